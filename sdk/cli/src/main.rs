@@ -1,0 +1,34 @@
+//! The `human2nav` command-line tool: glue between the SDK crates, nothing more.
+
+mod robot;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+#[derive(Debug, Parser)]
+#[command(name = "human2nav", version, about = "Crowd-navigation planning from human trajectories with feasibility-guided flow matching")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Inspect and validate robot profiles.
+    #[command(subcommand)]
+    Robot(robot::RobotCommand),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Robot(cmd) => robot::run(cmd),
+    };
+    match result {
+        Ok(code) => code,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,74 @@
+//! Constraint terms: batched costs with analytic gradients, summed into Φ (paper Eq. 8-9).
+//!
+//! A [`ConstraintTerm`] evaluates a batch of trajectories and *adds* its cost per trajectory and
+//! its gradient with respect to every pose into caller-owned buffers (the pattern of Nav2's MPPI
+//! critics: one context struct, batched evaluation, no allocation on the hot path).
+
+use crate::limits::Limits;
+use crate::planner::AgentState;
+use crate::se2::Twist2;
+
+/// A read-only view of `batch` trajectories of `horizon` poses, flat `[B, T, 3]` (`x, y, θ`).
+#[derive(Clone, Copy, Debug)]
+pub struct TrajBatch<'a> {
+    pub data: &'a [f64],
+    pub batch: usize,
+    pub horizon: usize,
+}
+
+impl<'a> TrajBatch<'a> {
+    /// Checks that `data.len() == batch·horizon·3`.
+    pub fn new(data: &'a [f64], batch: usize, horizon: usize) -> Result<Self, ConstraintError> {
+        if data.len() != batch * horizon * 3 {
+            return Err(ConstraintError::Shape(format!(
+                "{} values cannot be {batch} trajectories × {horizon} poses × 3",
+                data.len()
+            )));
+        }
+        Ok(Self { data, batch, horizon })
+    }
+
+    /// The poses of trajectory `b`, flat `[T, 3]`.
+    pub fn trajectory(&self, b: usize) -> &'a [f64] {
+        let n = self.horizon * 3;
+        &self.data[b * n..(b + 1) * n]
+    }
+}
+
+/// What a constraint term may look at besides the trajectories. All in the trajectories' frame.
+#[derive(Clone, Copy, Debug)]
+pub struct ConstraintContext<'a> {
+    /// Time between consecutive poses (s).
+    pub dt: f64,
+    /// The robot's hard limits.
+    pub limits: &'a Limits,
+    /// The robot's body velocity at the first pose (used for the first acceleration).
+    pub initial_velocity: Twist2,
+    /// Other agents, in the same frame as the trajectories (for clearance-style terms).
+    pub agents: &'a [AgentState],
+}
+
+/// Why a constraint term could not be evaluated.
+#[derive(Debug, thiserror::Error)]
+pub enum ConstraintError {
+    #[error("shape mismatch: {0}")]
+    Shape(String),
+    #[error("constraint `{term}` failed: {message}")]
+    Failed { term: String, message: String },
+}
+
+/// One additive term of the feasibility cost.
+pub trait ConstraintTerm: Send + Sync {
+    /// A short, stable name (`speed`, `acceleration`, `clearance`, ...).
+    fn name(&self) -> &str;
+
+    /// Adds this term's cost of trajectory `b` into `cost[b]` and its gradient with respect to
+    /// every pose into `grad` (flat `[B, T, 3]`, the shape of `batch.data`).
+    fn evaluate(
+        &self,
+        batch: TrajBatch<'_>,
+        ctx: &ConstraintContext<'_>,
+        cost: &mut [f64],
+        grad: &mut [f64],
+    ) -> Result<(), ConstraintError>;
+}

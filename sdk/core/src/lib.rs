@@ -1,0 +1,29 @@
+//! Core of the human2nav SDK (no libtorch).
+//!
+//! * [`se2`]: the SE(2) Lie group used for every pose and trajectory.
+//! * [`trajectory`]: fixed-step pose sequences and their derived speed, acceleration, yaw rate,
+//!   curvature and lateral speed.
+//! * [`robot`]: robot profiles (`robot.toml` + URDF) with their [`limits`].
+//! * [`embodiment`]: kinematic models, command saturation and tracking controllers.
+//! * [`constraint`]: constraint terms, the soft-margin penalty of Eq. 8 and Φ of Eq. 9.
+//! * [`tfs`]: the trajectory feasibility score.
+//! * [`bev`]: the ego-centred bird's-eye-view raster shared by training and inference.
+//! * [`flow`], [`guidance`]: the flow-model interface and feasibility guidance (Algorithm 1).
+//! * [`planner`]: the `Planner` trait, observations and plans.
+
+pub mod bev;
+pub mod constraint;
+pub mod embodiment;
+pub mod flow;
+pub mod guidance;
+pub mod limits;
+pub mod planner;
+pub mod robot;
+pub mod se2;
+pub mod tfs;
+pub mod trajectory;
+
+pub use flow::{FlowCondition, FlowError, FlowModel};
+pub use limits::{ControllerGains, GuidanceWeights, Limits};
+pub use planner::{AgentState, Observation, Plan, PlanError, PlanInfo, Planner};
+pub use se2::{Pose2, Twist2};

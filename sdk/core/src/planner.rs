@@ -1,0 +1,140 @@
+//! The planner interface: an [`Observation`] of the world goes in, a [`Plan`] comes out.
+//!
+//! Human2Nav, ORCA and SARL all implement [`Planner`]; the simulator, the CLI and robot
+//! integrations only ever see this trait, so a plugin planner and a built-in are used alike.
+//! All quantities are SI and in the world frame unless a field says otherwise.
+
+use crate::se2::{Pose2, Twist2};
+use serde::{Deserialize, Serialize};
+
+/// Another agent (a pedestrian) as the robot perceives it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AgentState {
+    /// Stable identity within an episode.
+    pub id: u64,
+    /// Position `[x, y]` in metres, world frame.
+    pub position: [f64; 2],
+    /// Velocity `[v_x, v_y]` in m/s, world frame.
+    pub velocity: [f64; 2],
+    /// Radius of the disc used for collision checks, metres.
+    pub radius: f64,
+    /// Recent positions, oldest first, at the episode's time step (may be empty).
+    #[serde(default)]
+    pub history: Vec<[f64; 2]>,
+}
+
+/// Everything a planner may use at one planning instant.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Observation {
+    /// Simulation or wall-clock time in seconds.
+    pub time: f64,
+    /// The robot's pose in the world frame.
+    pub ego: Pose2,
+    /// The robot's body-frame velocity.
+    pub ego_velocity: Twist2,
+    /// The goal position `[x, y]` in the world frame.
+    pub goal: [f64; 2],
+    /// The other agents in view.
+    pub agents: Vec<AgentState>,
+}
+
+/// Diagnostics a planner may attach to its plan (all optional, for figures and reports).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PlanInfo {
+    /// Candidate trajectories before any guidance, world frame, each `T` poses.
+    pub candidates: Vec<Vec<Pose2>>,
+    /// Candidate trajectories after guidance, world frame (empty when guidance is off).
+    pub guided: Vec<Vec<Pose2>>,
+    /// Index of the selected candidate.
+    pub selected: Option<usize>,
+    /// Φ of the selected trajectory before and after guidance.
+    pub phi_before: Option<f64>,
+    pub phi_after: Option<f64>,
+    /// True when the planner fell back to its documented safe behaviour (stop in place).
+    pub fallback: bool,
+    /// Free-form notes (why a fallback happened, for instance).
+    pub notes: Vec<String>,
+}
+
+/// A planned trajectory in the world frame: `poses[k]` is the target at `t0 + k·dt`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plan {
+    pub t0: f64,
+    pub dt: f64,
+    /// `poses[0]` is the robot's pose at `t0`.
+    pub poses: Vec<Pose2>,
+    pub info: PlanInfo,
+}
+
+impl Plan {
+    /// The "stop in place" plan: every waypoint equals the current pose.
+    pub fn stop_in_place(obs: &Observation, dt: f64, horizon: usize, why: impl Into<String>) -> Plan {
+        Plan {
+            t0: obs.time,
+            dt,
+            poses: vec![obs.ego; horizon.max(1)],
+            info: PlanInfo { fallback: true, notes: vec![why.into()], ..PlanInfo::default() },
+        }
+    }
+
+    /// Time covered by the plan, `(T − 1)·dt`.
+    pub fn duration(&self) -> f64 {
+        self.dt * self.poses.len().saturating_sub(1) as f64
+    }
+
+    /// True when every pose is finite (a planner must never return anything else).
+    pub fn is_finite(&self) -> bool {
+        self.t0.is_finite() && self.dt.is_finite() && self.poses.iter().all(|p| p.is_finite())
+    }
+}
+
+/// Why a planner could not produce a plan.
+#[derive(Debug, thiserror::Error)]
+pub enum PlanError {
+    #[error("invalid observation: {0}")]
+    InvalidObservation(String),
+    #[error("planner `{planner}` failed: {message}")]
+    Failed { planner: String, message: String },
+    #[error("planner `{planner}` is unusable after an earlier failure: {message}")]
+    Unusable { planner: String, message: String },
+}
+
+/// Observation → plan. Implementations must never return a plan with a non-finite value.
+pub trait Planner: Send {
+    /// A short, stable name used in reports (`human2nav`, `orca`, `sarl`, ...).
+    fn name(&self) -> &str;
+
+    /// Forgets any state carried between calls (warm starts), at the start of an episode.
+    fn reset(&mut self) {}
+
+    /// Plans from one observation.
+    fn plan(&mut self, obs: &Observation) -> Result<Plan, PlanError>;
+}
+
+impl Observation {
+    /// Checks every number is finite; names the first offending field.
+    pub fn validate(&self) -> Result<(), PlanError> {
+        let bad = |what: String| Err(PlanError::InvalidObservation(what));
+        if !self.time.is_finite() {
+            return bad("time is not finite".into());
+        }
+        if !self.ego.is_finite() {
+            return bad("ego pose is not finite".into());
+        }
+        if !self.ego_velocity.is_finite() {
+            return bad("ego velocity is not finite".into());
+        }
+        if !self.goal.iter().all(|v| v.is_finite()) {
+            return bad("goal is not finite".into());
+        }
+        for a in &self.agents {
+            let finite = a.position.iter().chain(&a.velocity).all(|v| v.is_finite())
+                && a.radius.is_finite()
+                && a.radius >= 0.0;
+            if !finite {
+                return bad(format!("agent {} has a non-finite or negative field", a.id));
+            }
+        }
+        Ok(())
+    }
+}

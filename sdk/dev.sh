@@ -1,0 +1,79 @@
+#!/usr/bin/env bash
+# One entry point for a fresh machine: installs what human2nav needs, then runs a job.
+#
+#   sdk/dev.sh demo [ARGS...]   the main job (see README.md)
+#   sdk/dev.sh test             build everything and run the whole test suite
+#   sdk/dev.sh env              print the exports this script uses (eval "$(sdk/dev.sh env)")
+#
+# libtorch comes from PyTorch 2.13.0 on PyPI (the version tch 0.26 is built against),
+# installed once into a virtualenv in a cache outside the repository:
+#   ${HUMAN2NAV_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/human2nav}/torch-2.13.0
+# Binaries find libtorch at run time through an rpath baked in by the build scripts.
+set -euo pipefail
+
+root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+cache=${HUMAN2NAV_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/human2nav}
+venv="$cache/torch-2.13.0"
+torch_version=2.13.0
+
+log() { printf '[dev.sh] %s\n' "$*" >&2; }
+
+ensure_torch() {
+    if [ -x "$venv/bin/python3" ] &&
+        "$venv/bin/python3" -c "import torch, sys; sys.exit(torch.__version__.split('+')[0] != '$torch_version')" 2>/dev/null; then
+        return
+    fi
+    command -v python3 >/dev/null || { log "python3 is required to install PyTorch"; exit 1; }
+    log "installing PyTorch $torch_version from PyPI into $venv (one time, about 5 GB)"
+    mkdir -p "$cache"
+    rm -rf "$venv.partial"
+    python3 -m venv "$venv.partial"
+    "$venv.partial/bin/pip" install --quiet --disable-pip-version-check "torch==$torch_version"
+    rm -rf "$venv"
+    mv "$venv.partial" "$venv"
+    # A venv's scripts name their own path; re-create them at the final location.
+    python3 -m venv --upgrade "$venv" >/dev/null
+}
+
+ensure_fonts() {
+    # plotters draws text through fontconfig; a minimal machine may lack both.
+    if ! command -v fc-list >/dev/null || [ -z "$(fc-list 2>/dev/null | head -n 1)" ] ||
+        ! pkg-config --exists fontconfig 2>/dev/null; then
+        if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+            log "installing fontconfig and DejaVu fonts (for figures)"
+            apt-get update -qq && apt-get install -y -qq libfontconfig1-dev fonts-dejavu-core pkg-config >/dev/null
+        else
+            log "warning: fontconfig or fonts are missing; install libfontconfig1-dev and a TTF font"
+        fi
+    fi
+}
+
+setup() {
+    ensure_torch
+    ensure_fonts
+    export LIBTORCH_USE_PYTORCH=1
+    export PATH="$venv/bin:$PATH"
+    cd "$root"
+}
+
+case "${1:-}" in
+    demo)
+        shift
+        setup
+        cargo build --release --workspace
+        exec "$root/target/release/human2nav" robot check robots/*/robot.toml "$@"
+        ;;
+    test)
+        setup
+        cargo build --workspace
+        exec cargo test --workspace
+        ;;
+    env)
+        setup >&2
+        printf 'export LIBTORCH_USE_PYTORCH=1\nexport PATH=%q:"$PATH"\n' "$venv/bin"
+        ;;
+    *)
+        sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'
+        exit 2
+        ;;
+esac

@@ -40,6 +40,14 @@ pub trait FlowModel {
     /// Number of poses `T` per trajectory.
     fn horizon(&self) -> usize;
 
+    /// Per-component standard deviation `[σ_x, σ_y, σ_θ]` of the source distribution in the
+    /// metric units of this trait: samplers draw `x0 = exp(ξ0)` per waypoint with
+    /// `ξ0 ~ N(0, diag(σ²))` (paper: `N(0, I)` in the model's normalised coordinates; a model
+    /// that scales translations by `s` internally reports `[s, s, 1]`).
+    fn source_std(&self) -> [f64; 3] {
+        [1.0, 1.0, 1.0]
+    }
+
     /// Writes `f(x, t, c)` into `out` (same shape as `x`).
     fn velocity(
         &self,

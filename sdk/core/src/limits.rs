@@ -27,7 +27,10 @@ pub struct Limits {
 }
 
 /// Gains of the embodiment's PD tracking controller (see [`crate::embodiment`]).
+///
+/// Defaults: `k_x = 1.5`, `k_y = 4.0`, `k_theta = 3.0`, `k_d = 0.2`, `lookahead = 0.1`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct ControllerGains {
     /// Proportional gain on the along-track position error (1/s).
     pub k_x: f64,
@@ -43,7 +46,10 @@ pub struct ControllerGains {
 
 /// Weights and shape of the feasibility penalty: `λ_v, λ_a, λ_ω, λ_κ` of Eq. 9, the same for the
 /// lateral-speed and reverse-speed terms, and the softplus sharpness `γ` and margin `δ` of Eq. 8.
+///
+/// Defaults: every `lambda_* = 1.0`, `gamma = 10.0`, `delta = 0.05`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct GuidanceWeights {
     pub lambda_v: f64,
     pub lambda_a: f64,
@@ -55,4 +61,25 @@ pub struct GuidanceWeights {
     pub gamma: f64,
     /// Tolerance margin `δ` (Eq. 8): the penalty starts rising at `(1 − δ)·limit`.
     pub delta: f64,
+}
+
+impl Default for ControllerGains {
+    fn default() -> Self {
+        Self { k_x: 1.5, k_y: 4.0, k_theta: 3.0, k_d: 0.2, lookahead: 0.1 }
+    }
+}
+
+impl Default for GuidanceWeights {
+    fn default() -> Self {
+        Self {
+            lambda_v: 1.0,
+            lambda_a: 1.0,
+            lambda_omega: 1.0,
+            lambda_kappa: 1.0,
+            lambda_lateral: 1.0,
+            lambda_reverse: 1.0,
+            gamma: 10.0,
+            delta: 0.05,
+        }
+    }
 }

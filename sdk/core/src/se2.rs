@@ -44,7 +44,11 @@ pub struct Twist2 {
 }
 
 impl Twist2 {
-    pub const ZERO: Twist2 = Twist2 { vx: 0.0, vy: 0.0, omega: 0.0 };
+    pub const ZERO: Twist2 = Twist2 {
+        vx: 0.0,
+        vy: 0.0,
+        omega: 0.0,
+    };
 
     pub const fn new(vx: f64, vy: f64, omega: f64) -> Self {
         Self { vx, vy, omega }
@@ -74,12 +78,18 @@ fn v_coefficients(theta: f64) -> (f64, f64) {
         let t2 = theta * theta;
         (1.0 - t2 / 6.0, theta / 2.0 - theta * t2 / 24.0)
     } else {
-        (theta.sin() / theta, (1.0 - theta.cos()) / theta)
+        // 1 − cos θ = 2·sin²(θ/2) avoids the cancellation of the direct form near 0.
+        let h = (0.5 * theta).sin();
+        (theta.sin() / theta, 2.0 * h * h / theta)
     }
 }
 
 impl Pose2 {
-    pub const IDENTITY: Pose2 = Pose2 { x: 0.0, y: 0.0, theta: 0.0 };
+    pub const IDENTITY: Pose2 = Pose2 {
+        x: 0.0,
+        y: 0.0,
+        theta: 0.0,
+    };
 
     pub const fn new(x: f64, y: f64, theta: f64) -> Self {
         Self { x, y, theta }
@@ -214,9 +224,20 @@ pub fn log_batch(poses: &[f64], out: &mut [f64]) {
 
 /// Batched geodesic interpolation (Eq. 4) between two `[N, 3]` pose arrays.
 pub fn interpolate_batch(x0: &[f64], x1: &[f64], t: f64, out: &mut [f64]) {
-    assert!(x0.len() == x1.len() && x0.len() == out.len(), "interpolate_batch: length mismatch");
-    assert_eq!(x0.len() % 3, 0, "interpolate_batch: length not a multiple of 3");
-    for ((a, b), o) in x0.chunks_exact(3).zip(x1.chunks_exact(3)).zip(out.chunks_exact_mut(3)) {
+    assert!(
+        x0.len() == x1.len() && x0.len() == out.len(),
+        "interpolate_batch: length mismatch"
+    );
+    assert_eq!(
+        x0.len() % 3,
+        0,
+        "interpolate_batch: length not a multiple of 3"
+    );
+    for ((a, b), o) in x0
+        .chunks_exact(3)
+        .zip(x1.chunks_exact(3))
+        .zip(out.chunks_exact_mut(3))
+    {
         let p = Pose2::from_slice(a).interpolate(Pose2::from_slice(b), t);
         o.copy_from_slice(&p.to_array());
     }
@@ -225,11 +246,101 @@ pub fn interpolate_batch(x0: &[f64], x1: &[f64], t: f64, out: &mut [f64]) {
 /// Batched Lie-group Euler step (Eq. 5), in place: `poses[i] ← poses[i]·exp(dt·v[i])`.
 pub fn euler_step_batch(poses: &mut [f64], v: &[f64], dt: f64) {
     assert_eq!(poses.len(), v.len(), "euler_step_batch: length mismatch");
-    assert_eq!(poses.len() % 3, 0, "euler_step_batch: length not a multiple of 3");
+    assert_eq!(
+        poses.len() % 3,
+        0,
+        "euler_step_batch: length not a multiple of 3"
+    );
     for (p, w) in poses.chunks_exact_mut(3).zip(v.chunks_exact(3)) {
         let next = Pose2::from_slice(p).euler_step(Twist2::from_slice(w), dt);
         p.copy_from_slice(&next.to_array());
     }
+}
+
+/// Below this |θ| the Jacobians of `exp`/`log` use Taylor series (their closed forms cancel).
+const SMALL_ANGLE_JACOBIAN: f64 = 1e-3;
+
+/// A 3×3 Jacobian in the `(x, y, θ)` / `(v_x, v_y, ω)` coordinates, row-major:
+/// `j[r][c] = ∂out_r / ∂in_c`.
+pub type Jacobian3 = [[f64; 3]; 3];
+
+/// `∂ exp(ξ) / ∂ξ` in coordinates: rows are the pose's `x, y, θ`, columns the twist's
+/// `v_x, v_y, ω` (the derivative of the wrap is taken as 1, its value away from ±π).
+pub fn exp_jacobian(xi: Twist2) -> Jacobian3 {
+    let w = xi.omega;
+    let (a, b) = v_coefficients(w);
+    // a' = d/dω (sin ω / ω), b' = d/dω ((1 − cos ω) / ω).
+    let (da, db) = if w.abs() < SMALL_ANGLE_JACOBIAN {
+        let w2 = w * w;
+        (-w / 3.0 + w * w2 / 30.0, 0.5 - w2 / 8.0 + w2 * w2 / 144.0)
+    } else {
+        let (s, c) = w.sin_cos();
+        ((w * c - s) / (w * w), (w * s - (1.0 - c)) / (w * w))
+    };
+    [
+        [a, -b, da * xi.vx - db * xi.vy],
+        [b, a, db * xi.vx + da * xi.vy],
+        [0.0, 0.0, 1.0],
+    ]
+}
+
+/// `∂ log(p) / ∂p` in coordinates: rows are the twist's `v_x, v_y, ω`, columns the pose's
+/// `x, y, θ`. Valid away from `θ = ±π`, where `log` itself jumps.
+pub fn log_jacobian(p: Pose2) -> Jacobian3 {
+    let phi = wrap_angle(p.theta);
+    let half = 0.5 * phi;
+    // A(φ) = (φ/2)·cot(φ/2) and its derivative A'(φ).
+    let (a, da) = if phi.abs() < SMALL_ANGLE_JACOBIAN {
+        let p2 = phi * phi;
+        (
+            1.0 - p2 / 12.0 - p2 * p2 / 720.0,
+            -phi / 6.0 - phi * p2 / 180.0,
+        )
+    } else {
+        let (s, c) = half.sin_cos();
+        (half * c / s, 0.5 * c / s - 0.25 * phi / (s * s))
+    };
+    [
+        [a, half, da * p.x + 0.5 * p.y],
+        [-half, a, -0.5 * p.x + da * p.y],
+        [0.0, 0.0, 1.0],
+    ]
+}
+
+/// The Jacobians of `a ∘ b` with respect to `a` and to `b`, in coordinates.
+pub fn compose_jacobians(a: Pose2, b: Pose2) -> (Jacobian3, Jacobian3) {
+    let (s, c) = a.theta.sin_cos();
+    let ja = [
+        [1.0, 0.0, -s * b.x - c * b.y],
+        [0.0, 1.0, c * b.x - s * b.y],
+        [0.0, 0.0, 1.0],
+    ];
+    let jb = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]];
+    (ja, jb)
+}
+
+/// The Jacobians of the Euler step `x·exp(dt·w)` (Eq. 5) with respect to the pose `x` and
+/// to the twist `w`, in coordinates. The second already contains the factor `dt`.
+pub fn euler_step_jacobians(x: Pose2, w: Twist2, dt: f64) -> (Jacobian3, Jacobian3) {
+    let xi = w.scale(dt);
+    let (jx, jb) = compose_jacobians(x, Pose2::exp(xi));
+    let je = exp_jacobian(xi);
+    let mut jw = [[0.0; 3]; 3];
+    for r in 0..3 {
+        for c in 0..3 {
+            jw[r][c] = dt * (0..3).map(|k| jb[r][k] * je[k][c]).sum::<f64>();
+        }
+    }
+    (jx, jw)
+}
+
+/// `jᵀ·v` for a 3×3 Jacobian: pulls a cotangent back through the map `j` linearises.
+pub fn transpose_apply(j: &Jacobian3, v: [f64; 3]) -> [f64; 3] {
+    [
+        j[0][0] * v[0] + j[1][0] * v[1] + j[2][0] * v[2],
+        j[0][1] * v[0] + j[1][1] * v[1] + j[2][1] * v[2],
+        j[0][2] * v[0] + j[1][2] * v[1] + j[2][2] * v[2],
+    ]
 }
 
 #[cfg(test)]
@@ -279,5 +390,269 @@ mod tests {
         assert_relative_eq!(p1.x, b.x, epsilon = 1e-12);
         assert_relative_eq!(p1.y, b.y, epsilon = 1e-12);
         assert_relative_eq!(p1.theta, b.theta, epsilon = 1e-12);
+    }
+
+    // ---- group laws, Jacobians and edge cases ----
+
+    use proptest::prelude::*;
+
+    /// Angle difference wrapped to (-π, π], for comparing headings.
+    fn dtheta(a: f64, b: f64) -> f64 {
+        wrap_angle(a - b)
+    }
+
+    fn assert_pose_eq(a: Pose2, b: Pose2, tol: f64) {
+        assert_relative_eq!(a.x, b.x, epsilon = tol);
+        assert_relative_eq!(a.y, b.y, epsilon = tol);
+        assert_relative_eq!(dtheta(a.theta, b.theta), 0.0, epsilon = tol);
+    }
+
+    fn pose() -> impl Strategy<Value = Pose2> {
+        (-10.0..10.0f64, -10.0..10.0f64, -PI..PI).prop_map(|(x, y, t)| Pose2::new(x, y, t))
+    }
+
+    /// Twists whose rotation stays inside (-π, π), where `log(exp(ξ)) = ξ`.
+    fn twist() -> impl Strategy<Value = Twist2> {
+        (-5.0..5.0f64, -5.0..5.0f64, -3.1..3.1f64).prop_map(|(a, b, w)| Twist2::new(a, b, w))
+    }
+
+    proptest! {
+        #[test]
+        fn composition_is_associative(a in pose(), b in pose(), c in pose()) {
+            assert_pose_eq(a.compose(b).compose(c), a.compose(b.compose(c)), 1e-9);
+        }
+
+        #[test]
+        fn identity_is_neutral(a in pose()) {
+            assert_pose_eq(a.compose(Pose2::IDENTITY), a, 1e-12);
+            assert_pose_eq(Pose2::IDENTITY.compose(a), a, 1e-12);
+        }
+
+        #[test]
+        fn inverse_is_two_sided(a in pose()) {
+            assert_pose_eq(a.compose(a.inverse()), Pose2::IDENTITY, 1e-9);
+            assert_pose_eq(a.inverse().compose(a), Pose2::IDENTITY, 1e-9);
+            assert_pose_eq(a.inverse().inverse(), a, 1e-9);
+        }
+
+        #[test]
+        fn log_of_exp_round_trips(xi in twist()) {
+            let back = Pose2::exp(xi).log();
+            prop_assert!((back.vx - xi.vx).abs() < 1e-9);
+            prop_assert!((back.vy - xi.vy).abs() < 1e-9);
+            prop_assert!((back.omega - xi.omega).abs() < 1e-12);
+        }
+
+        #[test]
+        fn exp_of_log_round_trips(a in pose()) {
+            assert_pose_eq(Pose2::exp(a.log()), a, 1e-9);
+        }
+
+        #[test]
+        fn exp_is_a_one_parameter_subgroup(xi in twist(), s in 0.0..1.0f64) {
+            // exp(sξ)·exp((1−s)ξ) = exp(ξ): the flow of a constant body velocity.
+            let split = Pose2::exp(xi.scale(s)).compose(Pose2::exp(xi.scale(1.0 - s)));
+            assert_pose_eq(split, Pose2::exp(xi), 1e-9);
+        }
+
+        #[test]
+        fn action_matches_composition(a in pose(), b in pose(), px in -5.0..5.0f64, py in -5.0..5.0f64) {
+            let lhs = a.compose(b).act([px, py]);
+            let rhs = a.act(b.act([px, py]));
+            prop_assert!((lhs[0] - rhs[0]).abs() < 1e-9 && (lhs[1] - rhs[1]).abs() < 1e-9);
+            let back = a.inverse_act(a.act([px, py]));
+            prop_assert!((back[0] - px).abs() < 1e-9 && (back[1] - py).abs() < 1e-9);
+        }
+
+        #[test]
+        fn interpolation_follows_the_geodesic(a in pose(), b in pose(), t in 0.0..1.0f64) {
+            // x(t) = a·exp(t·ξ) with ξ = log(a⁻¹b): the remaining way is exp((1−t)·ξ).
+            let xt = a.interpolate(b, t);
+            let xi = a.between(b).log();
+            assert_pose_eq(xt.compose(Pose2::exp(xi.scale(1.0 - t))), b, 1e-8);
+        }
+
+        #[test]
+        fn euler_step_is_right_multiplication(a in pose(), w in twist(), dt in 0.0..1.0f64) {
+            assert_pose_eq(a.euler_step(w, dt), a.compose(Pose2::exp(w.scale(dt))), 1e-12);
+        }
+
+        #[test]
+        fn wrap_angle_lands_in_half_open_interval(a in -100.0..100.0f64) {
+            let w = wrap_angle(a);
+            prop_assert!(w > -PI && w <= PI);
+            prop_assert!(((a - w) / (2.0 * PI) - ((a - w) / (2.0 * PI)).round()).abs() < 1e-9);
+        }
+
+        #[test]
+        fn exp_jacobian_matches_finite_differences(xi in twist()) {
+            let j = exp_jacobian(xi);
+            let fd = fd_jacobian(|v| Pose2::exp(Twist2::from_slice(v)).to_array(), xi.to_array());
+            assert_jacobian_close(&j, &fd, 1e-6);
+        }
+
+        #[test]
+        fn log_jacobian_matches_finite_differences(
+            x in -5.0..5.0f64, y in -5.0..5.0f64, t in -3.0..3.0f64,
+        ) {
+            let j = log_jacobian(Pose2::new(x, y, t));
+            let fd = fd_jacobian(|p| Pose2::from_slice(p).log().to_array(), [x, y, t]);
+            assert_jacobian_close(&j, &fd, 1e-6);
+        }
+
+        #[test]
+        fn euler_step_jacobians_match_finite_differences(a in pose(), w in twist(), dt in 0.01..0.5f64) {
+            // Keep θ away from ±π so the wrapped output is differentiable.
+            let a = Pose2::new(a.x, a.y, a.theta * 0.8);
+            let w = Twist2::new(w.vx, w.vy, w.omega * 0.5);
+            let (jx, jw) = euler_step_jacobians(a, w, dt);
+            let fx = fd_jacobian(|p| Pose2::from_slice(p).euler_step(w, dt).to_array(), a.to_array());
+            let fw = fd_jacobian(|v| a.euler_step(Twist2::from_slice(v), dt).to_array(), w.to_array());
+            assert_jacobian_close(&jx, &fx, 1e-6);
+            assert_jacobian_close(&jw, &fw, 1e-6);
+        }
+    }
+
+    /// Central finite differences of a map R³ → R³ (step 1e-6), as a row-major Jacobian.
+    fn fd_jacobian(f: impl Fn(&[f64]) -> [f64; 3], at: [f64; 3]) -> Jacobian3 {
+        let h = 1e-6;
+        let mut j = [[0.0; 3]; 3];
+        for c in 0..3 {
+            let mut p = at;
+            let mut m = at;
+            p[c] += h;
+            m[c] -= h;
+            let (fp, fm) = (f(&p), f(&m));
+            for r in 0..3 {
+                // Headings differ by a wrapped amount.
+                let d = if r == 2 {
+                    wrap_angle(fp[r] - fm[r])
+                } else {
+                    fp[r] - fm[r]
+                };
+                j[r][c] = d / (2.0 * h);
+            }
+        }
+        j
+    }
+
+    fn assert_jacobian_close(a: &Jacobian3, b: &Jacobian3, tol: f64) {
+        for r in 0..3 {
+            for c in 0..3 {
+                let scale = 1.0 + b[r][c].abs();
+                assert!(
+                    (a[r][c] - b[r][c]).abs() <= tol * scale,
+                    "entry ({r},{c}): analytic {} vs finite difference {}",
+                    a[r][c],
+                    b[r][c]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn jacobians_at_small_angles_match_finite_differences() {
+        for &w in &[0.0, 1e-9, -1e-5, 9e-4, -1.1e-3, 0.3] {
+            let xi = Twist2::new(0.8, -0.3, w);
+            let fd = fd_jacobian(
+                |v| Pose2::exp(Twist2::from_slice(v)).to_array(),
+                xi.to_array(),
+            );
+            assert_jacobian_close(&exp_jacobian(xi), &fd, 1e-7);
+            let p = Pose2::new(0.8, -0.3, w);
+            let fd = fd_jacobian(|v| Pose2::from_slice(v).log().to_array(), p.to_array());
+            assert_jacobian_close(&log_jacobian(p), &fd, 1e-7);
+        }
+    }
+
+    #[test]
+    fn closed_form_values() {
+        // Half turn on a unit circle: v = π, ω = π for one second ends at (0, 2), facing back.
+        let p = Pose2::exp(Twist2::new(PI, 0.0, PI));
+        assert_relative_eq!(p.x, 0.0, epsilon = 1e-12);
+        assert_relative_eq!(p.y, 2.0, epsilon = 1e-12);
+        assert_relative_eq!(p.theta, PI, epsilon = 1e-12);
+        // log of a pure translation is that translation; of a pure rotation, that rotation.
+        let xi = Pose2::new(3.0, -4.0, 0.0).log();
+        assert_relative_eq!(xi.vx, 3.0);
+        assert_relative_eq!(xi.vy, -4.0);
+        let xi = Pose2::new(0.0, 0.0, -1.2).log();
+        assert_relative_eq!(xi.omega, -1.2);
+        assert_relative_eq!(xi.vx, 0.0);
+        // Composition: translate then rotate, and the inverse of a rotated translation.
+        let a = Pose2::new(1.0, 0.0, PI / 2.0);
+        let b = Pose2::new(1.0, 0.0, 0.0);
+        let ab = a.compose(b);
+        assert_relative_eq!(ab.x, 1.0, epsilon = 1e-12);
+        assert_relative_eq!(ab.y, 1.0, epsilon = 1e-12);
+        let ai = a.inverse();
+        assert_relative_eq!(ai.x, 0.0, epsilon = 1e-12);
+        assert_relative_eq!(ai.y, 1.0, epsilon = 1e-12);
+        assert_relative_eq!(ai.theta, -PI / 2.0, epsilon = 1e-12);
+        // Geodesic midpoint between the identity and a quarter-circle end pose.
+        let q = Pose2::exp(Twist2::new(PI / 2.0, 0.0, PI / 2.0));
+        let m = Pose2::IDENTITY.interpolate(q, 0.5);
+        let expected = Pose2::exp(Twist2::new(PI / 4.0, 0.0, PI / 4.0));
+        assert_pose_eq(m, expected, 1e-12);
+    }
+
+    #[test]
+    fn small_angle_branches_are_continuous() {
+        // The Taylor and closed-form branches agree across the switch-over.
+        for &w in &[SMALL_ANGLE * 0.999, SMALL_ANGLE * 1.001] {
+            let p = Pose2::exp(Twist2::new(1.0, 0.5, w));
+            assert_relative_eq!(p.x, 1.0 - 0.5 * w / 2.0, epsilon = 1e-12);
+            assert_relative_eq!(p.y, 0.5 + w / 2.0, epsilon = 1e-12);
+        }
+        let a = exp_jacobian(Twist2::new(1.0, 0.5, SMALL_ANGLE_JACOBIAN * 0.999));
+        let b = exp_jacobian(Twist2::new(1.0, 0.5, SMALL_ANGLE_JACOBIAN * 1.001));
+        assert_jacobian_close(&a, &b, 1e-5);
+    }
+
+    #[test]
+    fn heading_wraps_at_pi_under_composition_and_exp() {
+        let a = Pose2::new(0.0, 0.0, 3.0);
+        let b = Pose2::new(0.0, 0.0, 0.5);
+        let ab = a.compose(b);
+        assert_relative_eq!(ab.theta, 3.5 - 2.0 * PI, epsilon = 1e-12);
+        // A full turn comes back to the start with θ = 0, not 2π.
+        let full = Pose2::exp(Twist2::new(0.0, 0.0, 2.0 * PI));
+        assert_relative_eq!(full.theta, 0.0, epsilon = 1e-12);
+        // log picks the short way round.
+        let back = Pose2::new(0.0, 0.0, 3.5).log();
+        assert_relative_eq!(back.omega, 3.5 - 2.0 * PI, epsilon = 1e-12);
+    }
+
+    #[test]
+    fn batched_forms_match_scalar_forms() {
+        let poses = [0.1, 0.2, 0.3, -1.0, 2.0, -2.5];
+        let twists = [1.0, 0.0, 0.5, 0.3, -0.2, -1.0];
+        let mut out = [0.0; 6];
+        exp_batch(&twists, &mut out);
+        for k in 0..2 {
+            let p = Pose2::exp(Twist2::from_slice(&twists[3 * k..]));
+            assert_pose_eq(Pose2::from_slice(&out[3 * k..]), p, 1e-15);
+        }
+        log_batch(&poses, &mut out);
+        for k in 0..2 {
+            let xi = Pose2::from_slice(&poses[3 * k..]).log();
+            assert_relative_eq!(out[3 * k], xi.vx);
+            assert_relative_eq!(out[3 * k + 2], xi.omega);
+        }
+        let mut stepped = poses;
+        euler_step_batch(&mut stepped, &twists, 0.1);
+        for k in 0..2 {
+            let p = Pose2::from_slice(&poses[3 * k..])
+                .euler_step(Twist2::from_slice(&twists[3 * k..]), 0.1);
+            assert_pose_eq(Pose2::from_slice(&stepped[3 * k..]), p, 1e-15);
+        }
+        interpolate_batch(&poses, &stepped, 1.0, &mut out);
+        for k in 0..2 {
+            assert_pose_eq(
+                Pose2::from_slice(&out[3 * k..]),
+                Pose2::from_slice(&stepped[3 * k..]),
+                1e-12,
+            );
+        }
     }
 }

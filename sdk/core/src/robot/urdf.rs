@@ -1,0 +1,312 @@
+//! What the robot profile reads from a URDF: the footprint radius of the base link's collision
+//! geometry, wheel radii and joint velocity limits, steering limits and axle positions.
+//!
+//! Joint frames are composed at zero joint positions from the base link down, so wheel and
+//! steering joints may sit anywhere below the base link (behind fixed joints, for instance).
+
+use super::ProfileError;
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use urdf_rs::{Geometry, JointType};
+
+/// A cylinder (or capsule) whose axis is within this angle of vertical counts as upright.
+const UPRIGHT_COS: f64 = 1.0 - 1e-9;
+
+/// A parsed URDF with its links indexed for the questions the profile asks.
+#[derive(Debug)]
+pub(crate) struct UrdfModel {
+    pub(crate) path: PathBuf,
+    pub(crate) robot: urdf_rs::Robot,
+    /// Child link name → index of the joint that has it as child.
+    parent_joint: HashMap<String, usize>,
+}
+
+/// One wheel joint as measured in the URDF.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WheelJoint {
+    /// Joint name.
+    pub name: String,
+    /// Wheel radius from the child link's cylinder or sphere (m).
+    pub radius: f64,
+    /// The joint's `<limit velocity>` (rad/s), when the URDF gives a positive finite one.
+    pub velocity_limit: Option<f64>,
+    /// Wheel centre in the base-link frame (m).
+    pub position: [f64; 3],
+}
+
+/// One steering joint as measured in the URDF.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SteeringJoint {
+    /// Joint name.
+    pub name: String,
+    /// Largest steering angle reachable to both sides, `min(|lower|, |upper|)` (rad).
+    pub max_angle: f64,
+    /// Joint origin in the base-link frame (m).
+    pub position: [f64; 3],
+}
+
+fn pose_to_isometry(p: &urdf_rs::Pose) -> Isometry3<f64> {
+    let [x, y, z] = p.xyz.0;
+    let [roll, pitch, yaw] = p.rpy.0;
+    // URDF rpy is fixed-axis roll, pitch, yaw: R = Rz(yaw)·Ry(pitch)·Rx(roll).
+    Isometry3::from_parts(
+        Translation3::new(x, y, z),
+        UnitQuaternion::from_euler_angles(roll, pitch, yaw),
+    )
+}
+
+impl UrdfModel {
+    /// Reads and parses `path`; `toml` is the profile that names it (for the error).
+    pub(crate) fn load(path: &Path, toml: &Path) -> Result<Self, ProfileError> {
+        let fail = |message: String| ProfileError::UrdfLoad {
+            file: toml.to_path_buf(),
+            urdf: path.to_path_buf(),
+            message,
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| fail(e.to_string()))?;
+        let robot = urdf_rs::read_from_string(&text).map_err(|e| fail(e.to_string()))?;
+        if robot.links.is_empty() {
+            return Err(fail("the URDF has no <link>".into()));
+        }
+        let parent_joint = robot
+            .joints
+            .iter()
+            .enumerate()
+            .map(|(i, j)| (j.child.link.clone(), i))
+            .collect();
+        Ok(Self {
+            path: path.to_path_buf(),
+            robot,
+            parent_joint,
+        })
+    }
+
+    fn content_error(
+        &self,
+        element: impl Into<String>,
+        message: impl Into<String>,
+    ) -> ProfileError {
+        ProfileError::UrdfContent {
+            urdf: self.path.clone(),
+            element: element.into(),
+            message: message.into(),
+        }
+    }
+
+    fn link(&self, name: &str) -> Option<&urdf_rs::Link> {
+        self.robot.links.iter().find(|l| l.name == name)
+    }
+
+    pub(crate) fn has_link(&self, name: &str) -> bool {
+        self.link(name).is_some()
+    }
+
+    /// The single link that is no joint's child.
+    pub(crate) fn root_link(&self) -> Result<String, ProfileError> {
+        let roots: Vec<&str> = self
+            .robot
+            .links
+            .iter()
+            .filter(|l| !self.parent_joint.contains_key(&l.name))
+            .map(|l| l.name.as_str())
+            .collect();
+        match roots.as_slice() {
+            [one] => Ok((*one).to_string()),
+            _ => Err(self.content_error(
+                "robot",
+                format!(
+                    "cannot tell the root link ({} candidates: {}); set base_link in robot.toml",
+                    roots.len(),
+                    roots.join(", ")
+                ),
+            )),
+        }
+    }
+
+    /// The transform base ← `link` at zero joint positions.
+    fn link_in_base(&self, base: &str, link: &str) -> Result<Isometry3<f64>, ProfileError> {
+        let mut transform = Isometry3::identity();
+        let mut current = link.to_string();
+        for _ in 0..=self.robot.joints.len() {
+            if current == base {
+                return Ok(transform);
+            }
+            let Some(&j) = self.parent_joint.get(&current) else {
+                break;
+            };
+            let joint = &self.robot.joints[j];
+            transform = pose_to_isometry(&joint.origin) * transform;
+            current = joint.parent.link.clone();
+        }
+        Err(self.content_error(
+            format!("link `{link}`"),
+            format!("is not below the base link `{base}`"),
+        ))
+    }
+
+    fn joint(&self, name: &str) -> Option<&urdf_rs::Joint> {
+        self.robot.joints.iter().find(|j| j.name == name)
+    }
+
+    /// The joint origin in the base-link frame.
+    fn joint_in_base(&self, base: &str, joint: &urdf_rs::Joint) -> Result<[f64; 3], ProfileError> {
+        let t = self.link_in_base(base, &joint.parent.link)? * pose_to_isometry(&joint.origin);
+        let p = t.translation.vector;
+        Ok([p.x, p.y, p.z])
+    }
+
+    /// Radius of the disc, centred on the base link's origin, that covers the xy-projection of
+    /// every `<collision>` of `base` (see [`super::RobotProfile`] for the rules).
+    pub(crate) fn footprint_radius(&self, base: &str) -> Result<f64, ProfileError> {
+        let link = self
+            .link(base)
+            .ok_or_else(|| self.content_error(format!("link `{base}`"), "not found"))?;
+        if link.collision.is_empty() {
+            return Err(self.content_error(
+                format!("link `{base}`"),
+                "has no <collision> geometry; add one or set [footprint] radius in robot.toml",
+            ));
+        }
+        let mut radius: f64 = 0.0;
+        for (i, c) in link.collision.iter().enumerate() {
+            let element = format!("link `{base}` collision[{i}]");
+            let iso = pose_to_isometry(&c.origin);
+            let offset = iso.translation.vector.xy().norm();
+            let axis = iso.rotation * Vector3::z();
+            let upright = axis.z.abs() >= UPRIGHT_COS;
+            let r = match &c.geometry {
+                Geometry::Box { size } => {
+                    let [a, b, h] = size.0.map(|s| 0.5 * s);
+                    let mut r: f64 = 0.0;
+                    for sx in [-a, a] {
+                        for sy in [-b, b] {
+                            for sz in [-h, h] {
+                                let p = iso * Point3::new(sx, sy, sz);
+                                r = r.max(p.x.hypot(p.y));
+                            }
+                        }
+                    }
+                    r
+                }
+                Geometry::Cylinder { radius, length } => {
+                    if upright {
+                        radius + offset
+                    } else {
+                        radius.hypot(0.5 * length) + offset
+                    }
+                }
+                Geometry::Capsule { radius, length } => {
+                    if upright {
+                        radius + offset
+                    } else {
+                        radius + 0.5 * length + offset
+                    }
+                }
+                Geometry::Sphere { radius } => radius + offset,
+                Geometry::Mesh { filename, .. } => {
+                    return Err(self.content_error(
+                        element,
+                        format!(
+                            "mesh `{filename}` has no analytic extent; set [footprint] radius in \
+                             robot.toml"
+                        ),
+                    ));
+                }
+            };
+            if !(r.is_finite() && r > 0.0) {
+                return Err(
+                    self.content_error(element, format!("degenerate geometry (radius {r})"))
+                );
+            }
+            radius = radius.max(r);
+        }
+        Ok(radius)
+    }
+
+    /// Measures a wheel joint: continuous or revolute, with a cylinder or sphere on its child.
+    pub(crate) fn wheel_joint(&self, base: &str, name: &str) -> Result<WheelJoint, ProfileError> {
+        let element = format!("joint `{name}`");
+        let joint = self
+            .joint(name)
+            .ok_or_else(|| self.content_error(&element, "not found"))?;
+        if !matches!(
+            joint.joint_type,
+            JointType::Continuous | JointType::Revolute
+        ) {
+            return Err(self.content_error(
+                &element,
+                format!(
+                    "is {:?}, a wheel joint must be continuous or revolute",
+                    joint.joint_type
+                ),
+            ));
+        }
+        let child = &joint.child.link;
+        let link = self
+            .link(child)
+            .ok_or_else(|| self.content_error(format!("link `{child}`"), "not found"))?;
+        let radius = link
+            .collision
+            .iter()
+            .map(|c| &c.geometry)
+            .chain(link.visual.iter().map(|v| &v.geometry))
+            .find_map(|g| match g {
+                Geometry::Cylinder { radius, .. } | Geometry::Sphere { radius } => Some(*radius),
+                _ => None,
+            })
+            .filter(|r| r.is_finite() && *r > 0.0)
+            .ok_or_else(|| {
+                self.content_error(
+                    format!("link `{child}`"),
+                    "a wheel link needs a <cylinder> or <sphere> collision (or visual) geometry \
+                     with a positive radius",
+                )
+            })?;
+        let v = joint.limit.velocity;
+        let velocity_limit = (v.is_finite() && v > 0.0).then_some(v);
+        Ok(WheelJoint {
+            name: name.to_string(),
+            radius,
+            velocity_limit,
+            position: self.joint_in_base(base, joint)?,
+        })
+    }
+
+    /// Measures a steering joint: revolute with limits on both sides.
+    pub(crate) fn steering_joint(
+        &self,
+        base: &str,
+        name: &str,
+    ) -> Result<SteeringJoint, ProfileError> {
+        let element = format!("joint `{name}`");
+        let joint = self
+            .joint(name)
+            .ok_or_else(|| self.content_error(&element, "not found"))?;
+        if joint.joint_type != JointType::Revolute {
+            return Err(self.content_error(
+                &element,
+                format!(
+                    "is {:?}, a steering joint must be revolute",
+                    joint.joint_type
+                ),
+            ));
+        }
+        let max_angle = joint.limit.lower.abs().min(joint.limit.upper.abs());
+        if !(max_angle.is_finite() && max_angle > 0.0 && max_angle < std::f64::consts::FRAC_PI_2) {
+            return Err(self.content_error(
+                &element,
+                format!(
+                    "<limit lower=\"{}\" upper=\"{}\"> must allow steering to both sides by less \
+                     than π/2",
+                    joint.limit.lower, joint.limit.upper
+                ),
+            ));
+        }
+        Ok(SteeringJoint {
+            name: name.to_string(),
+            max_angle,
+            position: self.joint_in_base(base, joint)?,
+        })
+    }
+}

@@ -155,10 +155,16 @@ pub fn plan_pose_at(plan: &Plan, t: f64) -> Option<Pose2> {
 ///   - all: plus the derivative term `k_d·(ξ_ff − ξ)`, the error between the feed-forward twist
 ///     and the velocity executed last step (the time derivative of the pose error).
 ///
-///   Measured in `sdk/core/tests/embodiment_tracking.rs` (dt = 0.05 s, empty world, feasible
-///   S-curves at ≤ 70 % of every limit, default gains, starting 0.3 m and 0.2 rad off): after a
-///   3 s transient the position error stays below 5 cm and the heading error below 0.05 rad for
-///   all three kinds; a plan whose poses are all equal brings the robot to rest.
+///   The feed-forward difference is exact for a control period equal to the look-ahead (default
+///   0.05 s); a longer look-ahead makes the robot lead the plan by about `a·h/(2·k_x)` while it
+///   accelerates.
+///
+///   Measured in `sdk/core/tests/embodiment_tracking.rs` (control period 0.05 s, empty world,
+///   the three shipped robot profiles, 24 s S-curves from rest at 70 % of v_max and a_max with
+///   60 % of the yaw-rate, curvature and lateral limits): starting on the plan the position error
+///   stays below 1 cm and the heading error below 0.01 rad; starting 0.32 m and 0.2 rad off, both
+///   are below 2 cm and 0.02 rad after a 5 s transient. A plan whose poses are all equal (the
+///   planner's stop-in-place fallback) brings the robot to rest at that pose.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BuiltinEmbodiment {
     kind: EmbodimentKind,

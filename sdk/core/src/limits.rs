@@ -28,13 +28,14 @@ pub struct Limits {
 
 /// Gains of the embodiment's PD tracking controller (see [`crate::embodiment`]).
 ///
-/// Defaults: `k_x = 1.5`, `k_y = 4.0`, `k_theta = 3.0`, `k_d = 0.2`, `lookahead = 0.1`.
+/// Defaults: `k_x = 1.5`, `k_y = 4.0`, `k_theta = 3.0`, `k_d = 0.2`, `lookahead = 0.05`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ControllerGains {
     /// Proportional gain on the along-track position error (1/s).
     pub k_x: f64,
-    /// Proportional gain on the cross-track position error.
+    /// Proportional gain on the cross-track position error (1/m², multiplied by the reference
+    /// speed for non-holonomic embodiments; see [`crate::embodiment::BuiltinEmbodiment`]).
     pub k_y: f64,
     /// Proportional gain on the heading error (1/s).
     pub k_theta: f64,
@@ -65,7 +66,13 @@ pub struct GuidanceWeights {
 
 impl Default for ControllerGains {
     fn default() -> Self {
-        Self { k_x: 1.5, k_y: 4.0, k_theta: 3.0, k_d: 0.2, lookahead: 0.1 }
+        Self {
+            k_x: 1.5,
+            k_y: 4.0,
+            k_theta: 3.0,
+            k_d: 0.2,
+            lookahead: 0.05,
+        }
     }
 }
 

@@ -1,1 +1,37 @@
-//! (being written)
+//! Dynamic plugins for human2nav: a small, versioned C ABI, the [`export_plugin!`] macro for
+//! plugin authors, and a [`libloading`]-based host whose proxies implement the core traits.
+//! No libtorch.
+//!
+//! * [`abi`]: the `#[repr(C)]` tables and status codes (mirrored in `include/human2nav_plugin.h`
+//!   for plugins written in C).
+//! * [`export_plugin!`] and [`init`]: what an author writes. Implement
+//!   [`ConstraintTerm`](human2nav_core::constraint::ConstraintTerm),
+//!   [`Embodiment`](human2nav_core::embodiment::Embodiment) or
+//!   [`Planner`](human2nav_core::Planner) as usual, give each type a constructor from
+//!   [`PluginInit`] (TOML config + optional robot context), and export them. The macro writes
+//!   every `unsafe` shim, catches panics and checks pointers and lengths.
+//! * [`host`]: [`PluginHost`] loads libraries explicitly (checking the ABI version first) and
+//!   returns proxies ([`PluginConstraint`], [`PluginEmbodiment`], [`PluginPlanner`]) that the
+//!   rest of the SDK uses like built-ins. Libraries are never unloaded.
+//! * [`resolve`]: how library paths in profiles are resolved (relative to the declaring file,
+//!   optional extension and `lib` prefix, the `{profile}` placeholder).
+//!
+//! Why not export Rust trait objects: their layout is not stable across compiler versions, so
+//! a plugin built with another rustc would be undefined behaviour. Only C types cross.
+
+pub mod abi;
+mod error;
+#[doc(hidden)]
+pub mod export;
+pub mod host;
+pub mod init;
+mod macros;
+pub mod resolve;
+
+pub use abi::ABI_VERSION;
+pub use error::{PluginError, PluginKind};
+pub use host::{
+    FactoryInfo, PluginConstraint, PluginEmbodiment, PluginFailure, PluginHost, PluginLibrary,
+    PluginPlanner,
+};
+pub use init::{InitError, PluginInit, RobotContext, parse_config};

@@ -1,0 +1,712 @@
+//! The C ABI between a host and a plugin library, version [`ABI_VERSION`].
+//!
+//! Everything here is `#[repr(C)]` and mirrored by hand in `include/human2nav_plugin.h`; the C
+//! plugin in `plugins/c_personal_space` exports the sizes and field offsets its compiler sees so
+//! the integration tests can compare them with [`layout`].
+//!
+//! # Contract
+//!
+//! * A plugin library exports one symbol, [`ENTRY_SYMBOL`], of type [`EntryFn`]. It returns a
+//!   pointer to a [`H2nPluginEntry`] that lives as long as the library. The first field of that
+//!   table, `abi_version`, is the only thing frozen forever: the host reads it before anything
+//!   else and refuses the library when it differs from [`ABI_VERSION`].
+//! * Every table starts with a `struct_size` (or is versioned by the entry's): tables are
+//!   append-only, so a newer plugin may add fields at the end and an older host ignores them.
+//! * Strings are [`H2nStr`] (UTF-8, pointer and length, no terminator required); arrays are
+//!   pointer and length (and shape). The host owns every output buffer; the plugin writes into
+//!   it and reports how much it needed ([`H2nBuffer`]).
+//! * Every function returns a status ([`H2N_OK`] or one of the `H2N_*` errors). After a failure
+//!   the instance's `last_error` explains it. A status of [`H2N_PANIC`] means the plugin caught a
+//!   panic: the instance is then unusable and every later call returns [`H2N_POISONED`].
+//! * Configuration reaches a factory as a TOML string; the plugin parses it and rejects unknown
+//!   fields ([`H2N_CONFIG`]).
+//! * Constraint and embodiment instances must tolerate concurrent calls from several threads
+//!   (the Rust traits are `Send + Sync`); a planner instance is only ever called by one thread
+//!   at a time. `destroy` is called exactly once, after the last call.
+//! * Libraries are never unloaded, so static data may be referenced by the host for ever.
+
+use human2nav_core::{ControllerGains, Limits, Pose2, Twist2};
+use std::ffi::c_void;
+
+/// The version of this ABI. Bumped on any incompatible change; appending a field to the end of a
+/// table (guarded by its `struct_size`) is compatible and does not bump it.
+pub const ABI_VERSION: u32 = 1;
+
+/// Name of the symbol every plugin library exports.
+pub const ENTRY_SYMBOL: &str = "human2nav_plugin_entry";
+
+/// Signature of [`ENTRY_SYMBOL`]: returns the plugin's entry table (never null for a plugin).
+pub type EntryFn = unsafe extern "C" fn() -> *const H2nPluginEntry;
+
+/// Status code returned by every ABI function.
+pub type H2nStatus = i32;
+/// Success.
+pub const H2N_OK: H2nStatus = 0;
+/// The call failed; `last_error` (or the create error buffer) says why.
+pub const H2N_ERROR: H2nStatus = 1;
+/// A null pointer, a length that does not match its shape, or text that is not UTF-8.
+pub const H2N_INVALID_ARGUMENT: H2nStatus = 2;
+/// The TOML configuration was rejected (syntax, unknown field, bad value).
+pub const H2N_CONFIG: H2nStatus = 3;
+/// The call panicked; the plugin caught the panic and the instance is now unusable.
+pub const H2N_PANIC: H2nStatus = 4;
+/// An earlier call on this instance panicked; the instance refuses further work.
+pub const H2N_POISONED: H2nStatus = 5;
+/// A host-owned output array was too small; the needed length was written back.
+pub const H2N_BUFFER_TOO_SMALL: H2nStatus = 6;
+/// No factory of that kind and name (create only).
+pub const H2N_UNKNOWN_FACTORY: H2nStatus = 7;
+
+/// A short description of a status code, for error messages.
+pub fn status_name(status: H2nStatus) -> &'static str {
+    match status {
+        H2N_OK => "ok",
+        H2N_ERROR => "error",
+        H2N_INVALID_ARGUMENT => "invalid argument",
+        H2N_CONFIG => "invalid configuration",
+        H2N_PANIC => "panic",
+        H2N_POISONED => "unusable after an earlier panic",
+        H2N_BUFFER_TOO_SMALL => "buffer too small",
+        H2N_UNKNOWN_FACTORY => "unknown factory",
+        _ => "unknown status",
+    }
+}
+
+/// Factory kind: a constraint term ([`H2nConstraintVTable`]).
+pub const H2N_KIND_CONSTRAINT: u32 = 1;
+/// Factory kind: an embodiment ([`H2nEmbodimentVTable`]).
+pub const H2N_KIND_EMBODIMENT: u32 = 2;
+/// Factory kind: a planner ([`H2nPlannerVTable`]).
+pub const H2N_KIND_PLANNER: u32 = 3;
+
+/// Borrowed UTF-8 text: `len` bytes at `ptr` (no terminator required; `ptr` may be null when
+/// `len == 0`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct H2nStr {
+    pub ptr: *const u8,
+    pub len: usize,
+}
+
+impl H2nStr {
+    /// The empty string.
+    pub const EMPTY: H2nStr = H2nStr {
+        ptr: std::ptr::null(),
+        len: 0,
+    };
+
+    /// Borrows a Rust string (the view must not outlive `s`).
+    pub const fn new(s: &str) -> Self {
+        Self {
+            ptr: s.as_ptr(),
+            len: s.len(),
+        }
+    }
+
+    /// The text as a Rust string.
+    ///
+    /// # Safety
+    /// `ptr` must point to `len` readable bytes that stay valid and unchanged for `'a`.
+    pub unsafe fn as_str<'a>(self) -> Result<&'a str, std::str::Utf8Error> {
+        if self.len == 0 || self.ptr.is_null() {
+            return Ok("");
+        }
+        // SAFETY: the caller guarantees `len` readable bytes at `ptr` for 'a.
+        let bytes = unsafe { std::slice::from_raw_parts(self.ptr, self.len) };
+        std::str::from_utf8(bytes)
+    }
+}
+
+/// A host-owned byte buffer the plugin writes text into: it copies `min(len, capacity)` bytes of
+/// its UTF-8 message to `data` and sets `len` to the message's full length (so the host can tell
+/// that it was truncated). `data` may be null when `capacity == 0`.
+#[repr(C)]
+#[derive(Debug)]
+pub struct H2nBuffer {
+    pub data: *mut u8,
+    pub capacity: usize,
+    pub len: usize,
+}
+
+/// The exported entry table.
+#[repr(C)]
+#[derive(Debug)]
+pub struct H2nPluginEntry {
+    /// Must equal the host's [`ABI_VERSION`]; read before anything else.
+    pub abi_version: u32,
+    /// `sizeof(H2nPluginEntry)` as the plugin was compiled.
+    pub struct_size: u32,
+    /// The plugin's name (e.g. `personal_space`).
+    pub name: H2nStr,
+    /// The plugin's own version (e.g. `0.1.0`).
+    pub version: H2nStr,
+    /// What the plugin provides: `factory_count` entries.
+    pub factories: *const H2nFactory,
+    pub factory_count: usize,
+    /// Factory lookup by kind and name; null when there is none.
+    pub find_factory: unsafe extern "C" fn(kind: u32, name: H2nStr) -> *const H2nFactory,
+}
+
+// SAFETY: an entry table is immutable static data (string literals, static factory arrays and
+// function pointers); sharing references to it between threads cannot race.
+unsafe impl Sync for H2nPluginEntry {}
+
+/// One factory: creates instances of one kind under one name.
+#[repr(C)]
+#[derive(Debug)]
+pub struct H2nFactory {
+    /// `sizeof(H2nFactory)` as the plugin was compiled.
+    pub struct_size: u32,
+    /// One of the `H2N_KIND_*` constants.
+    pub kind: u32,
+    /// The factory name robot profiles refer to (`plugin = "..."`).
+    pub name: H2nStr,
+    /// One line for `human2nav plugin inspect`.
+    pub description: H2nStr,
+    /// Creates an instance. On success writes `out` and returns [`H2N_OK`]; on failure writes a
+    /// message into `error` (host-owned) and returns a status.
+    pub create: unsafe extern "C" fn(
+        args: *const H2nCreateArgs,
+        out: *mut H2nObject,
+        error: *mut H2nBuffer,
+    ) -> H2nStatus,
+}
+
+// SAFETY: as for `H2nPluginEntry`: factories are immutable static data.
+unsafe impl Sync for H2nFactory {}
+
+/// The robot's hard limits ([`human2nav_core::Limits`]); `has_kappa_max == 0` means no curvature
+/// limit (the robot turns in place) and `kappa_max` is then ignored.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct H2nLimits {
+    pub v_max: f64,
+    pub v_reverse_max: f64,
+    pub a_max: f64,
+    pub omega_max: f64,
+    pub kappa_max: f64,
+    pub lateral_speed_max: f64,
+    pub has_kappa_max: u32,
+    pub reserved: u32,
+}
+
+/// Tracking-controller gains ([`human2nav_core::ControllerGains`]).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct H2nGains {
+    pub k_x: f64,
+    pub k_y: f64,
+    pub k_theta: f64,
+    pub k_d: f64,
+    pub lookahead: f64,
+}
+
+/// What a factory receives.
+#[repr(C)]
+#[derive(Debug)]
+pub struct H2nCreateArgs {
+    /// `sizeof(H2nCreateArgs)` as the host was compiled.
+    pub struct_size: u32,
+    /// The kind being created (the factory's own kind).
+    pub kind: u32,
+    /// The TOML configuration from the robot profile or benchmark config (may be empty).
+    pub config: H2nStr,
+    /// 1 when `limits`, `gains` and `footprint_radius` describe the robot the instance serves,
+    /// 0 when there is no robot context (e.g. `plugin inspect`, a stand-alone constraint).
+    pub has_robot: u32,
+    pub reserved: u32,
+    pub limits: H2nLimits,
+    pub gains: H2nGains,
+    /// Footprint radius of the robot (m).
+    pub footprint_radius: f64,
+}
+
+/// A created instance: an opaque pointer and the vtable of its kind
+/// ([`H2nConstraintVTable`], [`H2nEmbodimentVTable`] or [`H2nPlannerVTable`]).
+#[repr(C)]
+#[derive(Debug)]
+pub struct H2nObject {
+    pub instance: *mut c_void,
+    pub vtable: *const c_void,
+}
+
+/// A pose `(x, y, θ)` (m, m, rad).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct H2nPose {
+    pub x: f64,
+    pub y: f64,
+    pub theta: f64,
+}
+
+/// A body-frame twist `(v_x, v_y, ω)` (m/s, m/s, rad/s).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct H2nTwist {
+    pub vx: f64,
+    pub vy: f64,
+    pub omega: f64,
+}
+
+/// Another agent. `history` points to `history_len` positions `[x, y]` (`2·history_len`
+/// doubles, oldest first) and may be null when `history_len == 0`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct H2nAgent {
+    pub id: u64,
+    pub position: [f64; 2],
+    pub velocity: [f64; 2],
+    pub radius: f64,
+    pub history: *const f64,
+    pub history_len: usize,
+}
+
+/// A read-only batch of trajectories: `data` holds `len == batch·horizon·dim` doubles laid out
+/// `[batch, horizon, dim]` with `dim == 3` (`x, y, θ`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct H2nTrajBatch {
+    pub data: *const f64,
+    pub len: usize,
+    pub batch: usize,
+    pub horizon: usize,
+    pub dim: usize,
+}
+
+/// A host-owned output array of `len` doubles.
+#[repr(C)]
+#[derive(Debug)]
+pub struct H2nF64Out {
+    pub data: *mut f64,
+    pub len: usize,
+}
+
+/// What a constraint term sees besides the trajectories ([`human2nav_core::constraint::ConstraintContext`]).
+#[repr(C)]
+#[derive(Debug)]
+pub struct H2nConstraintContext {
+    /// `sizeof(H2nConstraintContext)` as the host was compiled.
+    pub struct_size: u32,
+    pub reserved: u32,
+    /// Time between poses (s).
+    pub dt: f64,
+    pub limits: H2nLimits,
+    pub initial_velocity: H2nTwist,
+    pub agents: *const H2nAgent,
+    pub agent_count: usize,
+}
+
+/// Vtable of a constraint term ([`human2nav_core::constraint::ConstraintTerm`]).
+#[repr(C)]
+#[derive(Debug)]
+pub struct H2nConstraintVTable {
+    /// `sizeof(H2nConstraintVTable)` as the plugin was compiled.
+    pub struct_size: u32,
+    pub reserved: u32,
+    /// Frees the instance. Called exactly once.
+    pub destroy: unsafe extern "C" fn(instance: *mut c_void),
+    /// Copies the instance's last error message into `out` (`len = 0` when there is none).
+    pub last_error: unsafe extern "C" fn(instance: *mut c_void, out: *mut H2nBuffer),
+    /// The term's name, valid as long as the instance.
+    pub name: unsafe extern "C" fn(instance: *mut c_void) -> H2nStr,
+    /// Adds the cost of trajectory `b` into `cost.data[b]` (`cost.len == batch`) and its
+    /// gradient into `grad` (`grad.len == batch.len`).
+    pub evaluate: unsafe extern "C" fn(
+        instance: *mut c_void,
+        batch: *const H2nTrajBatch,
+        ctx: *const H2nConstraintContext,
+        cost: H2nF64Out,
+        grad: H2nF64Out,
+    ) -> H2nStatus,
+}
+
+/// A robot state: pose and the body-frame velocity executed during the last step.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct H2nRobotState {
+    pub pose: H2nPose,
+    pub velocity: H2nTwist,
+}
+
+/// A read-only plan: `pose_count` poses, `poses[k]` at `t0 + k·dt` (diagnostics are not passed).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct H2nPlanView {
+    pub t0: f64,
+    pub dt: f64,
+    pub poses: *const H2nPose,
+    pub pose_count: usize,
+}
+
+/// Vtable of an embodiment ([`human2nav_core::embodiment::Embodiment`]).
+#[repr(C)]
+#[derive(Debug)]
+pub struct H2nEmbodimentVTable {
+    /// `sizeof(H2nEmbodimentVTable)` as the plugin was compiled.
+    pub struct_size: u32,
+    pub reserved: u32,
+    pub destroy: unsafe extern "C" fn(instance: *mut c_void),
+    pub last_error: unsafe extern "C" fn(instance: *mut c_void, out: *mut H2nBuffer),
+    pub name: unsafe extern "C" fn(instance: *mut c_void) -> H2nStr,
+    /// Writes 1 to `out` when the robot can move sideways, else 0.
+    pub holonomic: unsafe extern "C" fn(instance: *mut c_void, out: *mut u32) -> H2nStatus,
+    /// Clips `cmd` to what the robot can do from `state` within `dt`.
+    pub saturate: unsafe extern "C" fn(
+        instance: *mut c_void,
+        state: *const H2nRobotState,
+        cmd: *const H2nTwist,
+        dt: f64,
+        out: *mut H2nTwist,
+    ) -> H2nStatus,
+    /// Advances the kinematic model by `dt` under an already saturated command.
+    pub step: unsafe extern "C" fn(
+        instance: *mut c_void,
+        state: *const H2nRobotState,
+        cmd: *const H2nTwist,
+        dt: f64,
+        out: *mut H2nRobotState,
+    ) -> H2nStatus,
+    /// The tracking controller's (unsaturated) command that follows `plan` at time `t`.
+    pub track: unsafe extern "C" fn(
+        instance: *mut c_void,
+        state: *const H2nRobotState,
+        plan: *const H2nPlanView,
+        t: f64,
+        out: *mut H2nTwist,
+    ) -> H2nStatus,
+}
+
+/// What a planner sees at one planning instant ([`human2nav_core::Observation`]).
+#[repr(C)]
+#[derive(Debug)]
+pub struct H2nObservation {
+    /// `sizeof(H2nObservation)` as the host was compiled.
+    pub struct_size: u32,
+    pub reserved: u32,
+    pub time: f64,
+    pub ego: H2nPose,
+    pub ego_velocity: H2nTwist,
+    pub goal: [f64; 2],
+    pub agents: *const H2nAgent,
+    pub agent_count: usize,
+}
+
+/// A host-owned plan buffer. The plugin writes `t0`, `dt`, `fallback`, up to `capacity` poses
+/// and sets `len` to the plan's length. When `len > capacity` the call returns
+/// [`H2N_BUFFER_TOO_SMALL`] and the plugin keeps the plan so that `last_plan` can copy it into
+/// a larger buffer. `note` receives an optional one-line diagnostic (e.g. why it fell back).
+#[repr(C)]
+#[derive(Debug)]
+pub struct H2nPlanOut {
+    pub t0: f64,
+    pub dt: f64,
+    pub poses: *mut H2nPose,
+    pub capacity: usize,
+    pub len: usize,
+    /// 1 when the planner fell back to its safe behaviour (stop in place).
+    pub fallback: u32,
+    pub reserved: u32,
+    pub note: H2nBuffer,
+}
+
+/// Vtable of a planner ([`human2nav_core::Planner`]).
+#[repr(C)]
+#[derive(Debug)]
+pub struct H2nPlannerVTable {
+    /// `sizeof(H2nPlannerVTable)` as the plugin was compiled.
+    pub struct_size: u32,
+    pub reserved: u32,
+    pub destroy: unsafe extern "C" fn(instance: *mut c_void),
+    pub last_error: unsafe extern "C" fn(instance: *mut c_void, out: *mut H2nBuffer),
+    pub name: unsafe extern "C" fn(instance: *mut c_void) -> H2nStr,
+    /// Forgets state carried between calls.
+    pub reset: unsafe extern "C" fn(instance: *mut c_void) -> H2nStatus,
+    /// Plans from one observation into `out`.
+    pub plan: unsafe extern "C" fn(
+        instance: *mut c_void,
+        obs: *const H2nObservation,
+        out: *mut H2nPlanOut,
+    ) -> H2nStatus,
+    /// Copies the plan of the last successful `plan` call into `out` (after
+    /// [`H2N_BUFFER_TOO_SMALL`]).
+    pub last_plan: unsafe extern "C" fn(instance: *mut c_void, out: *mut H2nPlanOut) -> H2nStatus,
+}
+
+/// Size and field offsets of one ABI struct.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct StructLayout {
+    pub name: &'static str,
+    pub size: usize,
+    /// `(field, offset)` in declaration order.
+    pub fields: Vec<(&'static str, usize)>,
+}
+
+/// The layout of every ABI struct as this compiler lays them out; the C plugin reports the same
+/// table from its compiler and the tests compare the two.
+pub fn layout() -> Vec<StructLayout> {
+    use std::mem::{offset_of, size_of};
+    macro_rules! entry {
+        ($t:ident { $($f:ident),* $(,)? }) => {
+            StructLayout {
+                name: stringify!($t),
+                size: size_of::<$t>(),
+                fields: vec![$((stringify!($f), offset_of!($t, $f))),*],
+            }
+        };
+    }
+    vec![
+        entry!(H2nStr { ptr, len }),
+        entry!(H2nBuffer {
+            data,
+            capacity,
+            len
+        }),
+        entry!(H2nPluginEntry {
+            abi_version,
+            struct_size,
+            name,
+            version,
+            factories,
+            factory_count,
+            find_factory
+        }),
+        entry!(H2nFactory {
+            struct_size,
+            kind,
+            name,
+            description,
+            create
+        }),
+        entry!(H2nLimits {
+            v_max,
+            v_reverse_max,
+            a_max,
+            omega_max,
+            kappa_max,
+            lateral_speed_max,
+            has_kappa_max,
+            reserved
+        }),
+        entry!(H2nGains {
+            k_x,
+            k_y,
+            k_theta,
+            k_d,
+            lookahead
+        }),
+        entry!(H2nCreateArgs {
+            struct_size,
+            kind,
+            config,
+            has_robot,
+            reserved,
+            limits,
+            gains,
+            footprint_radius
+        }),
+        entry!(H2nObject { instance, vtable }),
+        entry!(H2nPose { x, y, theta }),
+        entry!(H2nTwist { vx, vy, omega }),
+        entry!(H2nAgent {
+            id,
+            position,
+            velocity,
+            radius,
+            history,
+            history_len
+        }),
+        entry!(H2nTrajBatch {
+            data,
+            len,
+            batch,
+            horizon,
+            dim
+        }),
+        entry!(H2nF64Out { data, len }),
+        entry!(H2nConstraintContext {
+            struct_size,
+            reserved,
+            dt,
+            limits,
+            initial_velocity,
+            agents,
+            agent_count
+        }),
+        entry!(H2nConstraintVTable {
+            struct_size,
+            reserved,
+            destroy,
+            last_error,
+            name,
+            evaluate
+        }),
+        entry!(H2nRobotState { pose, velocity }),
+        entry!(H2nPlanView {
+            t0,
+            dt,
+            poses,
+            pose_count
+        }),
+        entry!(H2nEmbodimentVTable {
+            struct_size,
+            reserved,
+            destroy,
+            last_error,
+            name,
+            holonomic,
+            saturate,
+            step,
+            track
+        }),
+        entry!(H2nObservation {
+            struct_size,
+            reserved,
+            time,
+            ego,
+            ego_velocity,
+            goal,
+            agents,
+            agent_count
+        }),
+        entry!(H2nPlanOut {
+            t0,
+            dt,
+            poses,
+            capacity,
+            len,
+            fallback,
+            reserved,
+            note
+        }),
+        entry!(H2nPlannerVTable {
+            struct_size,
+            reserved,
+            destroy,
+            last_error,
+            name,
+            reset,
+            plan,
+            last_plan
+        }),
+    ]
+}
+
+impl From<&Limits> for H2nLimits {
+    fn from(l: &Limits) -> Self {
+        Self {
+            v_max: l.v_max,
+            v_reverse_max: l.v_reverse_max,
+            a_max: l.a_max,
+            omega_max: l.omega_max,
+            kappa_max: l.kappa_max.unwrap_or(0.0),
+            lateral_speed_max: l.lateral_speed_max,
+            has_kappa_max: u32::from(l.kappa_max.is_some()),
+            reserved: 0,
+        }
+    }
+}
+
+impl From<&H2nLimits> for Limits {
+    fn from(l: &H2nLimits) -> Self {
+        Self {
+            v_max: l.v_max,
+            v_reverse_max: l.v_reverse_max,
+            a_max: l.a_max,
+            omega_max: l.omega_max,
+            kappa_max: (l.has_kappa_max != 0).then_some(l.kappa_max),
+            lateral_speed_max: l.lateral_speed_max,
+        }
+    }
+}
+
+impl From<&ControllerGains> for H2nGains {
+    fn from(g: &ControllerGains) -> Self {
+        Self {
+            k_x: g.k_x,
+            k_y: g.k_y,
+            k_theta: g.k_theta,
+            k_d: g.k_d,
+            lookahead: g.lookahead,
+        }
+    }
+}
+
+impl From<&H2nGains> for ControllerGains {
+    fn from(g: &H2nGains) -> Self {
+        Self {
+            k_x: g.k_x,
+            k_y: g.k_y,
+            k_theta: g.k_theta,
+            k_d: g.k_d,
+            lookahead: g.lookahead,
+        }
+    }
+}
+
+impl From<Pose2> for H2nPose {
+    fn from(p: Pose2) -> Self {
+        Self {
+            x: p.x,
+            y: p.y,
+            theta: p.theta,
+        }
+    }
+}
+
+impl From<H2nPose> for Pose2 {
+    fn from(p: H2nPose) -> Self {
+        Pose2::new(p.x, p.y, p.theta)
+    }
+}
+
+impl From<Twist2> for H2nTwist {
+    fn from(t: Twist2) -> Self {
+        Self {
+            vx: t.vx,
+            vy: t.vy,
+            omega: t.omega,
+        }
+    }
+}
+
+impl From<H2nTwist> for Twist2 {
+    fn from(t: H2nTwist) -> Self {
+        Twist2::new(t.vx, t.vy, t.omega)
+    }
+}
+
+impl From<&human2nav_core::embodiment::RobotState> for H2nRobotState {
+    fn from(s: &human2nav_core::embodiment::RobotState) -> Self {
+        Self {
+            pose: s.pose.into(),
+            velocity: s.velocity.into(),
+        }
+    }
+}
+
+impl From<&H2nRobotState> for human2nav_core::embodiment::RobotState {
+    fn from(s: &H2nRobotState) -> Self {
+        Self {
+            pose: s.pose.into(),
+            velocity: s.velocity.into(),
+        }
+    }
+}
+
+impl H2nAgent {
+    /// A view of `a` whose `history` borrows `a.history` (valid while `a` is).
+    pub fn borrow(a: &human2nav_core::AgentState) -> Self {
+        Self {
+            id: a.id,
+            position: a.position,
+            velocity: a.velocity,
+            radius: a.radius,
+            history: if a.history.is_empty() {
+                std::ptr::null()
+            } else {
+                a.history.as_ptr().cast()
+            },
+            history_len: a.history.len(),
+        }
+    }
+}

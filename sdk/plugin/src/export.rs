@@ -1,0 +1,739 @@
+//! The plugin side of the ABI: generic `extern "C"` shims around the core traits, used by the
+//! expansion of [`export_plugin!`](crate::export_plugin). Authors never call these directly.
+//!
+//! Every shim checks its pointers and lengths, runs the author's code inside `catch_unwind`,
+//! turns errors into status codes plus a per-instance last-error message, and marks the
+//! instance unusable (`H2N_POISONED` from then on) when the code panicked.
+
+use crate::abi::*;
+use crate::init::{InitError, PluginInit, RobotContext};
+use human2nav_core::constraint::{ConstraintContext, ConstraintTerm, TrajBatch};
+use human2nav_core::embodiment::{Embodiment, RobotState};
+use human2nav_core::{AgentState, Observation, Plan, PlanError, PlanInfo, Planner, Pose2};
+use std::ffi::c_void;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// A failure inside a shim: the status to return and the message for `last_error`.
+struct Fail {
+    status: H2nStatus,
+    message: String,
+}
+
+impl Fail {
+    fn invalid(message: impl Into<String>) -> Self {
+        Self {
+            status: H2N_INVALID_ARGUMENT,
+            message: message.into(),
+        }
+    }
+
+    fn error(message: impl Into<String>) -> Self {
+        Self {
+            status: H2N_ERROR,
+            message: message.into(),
+        }
+    }
+}
+
+/// The message of a caught panic.
+pub(crate) fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    if let Some(s) = payload.downcast_ref::<&str>() {
+        (*s).to_owned()
+    } else if let Some(s) = payload.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "(non-string panic payload)".to_owned()
+    }
+}
+
+/// Copies `message` into a host-owned buffer (truncating) and records its full length.
+///
+/// # Safety
+/// `out` is null or points to a valid `H2nBuffer` whose `data` has `capacity` writable bytes.
+unsafe fn write_buffer(out: *mut H2nBuffer, message: &str) {
+    // SAFETY: the caller guarantees `out` is null or valid for writes.
+    let Some(out) = (unsafe { out.as_mut() }) else {
+        return;
+    };
+    let n = message.len().min(out.capacity);
+    if n > 0 && !out.data.is_null() {
+        // SAFETY: `data` has `capacity >= n` writable bytes per the caller's contract and cannot
+        // overlap a message owned by this plugin.
+        unsafe { std::ptr::copy_nonoverlapping(message.as_ptr(), out.data, n) };
+    }
+    out.len = message.len();
+}
+
+/// A shared slice from an ABI pointer + length; null is allowed only for length 0.
+///
+/// # Safety
+/// When non-null, `ptr` must point to `len` initialised `T` valid for `'a`.
+unsafe fn slice<'a, T>(ptr: *const T, len: usize, what: &str) -> Result<&'a [T], Fail> {
+    if len == 0 {
+        return Ok(&[]);
+    }
+    if ptr.is_null() {
+        return Err(Fail::invalid(format!(
+            "{what} is null but its length is {len}"
+        )));
+    }
+    if !ptr.is_aligned() {
+        return Err(Fail::invalid(format!("{what} is not aligned")));
+    }
+    // SAFETY: non-null, aligned, and `len` valid elements per the caller's contract.
+    Ok(unsafe { std::slice::from_raw_parts(ptr, len) })
+}
+
+/// A mutable slice from an ABI pointer + length; null is allowed only for length 0.
+///
+/// # Safety
+/// When non-null, `ptr` must point to `len` initialised `T` valid for writes for `'a` and not
+/// aliased by any other slice in use.
+unsafe fn slice_mut<'a, T>(ptr: *mut T, len: usize, what: &str) -> Result<&'a mut [T], Fail> {
+    if len == 0 {
+        return Ok(&mut []);
+    }
+    if ptr.is_null() {
+        return Err(Fail::invalid(format!(
+            "{what} is null but its length is {len}"
+        )));
+    }
+    if !ptr.is_aligned() {
+        return Err(Fail::invalid(format!("{what} is not aligned")));
+    }
+    // SAFETY: non-null, aligned, valid and unaliased per the caller's contract.
+    Ok(unsafe { std::slice::from_raw_parts_mut(ptr, len) })
+}
+
+/// A reference from a non-null, aligned ABI pointer.
+///
+/// # Safety
+/// When non-null, `ptr` must point to a valid `T` for `'a`.
+unsafe fn reference<'a, T>(ptr: *const T, what: &str) -> Result<&'a T, Fail> {
+    if ptr.is_null() {
+        return Err(Fail::invalid(format!("{what} is null")));
+    }
+    if !ptr.is_aligned() {
+        return Err(Fail::invalid(format!("{what} is not aligned")));
+    }
+    // SAFETY: non-null, aligned and valid per the caller's contract.
+    Ok(unsafe { &*ptr })
+}
+
+/// Rebuilds the host's agents (copying their histories).
+///
+/// # Safety
+/// `ptr` must point to `count` valid `H2nAgent`s whose `history` pointers are valid.
+unsafe fn agents_from_abi(ptr: *const H2nAgent, count: usize) -> Result<Vec<AgentState>, Fail> {
+    // SAFETY: forwarded contract.
+    let raw = unsafe { slice(ptr, count, "agents") }?;
+    let mut out = Vec::with_capacity(raw.len());
+    for a in raw {
+        let n = a
+            .history_len
+            .checked_mul(2)
+            .ok_or_else(|| Fail::invalid("history too long"))?;
+        // SAFETY: forwarded contract: `history` holds `2·history_len` doubles.
+        let flat = unsafe { slice(a.history, n, "agent history") }?;
+        out.push(AgentState {
+            id: a.id,
+            position: a.position,
+            velocity: a.velocity,
+            radius: a.radius,
+            history: flat.chunks_exact(2).map(|p| [p[0], p[1]]).collect(),
+        });
+    }
+    Ok(out)
+}
+
+/// What a plugin instance is on the plugin's side of the boundary.
+struct Instance<S> {
+    state: S,
+    name: Box<str>,
+    poisoned: AtomicBool,
+    last_error: Mutex<String>,
+}
+
+impl<S> Instance<S> {
+    fn new(state: S, name: &str) -> Self {
+        Self {
+            state,
+            name: name.into(),
+            poisoned: AtomicBool::new(false),
+            last_error: Mutex::new(String::new()),
+        }
+    }
+
+    fn set_error(&self, message: String) {
+        *self.last_error.lock().unwrap_or_else(|e| e.into_inner()) = message;
+    }
+}
+
+/// Runs `body` on the instance behind `instance` with every guard of the ABI.
+///
+/// # Safety
+/// `instance` is null or was returned by a `create` shim for `Instance<S>` and not destroyed.
+unsafe fn call<S>(instance: *mut c_void, body: impl FnOnce(&S) -> Result<(), Fail>) -> H2nStatus {
+    if instance.is_null() {
+        return H2N_INVALID_ARGUMENT;
+    }
+    // SAFETY: per the caller's contract `instance` is a live `Instance<S>` (boxed by `create`);
+    // shims only ever take shared references to it.
+    let inst = unsafe { &*(instance as *const Instance<S>) };
+    if inst.poisoned.load(Ordering::Acquire) {
+        // last_error still holds the panic that poisoned the instance.
+        return H2N_POISONED;
+    }
+    match catch_unwind(AssertUnwindSafe(|| body(&inst.state))) {
+        Ok(Ok(())) => H2N_OK,
+        Ok(Err(fail)) => {
+            inst.set_error(fail.message);
+            fail.status
+        }
+        Err(payload) => {
+            inst.poisoned.store(true, Ordering::Release);
+            inst.set_error(format!("panicked: {}", panic_message(payload.as_ref())));
+            H2N_PANIC
+        }
+    }
+}
+
+/// `destroy` of every vtable.
+///
+/// # Safety
+/// `instance` is null or a live `Instance<S>` from `create`; it is not used afterwards.
+unsafe extern "C" fn destroy<S>(instance: *mut c_void) {
+    if instance.is_null() {
+        return;
+    }
+    // SAFETY: `instance` came from `Box::into_raw` in `create` and is destroyed exactly once.
+    let boxed = unsafe { Box::from_raw(instance as *mut Instance<S>) };
+    // A panicking destructor must not unwind into the host; its memory is then leaked.
+    let _ = catch_unwind(AssertUnwindSafe(move || drop(boxed)));
+}
+
+/// `last_error` of every vtable.
+///
+/// # Safety
+/// As [`call`], and `out` as [`write_buffer`].
+unsafe extern "C" fn last_error<S>(instance: *mut c_void, out: *mut H2nBuffer) {
+    if instance.is_null() {
+        // SAFETY: forwarded contract.
+        unsafe { write_buffer(out, "instance is null") };
+        return;
+    }
+    // SAFETY: a live `Instance<S>`; only shared access.
+    let inst = unsafe { &*(instance as *const Instance<S>) };
+    let message = inst.last_error.lock().unwrap_or_else(|e| e.into_inner());
+    // SAFETY: forwarded contract.
+    unsafe { write_buffer(out, &message) };
+}
+
+/// `name` of every vtable.
+///
+/// # Safety
+/// As [`call`]. The returned view lives as long as the instance.
+unsafe extern "C" fn name<S>(instance: *mut c_void) -> H2nStr {
+    if instance.is_null() {
+        return H2nStr::EMPTY;
+    }
+    // SAFETY: a live `Instance<S>`; its boxed name is never modified.
+    let inst = unsafe { &*(instance as *const Instance<S>) };
+    H2nStr::new(&inst.name)
+}
+
+/// Common part of every `create` shim: checks the arguments, runs the constructor under
+/// `catch_unwind` and boxes the instance.
+///
+/// # Safety
+/// `args` is null or a valid `H2nCreateArgs` (with `config` readable); `out` is null or valid
+/// for writes; `error` as [`write_buffer`].
+unsafe fn create<S: 'static>(
+    kind: u32,
+    args: *const H2nCreateArgs,
+    out: *mut H2nObject,
+    error: *mut H2nBuffer,
+    vtable: *const c_void,
+    build: impl FnOnce(&PluginInit<'_>) -> Result<(S, String), InitError>,
+) -> H2nStatus {
+    let result = catch_unwind(AssertUnwindSafe(|| -> Result<*mut c_void, Fail> {
+        // SAFETY: forwarded contract.
+        let args = unsafe { reference(args, "create args") }?;
+        if (args.struct_size as usize) < std::mem::size_of::<H2nCreateArgs>() {
+            return Err(Fail::invalid(format!(
+                "create args are {} bytes, this plugin needs {}",
+                args.struct_size,
+                std::mem::size_of::<H2nCreateArgs>()
+            )));
+        }
+        if args.kind != kind {
+            return Err(Fail::invalid(format!(
+                "factory of kind {kind} called for kind {}",
+                args.kind
+            )));
+        }
+        if out.is_null() {
+            return Err(Fail::invalid("output object is null"));
+        }
+        // SAFETY: forwarded contract: `config` is readable for the duration of the call.
+        let config = unsafe { args.config.as_str() }
+            .map_err(|e| Fail::invalid(format!("config is not UTF-8: {e}")))?;
+        let robot = (args.has_robot != 0).then(|| RobotContext {
+            limits: (&args.limits).into(),
+            gains: (&args.gains).into(),
+            footprint_radius: args.footprint_radius,
+        });
+        let init = PluginInit::new(config, robot);
+        let (state, name) = build(&init).map_err(|e| Fail {
+            status: if e.is_config() { H2N_CONFIG } else { H2N_ERROR },
+            message: e.to_string(),
+        })?;
+        Ok(Box::into_raw(Box::new(Instance::new(state, &name))).cast())
+    }));
+    let fail = match result {
+        Ok(Ok(instance)) => {
+            // SAFETY: `out` was checked non-null above and is valid for writes per the contract.
+            unsafe { out.write(H2nObject { instance, vtable }) };
+            return H2N_OK;
+        }
+        Ok(Err(fail)) => fail,
+        Err(payload) => Fail {
+            status: H2N_PANIC,
+            message: format!("factory panicked: {}", panic_message(payload.as_ref())),
+        },
+    };
+    // SAFETY: forwarded contract.
+    unsafe { write_buffer(error, &fail.message) };
+    fail.status
+}
+
+/// Lookup by kind and name in a factory table (the entry's `find_factory`).
+///
+/// # Safety
+/// `name` must be readable.
+pub unsafe fn find_factory(
+    factories: &'static [H2nFactory],
+    kind: u32,
+    name: H2nStr,
+) -> *const H2nFactory {
+    // SAFETY: forwarded contract.
+    let Ok(name) = (unsafe { name.as_str() }) else {
+        return std::ptr::null();
+    };
+    factories
+        .iter()
+        .find(|f| {
+            // SAFETY: factory names are static string literals.
+            f.kind == kind && unsafe { f.name.as_str() }.is_ok_and(|n| n == name)
+        })
+        .map_or(std::ptr::null(), |f| f as *const H2nFactory)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Constraint terms
+
+unsafe extern "C" fn constraint_evaluate<T: ConstraintTerm + 'static>(
+    instance: *mut c_void,
+    batch: *const H2nTrajBatch,
+    ctx: *const H2nConstraintContext,
+    cost: H2nF64Out,
+    grad: H2nF64Out,
+) -> H2nStatus {
+    // SAFETY: the host upholds the ABI contract for every pointer; `call` checks `instance`.
+    unsafe {
+        call::<T>(instance, |term| {
+            let batch = reference(batch, "batch")?;
+            let ctx = reference(ctx, "context")?;
+            if (ctx.struct_size as usize) < std::mem::size_of::<H2nConstraintContext>() {
+                return Err(Fail::invalid("constraint context is from an older host"));
+            }
+            if batch.dim != 3 {
+                return Err(Fail::invalid(format!(
+                    "pose dimension is {}, expected 3",
+                    batch.dim
+                )));
+            }
+            let expected = batch
+                .batch
+                .checked_mul(batch.horizon)
+                .and_then(|n| n.checked_mul(3));
+            if expected != Some(batch.len) {
+                return Err(Fail::invalid(format!(
+                    "{} values cannot be {} trajectories × {} poses × 3",
+                    batch.len, batch.batch, batch.horizon
+                )));
+            }
+            if cost.len != batch.batch {
+                return Err(Fail::invalid(format!(
+                    "cost has {} entries for {} trajectories",
+                    cost.len, batch.batch
+                )));
+            }
+            if grad.len != batch.len {
+                return Err(Fail::invalid(format!(
+                    "gradient has {} entries, the batch {}",
+                    grad.len, batch.len
+                )));
+            }
+            let data = slice(batch.data, batch.len, "batch data")?;
+            let cost = slice_mut(cost.data, cost.len, "cost")?;
+            let grad = slice_mut(grad.data, grad.len, "gradient")?;
+            let agents = agents_from_abi(ctx.agents, ctx.agent_count)?;
+            let limits = (&ctx.limits).into();
+            let core_ctx = ConstraintContext {
+                dt: ctx.dt,
+                limits: &limits,
+                initial_velocity: ctx.initial_velocity.into(),
+                agents: &agents,
+            };
+            let view = TrajBatch::new(data, batch.batch, batch.horizon)
+                .map_err(|e| Fail::invalid(e.to_string()))?;
+            term.evaluate(view, &core_ctx, cost, grad)
+                .map_err(|e| Fail::error(e.to_string()))
+        })
+    }
+}
+
+/// Creates a constraint term through `ctor` (used by `export_plugin!`).
+///
+/// # Safety
+/// The arguments of [`H2nFactory::create`], as passed by a host honouring the ABI.
+pub unsafe fn create_constraint<T, E>(
+    args: *const H2nCreateArgs,
+    out: *mut H2nObject,
+    error: *mut H2nBuffer,
+    ctor: fn(&PluginInit<'_>) -> Result<T, E>,
+) -> H2nStatus
+where
+    T: ConstraintTerm + 'static,
+    E: Into<InitError>,
+{
+    let vtable: &'static H2nConstraintVTable = const {
+        &H2nConstraintVTable {
+            struct_size: std::mem::size_of::<H2nConstraintVTable>() as u32,
+            reserved: 0,
+            destroy: destroy::<T>,
+            last_error: last_error::<T>,
+            name: name::<T>,
+            evaluate: constraint_evaluate::<T>,
+        }
+    };
+    // SAFETY: forwarded contract.
+    unsafe {
+        create::<T>(
+            H2N_KIND_CONSTRAINT,
+            args,
+            out,
+            error,
+            (vtable as *const H2nConstraintVTable).cast(),
+            |init| {
+                let term = ctor(init).map_err(Into::into)?;
+                let name = term.name().to_owned();
+                Ok((term, name))
+            },
+        )
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Embodiments
+
+unsafe extern "C" fn embodiment_holonomic<T: Embodiment + 'static>(
+    instance: *mut c_void,
+    out: *mut u32,
+) -> H2nStatus {
+    // SAFETY: the host upholds the ABI contract for every pointer; `call` checks `instance`.
+    unsafe {
+        call::<T>(instance, |e| {
+            if out.is_null() {
+                return Err(Fail::invalid("output is null"));
+            }
+            out.write(u32::from(e.holonomic()));
+            Ok(())
+        })
+    }
+}
+
+unsafe extern "C" fn embodiment_saturate<T: Embodiment + 'static>(
+    instance: *mut c_void,
+    state: *const H2nRobotState,
+    cmd: *const H2nTwist,
+    dt: f64,
+    out: *mut H2nTwist,
+) -> H2nStatus {
+    // SAFETY: the host upholds the ABI contract for every pointer; `call` checks `instance`.
+    unsafe {
+        call::<T>(instance, |e| {
+            let state: RobotState = reference(state, "state")?.into();
+            let cmd = *reference(cmd, "command")?;
+            if out.is_null() {
+                return Err(Fail::invalid("output is null"));
+            }
+            out.write(e.saturate(&state, cmd.into(), dt).into());
+            Ok(())
+        })
+    }
+}
+
+unsafe extern "C" fn embodiment_step<T: Embodiment + 'static>(
+    instance: *mut c_void,
+    state: *const H2nRobotState,
+    cmd: *const H2nTwist,
+    dt: f64,
+    out: *mut H2nRobotState,
+) -> H2nStatus {
+    // SAFETY: the host upholds the ABI contract for every pointer; `call` checks `instance`.
+    unsafe {
+        call::<T>(instance, |e| {
+            let state: RobotState = reference(state, "state")?.into();
+            let cmd = *reference(cmd, "command")?;
+            if out.is_null() {
+                return Err(Fail::invalid("output is null"));
+            }
+            out.write((&e.step(&state, cmd.into(), dt)).into());
+            Ok(())
+        })
+    }
+}
+
+unsafe extern "C" fn embodiment_track<T: Embodiment + 'static>(
+    instance: *mut c_void,
+    state: *const H2nRobotState,
+    plan: *const H2nPlanView,
+    t: f64,
+    out: *mut H2nTwist,
+) -> H2nStatus {
+    // SAFETY: the host upholds the ABI contract for every pointer; `call` checks `instance`.
+    unsafe {
+        call::<T>(instance, |e| {
+            let state: RobotState = reference(state, "state")?.into();
+            let view = reference(plan, "plan")?;
+            let poses = slice(view.poses, view.pose_count, "plan poses")?;
+            let plan = Plan {
+                t0: view.t0,
+                dt: view.dt,
+                poses: poses.iter().map(|&p| Pose2::from(p)).collect(),
+                info: PlanInfo::default(),
+            };
+            if out.is_null() {
+                return Err(Fail::invalid("output is null"));
+            }
+            out.write(e.track(&state, &plan, t).into());
+            Ok(())
+        })
+    }
+}
+
+/// Creates an embodiment through `ctor` (used by `export_plugin!`).
+///
+/// # Safety
+/// The arguments of [`H2nFactory::create`], as passed by a host honouring the ABI.
+pub unsafe fn create_embodiment<T, E>(
+    args: *const H2nCreateArgs,
+    out: *mut H2nObject,
+    error: *mut H2nBuffer,
+    ctor: fn(&PluginInit<'_>) -> Result<T, E>,
+) -> H2nStatus
+where
+    T: Embodiment + 'static,
+    E: Into<InitError>,
+{
+    let vtable: &'static H2nEmbodimentVTable = const {
+        &H2nEmbodimentVTable {
+            struct_size: std::mem::size_of::<H2nEmbodimentVTable>() as u32,
+            reserved: 0,
+            destroy: destroy::<T>,
+            last_error: last_error::<T>,
+            name: name::<T>,
+            holonomic: embodiment_holonomic::<T>,
+            saturate: embodiment_saturate::<T>,
+            step: embodiment_step::<T>,
+            track: embodiment_track::<T>,
+        }
+    };
+    // SAFETY: forwarded contract.
+    unsafe {
+        create::<T>(
+            H2N_KIND_EMBODIMENT,
+            args,
+            out,
+            error,
+            (vtable as *const H2nEmbodimentVTable).cast(),
+            |init| {
+                let e = ctor(init).map_err(Into::into)?;
+                let name = e.name().to_owned();
+                Ok((e, name))
+            },
+        )
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Planners
+
+/// A planner and the plan it produced last (kept for `last_plan`). The host calls a planner
+/// from one thread at a time; the mutex makes that a checked invariant instead of an assumption.
+struct PlannerState<T> {
+    planner: T,
+    last_plan: Option<Plan>,
+}
+
+/// Writes `plan` into the host's buffer, or only its length when the buffer is too small.
+///
+/// # Safety
+/// `out.poses` has `out.capacity` writable poses; `out.note` as [`write_buffer`].
+unsafe fn write_plan(plan: &Plan, out: &mut H2nPlanOut) -> Result<(), Fail> {
+    out.t0 = plan.t0;
+    out.dt = plan.dt;
+    out.len = plan.poses.len();
+    out.fallback = u32::from(plan.info.fallback);
+    // SAFETY: forwarded contract (the note buffer is host-owned).
+    unsafe { write_buffer(&mut out.note, &plan.info.notes.join("; ")) };
+    if plan.poses.len() > out.capacity {
+        return Err(Fail {
+            status: H2N_BUFFER_TOO_SMALL,
+            message: format!(
+                "plan has {} poses, buffer holds {}",
+                plan.poses.len(),
+                out.capacity
+            ),
+        });
+    }
+    // SAFETY: forwarded contract.
+    let dst = unsafe { slice_mut(out.poses, plan.poses.len(), "plan poses") }?;
+    for (d, p) in dst.iter_mut().zip(&plan.poses) {
+        *d = (*p).into();
+    }
+    Ok(())
+}
+
+fn plan_fail(e: PlanError) -> Fail {
+    match e {
+        PlanError::InvalidObservation(m) => Fail::invalid(m),
+        PlanError::Failed { message, .. } | PlanError::Unusable { message, .. } => {
+            Fail::error(message)
+        }
+    }
+}
+
+unsafe extern "C" fn planner_reset<T: Planner + 'static>(instance: *mut c_void) -> H2nStatus {
+    // SAFETY: `call` checks `instance`; the host upholds the rest of the contract.
+    unsafe {
+        call::<Mutex<PlannerState<T>>>(instance, |state| {
+            let mut state = state
+                .lock()
+                .map_err(|_| Fail::error("planner state is poisoned"))?;
+            state.planner.reset();
+            state.last_plan = None;
+            Ok(())
+        })
+    }
+}
+
+unsafe extern "C" fn planner_plan<T: Planner + 'static>(
+    instance: *mut c_void,
+    obs: *const H2nObservation,
+    out: *mut H2nPlanOut,
+) -> H2nStatus {
+    // SAFETY: `call` checks `instance`; the host upholds the rest of the contract.
+    unsafe {
+        call::<Mutex<PlannerState<T>>>(instance, |state| {
+            let raw = reference(obs, "observation")?;
+            if (raw.struct_size as usize) < std::mem::size_of::<H2nObservation>() {
+                return Err(Fail::invalid("observation is from an older host"));
+            }
+            if out.is_null() {
+                return Err(Fail::invalid("plan output is null"));
+            }
+            let out = &mut *out;
+            let obs = Observation {
+                time: raw.time,
+                ego: raw.ego.into(),
+                ego_velocity: raw.ego_velocity.into(),
+                goal: raw.goal,
+                agents: agents_from_abi(raw.agents, raw.agent_count)?,
+            };
+            let mut state = state
+                .lock()
+                .map_err(|_| Fail::error("planner state is poisoned"))?;
+            let plan = state.planner.plan(&obs).map_err(plan_fail)?;
+            let written = write_plan(&plan, out);
+            state.last_plan = Some(plan);
+            written
+        })
+    }
+}
+
+unsafe extern "C" fn planner_last_plan<T: Planner + 'static>(
+    instance: *mut c_void,
+    out: *mut H2nPlanOut,
+) -> H2nStatus {
+    // SAFETY: `call` checks `instance`; the host upholds the rest of the contract.
+    unsafe {
+        call::<Mutex<PlannerState<T>>>(instance, |state| {
+            if out.is_null() {
+                return Err(Fail::invalid("plan output is null"));
+            }
+            let state = state
+                .lock()
+                .map_err(|_| Fail::error("planner state is poisoned"))?;
+            let plan = state
+                .last_plan
+                .as_ref()
+                .ok_or_else(|| Fail::error("no plan yet"))?;
+            write_plan(plan, &mut *out)
+        })
+    }
+}
+
+/// Creates a planner through `ctor` (used by `export_plugin!`).
+///
+/// # Safety
+/// The arguments of [`H2nFactory::create`], as passed by a host honouring the ABI.
+pub unsafe fn create_planner<T, E>(
+    args: *const H2nCreateArgs,
+    out: *mut H2nObject,
+    error: *mut H2nBuffer,
+    ctor: fn(&PluginInit<'_>) -> Result<T, E>,
+) -> H2nStatus
+where
+    T: Planner + 'static,
+    E: Into<InitError>,
+{
+    type S<T> = Mutex<PlannerState<T>>;
+    let vtable: &'static H2nPlannerVTable = const {
+        &H2nPlannerVTable {
+            struct_size: std::mem::size_of::<H2nPlannerVTable>() as u32,
+            reserved: 0,
+            destroy: destroy::<S<T>>,
+            last_error: last_error::<S<T>>,
+            name: name::<S<T>>,
+            reset: planner_reset::<T>,
+            plan: planner_plan::<T>,
+            last_plan: planner_last_plan::<T>,
+        }
+    };
+    // SAFETY: forwarded contract.
+    unsafe {
+        create::<S<T>>(
+            H2N_KIND_PLANNER,
+            args,
+            out,
+            error,
+            (vtable as *const H2nPlannerVTable).cast(),
+            |init| {
+                let planner = ctor(init).map_err(Into::into)?;
+                let name = planner.name().to_owned();
+                Ok((
+                    Mutex::new(PlannerState {
+                        planner,
+                        last_plan: None,
+                    }),
+                    name,
+                ))
+            },
+        )
+    }
+}

@@ -3,6 +3,9 @@
 //! A [`ConstraintTerm`] evaluates a batch of trajectories and *adds* its cost per trajectory and
 //! its gradient with respect to every pose into caller-owned buffers (the pattern of Nav2's MPPI
 //! critics: one context struct, batched evaluation, no allocation on the hot path).
+//!
+//! The built-in soft-margin terms of Eq. 8 are [`BuiltinTerm`]s (see [`builtin`] for the exact
+//! formulas); [`Phi`] is their weighted sum (Eq. 9) plus any plugin terms.
 
 use crate::limits::Limits;
 use crate::planner::AgentState;
@@ -25,7 +28,11 @@ impl<'a> TrajBatch<'a> {
                 data.len()
             )));
         }
-        Ok(Self { data, batch, horizon })
+        Ok(Self {
+            data,
+            batch,
+            horizon,
+        })
     }
 
     /// The poses of trajectory `b`, flat `[T, 3]`.
@@ -72,3 +79,12 @@ pub trait ConstraintTerm: Send + Sync {
         grad: &mut [f64],
     ) -> Result<(), ConstraintError>;
 }
+
+pub mod builtin;
+mod phi;
+
+pub use builtin::{BuiltinKind, BuiltinTerm, SMOOTH_ABS_EPS, SoftMargin, sigmoid, softplus};
+pub use phi::{Phi, PhiScratch};
+
+#[cfg(test)]
+mod tests;

@@ -307,6 +307,16 @@ pub fn log_jacobian(p: Pose2) -> Jacobian3 {
     ]
 }
 
+/// `∂ p⁻¹ / ∂p` in coordinates.
+pub fn inverse_jacobian(p: Pose2) -> Jacobian3 {
+    let (s, c) = p.theta.sin_cos();
+    [
+        [-c, -s, s * p.x - c * p.y],
+        [s, -c, c * p.x + s * p.y],
+        [0.0, 0.0, -1.0],
+    ]
+}
+
 /// The Jacobians of `a ∘ b` with respect to `a` and to `b`, in coordinates.
 pub fn compose_jacobians(a: Pose2, b: Pose2) -> (Jacobian3, Jacobian3) {
     let (s, c) = a.theta.sin_cos();
@@ -498,6 +508,19 @@ mod tests {
             let j = log_jacobian(Pose2::new(x, y, t));
             let fd = fd_jacobian(|p| Pose2::from_slice(p).log().to_array(), [x, y, t]);
             assert_jacobian_close(&j, &fd, 1e-6);
+        }
+
+        #[test]
+        fn inverse_and_compose_jacobians_match_finite_differences(a in pose(), b in pose()) {
+            let a = Pose2::new(a.x, a.y, a.theta * 0.9);
+            let b = Pose2::new(b.x, b.y, b.theta * 0.05);
+            let fd = fd_jacobian(|p| Pose2::from_slice(p).inverse().to_array(), a.to_array());
+            assert_jacobian_close(&inverse_jacobian(a), &fd, 1e-6);
+            let (ja, jb) = compose_jacobians(a, b);
+            let fa = fd_jacobian(|p| Pose2::from_slice(p).compose(b).to_array(), a.to_array());
+            let fb = fd_jacobian(|p| a.compose(Pose2::from_slice(p)).to_array(), b.to_array());
+            assert_jacobian_close(&ja, &fa, 1e-6);
+            assert_jacobian_close(&jb, &fb, 1e-6);
         }
 
         #[test]

@@ -1,0 +1,313 @@
+//! The built-in soft-margin terms of Eq. 8 (speed, reverse speed, acceleration, yaw rate,
+//! curvature, lateral speed).
+//!
+//! Each term is the mean over its quantity's samples of the soft margin
+//!
+//! `C(q, L) = softplus(γ·(|q|_ε / L − 1 + δ)) / γ`
+//!
+//! with `γ` the softplus sharpness and `δ` the margin of [`GuidanceWeights`](crate::GuidanceWeights)
+//! (the penalty starts to rise at `(1 − δ)·L`, and for `|q| ≫ L` it grows like `|q|/L`). The
+//! absolute value is smoothed as `|q|_ε = L·(sqrt((q/L)² + ε²) − ε)` with
+//! [`SMOOTH_ABS_EPS`] `ε = 10⁻³`, so it is exactly 0 at `q = 0`, differentiable everywhere and
+//! never off by more than `ε·L`.
+//!
+//! Quantities and samples (finite differences as in [`crate::trajectory`]; `T` poses give
+//! `T − 1` segments):
+//!
+//! | kind | samples | argument of the softplus |
+//! |---|---|---|
+//! | [`BuiltinKind::Speed`] | `v_i`, `T − 1` | `γ(v/v_max − 1 + δ)`: the forward part only, reversing is judged by the reverse term against its own limit |
+//! | [`BuiltinKind::Reverse`] | `v_i`, `T − 1` | `γ(−v/v_reverse_max − 1 + δ)` |
+//! | [`BuiltinKind::Acceleration`] | `a_init` and `a_i`, `T − 1` | `γ(|a|_ε/a_max − 1 + δ)` |
+//! | [`BuiltinKind::YawRate`] | `ω_i`, `T − 1` | `γ(|ω|_ε/ω_max − 1 + δ)` |
+//! | [`BuiltinKind::Curvature`] | `κ_i`, `T − 1` | `γ(|κ|_ε/κ_max − 1 + δ)`; no cost when `κ_max` is `None` |
+//! | [`BuiltinKind::Lateral`] | `vy_i`, `T − 1` | `γ(|vy|_ε/lateral_speed_max − 1 + δ)` |
+//!
+//! The acceleration term always includes the initial acceleration from
+//! `ctx.initial_velocity.vx`, so a plan that starts at a speed the robot cannot reach in one
+//! step is penalised. The limits come from the [`ConstraintContext`] at evaluation time.
+
+use super::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
+use crate::trajectory::{SegmentJet, segment_jet};
+use serde::{Deserialize, Serialize};
+
+/// `ε` of the smoothed absolute value `|r|_ε = sqrt(r² + ε²) − ε` of a limit ratio `r = q/L`.
+pub const SMOOTH_ABS_EPS: f64 = 1e-3;
+
+/// Numerically stable `softplus(z) = ln(1 + eᶻ)`.
+#[inline]
+pub fn softplus(z: f64) -> f64 {
+    z.max(0.0) + (-z.abs()).exp().ln_1p()
+}
+
+/// The logistic function `σ(z) = 1/(1 + e⁻ᶻ)`, the derivative of [`softplus`].
+#[inline]
+pub fn sigmoid(z: f64) -> f64 {
+    if z >= 0.0 {
+        1.0 / (1.0 + (-z).exp())
+    } else {
+        let e = z.exp();
+        e / (1.0 + e)
+    }
+}
+
+/// The shape of the soft margin of Eq. 8: sharpness `γ` and margin `δ`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SoftMargin {
+    /// Softplus sharpness `γ` (> 0).
+    pub gamma: f64,
+    /// Tolerance margin `δ`: the penalty starts to rise at `(1 − δ)·limit`.
+    pub delta: f64,
+}
+
+impl SoftMargin {
+    /// `softplus(γ(r − 1 + δ))/γ` of a signed ratio `r` and its derivative with respect to `r`
+    /// (one-sided: only large positive `r` is penalised).
+    #[inline]
+    pub fn upper(&self, r: f64) -> (f64, f64) {
+        let z = self.gamma * (r - 1.0 + self.delta);
+        (softplus(z) / self.gamma, sigmoid(z))
+    }
+
+    /// The two-sided margin of Eq. 8, `softplus(γ(|r|_ε − 1 + δ))/γ`, and its derivative with
+    /// respect to `r`.
+    #[inline]
+    pub fn abs(&self, r: f64) -> (f64, f64) {
+        let s = (r * r + SMOOTH_ABS_EPS * SMOOTH_ABS_EPS).sqrt();
+        let (p, dp) = self.upper(s - SMOOTH_ABS_EPS);
+        (p, dp * r / s)
+    }
+}
+
+/// Which motion quantity a [`BuiltinTerm`] penalises.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BuiltinKind {
+    /// Forward speed against `v_max`.
+    Speed,
+    /// Reverse speed against `v_reverse_max`.
+    Reverse,
+    /// Longitudinal acceleration against `a_max` (including the initial acceleration).
+    Acceleration,
+    /// Yaw rate against `omega_max`.
+    YawRate,
+    /// Curvature against `kappa_max` (nothing when the robot has no curvature limit).
+    Curvature,
+    /// Body-frame lateral speed against `lateral_speed_max`.
+    Lateral,
+}
+
+impl BuiltinKind {
+    /// All kinds, in the order Φ lists them.
+    pub const ALL: [BuiltinKind; 6] = [
+        BuiltinKind::Speed,
+        BuiltinKind::Reverse,
+        BuiltinKind::Acceleration,
+        BuiltinKind::YawRate,
+        BuiltinKind::Curvature,
+        BuiltinKind::Lateral,
+    ];
+
+    /// The stable name used by [`ConstraintTerm::name`] and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            BuiltinKind::Speed => "speed",
+            BuiltinKind::Reverse => "reverse",
+            BuiltinKind::Acceleration => "acceleration",
+            BuiltinKind::YawRate => "yaw_rate",
+            BuiltinKind::Curvature => "curvature",
+            BuiltinKind::Lateral => "lateral",
+        }
+    }
+}
+
+/// One soft-margin term of Eq. 8 on one motion quantity (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BuiltinTerm {
+    pub kind: BuiltinKind,
+    pub margin: SoftMargin,
+}
+
+impl BuiltinTerm {
+    pub const fn new(kind: BuiltinKind, margin: SoftMargin) -> Self {
+        Self { kind, margin }
+    }
+
+    fn fail(&self, message: String) -> ConstraintError {
+        ConstraintError::Failed {
+            term: self.kind.name().to_owned(),
+            message,
+        }
+    }
+
+    /// The limit this term uses, `None` when the robot has none (curvature only).
+    fn limit(
+        &self,
+        ctx: &ConstraintContext<'_>,
+    ) -> Result<Option<(f64, &'static str)>, ConstraintError> {
+        let l = ctx.limits;
+        let (value, field) = match self.kind {
+            BuiltinKind::Speed => (l.v_max, "v_max"),
+            BuiltinKind::Reverse => (l.v_reverse_max, "v_reverse_max"),
+            BuiltinKind::Acceleration => (l.a_max, "a_max"),
+            BuiltinKind::YawRate => (l.omega_max, "omega_max"),
+            BuiltinKind::Curvature => match l.kappa_max {
+                Some(k) => (k, "kappa_max"),
+                None => return Ok(None),
+            },
+            BuiltinKind::Lateral => (l.lateral_speed_max, "lateral_speed_max"),
+        };
+        if !(value.is_finite() && value > 0.0) {
+            return Err(self.fail(format!(
+                "limit {field} = {value} must be finite and positive"
+            )));
+        }
+        Ok(Some((value, field)))
+    }
+
+    /// Penalty and its derivative with respect to the quantity `q`, for limit `limit`.
+    #[inline]
+    fn penalty(&self, q: f64, limit: f64) -> (f64, f64) {
+        let inv = 1.0 / limit;
+        let (p, dp) = match self.kind {
+            BuiltinKind::Speed => self.margin.upper(q * inv),
+            BuiltinKind::Reverse => {
+                let (p, dp) = self.margin.upper(-q * inv);
+                (p, -dp)
+            }
+            _ => self.margin.abs(q * inv),
+        };
+        (p, dp * inv)
+    }
+
+    /// The quantity of a segment and its gradient over the segment's six coordinates.
+    #[inline]
+    fn quantity(&self, jet: &SegmentJet) -> (f64, [f64; 6]) {
+        match self.kind {
+            BuiltinKind::Speed | BuiltinKind::Reverse => (jet.v, jet.dv),
+            BuiltinKind::YawRate => (jet.omega, jet.domega),
+            BuiltinKind::Lateral => (jet.vy, jet.dvy),
+            BuiltinKind::Curvature => jet.curvature(),
+            // Handled separately: it couples two segments.
+            BuiltinKind::Acceleration => (jet.v, jet.dv),
+        }
+    }
+
+    /// Cost of one trajectory `[T, 3]`, with its gradient added (scaled by `scale`) into `grad`.
+    fn accumulate(
+        &self,
+        traj: &[f64],
+        ctx: &ConstraintContext<'_>,
+        limit: f64,
+        grad: &mut [f64],
+    ) -> f64 {
+        let t = traj.len() / 3;
+        let n_seg = t - 1;
+        let dt = ctx.dt;
+        let inv_n = 1.0 / n_seg as f64;
+        let mut cost = 0.0;
+        if self.kind == BuiltinKind::Acceleration {
+            // a_init = (v_0 − v_init)/dt, then a_i = (v_{i+1} − v_i)/dt.
+            let mut prev = segment_jet(&traj[0..3], &traj[3..6], dt);
+            let (p, dp) = self.penalty((prev.v - ctx.initial_velocity.vx) / dt, limit);
+            cost += p;
+            let g = dp * inv_n / dt;
+            for j in 0..6 {
+                grad[j] += g * prev.dv[j];
+            }
+            for i in 1..n_seg {
+                let jet = segment_jet(&traj[3 * i..3 * i + 3], &traj[3 * i + 3..3 * i + 6], dt);
+                let (p, dp) = self.penalty((jet.v - prev.v) / dt, limit);
+                cost += p;
+                let g = dp * inv_n / dt;
+                let (lo, hi) = grad.split_at_mut(3 * i);
+                for j in 0..6 {
+                    hi[j] += g * jet.dv[j];
+                }
+                // The previous segment spans poses i−1 and i: coordinates 3(i−1) … 3i+2.
+                let base = 3 * (i - 1);
+                for j in 0..3 {
+                    lo[base + j] -= g * prev.dv[j];
+                    hi[j] -= g * prev.dv[3 + j];
+                }
+                prev = jet;
+            }
+        } else {
+            for i in 0..n_seg {
+                let jet = segment_jet(&traj[3 * i..3 * i + 3], &traj[3 * i + 3..3 * i + 6], dt);
+                let (q, dq) = self.quantity(&jet);
+                let (p, dp) = self.penalty(q, limit);
+                cost += p;
+                let g = dp * inv_n;
+                let out = &mut grad[3 * i..3 * i + 6];
+                for j in 0..6 {
+                    out[j] += g * dq[j];
+                }
+            }
+        }
+        cost * inv_n
+    }
+}
+
+/// Checks the buffers against the batch and the context's time step.
+pub(crate) fn check_buffers(
+    name: &str,
+    batch: &TrajBatch<'_>,
+    ctx: &ConstraintContext<'_>,
+    cost: &[f64],
+    grad: &[f64],
+) -> Result<(), ConstraintError> {
+    if cost.len() != batch.batch {
+        return Err(ConstraintError::Shape(format!(
+            "`{name}`: cost buffer holds {} values for {} trajectories",
+            cost.len(),
+            batch.batch
+        )));
+    }
+    if grad.len() != batch.data.len() {
+        return Err(ConstraintError::Shape(format!(
+            "`{name}`: gradient buffer holds {} values for {} pose coordinates",
+            grad.len(),
+            batch.data.len()
+        )));
+    }
+    if !(ctx.dt.is_finite() && ctx.dt > 0.0) {
+        return Err(ConstraintError::Failed {
+            term: name.to_owned(),
+            message: format!("time step dt = {} s must be finite and positive", ctx.dt),
+        });
+    }
+    Ok(())
+}
+
+impl ConstraintTerm for BuiltinTerm {
+    fn name(&self) -> &str {
+        self.kind.name()
+    }
+
+    fn evaluate(
+        &self,
+        batch: TrajBatch<'_>,
+        ctx: &ConstraintContext<'_>,
+        cost: &mut [f64],
+        grad: &mut [f64],
+    ) -> Result<(), ConstraintError> {
+        check_buffers(self.name(), &batch, ctx, cost, grad)?;
+        let Some((limit, _)) = self.limit(ctx)? else {
+            return Ok(());
+        };
+        if batch.horizon < 2 {
+            return Ok(());
+        }
+        let n = batch.horizon * 3;
+        for b in 0..batch.batch {
+            cost[b] += self.accumulate(
+                batch.trajectory(b),
+                ctx,
+                limit,
+                &mut grad[b * n..(b + 1) * n],
+            );
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,154 @@
+//! Φ of Eq. 9: the weighted sum of constraint terms.
+
+use super::builtin::{BuiltinKind, BuiltinTerm, SoftMargin, check_buffers};
+use super::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
+use crate::limits::{GuidanceWeights, Limits};
+
+/// The feasibility cost `Φ(x) = Σ_j w_j·C_j(x)` (Eq. 9, extended by the lateral-speed and
+/// reverse-speed terms and by any plugin terms).
+///
+/// Built with [`Phi::from_weights`] for the robot's built-in terms and extended with
+/// [`Phi::push`]; a new constraint is one more `push`, nothing else changes.
+#[derive(Default)]
+pub struct Phi {
+    terms: Vec<(f64, Box<dyn ConstraintTerm>)>,
+}
+
+/// Scratch buffers of [`Phi::evaluate`]; they grow to the largest batch seen and are reused, so
+/// evaluation does not allocate once warm.
+#[derive(Clone, Debug, Default)]
+pub struct PhiScratch {
+    cost: Vec<f64>,
+    grad: Vec<f64>,
+}
+
+impl std::fmt::Debug for Phi {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_list()
+            .entries(self.terms.iter().map(|(w, t)| (t.name(), *w)))
+            .finish()
+    }
+}
+
+impl Phi {
+    /// An empty Φ (cost 0 everywhere).
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The built-in terms weighted by `λ_v, λ_reverse, λ_a, λ_ω, λ_κ, λ_lateral` with the soft
+    /// margin `(γ, δ)` of `weights`. Terms of weight 0 are left out, and so is the curvature
+    /// term when `limits.kappa_max` is `None`.
+    pub fn from_weights(weights: &GuidanceWeights, limits: &Limits) -> Self {
+        let margin = SoftMargin {
+            gamma: weights.gamma,
+            delta: weights.delta,
+        };
+        let mut phi = Self::new();
+        for kind in BuiltinKind::ALL {
+            let w = match kind {
+                BuiltinKind::Speed => weights.lambda_v,
+                BuiltinKind::Reverse => weights.lambda_reverse,
+                BuiltinKind::Acceleration => weights.lambda_a,
+                BuiltinKind::YawRate => weights.lambda_omega,
+                BuiltinKind::Curvature if limits.kappa_max.is_none() => continue,
+                BuiltinKind::Curvature => weights.lambda_kappa,
+                BuiltinKind::Lateral => weights.lambda_lateral,
+            };
+            if w != 0.0 {
+                phi.terms
+                    .push((w, Box::new(BuiltinTerm::new(kind, margin))));
+            }
+        }
+        phi
+    }
+
+    /// Adds `weight · term`. The weight must be finite and non-negative.
+    pub fn push(
+        &mut self,
+        weight: f64,
+        term: Box<dyn ConstraintTerm>,
+    ) -> Result<(), ConstraintError> {
+        if !(weight.is_finite() && weight >= 0.0) {
+            return Err(ConstraintError::Failed {
+                term: term.name().to_owned(),
+                message: format!("weight {weight} must be finite and non-negative"),
+            });
+        }
+        self.terms.push((weight, term));
+        Ok(())
+    }
+
+    /// Number of terms.
+    pub fn len(&self) -> usize {
+        self.terms.len()
+    }
+
+    /// True when Φ has no term.
+    pub fn is_empty(&self) -> bool {
+        self.terms.is_empty()
+    }
+
+    /// `(weight, name)` of every term, in evaluation order.
+    pub fn terms(&self) -> impl Iterator<Item = (f64, &str)> + '_ {
+        self.terms.iter().map(|(w, t)| (*w, t.name()))
+    }
+
+    /// Writes `Φ` of every trajectory into `cost` (length `B`) and `∇Φ` with respect to every
+    /// pose into `grad` (the shape of `batch.data`). Both are overwritten, not added to.
+    pub fn evaluate(
+        &self,
+        batch: TrajBatch<'_>,
+        ctx: &ConstraintContext<'_>,
+        cost: &mut [f64],
+        grad: &mut [f64],
+        scratch: &mut PhiScratch,
+    ) -> Result<(), ConstraintError> {
+        check_buffers("phi", &batch, ctx, cost, grad)?;
+        cost.fill(0.0);
+        grad.fill(0.0);
+        scratch.cost.resize(cost.len(), 0.0);
+        scratch.grad.resize(grad.len(), 0.0);
+        for (w, term) in &self.terms {
+            if *w == 0.0 {
+                continue;
+            }
+            scratch.cost.fill(0.0);
+            scratch.grad.fill(0.0);
+            term.evaluate(batch, ctx, &mut scratch.cost, &mut scratch.grad)?;
+            for (c, s) in cost.iter_mut().zip(&scratch.cost) {
+                *c += w * s;
+            }
+            for (g, s) in grad.iter_mut().zip(&scratch.grad) {
+                *g += w * s;
+            }
+        }
+        Ok(())
+    }
+
+    /// Per-term costs for diagnostics: `out[j·B + b]` is the *unweighted* cost of term `j` on
+    /// trajectory `b` (`out.len()` must be `len()·B`).
+    pub fn term_costs(
+        &self,
+        batch: TrajBatch<'_>,
+        ctx: &ConstraintContext<'_>,
+        out: &mut [f64],
+        scratch: &mut PhiScratch,
+    ) -> Result<(), ConstraintError> {
+        if out.len() != self.terms.len() * batch.batch {
+            return Err(ConstraintError::Shape(format!(
+                "`phi`: {} values cannot hold {} terms × {} trajectories",
+                out.len(),
+                self.terms.len(),
+                batch.batch
+            )));
+        }
+        scratch.grad.resize(batch.data.len(), 0.0);
+        out.fill(0.0);
+        for (j, (_, term)) in self.terms.iter().enumerate() {
+            let slot = &mut out[j * batch.batch..(j + 1) * batch.batch];
+            term.evaluate(batch, ctx, slot, &mut scratch.grad)?;
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,373 @@
+use super::*;
+use crate::guidance::analytic::demo_batch;
+use crate::limits::GuidanceWeights;
+use crate::se2::Pose2;
+use approx::assert_relative_eq;
+
+fn limits(kappa: Option<f64>) -> Limits {
+    Limits {
+        v_max: 1.0,
+        v_reverse_max: 0.3,
+        a_max: 1.5,
+        omega_max: 1.0,
+        kappa_max: kappa,
+        lateral_speed_max: 0.1,
+    }
+}
+
+fn weights() -> GuidanceWeights {
+    GuidanceWeights {
+        lambda_v: 1.0,
+        lambda_a: 0.5,
+        lambda_omega: 2.0,
+        lambda_kappa: 0.7,
+        lambda_lateral: 1.5,
+        lambda_reverse: 3.0,
+        gamma: 10.0,
+        delta: 0.05,
+    }
+}
+
+const MARGIN: SoftMargin = SoftMargin {
+    gamma: 10.0,
+    delta: 0.05,
+};
+
+fn ctx(l: &Limits) -> ConstraintContext<'_> {
+    ConstraintContext {
+        dt: 0.1,
+        limits: l,
+        initial_velocity: Twist2::new(0.7, 0.0, 0.1),
+        agents: &[],
+    }
+}
+
+/// Cost per trajectory of `term` and its gradient.
+fn eval(
+    term: &dyn ConstraintTerm,
+    data: &[f64],
+    b: usize,
+    t: usize,
+    c: &ConstraintContext<'_>,
+) -> (Vec<f64>, Vec<f64>) {
+    let batch = TrajBatch::new(data, b, t).unwrap();
+    let mut cost = vec![0.0; b];
+    let mut grad = vec![0.0; data.len()];
+    term.evaluate(batch, c, &mut cost, &mut grad).unwrap();
+    (cost, grad)
+}
+
+/// Central finite differences of the summed cost over every coordinate, compared with `grad`.
+fn check_gradient(cost_of: impl Fn(&[f64]) -> f64, data: &[f64], grad: &[f64], what: &str) {
+    let h = 1e-6;
+    let mut p = data.to_vec();
+    let mut worst = 0.0f64;
+    for j in 0..data.len() {
+        p[j] = data[j] + h;
+        let up = cost_of(&p);
+        p[j] = data[j] - h;
+        let down = cost_of(&p);
+        p[j] = data[j];
+        let fd = (up - down) / (2.0 * h);
+        let err = (fd - grad[j]).abs() / (1.0 + fd.abs());
+        worst = worst.max(err);
+        assert!(
+            err < 1e-5,
+            "{what}: coordinate {j}: analytic {} vs finite difference {fd}",
+            grad[j]
+        );
+    }
+    assert!(worst.is_finite());
+}
+
+#[test]
+fn softplus_and_sigmoid_closed_forms() {
+    assert_relative_eq!(softplus(0.0), std::f64::consts::LN_2, epsilon = 1e-15);
+    assert_relative_eq!(softplus(40.0), 40.0, epsilon = 1e-12);
+    assert_relative_eq!(softplus(-40.0), (-40.0f64).exp(), max_relative = 1e-9);
+    assert_relative_eq!(softplus(1.3), (1.0 + 1.3f64.exp()).ln(), epsilon = 1e-14);
+    assert_relative_eq!(sigmoid(0.0), 0.5);
+    assert_relative_eq!(sigmoid(-800.0), 0.0);
+    assert_relative_eq!(sigmoid(800.0), 1.0);
+    // Soft margin at the limit: softplus(γδ)/γ; far beyond: ≈ r − 1 + δ.
+    let (p, dp) = MARGIN.abs(1.0);
+    assert_relative_eq!(
+        p,
+        softplus(10.0 * (0.05 - SMOOTH_ABS_EPS + (1.0 + 1e-6f64).sqrt() - 1.0)) / 10.0,
+        epsilon = 1e-12
+    );
+    assert!(dp > 0.5 && dp < 1.0);
+    let (p, dp) = MARGIN.abs(-3.0);
+    assert_relative_eq!(p, 3.0 - 1.0 + 0.05, epsilon = 2e-3);
+    assert_relative_eq!(dp, -1.0, epsilon = 1e-6);
+    // |0|_ε is exactly 0.
+    let (p0, dp0) = MARGIN.abs(0.0);
+    assert_relative_eq!(p0, softplus(-9.5) / 10.0, epsilon = 1e-15);
+    assert_relative_eq!(dp0, 0.0);
+}
+
+#[test]
+fn speed_term_closed_form_on_a_straight_line() {
+    // Straight line at 2 m/s from rest-pose: every segment has v = 2, so the cost is the
+    // margin of r = 2 exactly (the forward term needs no smoothing).
+    let l = limits(None);
+    let t = 8;
+    let data: Vec<f64> = (0..t).flat_map(|k| [0.2 * k as f64, 0.0, 0.0]).collect();
+    let speed = BuiltinTerm::new(BuiltinKind::Speed, MARGIN);
+    let (cost, grad) = eval(&speed, &data, 1, t, &ctx(&l));
+    assert_relative_eq!(
+        cost[0],
+        softplus(10.0 * (2.0 - 1.0 + 0.05)) / 10.0,
+        epsilon = 1e-12
+    );
+    // Interior gradients cancel; the last pose is pulled back, the first pushed forward.
+    let g = sigmoid(10.5) / (1.0 * 0.1 * (t - 1) as f64);
+    assert_relative_eq!(grad[0], -g, epsilon = 1e-12);
+    assert_relative_eq!(grad[3 * (t - 1)], g, epsilon = 1e-12);
+    for k in 1..t - 1 {
+        assert_relative_eq!(grad[3 * k], 0.0, epsilon = 1e-12);
+    }
+    // The reverse, lateral, yaw-rate and curvature terms see nothing of it.
+    for kind in [
+        BuiltinKind::Reverse,
+        BuiltinKind::Lateral,
+        BuiltinKind::YawRate,
+    ] {
+        let (c, _) = eval(&BuiltinTerm::new(kind, MARGIN), &data, 1, t, &ctx(&l));
+        assert!(c[0] < 1e-4, "{kind:?}: {}", c[0]);
+    }
+}
+
+#[test]
+fn acceleration_term_includes_the_initial_acceleration() {
+    let l = limits(None);
+    let t = 5;
+    // Constant 0.7 m/s, equal to the initial speed: nothing to penalise.
+    let data: Vec<f64> = (0..t).flat_map(|k| [0.07 * k as f64, 0.0, 0.0]).collect();
+    let acc = BuiltinTerm::new(BuiltinKind::Acceleration, MARGIN);
+    let (cost, _) = eval(&acc, &data, 1, t, &ctx(&l));
+    assert_relative_eq!(cost[0], softplus(-9.5) / 10.0, epsilon = 1e-12);
+    // Starting at 0.7 m/s, a plan at 1.0 m/s starts with a 3 m/s² acceleration: one sample of 4
+    // at r = 2, the other three at 0.
+    let data: Vec<f64> = (0..t).flat_map(|k| [0.1 * k as f64, 0.0, 0.0]).collect();
+    let (cost, _) = eval(&acc, &data, 1, t, &ctx(&l));
+    let r = (4.0 + SMOOTH_ABS_EPS * SMOOTH_ABS_EPS).sqrt() - SMOOTH_ABS_EPS;
+    let expected = (softplus(10.0 * (r - 0.95)) + 3.0 * softplus(-9.5)) / 40.0;
+    assert_relative_eq!(cost[0], expected, epsilon = 1e-9);
+}
+
+#[test]
+fn curvature_term_is_silent_without_a_limit() {
+    let l = limits(None);
+    let data = demo_batch(3, 10, 0.1);
+    let (cost, grad) = eval(
+        &BuiltinTerm::new(BuiltinKind::Curvature, MARGIN),
+        &data,
+        3,
+        10,
+        &ctx(&l),
+    );
+    assert!(cost.iter().chain(&grad).all(|&v| v == 0.0));
+    let phi = Phi::from_weights(&weights(), &l);
+    assert!(phi.terms().all(|(_, n)| n != "curvature"));
+    assert_eq!(phi.len(), 5);
+    assert_eq!(Phi::from_weights(&weights(), &limits(Some(1.0))).len(), 6);
+}
+
+#[test]
+fn every_builtin_gradient_matches_finite_differences() {
+    let (b, t) = (6, 12);
+    let data = demo_batch(b, t, 0.1);
+    for kappa in [Some(0.8), None] {
+        let l = limits(kappa);
+        let c = ctx(&l);
+        for kind in BuiltinKind::ALL {
+            let term = BuiltinTerm::new(kind, MARGIN);
+            let (cost, grad) = eval(&term, &data, b, t, &c);
+            assert!(cost.iter().all(|v| v.is_finite() && *v >= 0.0));
+            let total = |p: &[f64]| eval(&term, p, b, t, &c).0.iter().sum::<f64>();
+            check_gradient(total, &data, &grad, kind.name());
+        }
+    }
+}
+
+#[test]
+fn gradients_at_rest_and_turning_in_place_are_finite_and_correct() {
+    // v = 0 and ω = 0 are where |·| and κ would be non-smooth without the ε's.
+    let l = limits(Some(0.5));
+    let c = ConstraintContext {
+        initial_velocity: Twist2::ZERO,
+        ..ctx(&l)
+    };
+    let mut data = vec![0.0; 3 * 6];
+    for k in 3..6 {
+        data[3 * k + 2] = 0.05 * (k - 2) as f64; // turning in place at 0.5 rad/s
+    }
+    for kind in BuiltinKind::ALL {
+        let term = BuiltinTerm::new(kind, MARGIN);
+        let (_, grad) = eval(&term, &data, 1, 6, &c);
+        let total = |p: &[f64]| eval(&term, p, 1, 6, &c).0[0];
+        check_gradient(total, &data, &grad, kind.name());
+    }
+}
+
+#[test]
+fn phi_is_the_weighted_sum_and_its_gradient_matches_finite_differences() {
+    let (b, t) = (5, 10);
+    let data = demo_batch(b, t, 0.1);
+    let l = limits(Some(1.2));
+    let c = ctx(&l);
+    let w = weights();
+    let phi = Phi::from_weights(&w, &l);
+    let mut scratch = PhiScratch::default();
+    let batch = TrajBatch::new(&data, b, t).unwrap();
+    let mut cost = vec![123.0; b]; // overwritten, not added to
+    let mut grad = vec![7.0; data.len()];
+    phi.evaluate(batch, &c, &mut cost, &mut grad, &mut scratch)
+        .unwrap();
+
+    let mut expected = vec![0.0; b];
+    for (weight, kind) in [
+        (w.lambda_v, BuiltinKind::Speed),
+        (w.lambda_reverse, BuiltinKind::Reverse),
+        (w.lambda_a, BuiltinKind::Acceleration),
+        (w.lambda_omega, BuiltinKind::YawRate),
+        (w.lambda_kappa, BuiltinKind::Curvature),
+        (w.lambda_lateral, BuiltinKind::Lateral),
+    ] {
+        let (ct, _) = eval(&BuiltinTerm::new(kind, MARGIN), &data, b, t, &c);
+        for k in 0..b {
+            expected[k] += weight * ct[k];
+        }
+    }
+    for k in 0..b {
+        assert_relative_eq!(cost[k], expected[k], max_relative = 1e-12);
+    }
+    let total = |p: &[f64]| {
+        let mut cs = vec![0.0; b];
+        let mut g = vec![0.0; p.len()];
+        let mut s = PhiScratch::default();
+        phi.evaluate(
+            TrajBatch::new(p, b, t).unwrap(),
+            &c,
+            &mut cs,
+            &mut g,
+            &mut s,
+        )
+        .unwrap();
+        cs.iter().sum::<f64>()
+    };
+    check_gradient(total, &data, &grad, "phi");
+
+    // Per-term breakdown is unweighted and sums back to Φ with the weights.
+    let mut terms = vec![0.0; phi.len() * b];
+    phi.term_costs(batch, &c, &mut terms, &mut scratch).unwrap();
+    let weights: Vec<f64> = phi.terms().map(|(w, _)| w).collect();
+    for k in 0..b {
+        let sum: f64 = (0..phi.len()).map(|j| weights[j] * terms[j * b + k]).sum();
+        assert_relative_eq!(sum, cost[k], max_relative = 1e-12);
+    }
+}
+
+/// A plugin-style term: quadratic pull of every pose's `y` towards 0.
+struct CenterLine;
+
+impl ConstraintTerm for CenterLine {
+    fn name(&self) -> &str {
+        "center_line"
+    }
+
+    fn evaluate(
+        &self,
+        batch: TrajBatch<'_>,
+        _ctx: &ConstraintContext<'_>,
+        cost: &mut [f64],
+        grad: &mut [f64],
+    ) -> Result<(), ConstraintError> {
+        for b in 0..batch.batch {
+            for (k, p) in batch.trajectory(b).chunks_exact(3).enumerate() {
+                cost[b] += p[1] * p[1];
+                grad[b * batch.horizon * 3 + 3 * k + 1] += 2.0 * p[1];
+            }
+        }
+        Ok(())
+    }
+}
+
+#[test]
+fn pushed_terms_are_weighted_and_checked() {
+    let l = limits(None);
+    let c = ctx(&l);
+    let mut phi = Phi::new();
+    assert!(phi.is_empty());
+    phi.push(0.25, Box::new(CenterLine)).unwrap();
+    assert!(phi.push(-1.0, Box::new(CenterLine)).is_err());
+    assert!(phi.push(f64::NAN, Box::new(CenterLine)).is_err());
+    let data = [0.0, 2.0, 0.0, 1.0, -1.0, 0.0];
+    let mut cost = [0.0];
+    let mut grad = [0.0; 6];
+    phi.evaluate(
+        TrajBatch::new(&data, 1, 2).unwrap(),
+        &c,
+        &mut cost,
+        &mut grad,
+        &mut PhiScratch::default(),
+    )
+    .unwrap();
+    assert_relative_eq!(cost[0], 0.25 * 5.0);
+    assert_relative_eq!(grad[1], 1.0);
+    assert_relative_eq!(grad[4], -0.5);
+    assert_eq!(format!("{phi:?}"), "[(\"center_line\", 0.25)]");
+}
+
+#[test]
+fn bad_buffers_and_limits_are_errors() {
+    let l = limits(None);
+    let c = ctx(&l);
+    let data = demo_batch(2, 4, 0.1);
+    let term = BuiltinTerm::new(BuiltinKind::Speed, MARGIN);
+    let batch = TrajBatch::new(&data, 2, 4).unwrap();
+    let mut grad = vec![0.0; data.len()];
+    assert!(matches!(
+        term.evaluate(batch, &c, &mut [0.0; 3], &mut grad),
+        Err(ConstraintError::Shape(_))
+    ));
+    assert!(matches!(
+        term.evaluate(batch, &c, &mut [0.0; 2], &mut [0.0; 5]),
+        Err(ConstraintError::Shape(_))
+    ));
+    let bad = Limits { v_max: 0.0, ..l };
+    let err = term
+        .evaluate(batch, &ctx(&bad), &mut [0.0; 2], &mut grad)
+        .unwrap_err();
+    assert!(err.to_string().contains("v_max"), "{err}");
+    let zero_dt = ConstraintContext { dt: 0.0, ..c };
+    assert!(
+        term.evaluate(batch, &zero_dt, &mut [0.0; 2], &mut grad)
+            .is_err()
+    );
+    // A single pose has no segment: no cost, no error.
+    let one = [0.0, 0.0, 0.0];
+    let (cost, _) = eval(&term, &one, 1, 1, &c);
+    assert_eq!(cost[0], 0.0);
+}
+
+#[test]
+fn unicycle_arcs_cost_nothing_laterally() {
+    // A differential-drive arc, wrapped around ±π, has vy = 0 on every segment.
+    let l = limits(None);
+    let mut pose = Pose2::new(0.0, 0.0, 3.0);
+    let mut data = Vec::new();
+    for _ in 0..20 {
+        data.extend_from_slice(&pose.to_array());
+        pose = pose.euler_step(Twist2::new(0.8, 0.0, 0.9), 0.1);
+    }
+    let (cost, _) = eval(
+        &BuiltinTerm::new(BuiltinKind::Lateral, MARGIN),
+        &data,
+        1,
+        20,
+        &ctx(&l),
+    );
+    assert_relative_eq!(cost[0], softplus(-9.5) / 10.0, epsilon = 1e-12);
+}

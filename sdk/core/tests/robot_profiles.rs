@@ -251,6 +251,16 @@ fn malformed_toml_names_line_and_column() {
 }
 
 #[test]
+fn syntax_error_found_on_the_next_line_names_the_key_before_it() {
+    // An unterminated array is only detected at the next key; the culprit is `a_max`.
+    let (_, result) = load_edited("go2", |t| set_line(t, "a_max", "a_max = [1.0"));
+    match result {
+        Err(e @ ProfileError::Parse { .. }) => assert_eq!(e.field(), "limits.a_max", "{e}"),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
 fn unknown_fields_are_rejected_with_their_name() {
     let (toml, result) = load_edited("diablo", |t| {
         set_line(t, "a_max", "a_max = 1.0\nbrake_max = 3.0")

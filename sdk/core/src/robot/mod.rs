@@ -77,7 +77,7 @@ use urdf::UrdfModel;
 #[derive(Debug, thiserror::Error)]
 pub enum ProfileError {
     /// The profile file itself could not be read.
-    #[error("{}: cannot read the profile: {source}", file.display())]
+    #[error("{}: (file): cannot read: {source}", file.display())]
     Read {
         file: PathBuf,
         #[source]
@@ -562,7 +562,7 @@ impl RobotProfile {
         let (footprint_radius, footprint_source) = match footprint_override {
             Some(r) => {
                 let urdf_says = match model.footprint_radius(&base_link) {
-                    Ok(u) => format!("URDF base collision would give {} m", num(u)),
+                    Ok((u, _)) => format!("URDF base collision would give {} m", num(u)),
                     Err(_) => "URDF base collision has no analytic extent".to_string(),
                 };
                 (
@@ -573,11 +573,8 @@ impl RobotProfile {
                 )
             }
             None => {
-                let r = model.footprint_radius(&base_link)?;
-                (
-                    r,
-                    Provenance::urdf(format!("URDF link `{base_link}` collision geometry")),
-                )
+                let (r, account) = model.footprint_radius(&base_link)?;
+                (r, Provenance::urdf(format!("URDF {account}")))
             }
         };
 
@@ -887,21 +884,38 @@ fn line_col(text: &str, offset: usize) -> (usize, usize) {
 
 /// Best-effort dotted name (`limits.v_max`, `constraint[1].weight`) of what sits at `offset`:
 /// the nearest table header above plus the key on that line, or the key a "missing field"
-/// message names.
+/// message names. A syntax error reported at the very start of a line (an unterminated array,
+/// say) belongs to the key-value line before it.
 fn field_at(text: &str, offset: usize, message: &str) -> String {
+    let key_of = |line: &str| -> Option<String> {
+        let k = line.split('=').next()?.trim().trim_matches('"');
+        (!k.is_empty() && !k.contains(char::is_whitespace) && line.contains('='))
+            .then(|| k.to_string())
+    };
+    let data_error = [
+        "unknown field",
+        "duplicate key",
+        "missing field",
+        "invalid type",
+    ]
+    .iter()
+    .any(|m| message.starts_with(m));
     let mut section: Option<String> = None;
     let mut arrays: Vec<(String, usize)> = Vec::new();
     let mut in_multiline = false;
-    let mut key: Option<String> = None;
+    let mut previous: Option<(Option<String>, String)> = None;
+    let mut found: (Option<String>, Option<String>) = (None, None);
     let mut pos = 0;
     for raw_line in text.split_inclusive('\n') {
+        let line_start = pos;
         pos += raw_line.len();
         let line = raw_line.trim();
         let was_multiline = in_multiline;
         if (line.matches("\"\"\"").count() + line.matches("'''").count()) % 2 == 1 {
             in_multiline = !in_multiline;
         }
-        if !was_multiline {
+        let plain = !was_multiline && !line.starts_with('#');
+        if plain {
             if let Some(inner) = line.strip_prefix("[[").and_then(|l| l.split("]]").next()) {
                 let name = inner.trim().to_string();
                 let n = match arrays.iter_mut().find(|(a, _)| *a == name) {
@@ -920,16 +934,28 @@ fn field_at(text: &str, offset: usize, message: &str) -> String {
             }
         }
         if offset < pos || pos == text.len() {
-            if !was_multiline && !line.starts_with('[') && !line.starts_with('#') {
-                key = line
-                    .split('=')
-                    .next()
-                    .map(|k| k.trim().trim_matches('"').to_string());
-                key = key.filter(|k| !k.is_empty() && !k.contains(char::is_whitespace));
-            }
+            let indent = raw_line.len() - raw_line.trim_start().len();
+            let at_line_start = offset <= line_start + indent;
+            found = match (&previous, at_line_start && !data_error) {
+                (Some((sec, key)), true) => (sec.clone(), Some(key.clone())),
+                _ => {
+                    let key = if plain && !line.starts_with('[') {
+                        key_of(line)
+                    } else {
+                        None
+                    };
+                    (section, key)
+                }
+            };
             break;
         }
+        if plain && !line.starts_with('[') {
+            if let Some(k) = key_of(line) {
+                previous = Some((section.clone(), k));
+            }
+        }
     }
+    let (section, mut key) = found;
     if let Some(missing) = message
         .strip_prefix("missing field `")
         .and_then(|m| m.split('`').next())

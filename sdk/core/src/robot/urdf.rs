@@ -59,10 +59,11 @@ fn pose_to_isometry(p: &urdf_rs::Pose) -> Isometry3<f64> {
 impl UrdfModel {
     /// Reads and parses `path`; `toml` is the profile that names it (for the error).
     pub(crate) fn load(path: &Path, toml: &Path) -> Result<Self, ProfileError> {
+        // One line, whatever the XML parser reports.
         let fail = |message: String| ProfileError::UrdfLoad {
             file: toml.to_path_buf(),
             urdf: path.to_path_buf(),
-            message,
+            message: message.split_whitespace().collect::<Vec<_>>().join(" "),
         };
         let text = std::fs::read_to_string(path).map_err(|e| fail(e.to_string()))?;
         let robot = urdf_rs::read_from_string(&text).map_err(|e| fail(e.to_string()))?;
@@ -158,7 +159,8 @@ impl UrdfModel {
 
     /// Radius of the disc, centred on the base link's origin, that covers the xy-projection of
     /// every `<collision>` of `base` (see [`super::RobotProfile`] for the rules).
-    pub(crate) fn footprint_radius(&self, base: &str) -> Result<f64, ProfileError> {
+    /// Also returns a short account of the geometry that set the radius.
+    pub(crate) fn footprint_radius(&self, base: &str) -> Result<(f64, String), ProfileError> {
         let link = self
             .link(base)
             .ok_or_else(|| self.content_error(format!("link `{base}`"), "not found"))?;
@@ -169,6 +171,7 @@ impl UrdfModel {
             ));
         }
         let mut radius: f64 = 0.0;
+        let mut account = String::new();
         for (i, c) in link.collision.iter().enumerate() {
             let element = format!("link `{base}` collision[{i}]");
             let iso = pose_to_isometry(&c.origin);
@@ -219,9 +222,20 @@ impl UrdfModel {
                     self.content_error(element, format!("degenerate geometry (radius {r})"))
                 );
             }
-            radius = radius.max(r);
+            if r > radius {
+                radius = r;
+                let n = |v: f64| format!("{}", (v * 1e4).round() / 1e4);
+                let shape = match &c.geometry {
+                    Geometry::Box { size } => format!("box {}×{} m", n(size.0[0]), n(size.0[1])),
+                    Geometry::Cylinder { radius, .. } => format!("cylinder r {} m", n(*radius)),
+                    Geometry::Capsule { radius, .. } => format!("capsule r {} m", n(*radius)),
+                    Geometry::Sphere { radius } => format!("sphere r {} m", n(*radius)),
+                    Geometry::Mesh { .. } => "mesh".to_string(),
+                };
+                account = format!("{element}: {shape}, xy offset {} m", n(offset));
+            }
         }
-        Ok(radius)
+        Ok((radius, account))
     }
 
     /// Measures a wheel joint: continuous or revolute, with a cylinder or sphere on its child.

@@ -1,0 +1,175 @@
+//! The model card: a TOML file shipped beside the weights that fully describes how to rebuild
+//! the network and how to use it (architecture, normalisation, source distribution), and
+//! records where it came from (training data, split, time) and how good it is.
+
+use crate::config::{NetConfig, Normalisation};
+use crate::error::CfmError;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Version of the card and weight-naming scheme; bumped on incompatible changes.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// Everything needed to rebuild and use a trained model, plus its provenance.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelCard {
+    /// Card format version ([`FORMAT_VERSION`]).
+    pub format_version: u32,
+    /// Model name, e.g. `human2nav-cfm`.
+    pub name: String,
+    /// One-paragraph description.
+    #[serde(default)]
+    pub description: String,
+    /// File name of the weights beside the card.
+    pub weights: String,
+    /// Architecture hyper-parameters.
+    pub net: NetConfig,
+    /// Metric ↔ network normalisation.
+    pub normalisation: Normalisation,
+    /// The source distribution samplers must draw from.
+    pub source: SourceInfo,
+    /// Size and cost.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub complexity: Option<ComplexityInfo>,
+    /// How the model was trained.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub training: Option<TrainingInfo>,
+    /// Held-out evaluation.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub evaluation: Option<EvaluationInfo>,
+    /// Measured latencies.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub performance: Option<PerformanceInfo>,
+}
+
+/// The source distribution `x0 = exp(ξ0)`, `ξ0 ~ N(0, diag(std²))` per waypoint.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SourceInfo {
+    /// `[σ_x, σ_y, σ_θ]` in metres and radians (`[s, s, 1]`: `N(0, I)` in normalised units).
+    pub std: [f64; 3],
+    /// Integration steps `N` the evaluation used (uniform grid `t_i = i/N`).
+    pub steps: usize,
+}
+
+/// Parameter count and cost of one forward pass.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ComplexityInfo {
+    /// Trainable scalar parameters.
+    pub parameters: usize,
+    /// FLOPs (2 × multiply-accumulates) of the U-Net per trajectory and flow step.
+    pub unet_flops_per_trajectory: u64,
+    /// FLOPs of the BEV and goal encoders, once per planning condition.
+    pub condition_flops: u64,
+    /// Size of the weights file in bytes.
+    pub weights_bytes: u64,
+}
+
+/// Provenance of a trained model.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainingInfo {
+    /// Data sets and cache the tuples came from.
+    pub data: String,
+    /// How the scenes were split into train / validation / test.
+    pub split: String,
+    /// Number of training and validation tuples.
+    pub train_tuples: usize,
+    pub val_tuples: usize,
+    /// Optimiser steps, batch size, and epochs (fractional).
+    pub steps: u64,
+    pub batch_size: usize,
+    pub epochs: f64,
+    /// Random seed.
+    pub seed: u64,
+    /// Flow-time distribution during training (see [`crate::cfm::TimeDistribution`]).
+    pub time_distribution: String,
+    /// Optimiser and schedule, in words.
+    pub optimiser: String,
+    /// Wall time of training in seconds, and threads used.
+    pub wall_time_s: f64,
+    pub threads: usize,
+    /// Mean training throughput.
+    pub samples_per_s: f64,
+    /// Loss (Eq. 3, standardised units) of the EMA weights on the validation split at the end,
+    /// and the best one seen.
+    pub final_val_loss: f64,
+    pub best_val_loss: f64,
+    /// Training loss averaged over the last validation interval.
+    pub final_train_loss: f64,
+}
+
+/// Best-of-K displacement errors on held-out windows and the proximity rate.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EvaluationInfo {
+    /// What was evaluated, in words (split, number of windows, sampler settings).
+    pub protocol: String,
+    pub windows: usize,
+    pub samples_per_window: usize,
+    pub steps: usize,
+    /// Best-of-K average and final displacement error of the model, metres.
+    pub min_ade: f64,
+    pub min_fde: f64,
+    /// Mean over samples (not the best) of ADE, metres.
+    pub mean_ade: f64,
+    /// Constant-velocity baseline on the same windows, metres.
+    pub cv_ade: f64,
+    pub cv_fde: f64,
+    /// `1 − min_ade / cv_ade`.
+    pub ade_improvement: f64,
+    /// Fraction of sampled trajectories that come within `proximity_radius` of another
+    /// agent's position, and the same for the ground-truth futures.
+    pub proximity_radius: f64,
+    pub proximity_model: f64,
+    pub proximity_truth: f64,
+    /// How the other agents' positions were obtained for the proximity metric.
+    pub proximity_note: String,
+}
+
+/// Measured latencies on the training machine.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PerformanceInfo {
+    /// Machine and thread count the numbers were measured with.
+    pub machine: String,
+    pub threads: usize,
+    /// Median milliseconds: velocity at batch 1 / 16, velocity + VJP at batch 1 / 16,
+    /// condition encoding once.
+    pub forward_b1_ms: f64,
+    pub forward_b16_ms: f64,
+    pub vjp_b1_ms: f64,
+    pub vjp_b16_ms: f64,
+    pub encode_condition_ms: f64,
+}
+
+impl ModelCard {
+    /// Reads and checks a card.
+    pub fn load(path: &Path) -> Result<Self, CfmError> {
+        let text = std::fs::read_to_string(path).map_err(|e| CfmError::io(path, e))?;
+        let card: ModelCard = toml::from_str(&text)
+            .map_err(|e| CfmError::Toml { path: path.to_path_buf(), message: e.to_string() })?;
+        if card.format_version != FORMAT_VERSION {
+            return Err(CfmError::Toml {
+                path: path.to_path_buf(),
+                message: format!(
+                    "format_version {} is not supported (expected {FORMAT_VERSION})",
+                    card.format_version
+                ),
+            });
+        }
+        card.net.validate()?;
+        card.normalisation.validate()?;
+        Ok(card)
+    }
+
+    /// Writes the card as TOML.
+    pub fn save(&self, path: &Path) -> Result<(), CfmError> {
+        let text = toml::to_string_pretty(self)
+            .map_err(|e| CfmError::Toml { path: path.to_path_buf(), message: e.to_string() })?;
+        let header = "# human2nav flow-model card: architecture, normalisation, provenance, metrics.\n";
+        std::fs::write(path, format!("{header}{text}")).map_err(|e| CfmError::io(path, e))
+    }
+}

@@ -1,0 +1,636 @@
+//! [`CfmModel`]: the trained network behind core's [`FlowModel`] trait, and its checkpoints.
+//!
+//! Metric poses `[K, T, 3]` go in, metric se(2) velocities come out (see
+//! [`crate::config::Normalisation`] for the exact mapping). The condition encoding (BEV CNN and
+//! goal MLP) is computed once per distinct [`FlowCondition`] and cached: a planning call that
+//! integrates `N` steps and runs `M` guidance iterations with the same condition encodes it
+//! once. The cache compares the whole condition for equality (a 3·32·32 raster compares in a
+//! few microseconds), so there are no false hits.
+
+use crate::card::{FORMAT_VERSION, ModelCard, SourceInfo};
+use crate::config::{NetConfig, Normalisation};
+use crate::error::CfmError;
+use crate::net::{CondUnet1d, store_kind};
+use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use tch::{Device, Kind, Tensor, nn};
+
+/// Default file names inside a model folder.
+pub const CARD_FILE: &str = "model.toml";
+pub const WEIGHTS_FILE: &str = "model.safetensors";
+
+/// Writes the normalised condition of one example: the raster with its velocity channels
+/// divided by the speed scale into `bev_out` (`3·H·W`), and
+/// `[g_x/goal_scale, g_y/goal_scale, v_x/speed_scale, v_y/speed_scale]` into `goal_out`.
+///
+/// Training and inference both go through this function, so the network sees the same inputs.
+pub fn normalise_condition(
+    norm: &Normalisation,
+    bev: &[f32],
+    goal: [f64; 2],
+    velocity: [f64; 2],
+    bev_out: &mut [f32],
+    goal_out: &mut [f32],
+) {
+    let plane = bev.len() / 3;
+    let inv_speed = (1.0 / norm.speed_scale) as f32;
+    bev_out[..plane].copy_from_slice(&bev[..plane]);
+    for (o, &b) in bev_out[plane..].iter_mut().zip(&bev[plane..]) {
+        *o = b * inv_speed;
+    }
+    goal_out[0] = (goal[0] / norm.goal_scale) as f32;
+    goal_out[1] = (goal[1] / norm.goal_scale) as f32;
+    goal_out[2] = (velocity[0] / norm.speed_scale) as f32;
+    goal_out[3] = (velocity[1] / norm.speed_scale) as f32;
+}
+
+/// Trajectory features of normalised poses (flat `[T, 3]`, translations already divided by
+/// `s`), written channel-major `[5, T]` into `out`: `x, y, cos θ, sin θ, (i + 1)/T`.
+pub fn trajectory_features(poses: &[f64], out: &mut [f32]) {
+    let t = poses.len() / 3;
+    for (i, p) in poses.chunks_exact(3).enumerate() {
+        out[i] = p[0] as f32;
+        out[t + i] = p[1] as f32;
+        out[2 * t + i] = p[2].cos() as f32;
+        out[3 * t + i] = p[2].sin() as f32;
+        out[4 * t + i] = (i + 1) as f32 / t as f32;
+    }
+}
+
+struct CachedCondition {
+    cond: FlowCondition,
+    embedding: Tensor,
+}
+
+/// A conditional flow-matching model on SE(2): network, normalisation and model card.
+pub struct CfmModel {
+    vs: nn::VarStore,
+    net: CondUnet1d,
+    card: ModelCard,
+    /// `[1, 1, 3]` multiplier from standardised network output to metric velocity.
+    out_scale: Tensor,
+    /// `[1, T]` waypoint-position feature `(i + 1)/T`.
+    tau: Tensor,
+    cache: Mutex<Option<CachedCondition>>,
+}
+
+impl std::fmt::Debug for CfmModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CfmModel")
+            .field("name", &self.card.name)
+            .field("net", &self.card.net)
+            .field("normalisation", &self.card.normalisation)
+            .field("device", &self.vs.device())
+            .finish_non_exhaustive()
+    }
+}
+
+impl CfmModel {
+    /// A freshly initialised model (weights from torch's RNG; seed it with
+    /// `tch::manual_seed` for reproducibility).
+    pub fn new(net: &NetConfig, norm: &Normalisation, device: Device) -> Result<Self, CfmError> {
+        net.validate()?;
+        norm.validate()?;
+        let card = ModelCard {
+            format_version: FORMAT_VERSION,
+            name: "human2nav-cfm".into(),
+            description: String::new(),
+            weights: WEIGHTS_FILE.into(),
+            net: net.clone(),
+            normalisation: norm.clone(),
+            source: SourceInfo { std: norm.source_std(), steps: 10 },
+            ..ModelCard::default()
+        };
+        Ok(Self::from_card(card, device))
+    }
+
+    fn from_card(card: ModelCard, device: Device) -> Self {
+        let vs = nn::VarStore::new(device);
+        let net = CondUnet1d::new(&vs.root(), &card.net);
+        let (out_scale, tau) = Self::constants(&card, Kind::Float, device);
+        Self { vs, net, card, out_scale, tau, cache: Mutex::new(None) }
+    }
+
+    fn constants(card: &ModelCard, kind: Kind, device: Device) -> (Tensor, Tensor) {
+        let n = &card.normalisation;
+        let s = n.position_scale;
+        let scale = [s * n.velocity_std[0], s * n.velocity_std[1], n.velocity_std[2]];
+        let out_scale = Tensor::from_slice(&scale).to_kind(kind).to_device(device).view([1, 1, 3]);
+        let t = card.net.horizon;
+        let tau: Vec<f64> = (1..=t).map(|i| i as f64 / t as f64).collect();
+        let tau = Tensor::from_slice(&tau).to_kind(kind).to_device(device).view([1, t as i64]);
+        (out_scale, tau)
+    }
+
+    /// Loads a model folder (`model.toml` + the weights it names) or a card file directly.
+    ///
+    /// The weights are checked against the card's architecture: every tensor name must be
+    /// known, none may be missing, and every shape must match; a truncated or corrupt file
+    /// fails with [`CfmError::Corrupt`].
+    pub fn load(path: &Path, device: Device) -> Result<Self, CfmError> {
+        let card_path =
+            if path.is_dir() { path.join(CARD_FILE) } else { path.to_path_buf() };
+        let card = ModelCard::load(&card_path)?;
+        let dir = card_path.parent().map(Path::to_path_buf).unwrap_or_default();
+        let weights = dir.join(&card.weights);
+        let model = Self::from_card(card, device);
+        model.load_weights(&weights, "")?;
+        Ok(model)
+    }
+
+    /// Copies the tensors named `prefix + name` in a safetensors file into this model's
+    /// variables, validating names and shapes. With an empty prefix, tensors the model does
+    /// not know are an error; with a prefix, only the prefixed tensors are considered.
+    pub(crate) fn load_weights(&self, path: &Path, prefix: &str) -> Result<(), CfmError> {
+        let tensors = read_safetensors(path)?;
+        self.assign_from(path, prefix, &tensors)
+    }
+
+    pub(crate) fn assign_from(
+        &self,
+        path: &Path,
+        prefix: &str,
+        tensors: &BTreeMap<String, Tensor>,
+    ) -> Result<(), CfmError> {
+        let vars = self.vs.variables();
+        if prefix.is_empty() {
+            if let Some(name) = tensors.keys().find(|n| !vars.contains_key(n.as_str())) {
+                return Err(CfmError::UnexpectedTensor { path: path.into(), name: name.clone() });
+            }
+        }
+        let _guard = tch::no_grad_guard();
+        let mut names: Vec<&String> = vars.keys().collect();
+        names.sort();
+        for name in names {
+            let key = format!("{prefix}{name}");
+            let Some(src) = tensors.get(&key) else {
+                return Err(CfmError::MissingTensor { path: path.into(), name: key });
+            };
+            let mut dst = vars[name].shallow_clone();
+            if src.size() != dst.size() {
+                return Err(CfmError::TensorShape {
+                    path: path.into(),
+                    name: key,
+                    expected: dst.size(),
+                    found: src.size(),
+                });
+            }
+            dst.f_copy_(&src.to_kind(dst.kind()).to_device(dst.device()))?;
+        }
+        self.invalidate_cache();
+        Ok(())
+    }
+
+    /// Writes the weights (float32) and the card into `dir` (created if needed).
+    pub fn save(&self, dir: &Path) -> Result<(), CfmError> {
+        std::fs::create_dir_all(dir).map_err(|e| CfmError::io(dir, e))?;
+        let weights = dir.join(&self.card.weights);
+        write_safetensors(&weights, &self.named_tensors(""))?;
+        self.card.save(&dir.join(CARD_FILE))
+    }
+
+    /// The variables as `(prefix + name, float32 CPU tensor)`, sorted by name.
+    pub(crate) fn named_tensors(&self, prefix: &str) -> Vec<(String, Tensor)> {
+        let mut v: Vec<(String, Tensor)> = self
+            .vs
+            .variables()
+            .into_iter()
+            .map(|(n, t)| (format!("{prefix}{n}"), t.detach().to_kind(Kind::Float).to_device(Device::Cpu)))
+            .collect();
+        v.sort_by(|a, b| a.0.cmp(&b.0));
+        v
+    }
+
+    /// The model card (architecture, normalisation, provenance).
+    pub fn card(&self) -> &ModelCard {
+        &self.card
+    }
+
+    /// Mutable card, to record training provenance and metrics before [`Self::save`].
+    /// Architecture and normalisation are fixed once the model exists; change them through a
+    /// new model.
+    pub fn card_mut(&mut self) -> &mut ModelCard {
+        &mut self.card
+    }
+
+    /// The network.
+    pub fn net(&self) -> &CondUnet1d {
+        &self.net
+    }
+
+    /// The variables (for optimisers and EMA).
+    pub fn var_store(&self) -> &nn::VarStore {
+        &self.vs
+    }
+
+    /// Device the weights live on.
+    pub fn device(&self) -> Device {
+        self.vs.device()
+    }
+
+    /// Floating-point kind of the weights.
+    pub fn kind(&self) -> Kind {
+        store_kind(&self.vs)
+    }
+
+    /// Converts the weights to float64 (for finite-difference tests of the autograd VJP).
+    pub fn to_double(&mut self) {
+        self.vs.double();
+        let (o, t) = Self::constants(&self.card, Kind::Double, self.vs.device());
+        self.out_scale = o;
+        self.tau = t;
+        self.invalidate_cache();
+    }
+
+    /// Drops the cached condition encoding (after the weights changed).
+    pub fn invalidate_cache(&self) {
+        if let Ok(mut c) = self.cache.lock() {
+            *c = None;
+        }
+    }
+
+    /// Normalised condition tensors `([1, 3, H, W], [1, 4])` of one planning condition.
+    pub fn condition_tensors(&self, cond: &FlowCondition) -> Result<(Tensor, Tensor), FlowError> {
+        let cells = self.card.net.bev_cells;
+        let len = self.card.net.bev_len();
+        if cond.bev.len() != len {
+            return Err(FlowError::Shape(format!(
+                "BEV raster has {} values, the model expects 3×{cells}×{cells} = {len}",
+                cond.bev.len()
+            )));
+        }
+        let mut bev = vec![0f32; len];
+        let mut gv = [0f32; 4];
+        normalise_condition(
+            &self.card.normalisation,
+            &cond.bev,
+            cond.goal,
+            cond.velocity,
+            &mut bev,
+            &mut gv,
+        );
+        let (kind, device) = (self.kind(), self.device());
+        let c = cells as i64;
+        let bev = Tensor::from_slice(&bev).view([1, 3, c, c]).to_kind(kind).to_device(device);
+        let gv = Tensor::from_slice(&gv).view([1, 4]).to_kind(kind).to_device(device);
+        Ok((bev, gv))
+    }
+
+    /// The static condition embedding `[1, ·]`, from the cache when `cond` is unchanged.
+    pub fn condition_embedding(&self, cond: &FlowCondition) -> Result<Tensor, FlowError> {
+        let mut cache = self
+            .cache
+            .lock()
+            .map_err(|_| FlowError::Backend("condition cache poisoned".into()))?;
+        if let Some(c) = cache.as_ref() {
+            if c.cond == *cond {
+                return Ok(c.embedding.shallow_clone());
+            }
+        }
+        let (bev, gv) = self.condition_tensors(cond)?;
+        let embedding = tch::no_grad(|| self.net.encode_condition(&bev, &gv));
+        *cache = Some(CachedCondition { cond: cond.clone(), embedding: embedding.shallow_clone() });
+        Ok(embedding)
+    }
+
+    /// Trajectory features `[K, 5, T]` of metric poses `x: [K, T, 3]` (differentiable).
+    pub fn features(&self, x: &Tensor) -> Tensor {
+        let inv_s = 1.0 / self.card.normalisation.position_scale;
+        let xy = x.narrow(2, 0, 2) * inv_s;
+        let th = x.narrow(2, 2, 1);
+        let k = x.size()[0];
+        let tau = self.tau.view([1, -1, 1]).expand([k, -1, 1], false);
+        Tensor::cat(&[xy, th.cos(), th.sin(), tau], 2).permute([0, 2, 1])
+    }
+
+    /// Metric velocity `[K, T, 3]` of metric poses `x: [K, T, 3]` at flow time `t` with a
+    /// static condition embedding from [`Self::condition_embedding`].
+    pub fn velocity_tensor(&self, x: &Tensor, t: f64, embedding: &Tensor) -> Tensor {
+        let t = Tensor::from_slice(&[t]).to_kind(x.kind()).to_device(x.device());
+        let out = self.net.forward(&self.features(x), &t, embedding);
+        out.permute([0, 2, 1]) * &self.out_scale
+    }
+
+    fn input_tensor(&self, x: &[f64], what: &str) -> Result<(Tensor, i64), FlowError> {
+        let t = self.card.net.horizon;
+        if x.is_empty() || x.len() % (3 * t) != 0 {
+            return Err(FlowError::Shape(format!(
+                "{what} has {} values, not a positive multiple of T·3 = {}",
+                x.len(),
+                3 * t
+            )));
+        }
+        let k = (x.len() / (3 * t)) as i64;
+        let tensor = Tensor::from_slice(x)
+            .view([k, t as i64, 3])
+            .to_kind(self.kind())
+            .to_device(self.device());
+        Ok((tensor, k))
+    }
+}
+
+fn copy_out(src: &Tensor, out: &mut [f64]) -> Result<(), FlowError> {
+    let src = src.detach().to_device(Device::Cpu).to_kind(Kind::Double).contiguous();
+    if src.numel() != out.len() {
+        return Err(FlowError::Shape(format!(
+            "output buffer has {} values, expected {}",
+            out.len(),
+            src.numel()
+        )));
+    }
+    src.f_copy_data(out, out.len()).map_err(|e| FlowError::Backend(e.to_string()))?;
+    if out.iter().any(|v| !v.is_finite()) {
+        return Err(FlowError::NonFinite);
+    }
+    Ok(())
+}
+
+fn check_len(name: &str, got: usize, want: usize) -> Result<(), FlowError> {
+    if got != want {
+        return Err(FlowError::Shape(format!("{name} has {got} values, expected {want}")));
+    }
+    Ok(())
+}
+
+impl FlowModel for CfmModel {
+    fn horizon(&self) -> usize {
+        self.card.net.horizon
+    }
+
+    fn source_std(&self) -> [f64; 3] {
+        self.card.normalisation.source_std()
+    }
+
+    fn velocity(
+        &self,
+        x: &[f64],
+        t: f64,
+        cond: &FlowCondition,
+        out: &mut [f64],
+    ) -> Result<(), FlowError> {
+        check_len("out", out.len(), x.len())?;
+        let emb = self.condition_embedding(cond)?;
+        let (xt, _) = self.input_tensor(x, "x")?;
+        let v = tch::no_grad(|| self.velocity_tensor(&xt, t, &emb));
+        copy_out(&v, out)
+    }
+
+    fn velocity_vjp(
+        &self,
+        x: &[f64],
+        t: f64,
+        cond: &FlowCondition,
+        cotangent: &[f64],
+        out: &mut [f64],
+        vjp: &mut [f64],
+    ) -> Result<(), FlowError> {
+        check_len("out", out.len(), x.len())?;
+        check_len("vjp", vjp.len(), x.len())?;
+        check_len("cotangent", cotangent.len(), x.len())?;
+        let emb = self.condition_embedding(cond)?;
+        let (xt, _) = self.input_tensor(x, "x")?;
+        let (ct, _) = self.input_tensor(cotangent, "cotangent")?;
+        let (v, grad) = tch::with_grad(|| -> Result<(Tensor, Tensor), FlowError> {
+            let xt = xt.set_requires_grad(true);
+            let v = self.velocity_tensor(&xt, t, &emb);
+            let s = (&v * &ct).sum(Kind::Double);
+            let grads = Tensor::f_run_backward(&[&s], &[&xt], false, false)
+                .map_err(|e| FlowError::Backend(e.to_string()))?;
+            let g = grads
+                .into_iter()
+                .next()
+                .ok_or_else(|| FlowError::Backend("autograd returned no gradient".into()))?;
+            Ok((v, g))
+        })?;
+        copy_out(&v, out)?;
+        copy_out(&grad, vjp)
+    }
+}
+
+/// Reads every tensor of a safetensors file, mapping failures to [`CfmError`].
+pub(crate) fn read_safetensors(path: &Path) -> Result<BTreeMap<String, Tensor>, CfmError> {
+    if !path.is_file() {
+        return Err(CfmError::io(
+            path,
+            std::io::Error::new(std::io::ErrorKind::NotFound, "weights file not found"),
+        ));
+    }
+    let list = Tensor::read_safetensors(path)
+        .map_err(|e| CfmError::Corrupt { path: PathBuf::from(path), message: e.to_string() })?;
+    Ok(list.into_iter().collect())
+}
+
+/// Writes named tensors to a safetensors file (atomically: temporary file, then rename).
+pub(crate) fn write_safetensors(path: &Path, tensors: &[(String, Tensor)]) -> Result<(), CfmError> {
+    let tmp = path.with_extension("safetensors.tmp");
+    Tensor::write_safetensors(tensors, &tmp)
+        .map_err(|e| CfmError::Corrupt { path: tmp.clone(), message: e.to_string() })?;
+    std::fs::rename(&tmp, path).map_err(|e| CfmError::io(path, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    fn small() -> NetConfig {
+        NetConfig {
+            horizon: 8,
+            bev_cells: 8,
+            down_dims: vec![8, 16],
+            n_groups: 4,
+            bev_channels: [4, 8, 8],
+            time_embed_dim: 8,
+            bev_embed_dim: 8,
+            goal_embed_dim: 8,
+            kernel_size: 3,
+        }
+    }
+
+    fn norm() -> Normalisation {
+        Normalisation {
+            position_scale: 1.7,
+            velocity_std: [0.9, 0.6, 1.3],
+            goal_scale: 5.0,
+            speed_scale: 1.2,
+        }
+    }
+
+    fn condition(cfg: &NetConfig, seed: u32) -> FlowCondition {
+        let n = cfg.bev_len();
+        let bev = (0..n)
+            .map(|i| ((((i as u32) ^ seed.wrapping_mul(7919)).wrapping_mul(2654435761) >> 16) % 7) as f32 / 7.0)
+            .collect();
+        FlowCondition { bev, goal: [3.0, -1.0], velocity: [1.1, 0.2] }
+    }
+
+    fn poses(k: usize, t: usize) -> Vec<f64> {
+        (0..k * t * 3)
+            .map(|i| match i % 3 {
+                0 => 0.1 * (i / 3) as f64 % 3.0,
+                1 => 0.3 * ((i as f64) * 0.37).sin(),
+                _ => 2.9 * ((i as f64) * 0.11).cos(),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn tensor_features_match_rust_features() {
+        tch::manual_seed(0);
+        let cfg = small();
+        let model = CfmModel::new(&cfg, &norm(), Device::Cpu).unwrap();
+        let x = poses(2, cfg.horizon);
+        let xt = Tensor::from_slice(&x).view([2, cfg.horizon as i64, 3]).to_kind(Kind::Float);
+        let f = model.features(&xt).contiguous();
+        let mut rust = vec![0f32; 5 * cfg.horizon];
+        let s = norm().position_scale;
+        for k in 0..2 {
+            let mut p: Vec<f64> = x[k * cfg.horizon * 3..(k + 1) * cfg.horizon * 3].to_vec();
+            for c in p.chunks_exact_mut(3) {
+                c[0] /= s;
+                c[1] /= s;
+            }
+            trajectory_features(&p, &mut rust);
+            let mut got = vec![0f32; 5 * cfg.horizon];
+            f.get(k as i64).copy_data(&mut got, 5 * cfg.horizon);
+            for (a, b) in got.iter().zip(&rust) {
+                assert_relative_eq!(*a, *b, epsilon = 1e-6);
+            }
+        }
+    }
+
+    /// The autograd VJP equals central finite differences of `cotangent · f(x)` (float64).
+    #[test]
+    fn vjp_matches_finite_differences() {
+        tch::manual_seed(1);
+        let cfg = small();
+        let mut model = CfmModel::new(&cfg, &norm(), Device::Cpu).unwrap();
+        model.to_double();
+        let cond = condition(&cfg, 3);
+        let k = 2;
+        let x = poses(k, cfg.horizon);
+        let cot: Vec<f64> = (0..x.len()).map(|i| ((i * 7 % 11) as f64 - 5.0) / 5.0).collect();
+        let mut out = vec![0.0; x.len()];
+        let mut vjp = vec![0.0; x.len()];
+        model.velocity_vjp(&x, 0.37, &cond, &cot, &mut out, &mut vjp).unwrap();
+        let mut out2 = vec![0.0; x.len()];
+        model.velocity(&x, 0.37, &cond, &mut out2).unwrap();
+        for (a, b) in out.iter().zip(&out2) {
+            assert_relative_eq!(*a, *b, epsilon = 1e-12);
+        }
+        let f = |x: &[f64]| -> f64 {
+            let mut o = vec![0.0; x.len()];
+            model.velocity(x, 0.37, &cond, &mut o).unwrap();
+            o.iter().zip(&cot).map(|(a, b)| a * b).sum()
+        };
+        let h = 1e-6;
+        let mut max_err = 0f64;
+        for i in 0..x.len() {
+            let mut xp = x.clone();
+            let mut xm = x.clone();
+            xp[i] += h;
+            xm[i] -= h;
+            let fd = (f(&xp) - f(&xm)) / (2.0 * h);
+            max_err = max_err.max((fd - vjp[i]).abs() / (1.0 + vjp[i].abs()));
+        }
+        assert!(max_err < 1e-6, "max relative VJP error {max_err}");
+        // The VJP is not trivially zero.
+        assert!(vjp.iter().map(|v| v.abs()).sum::<f64>() > 1e-3);
+    }
+
+    #[test]
+    fn batch_rows_are_independent_and_cache_is_exact() {
+        tch::manual_seed(2);
+        let cfg = small();
+        let model = CfmModel::new(&cfg, &norm(), Device::Cpu).unwrap();
+        let cond = condition(&cfg, 1);
+        let x = poses(3, cfg.horizon);
+        let mut out = vec![0.0; x.len()];
+        model.velocity(&x, 0.5, &cond, &mut out).unwrap();
+        let n = cfg.horizon * 3;
+        let mut single = vec![0.0; n];
+        model.velocity(&x[n..2 * n], 0.5, &cond, &mut single).unwrap();
+        for (a, b) in single.iter().zip(&out[n..2 * n]) {
+            assert_relative_eq!(*a, *b, epsilon = 1e-5, max_relative = 1e-5);
+        }
+        // A different condition must not hit the cache.
+        let other = condition(&cfg, 99);
+        let mut out_other = vec![0.0; x.len()];
+        model.velocity(&x, 0.5, &other, &mut out_other).unwrap();
+        assert!(out.iter().zip(&out_other).any(|(a, b)| (a - b).abs() > 1e-6));
+        // And going back reproduces the first result.
+        let mut again = vec![0.0; x.len()];
+        model.velocity(&x, 0.5, &cond, &mut again).unwrap();
+        assert_eq!(out, again);
+    }
+
+    #[test]
+    fn shape_errors_are_reported() {
+        let cfg = small();
+        let model = CfmModel::new(&cfg, &norm(), Device::Cpu).unwrap();
+        let cond = condition(&cfg, 1);
+        let mut out = vec![0.0; 5];
+        assert!(matches!(model.velocity(&[0.0; 5], 0.1, &cond, &mut out), Err(FlowError::Shape(_))));
+        let bad = FlowCondition { bev: vec![0.0; 10], ..cond };
+        let x = poses(1, cfg.horizon);
+        let mut out = vec![0.0; x.len()];
+        assert!(matches!(model.velocity(&x, 0.1, &bad, &mut out), Err(FlowError::Shape(_))));
+    }
+
+    #[test]
+    fn save_load_round_trip_and_validation() {
+        tch::manual_seed(3);
+        let dir = std::env::temp_dir().join(format!("h2n-flow-ckpt-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let cfg = small();
+        let model = CfmModel::new(&cfg, &norm(), Device::Cpu).unwrap();
+        model.save(&dir).unwrap();
+        let loaded = CfmModel::load(&dir, Device::Cpu).unwrap();
+        assert_eq!(loaded.card(), model.card());
+        let cond = condition(&cfg, 5);
+        let x = poses(2, cfg.horizon);
+        let (mut a, mut b) = (vec![0.0; x.len()], vec![0.0; x.len()]);
+        model.velocity(&x, 0.2, &cond, &mut a).unwrap();
+        loaded.velocity(&x, 0.2, &cond, &mut b).unwrap();
+        assert_eq!(a, b);
+
+        // A card whose architecture differs from the weights: shape mismatch.
+        let mut card = ModelCard::load(&dir.join(CARD_FILE)).unwrap();
+        card.net.down_dims = vec![8, 24];
+        card.save(&dir.join(CARD_FILE)).unwrap();
+        let err = CfmModel::load(&dir, Device::Cpu).unwrap_err();
+        assert!(matches!(err, CfmError::TensorShape { .. }), "{err}");
+
+        // A card with an extra level: missing tensors.
+        card.net.down_dims = vec![8, 16, 16];
+        card.save(&dir.join(CARD_FILE)).unwrap();
+        let err = CfmModel::load(&dir, Device::Cpu).unwrap_err();
+        assert!(matches!(err, CfmError::MissingTensor { .. }), "{err}");
+
+        // Weights with a tensor the architecture lacks: unexpected.
+        card.net.down_dims = vec![8, 16];
+        card.save(&dir.join(CARD_FILE)).unwrap();
+        let mut named = model.named_tensors("");
+        named.push(("extra.weight".into(), Tensor::zeros([2], (Kind::Float, Device::Cpu))));
+        write_safetensors(&dir.join(WEIGHTS_FILE), &named).unwrap();
+        let err = CfmModel::load(&dir, Device::Cpu).unwrap_err();
+        assert!(matches!(err, CfmError::UnexpectedTensor { .. }), "{err}");
+
+        // A truncated file: corrupt.
+        model.save(&dir).unwrap();
+        let bytes = std::fs::read(dir.join(WEIGHTS_FILE)).unwrap();
+        std::fs::write(dir.join(WEIGHTS_FILE), &bytes[..bytes.len() / 2]).unwrap();
+        let err = CfmModel::load(&dir, Device::Cpu).unwrap_err();
+        assert!(matches!(err, CfmError::Corrupt { .. }), "{err}");
+
+        // An unknown card field: a TOML error naming the file.
+        model.save(&dir).unwrap();
+        let text = std::fs::read_to_string(dir.join(CARD_FILE)).unwrap();
+        std::fs::write(dir.join(CARD_FILE), format!("bogus = 1\n{text}")).unwrap();
+        let err = CfmModel::load(&dir, Device::Cpu).unwrap_err();
+        assert!(matches!(err, CfmError::Toml { .. }), "{err}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -1,0 +1,385 @@
+//! The conditional 1-D temporal U-Net `f_θ(x_t, c, t)` (paper §III-A), in the style of
+//! Diffusion Policy's `ConditionalUnet1D`.
+//!
+//! * Trajectory input `[B, 5, T]`: per waypoint the normalised position `x/s, y/s`, the heading
+//!   as `cos θ, sin θ` (continuous across ±π) and the waypoint's place in the horizon
+//!   `(i + 1)/T` (convolutions are shift-invariant; the waypoint index matters here).
+//! * Output `[B, 3, T]`: the standardised body velocity `(v_x, v_y, ω)` per waypoint.
+//! * Conditioning by FiLM: every residual block scales and shifts its first convolution's
+//!   output per channel with a linear map of `Mish(c)`, where `c = [time embedding, BEV
+//!   embedding, goal embedding]`.
+//! * BEV encoder: three stride-2 3×3 convolutions with GroupNorm and Mish, an adaptive average
+//!   pool to 4×4 and a linear layer. Goal encoder: a two-layer MLP on
+//!   `(g_x, g_y)/goal_scale, (v_x, v_y)/speed_scale`. Time: sinusoidal embedding of `100·t`
+//!   followed by a two-layer MLP.
+//!
+//! The BEV and goal embeddings (the "static" part of `c`) depend only on the planning
+//! condition, so [`CondUnet1d::encode_condition`] is separate from [`CondUnet1d::forward`] and
+//! can be computed once per planning call.
+
+use crate::config::NetConfig;
+use tch::nn::{self, Module};
+use tch::{Kind, Tensor};
+
+/// Input channels of the trajectory: `x/s, y/s, cos θ, sin θ, (i + 1)/T`.
+pub const TRAJ_CHANNELS: i64 = 5;
+/// Output channels: `v_x, v_y, ω`.
+pub const OUT_CHANNELS: i64 = 3;
+/// Inputs of the goal encoder: `g_x, g_y, v_x, v_y`.
+pub const GOAL_FEATURES: i64 = 4;
+/// Frequency multiplier of the sinusoidal time embedding (flow time `t ∈ [0, 1]`).
+const TIME_SCALE: f64 = 100.0;
+
+/// Conv1d → GroupNorm → Mish.
+#[derive(Debug)]
+struct Conv1dBlock {
+    conv: nn::Conv1D,
+    norm: nn::GroupNorm,
+}
+
+impl Conv1dBlock {
+    fn new(p: nn::Path<'_>, cin: i64, cout: i64, k: i64, groups: i64) -> Self {
+        let cfg = nn::ConvConfig { padding: k / 2, ..Default::default() };
+        Self {
+            conv: nn::conv1d(&p / "conv", cin, cout, k, cfg),
+            norm: nn::group_norm(&p / "norm", groups, cout, Default::default()),
+        }
+    }
+
+    fn forward(&self, x: &Tensor) -> Tensor {
+        self.norm.forward(&self.conv.forward(x)).mish()
+    }
+}
+
+/// Residual block with FiLM conditioning (`ConditionalResidualBlock1D`).
+#[derive(Debug)]
+struct ResBlock {
+    block0: Conv1dBlock,
+    block1: Conv1dBlock,
+    film: nn::Linear,
+    residual: Option<nn::Conv1D>,
+    cout: i64,
+}
+
+impl ResBlock {
+    fn new(p: nn::Path<'_>, cin: i64, cout: i64, cond_dim: i64, k: i64, groups: i64) -> Self {
+        let residual = (cin != cout)
+            .then(|| nn::conv1d(&p / "residual", cin, cout, 1, Default::default()));
+        Self {
+            block0: Conv1dBlock::new(&p / "block0", cin, cout, k, groups),
+            block1: Conv1dBlock::new(&p / "block1", cout, cout, k, groups),
+            film: nn::linear(&p / "film", cond_dim, 2 * cout, Default::default()),
+            residual,
+            cout,
+        }
+    }
+
+    /// `x`: `[B, cin, L]`; `mish_c`: `Mish(c)`, `[B, cond]` or `[1, cond]` (broadcast).
+    fn forward(&self, x: &Tensor, mish_c: &Tensor) -> Tensor {
+        let h = self.block0.forward(x);
+        let film = self.film.forward(mish_c).view([-1, 2, self.cout, 1]);
+        let h = &h * film.select(1, 0) + film.select(1, 1);
+        let h = self.block1.forward(&h);
+        match &self.residual {
+            Some(r) => h + r.forward(x),
+            None => h + x,
+        }
+    }
+}
+
+#[derive(Debug)]
+struct DownLevel {
+    res0: ResBlock,
+    res1: ResBlock,
+    down: Option<nn::Conv1D>,
+}
+
+#[derive(Debug)]
+struct UpLevel {
+    res0: ResBlock,
+    res1: ResBlock,
+    up: nn::ConvTranspose1D,
+}
+
+/// The conditional U-Net with its BEV, goal and time encoders.
+#[derive(Debug)]
+pub struct CondUnet1d {
+    cfg: NetConfig,
+    time_mlp0: nn::Linear,
+    time_mlp1: nn::Linear,
+    bev_convs: Vec<(nn::Conv2D, nn::GroupNorm)>,
+    bev_fc: nn::Linear,
+    goal_fc0: nn::Linear,
+    goal_fc1: nn::Linear,
+    down: Vec<DownLevel>,
+    mid: Vec<ResBlock>,
+    up: Vec<UpLevel>,
+    final_block: Conv1dBlock,
+    final_conv: nn::Conv1D,
+}
+
+impl CondUnet1d {
+    /// Creates the network's variables under `p` (the config must be valid).
+    pub fn new(p: &nn::Path<'_>, cfg: &NetConfig) -> Self {
+        let k = cfg.kernel_size as i64;
+        let g = cfg.n_groups as i64;
+        let cond = cfg.cond_dim() as i64;
+        let tdim = cfg.time_embed_dim as i64;
+
+        let time = p / "time";
+        let time_mlp0 = nn::linear(&time / "fc0", tdim, 4 * tdim, Default::default());
+        let time_mlp1 = nn::linear(&time / "fc1", 4 * tdim, tdim, Default::default());
+
+        let bev = p / "bev";
+        let mut bev_convs = Vec::new();
+        let mut cin = 3i64;
+        for (i, &c) in cfg.bev_channels.iter().enumerate() {
+            let c = c as i64;
+            let conv_cfg = nn::ConvConfig { stride: 2, padding: 1, ..Default::default() };
+            let conv = nn::conv2d(&bev / format!("conv{i}"), cin, c, 3, conv_cfg);
+            let norm = nn::group_norm(&bev / format!("norm{i}"), g, c, Default::default());
+            bev_convs.push((conv, norm));
+            cin = c;
+        }
+        let bev_fc = nn::linear(&bev / "fc", cin * 16, cfg.bev_embed_dim as i64, Default::default());
+
+        let goal = p / "goal";
+        let gdim = cfg.goal_embed_dim as i64;
+        let goal_fc0 = nn::linear(&goal / "fc0", GOAL_FEATURES, gdim, Default::default());
+        let goal_fc1 = nn::linear(&goal / "fc1", gdim, gdim, Default::default());
+
+        let unet = p / "unet";
+        let dims: Vec<i64> = std::iter::once(TRAJ_CHANNELS)
+            .chain(cfg.down_dims.iter().map(|&d| d as i64))
+            .collect();
+        let levels = cfg.down_dims.len();
+        let mut down = Vec::new();
+        for i in 0..levels {
+            let (din, dout) = (dims[i], dims[i + 1]);
+            let lp = &unet / "down" / i;
+            let last = i + 1 == levels;
+            down.push(DownLevel {
+                res0: ResBlock::new(&lp / "res0", din, dout, cond, k, g),
+                res1: ResBlock::new(&lp / "res1", dout, dout, cond, k, g),
+                down: (!last).then(|| {
+                    let c = nn::ConvConfig { stride: 2, padding: 1, ..Default::default() };
+                    nn::conv1d(&lp / "downsample", dout, dout, 3, c)
+                }),
+            });
+        }
+        let dmid = dims[levels];
+        let mid = (0..2)
+            .map(|i| ResBlock::new(&unet / "mid" / i, dmid, dmid, cond, k, g))
+            .collect();
+        let mut up = Vec::new();
+        // Levels levels-1 .. 1, coarse to fine: (dim_in, dim_out) = (dims[i], dims[i+1]).
+        for (j, i) in (1..levels).rev().enumerate() {
+            let (din, dout) = (dims[i], dims[i + 1]);
+            let lp = &unet / "up" / j;
+            let c = nn::ConvTransposeConfig { stride: 2, padding: 1, ..Default::default() };
+            up.push(UpLevel {
+                res0: ResBlock::new(&lp / "res0", 2 * dout, din, cond, k, g),
+                res1: ResBlock::new(&lp / "res1", din, din, cond, k, g),
+                up: nn::conv_transpose1d(&lp / "upsample", din, din, 4, c),
+            });
+        }
+        let d0 = dims[1];
+        let final_block = Conv1dBlock::new(&unet / "final_block", d0, d0, k, g);
+        let final_conv = nn::conv1d(&unet / "final_conv", d0, OUT_CHANNELS, 1, Default::default());
+
+        Self {
+            cfg: cfg.clone(),
+            time_mlp0,
+            time_mlp1,
+            bev_convs,
+            bev_fc,
+            goal_fc0,
+            goal_fc1,
+            down,
+            mid,
+            up,
+            final_block,
+            final_conv,
+        }
+    }
+
+    /// The architecture this network was built with.
+    pub fn config(&self) -> &NetConfig {
+        &self.cfg
+    }
+
+    /// The static part of the conditioning: `[BEV embedding, goal embedding]`, `[B, bev + goal]`.
+    ///
+    /// `bev`: `[B, 3, H, W]` (velocity channels already divided by the speed scale);
+    /// `goal_vel`: `[B, 4]` normalised goal and ego velocity.
+    pub fn encode_condition(&self, bev: &Tensor, goal_vel: &Tensor) -> Tensor {
+        let mut h = bev.shallow_clone();
+        for (conv, norm) in &self.bev_convs {
+            h = norm.forward(&conv.forward(&h)).mish();
+        }
+        let h = h.adaptive_avg_pool2d([4, 4]).flatten(1, -1);
+        let bev_emb = self.bev_fc.forward(&h).mish();
+        let goal_emb = self.goal_fc1.forward(&self.goal_fc0.forward(goal_vel).mish());
+        Tensor::cat(&[bev_emb, goal_emb], 1)
+    }
+
+    /// The embedding of flow time `t` (`[B]` or `[1]`), `[B, time_embed_dim]`.
+    pub fn encode_time(&self, t: &Tensor) -> Tensor {
+        let half = (self.cfg.time_embed_dim / 2) as i64;
+        let step = (10000f64).ln() / (half - 1) as f64;
+        let freqs = (Tensor::arange(half, (t.kind(), t.device())) * -step).exp();
+        let args = t.view([-1, 1]) * TIME_SCALE * freqs.view([1, -1]);
+        let emb = Tensor::cat(&[args.sin(), args.cos()], 1);
+        self.time_mlp1.forward(&self.time_mlp0.forward(&emb).mish())
+    }
+
+    /// The standardised velocity `[B, 3, T]` for trajectory features `x` (`[B, 5, T]`), flow
+    /// time `t` (`[B]`, or `[1]` shared by the batch) and static condition `cond` (from
+    /// [`Self::encode_condition`], `[B, ·]` or `[1, ·]` shared by the batch).
+    pub fn forward(&self, x: &Tensor, t: &Tensor, cond: &Tensor) -> Tensor {
+        let temb = self.encode_time(t);
+        let (bt, bc) = (temb.size()[0], cond.size()[0]);
+        let c = if bt == bc {
+            Tensor::cat(&[&temb, cond], 1)
+        } else if bt == 1 {
+            Tensor::cat(&[&temb.expand([bc, -1], false), cond], 1)
+        } else {
+            Tensor::cat(&[&temb, &cond.expand([bt, -1], false)], 1)
+        };
+        let c = c.mish();
+
+        let mut h = x.shallow_clone();
+        let mut skips = Vec::with_capacity(self.down.len());
+        for lvl in &self.down {
+            h = lvl.res0.forward(&h, &c);
+            h = lvl.res1.forward(&h, &c);
+            skips.push(h.shallow_clone());
+            if let Some(d) = &lvl.down {
+                h = d.forward(&h);
+            }
+        }
+        for m in &self.mid {
+            h = m.forward(&h, &c);
+        }
+        for lvl in &self.up {
+            if let Some(skip) = skips.pop() {
+                h = Tensor::cat(&[&h, &skip], 1);
+            }
+            h = lvl.res0.forward(&h, &c);
+            h = lvl.res1.forward(&h, &c);
+            h = lvl.up.forward(&h);
+        }
+        self.final_conv.forward(&self.final_block.forward(&h))
+    }
+}
+
+/// Multiply-accumulate counts of one forward pass, from the architecture alone
+/// (convolutions and linear layers; normalisations and activations are not counted).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Complexity {
+    /// U-Net plus time MLP and FiLM layers, per trajectory.
+    pub unet_macs: u64,
+    /// BEV and goal encoders, per condition.
+    pub condition_macs: u64,
+}
+
+impl Complexity {
+    /// Counts the multiply-accumulates of the architecture `cfg`.
+    pub fn of(cfg: &NetConfig) -> Self {
+        let k = cfg.kernel_size as u64;
+        let cond = cfg.cond_dim() as u64;
+        let conv1d = |cin: u64, cout: u64, k: u64, len: u64| cin * cout * k * len;
+        let res = |cin: u64, cout: u64, len: u64| {
+            conv1d(cin, cout, k, len)
+                + conv1d(cout, cout, k, len)
+                + cond * 2 * cout
+                + if cin != cout { conv1d(cin, cout, 1, len) } else { 0 }
+        };
+        let tdim = cfg.time_embed_dim as u64;
+        let mut unet = tdim * 4 * tdim * 2;
+        let dims: Vec<u64> = std::iter::once(TRAJ_CHANNELS as u64)
+            .chain(cfg.down_dims.iter().map(|&d| d as u64))
+            .collect();
+        let levels = cfg.down_dims.len();
+        let mut len = cfg.horizon as u64;
+        for i in 0..levels {
+            let (din, dout) = (dims[i], dims[i + 1]);
+            unet += res(din, dout, len) + res(dout, dout, len);
+            if i + 1 < levels {
+                len /= 2;
+                unet += conv1d(dout, dout, 3, len);
+            }
+        }
+        unet += 2 * res(dims[levels], dims[levels], len);
+        for i in (1..levels).rev() {
+            let (din, dout) = (dims[i], dims[i + 1]);
+            unet += res(2 * dout, din, len) + res(din, din, len);
+            unet += conv1d(din, din, 4, len);
+            len *= 2;
+        }
+        let d0 = dims[1];
+        unet += conv1d(d0, d0, k, len) + conv1d(d0, OUT_CHANNELS as u64, 1, len);
+
+        let mut condition = 0u64;
+        let mut side = cfg.bev_cells as u64;
+        let mut cin = 3u64;
+        for &c in &cfg.bev_channels {
+            side = side.div_ceil(2);
+            condition += side * side * cin * c as u64 * 9;
+            cin = c as u64;
+        }
+        condition += cin * 16 * cfg.bev_embed_dim as u64;
+        let gdim = cfg.goal_embed_dim as u64;
+        condition += GOAL_FEATURES as u64 * gdim + gdim * gdim;
+        Self { unet_macs: unet, condition_macs: condition }
+    }
+}
+
+/// Number of scalar parameters of the variables in `vs`.
+pub fn parameter_count(vs: &nn::VarStore) -> usize {
+    vs.trainable_variables().iter().map(Tensor::numel).sum()
+}
+
+/// Kind of the variables in `vs` (Float unless converted with `VarStore::double`).
+pub(crate) fn store_kind(vs: &nn::VarStore) -> Kind {
+    vs.trainable_variables().first().map(Tensor::kind).unwrap_or(Kind::Float)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tch::Device;
+
+    #[test]
+    fn shapes_for_two_and_three_levels() {
+        for dims in [vec![32, 64], vec![16, 32, 64]] {
+            let cfg = NetConfig { down_dims: dims, ..NetConfig::default() };
+            cfg.validate().unwrap();
+            let vs = nn::VarStore::new(Device::Cpu);
+            let net = CondUnet1d::new(&vs.root(), &cfg);
+            let b = 3;
+            let x = Tensor::randn([b, TRAJ_CHANNELS, 32], (Kind::Float, Device::Cpu));
+            let bev = Tensor::zeros([b, 3, 32, 32], (Kind::Float, Device::Cpu));
+            let g = Tensor::ones([b, 4], (Kind::Float, Device::Cpu));
+            let cond = net.encode_condition(&bev, &g);
+            assert_eq!(cond.size(), vec![b, (cfg.bev_embed_dim + cfg.goal_embed_dim) as i64]);
+            // Per-sample time and condition.
+            let t = Tensor::from_slice(&[0.1f32, 0.5, 0.9]);
+            assert_eq!(net.forward(&x, &t, &cond).size(), vec![b, 3, 32]);
+            // One time and one condition shared by the batch.
+            let t1 = Tensor::from_slice(&[0.3f32]);
+            let c1 = cond.narrow(0, 0, 1);
+            assert_eq!(net.forward(&x, &t1, &c1).size(), vec![b, 3, 32]);
+        }
+    }
+
+    #[test]
+    fn complexity_counts_grow_with_width() {
+        let small = Complexity::of(&NetConfig::default());
+        let wide = Complexity::of(&NetConfig { down_dims: vec![64, 128], ..NetConfig::default() });
+        assert!(small.unet_macs > 0 && small.condition_macs > 0);
+        // Doubling every channel roughly quadruples the convolution cost.
+        let ratio = wide.unet_macs as f64 / small.unet_macs as f64;
+        assert!(ratio > 2.5 && ratio < 4.5, "ratio {ratio}");
+    }
+}

@@ -1,0 +1,775 @@
+//! Training: the CFM loss of Eq. 3 minimised with AdamW, warm-up + cosine learning rate,
+//! gradient-norm clipping and an exponential moving average (EMA) of the weights.
+//!
+//! Everything random is derived from `(seed, step)` (batch order from `(seed, epoch)`, noise
+//! and flow times from `(seed, step)`), so a run resumed from a checkpoint continues exactly
+//! as the uninterrupted run would have. AdamW is implemented here on plain tensors so its
+//! moments can be checkpointed with the weights.
+
+use crate::cfm::{TimeDistribution, TimeSampler, geodesic_point, target_velocity};
+use crate::config::{NetConfig, Normalisation};
+use crate::error::CfmError;
+use crate::model::{CfmModel, normalise_condition, read_safetensors, trajectory_features, write_safetensors};
+use human2nav_core::se2::{Pose2, Twist2};
+use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+use tch::{Device, Kind, Tensor};
+
+/// One training example as the trainer needs it. Implemented for the data crate's tuples and
+/// for [`Example`].
+pub trait TrainingSample {
+    /// `[3, H, W]` raster.
+    fn bev(&self) -> &[f32];
+    /// Goal `[x, y]`, ego frame, metres.
+    fn goal(&self) -> [f64; 2];
+    /// Ego velocity `[v_x, v_y]`, ego frame, m/s.
+    fn velocity(&self) -> [f64; 2];
+    /// Number of future poses.
+    fn future_len(&self) -> usize;
+    /// Future pose `i` (`x, y, θ`), ego frame; the current (identity) pose is not included.
+    fn future_pose(&self, i: usize) -> Pose2;
+}
+
+/// A self-contained training example (tests, synthetic data).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Example {
+    pub bev: Vec<f32>,
+    pub goal: [f64; 2],
+    pub velocity: [f64; 2],
+    pub future: Vec<Pose2>,
+}
+
+impl TrainingSample for Example {
+    fn bev(&self) -> &[f32] {
+        &self.bev
+    }
+    fn goal(&self) -> [f64; 2] {
+        self.goal
+    }
+    fn velocity(&self) -> [f64; 2] {
+        self.velocity
+    }
+    fn future_len(&self) -> usize {
+        self.future.len()
+    }
+    fn future_pose(&self, i: usize) -> Pose2 {
+        self.future[i]
+    }
+}
+
+impl TrainingSample for human2nav_data::tuples::TrainingTuple {
+    fn bev(&self) -> &[f32] {
+        &self.bev
+    }
+    fn goal(&self) -> [f64; 2] {
+        [self.goal[0] as f64, self.goal[1] as f64]
+    }
+    fn velocity(&self) -> [f64; 2] {
+        [self.velocity[0] as f64, self.velocity[1] as f64]
+    }
+    fn future_len(&self) -> usize {
+        self.future.len()
+    }
+    fn future_pose(&self, i: usize) -> Pose2 {
+        let p = self.future[i];
+        Pose2::new(p[0] as f64, p[1] as f64, p[2] as f64)
+    }
+}
+
+/// Checks every example matches the architecture (raster size, horizon, finite values).
+pub fn check_examples<S: TrainingSample>(net: &NetConfig, data: &[S]) -> Result<(), CfmError> {
+    for (index, s) in data.iter().enumerate() {
+        if s.bev().len() != net.bev_len() {
+            return Err(CfmError::Example {
+                index,
+                reason: format!("BEV has {} values, expected {}", s.bev().len(), net.bev_len()),
+            });
+        }
+        if s.future_len() != net.horizon {
+            return Err(CfmError::Example {
+                index,
+                reason: format!("{} future poses, expected {}", s.future_len(), net.horizon),
+            });
+        }
+        let finite = s.goal().iter().chain(&s.velocity()).all(|v| v.is_finite())
+            && (0..net.horizon).all(|i| s.future_pose(i).is_finite());
+        if !finite {
+            return Err(CfmError::Example { index, reason: "non-finite goal, velocity or pose".into() });
+        }
+    }
+    Ok(())
+}
+
+impl Normalisation {
+    /// Estimates the normalisation from training data: RMS future distance, goal distance and
+    /// ego speed, and the RMS of the target velocity per component over sampled source/data
+    /// pairs (up to 4096 examples, seeded).
+    pub fn estimate<S: TrainingSample>(data: &[S], seed: u64) -> Result<Self, CfmError> {
+        if data.is_empty() {
+            return Err(CfmError::EmptyData { split: "train" });
+        }
+        let (mut d2, mut n) = (0.0, 0usize);
+        let (mut g2, mut v2) = (0.0, 0.0);
+        for s in data {
+            for i in 0..s.future_len() {
+                let p = s.future_pose(i);
+                d2 += p.x * p.x + p.y * p.y;
+                n += 1;
+            }
+            let g = s.goal();
+            let v = s.velocity();
+            g2 += g[0] * g[0] + g[1] * g[1];
+            v2 += v[0] * v[0] + v[1] * v[1];
+        }
+        let m = data.len() as f64;
+        let position_scale = (d2 / n.max(1) as f64).sqrt().max(0.1);
+        let goal_scale = (g2 / m).sqrt().max(0.1);
+        let speed_scale = (v2 / m).sqrt().max(0.1);
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_0f_5ca1e);
+        let mut acc = [0.0; 3];
+        let mut count = 0usize;
+        let take = data.len().min(4096);
+        let mut idx: Vec<usize> = (0..data.len()).collect();
+        idx.shuffle(&mut rng);
+        for &i in &idx[..take] {
+            let s = &data[i];
+            for j in 0..s.future_len() {
+                let x1 = scaled(s.future_pose(j), position_scale);
+                let x0 = Pose2::exp(unit_normal_twist(&mut rng));
+                let xi = target_velocity(x0, x1).to_array();
+                for c in 0..3 {
+                    acc[c] += xi[c] * xi[c];
+                }
+                count += 1;
+            }
+        }
+        let velocity_std = acc.map(|a| (a / count.max(1) as f64).sqrt().max(1e-3));
+        let norm = Self { position_scale, velocity_std, goal_scale, speed_scale };
+        norm.validate()?;
+        Ok(norm)
+    }
+}
+
+fn scaled(p: Pose2, s: f64) -> Pose2 {
+    Pose2::new(p.x / s, p.y / s, p.theta)
+}
+
+fn unit_normal_twist<R: Rng + ?Sized>(rng: &mut R) -> Twist2 {
+    let mut n = || -> f64 { StandardNormal.sample(rng) };
+    Twist2::new(n(), n(), n())
+}
+
+/// Optimiser, schedule and bookkeeping options of a training run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainOptions {
+    /// Seed of weight initialisation, batch order, noise and flow times. Default 0.
+    pub seed: u64,
+    /// Examples per optimiser step. Default 256.
+    pub batch_size: usize,
+    /// Total optimiser steps (the cosine schedule ends here). Default 20 000.
+    pub steps: u64,
+    /// Peak learning rate. Default 1e-3.
+    pub lr: f64,
+    /// Final learning rate of the cosine decay. Default 1e-5.
+    pub lr_min: f64,
+    /// Linear warm-up steps. Default 500.
+    pub warmup_steps: u64,
+    /// AdamW `β1, β2, ε` and decoupled weight decay. Defaults 0.9, 0.999, 1e-8, 1e-4.
+    pub beta1: f64,
+    pub beta2: f64,
+    pub eps: f64,
+    pub weight_decay: f64,
+    /// Gradient clipping by global norm. Default 1.0.
+    pub grad_clip: f64,
+    /// EMA decay; the effective decay at step `k` is `min(ema_decay, (1 + k)/(10 + k))`.
+    /// Default 0.999.
+    pub ema_decay: f64,
+    /// Flow-time distribution.
+    pub time: TimeDistribution,
+    /// Also train on the left-right mirror image of each example with probability 1/2
+    /// (erases any side preference of walkers). Default false.
+    pub mirror: bool,
+}
+
+impl Default for TrainOptions {
+    fn default() -> Self {
+        Self {
+            seed: 0,
+            batch_size: 256,
+            steps: 20_000,
+            lr: 1e-3,
+            lr_min: 1e-5,
+            warmup_steps: 500,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+            weight_decay: 1e-4,
+            grad_clip: 1.0,
+            ema_decay: 0.999,
+            time: TimeDistribution::default(),
+            mirror: false,
+        }
+    }
+}
+
+impl TrainOptions {
+    /// Checks every option is in range.
+    pub fn validate(&self) -> Result<(), CfmError> {
+        if self.batch_size == 0 {
+            return Err(CfmError::option("train.batch_size", "must be positive"));
+        }
+        if self.steps == 0 {
+            return Err(CfmError::option("train.steps", "must be positive"));
+        }
+        if !(self.lr > 0.0 && self.lr.is_finite()) {
+            return Err(CfmError::option("train.lr", "must be finite and > 0"));
+        }
+        if !(self.lr_min >= 0.0 && self.lr_min <= self.lr) {
+            return Err(CfmError::option("train.lr_min", "must lie in [0, lr]"));
+        }
+        for (f, v) in [("train.beta1", self.beta1), ("train.beta2", self.beta2), ("train.ema_decay", self.ema_decay)] {
+            if !(0.0..1.0).contains(&v) {
+                return Err(CfmError::option(f, "must lie in [0, 1)"));
+            }
+        }
+        if !(self.eps > 0.0) {
+            return Err(CfmError::option("train.eps", "must be > 0"));
+        }
+        if !(self.weight_decay >= 0.0) {
+            return Err(CfmError::option("train.weight_decay", "must be >= 0"));
+        }
+        if !(self.grad_clip > 0.0) {
+            return Err(CfmError::option("train.grad_clip", "must be > 0"));
+        }
+        self.time.validate()
+    }
+
+    /// Learning rate at `step` (0-based): linear warm-up, then cosine decay to `lr_min`.
+    pub fn lr_at(&self, step: u64) -> f64 {
+        if step < self.warmup_steps {
+            return self.lr * (step + 1) as f64 / self.warmup_steps as f64;
+        }
+        let span = self.steps.saturating_sub(self.warmup_steps).max(1) as f64;
+        let p = ((step - self.warmup_steps) as f64 / span).min(1.0);
+        self.lr_min + 0.5 * (self.lr - self.lr_min) * (1.0 + (std::f64::consts::PI * p).cos())
+    }
+
+    /// One line describing the optimiser, for the model card.
+    pub fn describe_optimiser(&self) -> String {
+        format!(
+            "AdamW (beta1 {}, beta2 {}, eps {:e}, weight decay {:e}), lr {:e} with {} warm-up \
+             steps then cosine to {:e}, gradient clipping at global norm {}, EMA decay {}",
+            self.beta1, self.beta2, self.eps, self.weight_decay, self.lr, self.warmup_steps,
+            self.lr_min, self.grad_clip, self.ema_decay
+        )
+    }
+}
+
+/// One point of the loss history.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LossRecord {
+    /// Optimiser steps done.
+    pub step: u64,
+    /// Mean training loss since the previous record.
+    pub train_loss: f64,
+    /// Validation loss of the EMA weights (NaN when no validation data).
+    pub val_loss: f64,
+    /// Learning rate at this step.
+    pub lr: f64,
+    /// Training seconds so far (across resumes).
+    pub elapsed_s: f64,
+}
+
+/// A batch in tensor form.
+struct Batch {
+    x: Tensor,
+    t: Tensor,
+    bev: Tensor,
+    goal_vel: Tensor,
+    target: Tensor,
+}
+
+/// Builds the batch of examples `idx` with noise from `rng`: features of `x_t`, flow times,
+/// normalised conditions and standardised targets `ξ/σ`.
+fn build_batch<S: TrainingSample, R: Rng + ?Sized>(
+    data: &[S],
+    idx: &[usize],
+    net: &NetConfig,
+    norm: &Normalisation,
+    time: &TimeSampler,
+    mirror: bool,
+    rng: &mut R,
+    device: Device,
+) -> Batch {
+    let b = idx.len();
+    let t_len = net.horizon;
+    let bev_len = net.bev_len();
+    let cells = net.bev_cells;
+    let mut x = vec![0f32; b * 5 * t_len];
+    let mut target = vec![0f32; b * 3 * t_len];
+    let mut ts = vec![0f32; b];
+    let mut bev = vec![0f32; b * bev_len];
+    let mut gv = vec![0f32; b * 4];
+    let mut poses = vec![0f64; t_len * 3];
+    let mut flipped = vec![0f32; bev_len];
+    let s = norm.position_scale;
+    for (row, &i) in idx.iter().enumerate() {
+        let ex = &data[i];
+        let flip = mirror && rng.random_bool(0.5);
+        let t = time.sample(rng);
+        ts[row] = t as f32;
+        let tgt = &mut target[row * 3 * t_len..(row + 1) * 3 * t_len];
+        for j in 0..t_len {
+            let mut p1 = scaled(ex.future_pose(j), s);
+            if flip {
+                p1 = Pose2::new(p1.x, -p1.y, -p1.theta);
+            }
+            let x0 = Pose2::exp(unit_normal_twist(rng));
+            let xi = target_velocity(x0, p1);
+            let xt = geodesic_point(x0, xi, t);
+            poses[3 * j..3 * j + 3].copy_from_slice(&xt.to_array());
+            let xi = xi.to_array();
+            for c in 0..3 {
+                tgt[c * t_len + j] = (xi[c] / norm.velocity_std[c]) as f32;
+            }
+        }
+        trajectory_features(&poses, &mut x[row * 5 * t_len..(row + 1) * 5 * t_len]);
+        let (mut goal, mut vel) = (ex.goal(), ex.velocity());
+        let src: &[f32] = if flip {
+            // Mirror y: columns reverse (column 0 is the far left), v_y flips sign.
+            let plane = cells * cells;
+            for c in 0..3 {
+                let sign = if c == 2 { -1.0 } else { 1.0 };
+                for r in 0..cells {
+                    for q in 0..cells {
+                        flipped[c * plane + r * cells + q] =
+                            sign * ex.bev()[c * plane + r * cells + (cells - 1 - q)];
+                    }
+                }
+            }
+            goal[1] = -goal[1];
+            vel[1] = -vel[1];
+            &flipped
+        } else {
+            ex.bev()
+        };
+        normalise_condition(
+            norm,
+            src,
+            goal,
+            vel,
+            &mut bev[row * bev_len..(row + 1) * bev_len],
+            &mut gv[row * 4..row * 4 + 4],
+        );
+    }
+    let (bi, ti, ci) = (b as i64, t_len as i64, cells as i64);
+    Batch {
+        x: Tensor::from_slice(&x).view([bi, 5, ti]).to_device(device),
+        t: Tensor::from_slice(&ts).to_device(device),
+        bev: Tensor::from_slice(&bev).view([bi, 3, ci, ci]).to_device(device),
+        goal_vel: Tensor::from_slice(&gv).view([bi, 4]).to_device(device),
+        target: Tensor::from_slice(&target).view([bi, 3, ti]).to_device(device),
+    }
+}
+
+/// CFM loss (Eq. 3) of `model` on a batch: mean squared error of the standardised velocity.
+fn batch_loss(model: &CfmModel, b: &Batch) -> Tensor {
+    let cond = model.net().encode_condition(&b.bev, &b.goal_vel);
+    let pred = model.net().forward(&b.x, &b.t, &cond);
+    pred.mse_loss(&b.target, tch::Reduction::Mean)
+}
+
+/// Training state that is not part of [`CfmModel`]: saved as `state.toml` beside the tensors.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct StateFile {
+    step: u64,
+    elapsed_s: f64,
+    net: NetConfig,
+    normalisation: Normalisation,
+    options: TrainOptions,
+    history: Vec<LossRecord>,
+}
+
+/// A training run: the trained weights, their EMA, the AdamW moments and the history.
+pub struct Trainer<'a, S: TrainingSample> {
+    model: CfmModel,
+    ema: CfmModel,
+    opts: TrainOptions,
+    time: TimeSampler,
+    train: &'a [S],
+    val: &'a [S],
+    names: Vec<String>,
+    params: Vec<Tensor>,
+    ema_params: Vec<Tensor>,
+    adam_m: Vec<Tensor>,
+    adam_v: Vec<Tensor>,
+    step: u64,
+    elapsed_s: f64,
+    history: Vec<LossRecord>,
+    order: Vec<usize>,
+    order_epoch: Option<u64>,
+    loss_sum: f64,
+    loss_count: u64,
+}
+
+impl<S: TrainingSample> std::fmt::Debug for Trainer<'_, S> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Trainer")
+            .field("step", &self.step)
+            .field("train", &self.train.len())
+            .field("val", &self.val.len())
+            .finish_non_exhaustive()
+    }
+}
+
+/// Number of validation examples used at most (a fixed, seeded draw of noise).
+pub const VAL_MAX: usize = 4096;
+
+impl<'a, S: TrainingSample> Trainer<'a, S> {
+    /// A fresh run: weights initialised from `opts.seed`.
+    pub fn new(
+        net: &NetConfig,
+        norm: &Normalisation,
+        opts: &TrainOptions,
+        train: &'a [S],
+        val: &'a [S],
+        device: Device,
+    ) -> Result<Self, CfmError> {
+        opts.validate()?;
+        net.validate()?;
+        if train.is_empty() {
+            return Err(CfmError::EmptyData { split: "train" });
+        }
+        check_examples(net, train)?;
+        check_examples(net, val)?;
+        tch::manual_seed(opts.seed as i64);
+        let model = CfmModel::new(net, norm, device)?;
+        let ema = CfmModel::new(net, norm, device)?;
+        let mut names: Vec<String> = model.var_store().variables().into_keys().collect();
+        names.sort();
+        let vars = model.var_store().variables();
+        let evars = ema.var_store().variables();
+        let params: Vec<Tensor> = names.iter().map(|n| vars[n].shallow_clone()).collect();
+        let ema_params: Vec<Tensor> = names.iter().map(|n| evars[n].shallow_clone()).collect();
+        tch::no_grad(|| {
+            for (e, p) in ema_params.iter().zip(&params) {
+                e.shallow_clone().copy_(p);
+            }
+        });
+        let adam_m = params.iter().map(Tensor::zeros_like).collect();
+        let adam_v = params.iter().map(Tensor::zeros_like).collect();
+        Ok(Self {
+            model,
+            ema,
+            time: opts.time.sampler()?,
+            opts: opts.clone(),
+            train,
+            val,
+            names,
+            params,
+            ema_params,
+            adam_m,
+            adam_v,
+            step: 0,
+            elapsed_s: 0.0,
+            history: Vec::new(),
+            order: Vec::new(),
+            order_epoch: None,
+            loss_sum: 0.0,
+            loss_count: 0,
+        })
+    }
+
+    /// Resumes a run saved with [`Self::save_state`]. The architecture and normalisation come
+    /// from the state; `opts.steps` may extend the schedule, other options must match.
+    pub fn resume(
+        dir: &Path,
+        opts: &TrainOptions,
+        train: &'a [S],
+        val: &'a [S],
+        device: Device,
+    ) -> Result<Self, CfmError> {
+        let state_path = dir.join("state.toml");
+        let text = std::fs::read_to_string(&state_path).map_err(|e| CfmError::io(&state_path, e))?;
+        let state: StateFile = toml::from_str(&text)
+            .map_err(|e| CfmError::Toml { path: state_path.clone(), message: e.to_string() })?;
+        let mut same = state.options.clone();
+        same.steps = opts.steps;
+        if same != *opts {
+            return Err(CfmError::option(
+                "train",
+                format!(
+                    "options differ from the checkpoint in {} (only `steps` may change on resume)",
+                    state_path.display()
+                ),
+            ));
+        }
+        let mut tr = Self::new(&state.net, &state.normalisation, opts, train, val, device)?;
+        let tensors_path = dir.join("state.safetensors");
+        let tensors = read_safetensors(&tensors_path)?;
+        tr.model.assign_from(&tensors_path, "param.", &tensors)?;
+        tr.ema.assign_from(&tensors_path, "ema.", &tensors)?;
+        let _guard = tch::no_grad_guard();
+        for (i, name) in tr.names.iter().enumerate() {
+            for (prefix, dst) in [("adam_m.", &tr.adam_m[i]), ("adam_v.", &tr.adam_v[i])] {
+                let key = format!("{prefix}{name}");
+                let src = tensors
+                    .get(&key)
+                    .ok_or_else(|| CfmError::MissingTensor { path: tensors_path.clone(), name: key.clone() })?;
+                if src.size() != dst.size() {
+                    return Err(CfmError::TensorShape {
+                        path: tensors_path.clone(),
+                        name: key,
+                        expected: dst.size(),
+                        found: src.size(),
+                    });
+                }
+                dst.shallow_clone().copy_(&src.to_kind(dst.kind()).to_device(dst.device()));
+            }
+        }
+        tr.step = state.step;
+        tr.elapsed_s = state.elapsed_s;
+        tr.history = state.history;
+        Ok(tr)
+    }
+
+    /// Writes weights, EMA weights, AdamW moments (`state.safetensors`) and the step, options
+    /// and history (`state.toml`) into `dir`.
+    pub fn save_state(&self, dir: &Path) -> Result<(), CfmError> {
+        std::fs::create_dir_all(dir).map_err(|e| CfmError::io(dir, e))?;
+        let mut tensors = self.model.named_tensors("param.");
+        tensors.extend(self.ema.named_tensors("ema."));
+        for (i, n) in self.names.iter().enumerate() {
+            tensors.push((format!("adam_m.{n}"), self.adam_m[i].detach().to_device(Device::Cpu)));
+            tensors.push((format!("adam_v.{n}"), self.adam_v[i].detach().to_device(Device::Cpu)));
+        }
+        write_safetensors(&dir.join("state.safetensors"), &tensors)?;
+        let state = StateFile {
+            step: self.step,
+            elapsed_s: self.elapsed_s,
+            net: self.model.card().net.clone(),
+            normalisation: self.model.card().normalisation.clone(),
+            options: self.opts.clone(),
+            history: self.history.clone(),
+        };
+        let path = dir.join("state.toml");
+        let text = toml::to_string_pretty(&state)
+            .map_err(|e| CfmError::Toml { path: path.clone(), message: e.to_string() })?;
+        let tmp = dir.join("state.toml.tmp");
+        std::fs::write(&tmp, text).map_err(|e| CfmError::io(&tmp, e))?;
+        std::fs::rename(&tmp, &path).map_err(|e| CfmError::io(&path, e))
+    }
+
+    /// Optimiser steps done.
+    pub fn step(&self) -> u64 {
+        self.step
+    }
+
+    /// Total steps of the schedule.
+    pub fn total_steps(&self) -> u64 {
+        self.opts.steps
+    }
+
+    /// The loss history recorded by [`Self::record`].
+    pub fn history(&self) -> &[LossRecord] {
+        &self.history
+    }
+
+    /// Seconds of training so far, across resumes.
+    pub fn elapsed_s(&self) -> f64 {
+        self.elapsed_s
+    }
+
+    /// Adds wall time spent outside [`Self::train_step`] bookkeeping (set by the driver).
+    pub fn add_elapsed(&mut self, seconds: f64) {
+        self.elapsed_s += seconds;
+    }
+
+    /// The EMA model (what gets shipped).
+    pub fn ema_model(&self) -> &CfmModel {
+        &self.ema
+    }
+
+    /// Consumes the trainer, returning the EMA model.
+    pub fn into_ema_model(self) -> CfmModel {
+        self.ema
+    }
+
+    /// The raw (non-averaged) model.
+    pub fn model(&self) -> &CfmModel {
+        &self.model
+    }
+
+    /// Indices of the examples of step `step`: a per-epoch permutation seeded by
+    /// `(seed, epoch)`, walked in order across epoch boundaries.
+    fn batch_indices(&mut self, step: u64) -> Vec<usize> {
+        let n = self.train.len() as u64;
+        let b = self.opts.batch_size as u64;
+        let mut out = Vec::with_capacity(b as usize);
+        for pos in step * b..(step + 1) * b {
+            let epoch = pos / n;
+            if self.order_epoch != Some(epoch) {
+                let mut rng = ChaCha8Rng::seed_from_u64(self.opts.seed);
+                rng.set_stream(0x0de0_0000 + epoch);
+                self.order = (0..self.train.len()).collect();
+                self.order.shuffle(&mut rng);
+                self.order_epoch = Some(epoch);
+            }
+            out.push(self.order[(pos % n) as usize]);
+        }
+        out
+    }
+
+    /// One optimiser step; returns the batch loss (before the update).
+    pub fn train_step(&mut self) -> Result<f64, CfmError> {
+        let step = self.step;
+        let idx = self.batch_indices(step);
+        let mut rng = ChaCha8Rng::seed_from_u64(self.opts.seed);
+        rng.set_stream(step);
+        let card = self.model.card();
+        let batch = build_batch(
+            self.train,
+            &idx,
+            &card.net,
+            &card.normalisation,
+            &self.time,
+            self.opts.mirror,
+            &mut rng,
+            self.model.device(),
+        );
+        for p in &mut self.params {
+            p.zero_grad();
+        }
+        let loss = batch_loss(&self.model, &batch);
+        let loss_value = loss.double_value(&[]);
+        if !loss_value.is_finite() {
+            return Err(CfmError::Diverged { step });
+        }
+        loss.backward();
+        self.apply_adamw(step);
+        self.step += 1;
+        self.loss_sum += loss_value;
+        self.loss_count += 1;
+        self.model.invalidate_cache();
+        self.ema.invalidate_cache();
+        Ok(loss_value)
+    }
+
+    fn apply_adamw(&mut self, step: u64) {
+        let o = &self.opts;
+        let lr = o.lr_at(step);
+        let _guard = tch::no_grad_guard();
+        let grads: Vec<Tensor> = self.params.iter().map(Tensor::grad).collect();
+        let sq: f64 = grads
+            .iter()
+            .filter(|g| g.defined())
+            .map(|g| g.square().sum(Kind::Double).double_value(&[]))
+            .sum();
+        let norm = sq.sqrt();
+        let clip = if norm > o.grad_clip { o.grad_clip / (norm + 1e-6) } else { 1.0 };
+        let k = (step + 1) as f64;
+        let bc1 = 1.0 - o.beta1.powf(k);
+        let bc2 = 1.0 - o.beta2.powf(k);
+        let decay = o.ema_decay.min((1.0 + step as f64) / (10.0 + step as f64));
+        for i in 0..self.params.len() {
+            let g = &grads[i];
+            let mut p = self.params[i].shallow_clone();
+            if g.defined() {
+                let g = g * clip;
+                let mut m = self.adam_m[i].shallow_clone();
+                let mut v = self.adam_v[i].shallow_clone();
+                m.copy_(&(&m * o.beta1 + &g * (1.0 - o.beta1)));
+                v.copy_(&(&v * o.beta2 + g.square() * (1.0 - o.beta2)));
+                let update = (&m / bc1) / ((&v / bc2).sqrt() + o.eps);
+                let decayed = &p * (1.0 - lr * o.weight_decay);
+                p.copy_(&(decayed - update * lr));
+            }
+            let mut e = self.ema_params[i].shallow_clone();
+            e.copy_(&(&e * decay + &p * (1.0 - decay)));
+        }
+    }
+
+    /// Validation loss (Eq. 3) of the EMA weights on up to [`VAL_MAX`] validation examples,
+    /// with noise and flow times from a fixed seed (so successive values are comparable).
+    /// `None` when there is no validation data.
+    pub fn validate(&self) -> Option<f64> {
+        if self.val.is_empty() {
+            return None;
+        }
+        let n = self.val.len().min(VAL_MAX);
+        let mut rng = ChaCha8Rng::seed_from_u64(self.opts.seed ^ 0x7a1_1d);
+        let card = self.ema.card();
+        let (mut sum, mut count) = (0.0, 0usize);
+        let bs = self.opts.batch_size.max(64);
+        let _guard = tch::no_grad_guard();
+        for start in (0..n).step_by(bs) {
+            let idx: Vec<usize> = (start..(start + bs).min(n)).collect();
+            let batch = build_batch(
+                self.val,
+                &idx,
+                &card.net,
+                &card.normalisation,
+                &self.time,
+                false,
+                &mut rng,
+                self.ema.device(),
+            );
+            sum += batch_loss(&self.ema, &batch).double_value(&[]) * idx.len() as f64;
+            count += idx.len();
+        }
+        Some(sum / count as f64)
+    }
+
+    /// Records a history point: the mean training loss since the previous record and the
+    /// validation loss now. Returns it.
+    pub fn record(&mut self) -> LossRecord {
+        let train_loss =
+            if self.loss_count > 0 { self.loss_sum / self.loss_count as f64 } else { f64::NAN };
+        let rec = LossRecord {
+            step: self.step,
+            train_loss,
+            val_loss: self.validate().unwrap_or(f64::NAN),
+            lr: self.opts.lr_at(self.step.saturating_sub(1)),
+            elapsed_s: self.elapsed_s,
+        };
+        self.loss_sum = 0.0;
+        self.loss_count = 0;
+        self.history.push(rec);
+        rec
+    }
+
+    /// Mean training loss since the last [`Self::record`] (NaN before the first step).
+    pub fn running_loss(&self) -> f64 {
+        if self.loss_count > 0 { self.loss_sum / self.loss_count as f64 } else { f64::NAN }
+    }
+}
+
+/// Per-batch CFM loss of a model on `data` with a fixed seed (for tests and reports).
+pub fn evaluate_loss<S: TrainingSample>(
+    model: &CfmModel,
+    data: &[S],
+    time: &TimeDistribution,
+    seed: u64,
+) -> Result<f64, CfmError> {
+    if data.is_empty() {
+        return Err(CfmError::EmptyData { split: "evaluation" });
+    }
+    let sampler = time.sampler()?;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let card = model.card();
+    let _guard = tch::no_grad_guard();
+    let (mut sum, mut count) = (0.0, 0usize);
+    for start in (0..data.len()).step_by(256) {
+        let idx: Vec<usize> = (start..(start + 256).min(data.len())).collect();
+        let b = build_batch(data, &idx, &card.net, &card.normalisation, &sampler, false, &mut rng, model.device());
+        sum += batch_loss(model, &b).double_value(&[]) * idx.len() as f64;
+        count += idx.len();
+    }
+    Ok(sum / count as f64)
+}

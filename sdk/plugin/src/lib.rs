@@ -13,6 +13,8 @@
 //! * [`host`]: [`PluginHost`] loads libraries explicitly (checking the ABI version first) and
 //!   returns proxies ([`PluginConstraint`], [`PluginEmbodiment`], [`PluginPlanner`]) that the
 //!   rest of the SDK uses like built-ins. Libraries are never unloaded.
+//! * [`robot`]: [`PluginHost::load_robot`] turns a robot profile into a [`LoadedRobot`]
+//!   (embodiment + plugin constraint terms); [`PluginSpec`] names a plugin in other configs.
 //! * [`resolve`]: how library paths in profiles are resolved (relative to the declaring file,
 //!   optional extension and `lib` prefix, the `{profile}` placeholder).
 //!
@@ -27,6 +29,7 @@ pub mod host;
 pub mod init;
 mod macros;
 pub mod resolve;
+pub mod robot;
 
 pub use abi::ABI_VERSION;
 pub use error::{PluginError, PluginKind};
@@ -35,3 +38,4 @@ pub use host::{
     PluginPlanner,
 };
 pub use init::{InitError, PluginInit, RobotContext, parse_config};
+pub use robot::{LoadedRobot, PluginSpec, robot_context};

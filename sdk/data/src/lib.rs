@@ -1,1 +1,29 @@
-//! (being written)
+//! Pedestrian datasets to training tuples and benchmark episodes (paper §III-A), and a
+//! synthetic social-force crowd for machines without the datasets. No libtorch.
+//!
+//! Pipeline: [`loaders`] (ETH, UCY, sgan benchmark, SDD raw and TrajNet) → [`track::RawScene`]
+//! in metres → [`resample`] to 0.1 s with velocity and heading → [`tuples`] (BEV raster, goal,
+//! velocity, 32 future SE(2) poses) in a versioned binary [`cache`] split by scene, and
+//! [`scenario`] mining of benchmark [`Episode`]s from held-out scenes. [`association`] builds
+//! tracks from identity-free detections with the Hungarian algorithm, [`homography`] maps image
+//! to world (Eq. 1), [`synthetic`] generates crowds of the four flow classes.
+
+pub mod cache;
+pub mod error;
+pub mod homography;
+pub mod loaders;
+pub mod paths;
+pub mod resample;
+pub mod scenario;
+pub mod synthetic;
+pub(crate) mod text;
+pub mod track;
+pub mod tuples;
+
+pub use cache::{Manifest, SceneInfo, TupleCache};
+pub use error::DataError;
+pub use homography::Homography;
+pub use resample::{ResampleOptions, Scene, Track};
+pub use scenario::{AgentTrack, Episode, EpisodeSuite, ScenarioClass};
+pub use track::{AgentClass, RawScene, RawTrack, Sample};
+pub use tuples::{CompactTuple, Split, TrainingTuple};

@@ -1,0 +1,726 @@
+//! Scenario classes, benchmark episodes and their mining from real scenes.
+//!
+//! # Classification (thresholds in [`ClassifyOptions`])
+//! The reference direction `u` is the unit vector from the ego's start to its goal. Each
+//! relevant other agent whose mean velocity (over the time it is relevant) exceeds
+//! `moving_speed` (0.3 m/s) votes by the angle `α` between its velocity and `u`:
+//! co-flow if `|α| ≤ 45°`, counter-flow if `|α| ≥ 135°`, cross-flow otherwise. Slower agents
+//! do not vote. The window's class is the flow holding at least `dominant_share` (70 %) of the
+//! votes; when no flow reaches that share the class is multidirection-flow; with no vote at
+//! all the window is unclassified.
+//!
+//! # Density
+//! An other agent is relevant when it comes within `density_radius` (3 m) of the ego
+//! pedestrian's real position at some step between the start and the moment the ego reaches
+//! the goal. The density is the number of relevant agents (any class, moving or not).
+//!
+//! # Episodes (rules in [`MiningOptions`])
+//! From every ego pedestrian of a held-out scene, at starts spaced so that one ego's episodes
+//! never overlap: the start pose is the ego's pose, the goal is its position at the first step
+//! at which it is `goal_distance` (5 m) from the start in a straight line (within
+//! `max_goal_time` = 10 s), and the time budget is `budget_factor · distance / reference_speed`
+//! (2.5 · 5 m / 1 m/s = 12.5 s): a robot driving straight at 1 m/s needs 40 % of it in an empty
+//! world. The episode is kept when the whole budget lies inside the recording, no other agent
+//! is within `min_start_clearance` (1 m) of the start, and the density is within
+//! `[min_density, max_density]` (1–15). The exported agents are every other track present
+//! during the budget that comes within `export_radius` (10 m) of the start→goal segment,
+//! replayed non-reactively; the ego itself is removed (the robot replaces it).
+
+use crate::error::DataError;
+use crate::resample::{Scene, StepIndex, Track};
+use crate::track::AgentClass;
+use human2nav_core::Pose2;
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// The four crowd scenarios of the paper (Figs. 4, 6, 8).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ScenarioClass {
+    CoFlow,
+    CrossFlow,
+    CounterFlow,
+    MultidirectionFlow,
+}
+
+impl ScenarioClass {
+    /// All classes in a fixed order.
+    pub const ALL: [ScenarioClass; 4] = [
+        Self::CoFlow,
+        Self::CrossFlow,
+        Self::CounterFlow,
+        Self::MultidirectionFlow,
+    ];
+
+    /// The snake_case name used in files and reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::CoFlow => "co_flow",
+            Self::CrossFlow => "cross_flow",
+            Self::CounterFlow => "counter_flow",
+            Self::MultidirectionFlow => "multidirection_flow",
+        }
+    }
+
+    /// Position in [`ScenarioClass::ALL`].
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// Inverse of [`ScenarioClass::index`].
+    pub fn from_index(i: usize) -> Option<Self> {
+        Self::ALL.get(i).copied()
+    }
+
+    /// Parses a snake_case name.
+    pub fn parse(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|c| c.name() == s)
+    }
+}
+
+impl std::fmt::Display for ScenarioClass {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Thresholds of the flow classification (module docs).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ClassifyOptions {
+    /// Agents slower than this (m/s) do not vote. Default 0.3.
+    pub moving_speed: f64,
+    /// `|α|` up to this many degrees is co-flow. Default 45.
+    pub co_angle_deg: f64,
+    /// `|α|` from this many degrees on is counter-flow. Default 135.
+    pub counter_angle_deg: f64,
+    /// Share of votes a flow needs to name the window. Default 0.7.
+    pub dominant_share: f64,
+}
+
+impl Default for ClassifyOptions {
+    fn default() -> Self {
+        Self {
+            moving_speed: 0.3,
+            co_angle_deg: 45.0,
+            counter_angle_deg: 135.0,
+            dominant_share: 0.7,
+        }
+    }
+}
+
+impl ClassifyOptions {
+    /// Checks the thresholds are consistent.
+    pub fn validate(&self) -> Result<(), DataError> {
+        if !(self.moving_speed.is_finite() && self.moving_speed >= 0.0) {
+            return Err(DataError::option(
+                "classify.moving_speed",
+                "must be finite and >= 0",
+            ));
+        }
+        if !(0.0 < self.co_angle_deg
+            && self.co_angle_deg <= self.counter_angle_deg
+            && self.counter_angle_deg < 180.0)
+        {
+            return Err(DataError::option(
+                "classify.co_angle_deg",
+                "need 0 < co_angle_deg <= counter_angle_deg < 180",
+            ));
+        }
+        if !(self.dominant_share > 0.5 && self.dominant_share <= 1.0) {
+            return Err(DataError::option(
+                "classify.dominant_share",
+                "must be in (0.5, 1]",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The flow one agent votes for, or `None` when it is (nearly) standing.
+pub fn flow_of(
+    direction: [f64; 2],
+    velocity: [f64; 2],
+    opts: &ClassifyOptions,
+) -> Option<ScenarioClass> {
+    let speed = velocity[0].hypot(velocity[1]);
+    let norm = direction[0].hypot(direction[1]);
+    let moving = speed > opts.moving_speed && norm > 0.0;
+    if !moving {
+        return None;
+    }
+    let cos = (velocity[0] * direction[0] + velocity[1] * direction[1]) / (speed * norm);
+    let alpha = cos.clamp(-1.0, 1.0).acos().to_degrees();
+    Some(if alpha <= opts.co_angle_deg {
+        ScenarioClass::CoFlow
+    } else if alpha >= opts.counter_angle_deg {
+        ScenarioClass::CounterFlow
+    } else {
+        ScenarioClass::CrossFlow
+    })
+}
+
+/// Classifies a window from the reference direction and the relevant agents' velocities.
+pub fn classify(
+    direction: [f64; 2],
+    velocities: impl IntoIterator<Item = [f64; 2]>,
+    opts: &ClassifyOptions,
+) -> Option<ScenarioClass> {
+    let mut votes = [0usize; 3];
+    for v in velocities {
+        match flow_of(direction, v, opts) {
+            Some(ScenarioClass::CoFlow) => votes[0] += 1,
+            Some(ScenarioClass::CrossFlow) => votes[1] += 1,
+            Some(ScenarioClass::CounterFlow) => votes[2] += 1,
+            _ => {}
+        }
+    }
+    let total: usize = votes.iter().sum();
+    if total == 0 {
+        return None;
+    }
+    let flows = [
+        ScenarioClass::CoFlow,
+        ScenarioClass::CrossFlow,
+        ScenarioClass::CounterFlow,
+    ];
+    for (k, &n) in votes.iter().enumerate() {
+        if n as f64 >= opts.dominant_share * total as f64 {
+            return Some(flows[k]);
+        }
+    }
+    Some(ScenarioClass::MultidirectionFlow)
+}
+
+/// A non-reactive agent replayed during an episode.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AgentTrack {
+    pub id: u64,
+    /// First step index (from the episode start) at which the agent exists.
+    pub start_step: usize,
+    /// World-frame positions, one per `dt` from `start_step`.
+    pub positions: Vec<[f64; 2]>,
+    pub radius: f64,
+}
+
+/// One benchmark episode: a robot start, a goal, a time budget and a replayed crowd.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Episode {
+    pub id: String,
+    pub scene: String,
+    /// The dataset the crowd comes from (`eth`, `ucy`, `sdd`, `synthetic`).
+    pub source: String,
+    pub scenario: ScenarioClass,
+    /// Step of the agent tracks, seconds (0.1).
+    pub dt: f64,
+    /// Robot start pose, world frame.
+    pub start: Pose2,
+    /// Goal position, world frame.
+    pub goal: [f64; 2],
+    /// Time allowed to reach the goal, seconds.
+    pub time_budget: f64,
+    pub agents: Vec<AgentTrack>,
+    /// Number of relevant agents (module docs).
+    pub density: usize,
+}
+
+impl Episode {
+    /// Straight-line distance from start to goal, metres.
+    pub fn goal_distance(&self) -> f64 {
+        (self.goal[0] - self.start.x).hypot(self.goal[1] - self.start.y)
+    }
+
+    /// Number of steps of the episode (`ceil(time_budget / dt)`).
+    pub fn steps(&self) -> usize {
+        (self.time_budget / self.dt - 1e-9).ceil().max(0.0) as usize
+    }
+}
+
+/// Version of the episode file format.
+pub const EPISODES_VERSION: u32 = 1;
+
+/// An episode suite as stored on disk (`episodes.json`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeSuite {
+    pub version: u32,
+    /// Where the episodes come from (`real: eth/eth, ucy/zara01, ...` or `synthetic`).
+    pub source: String,
+    /// Episodes per class.
+    pub counts: BTreeMap<ScenarioClass, usize>,
+    pub episodes: Vec<Episode>,
+}
+
+impl EpisodeSuite {
+    /// A suite with counts computed from its episodes.
+    pub fn new(source: impl Into<String>, episodes: Vec<Episode>) -> Self {
+        let mut counts: BTreeMap<ScenarioClass, usize> =
+            ScenarioClass::ALL.iter().map(|c| (*c, 0)).collect();
+        for e in &episodes {
+            *counts.entry(e.scenario).or_default() += 1;
+        }
+        Self {
+            version: EPISODES_VERSION,
+            source: source.into(),
+            counts,
+            episodes,
+        }
+    }
+
+    /// Writes the suite as pretty JSON, creating parent directories.
+    pub fn save(&self, path: &Path) -> Result<(), DataError> {
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir).map_err(|e| DataError::io(dir, e))?;
+        }
+        let body = serde_json::to_string(self).map_err(|e| DataError::Json {
+            path: path.to_path_buf(),
+            source: e,
+        })?;
+        std::fs::write(path, body).map_err(|e| DataError::io(path, e))
+    }
+
+    /// Reads a suite and checks its version, counts and every number.
+    pub fn load(path: &Path) -> Result<Self, DataError> {
+        let body = std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))?;
+        let suite: Self = serde_json::from_str(&body).map_err(|e| DataError::Json {
+            path: path.to_path_buf(),
+            source: e,
+        })?;
+        let bad = |message: String| DataError::Cache {
+            path: path.to_path_buf(),
+            message,
+        };
+        if suite.version != EPISODES_VERSION {
+            return Err(bad(format!(
+                "episode format version {} (this build reads {EPISODES_VERSION})",
+                suite.version
+            )));
+        }
+        for e in &suite.episodes {
+            let finite = e.start.is_finite()
+                && e.goal.iter().all(|v| v.is_finite())
+                && e.dt.is_finite()
+                && e.dt > 0.0
+                && e.time_budget.is_finite()
+                && e.time_budget > 0.0
+                && e.agents.iter().all(|a| {
+                    a.radius.is_finite() && a.positions.iter().flatten().all(|v| v.is_finite())
+                });
+            if !finite {
+                return Err(bad(format!(
+                    "episode `{}` has a non-finite or non-positive field",
+                    e.id
+                )));
+            }
+        }
+        let recount = Self::new(suite.source.clone(), Vec::new())
+            .counts
+            .into_keys()
+            .map(|c| (c, suite.episodes.iter().filter(|e| e.scenario == c).count()));
+        for (c, n) in recount {
+            if suite.counts.get(&c).copied().unwrap_or(0) != n {
+                return Err(bad(format!("header counts {n} {c} episodes differently")));
+            }
+        }
+        Ok(suite)
+    }
+}
+
+/// Rules for mining episodes (module docs).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MiningOptions {
+    /// Straight-line start→goal distance, metres. Default 5.
+    pub goal_distance: f64,
+    /// The ego must reach the goal distance within this time, seconds. Default 10.
+    pub max_goal_time: f64,
+    /// Budget = `budget_factor · distance / reference_speed`. Default 2.5.
+    pub budget_factor: f64,
+    /// Robot reference speed for the budget, m/s. Default 1.0.
+    pub reference_speed: f64,
+    /// Radius around the ego that makes an agent relevant, metres. Default 3.
+    pub density_radius: f64,
+    /// Exported agents come within this distance of the start→goal segment, metres. Default 10.
+    pub export_radius: f64,
+    /// No agent may be closer than this to the start at the first step, metres. Default 1.
+    pub min_start_clearance: f64,
+    pub min_density: usize,
+    pub max_density: usize,
+    /// Episodes per class to select. Default 50.
+    pub per_class: usize,
+    /// Radius of every replayed agent, metres. Default 0.3.
+    pub agent_radius: f64,
+    /// Seed of the selection shuffle.
+    pub seed: u64,
+    pub classify: ClassifyOptions,
+}
+
+impl Default for MiningOptions {
+    fn default() -> Self {
+        Self {
+            goal_distance: 5.0,
+            max_goal_time: 10.0,
+            budget_factor: 2.5,
+            reference_speed: 1.0,
+            density_radius: 3.0,
+            export_radius: 10.0,
+            min_start_clearance: 1.0,
+            min_density: 1,
+            max_density: 15,
+            per_class: 50,
+            agent_radius: 0.3,
+            seed: 7,
+            classify: ClassifyOptions::default(),
+        }
+    }
+}
+
+impl MiningOptions {
+    /// Checks every option is usable.
+    pub fn validate(&self) -> Result<(), DataError> {
+        let pos = |v: f64, f: &str| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(DataError::option(f, "must be finite and positive"))
+            }
+        };
+        pos(self.goal_distance, "episodes.goal_distance")?;
+        pos(self.max_goal_time, "episodes.max_goal_time")?;
+        pos(self.reference_speed, "episodes.reference_speed")?;
+        pos(self.density_radius, "episodes.density_radius")?;
+        pos(self.export_radius, "episodes.export_radius")?;
+        pos(self.agent_radius, "episodes.agent_radius")?;
+        if !(self.budget_factor.is_finite() && self.budget_factor >= 1.0) {
+            return Err(DataError::option("episodes.budget_factor", "must be >= 1"));
+        }
+        if !(self.min_start_clearance.is_finite() && self.min_start_clearance >= 0.0) {
+            return Err(DataError::option(
+                "episodes.min_start_clearance",
+                "must be finite and >= 0",
+            ));
+        }
+        if self.min_density > self.max_density {
+            return Err(DataError::option(
+                "episodes.min_density",
+                "must not exceed max_density",
+            ));
+        }
+        self.classify.validate()
+    }
+
+    /// The time budget for a start→goal distance, seconds.
+    pub fn budget(&self, distance: f64) -> f64 {
+        self.budget_factor * distance / self.reference_speed
+    }
+}
+
+/// Counters of why candidate windows were rejected.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MiningStats {
+    pub windows: usize,
+    pub goal_not_reached: usize,
+    pub outside_recording: usize,
+    pub start_blocked: usize,
+    pub density_out_of_range: usize,
+    pub unclassified: usize,
+    pub candidates: BTreeMap<ScenarioClass, usize>,
+}
+
+fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
+    (a[0] - b[0]).hypot(a[1] - b[1])
+}
+
+fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let ab = [b[0] - a[0], b[1] - a[1]];
+    let l2 = ab[0] * ab[0] + ab[1] * ab[1];
+    let t = if l2 > 0.0 {
+        (((p[0] - a[0]) * ab[0] + (p[1] - a[1]) * ab[1]) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    dist(p, [a[0] + t * ab[0], a[1] + t * ab[1]])
+}
+
+/// The relevant agents of an ego window `[s0, s_goal]`: (track index, mean velocity while in range).
+pub(crate) fn relevant_agents(
+    scene: &Scene,
+    index: &StepIndex,
+    ego: usize,
+    s0: i64,
+    s_goal: i64,
+    radius: f64,
+) -> Vec<(usize, [f64; 2])> {
+    let ego_t = &scene.tracks[ego];
+    let mut acc: BTreeMap<usize, ([f64; 2], usize)> = BTreeMap::new();
+    for s in s0..=s_goal {
+        let Some(ei) = ego_t.local(s) else { continue };
+        let pe = ego_t.positions[ei];
+        for &j in index.at(s) {
+            let j = j as usize;
+            if j == ego {
+                continue;
+            }
+            let t = &scene.tracks[j];
+            let Some(k) = t.local(s) else { continue };
+            if dist(t.positions[k], pe) <= radius {
+                let e = acc.entry(j).or_insert(([0.0, 0.0], 0));
+                e.0[0] += t.velocities[k][0];
+                e.0[1] += t.velocities[k][1];
+                e.1 += 1;
+            }
+        }
+    }
+    acc.into_iter()
+        .map(|(j, (v, n))| (j, [v[0] / n as f64, v[1] / n as f64]))
+        .collect()
+}
+
+/// Why [`try_episode`] rejected a window.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reject {
+    GoalNotReached,
+    OutsideRecording,
+    StartBlocked,
+    DensityOutOfRange,
+    Unclassified,
+}
+
+/// The episode of ego track `ego` starting at its local index `i0` (module docs), or why
+/// there is none. On success the second value is the ego's local index at the goal.
+pub fn try_episode(
+    scene: &Scene,
+    index: &StepIndex,
+    ego: usize,
+    i0: usize,
+    opts: &MiningOptions,
+) -> Result<(Episode, usize), Reject> {
+    let t = &scene.tracks[ego];
+    let dt = scene.dt;
+    let last = scene.step_range().map(|r| r.1).unwrap_or(i64::MIN);
+    let max_goal_steps = (opts.max_goal_time / dt).round() as usize;
+    let p0 = t.positions[i0];
+    let ig = (i0 + 1..t.len().min(i0 + max_goal_steps + 1))
+        .find(|&i| dist(t.positions[i], p0) >= opts.goal_distance)
+        .ok_or(Reject::GoalNotReached)?;
+    let s0 = t.start + i0 as i64;
+    let sg = t.start + ig as i64;
+    let goal = t.positions[ig];
+    let distance = dist(goal, p0);
+    let budget = opts.budget(distance);
+    let steps = (budget / dt - 1e-9).ceil() as i64;
+    if s0 + steps > last {
+        return Err(Reject::OutsideRecording);
+    }
+    let blocked = index.at(s0).iter().any(|&j| {
+        let j = j as usize;
+        j != ego
+            && scene.tracks[j]
+                .local(s0)
+                .is_some_and(|k| dist(scene.tracks[j].positions[k], p0) < opts.min_start_clearance)
+    });
+    if blocked {
+        return Err(Reject::StartBlocked);
+    }
+    let relevant = relevant_agents(scene, index, ego, s0, sg, opts.density_radius);
+    let density = relevant.len();
+    if density < opts.min_density || density > opts.max_density {
+        return Err(Reject::DensityOutOfRange);
+    }
+    let u = [goal[0] - p0[0], goal[1] - p0[1]];
+    let class =
+        classify(u, relevant.iter().map(|r| r.1), &opts.classify).ok_or(Reject::Unclassified)?;
+    let agents = export_agents(scene, index, ego, s0, steps, p0, goal, opts);
+    let episode = Episode {
+        id: format!("{}/ped{}/t{:.1}", scene.name, t.source_id, s0 as f64 * dt),
+        scene: scene.name.clone(),
+        source: scene.dataset.clone(),
+        scenario: class,
+        dt,
+        start: t.pose(i0),
+        goal,
+        time_budget: budget,
+        agents,
+        density,
+    };
+    Ok((episode, ig))
+}
+
+/// All candidate episodes of one scene (before per-class selection). One ego's windows
+/// never overlap: the next window starts where the previous one reached its goal.
+pub fn mine_scene(scene: &Scene, opts: &MiningOptions, stats: &mut MiningStats) -> Vec<Episode> {
+    let index = scene.index();
+    let mut out = Vec::new();
+    for (e, ego) in scene.tracks.iter().enumerate() {
+        if ego.class != AgentClass::Pedestrian {
+            continue;
+        }
+        let mut i0 = 0usize;
+        while i0 + 1 < ego.len() {
+            stats.windows += 1;
+            match try_episode(scene, &index, e, i0, opts) {
+                Ok((ep, ig)) => {
+                    *stats.candidates.entry(ep.scenario).or_default() += 1;
+                    out.push(ep);
+                    i0 = ig;
+                }
+                Err(why) => {
+                    match why {
+                        Reject::GoalNotReached => stats.goal_not_reached += 1,
+                        Reject::OutsideRecording => stats.outside_recording += 1,
+                        Reject::StartBlocked => stats.start_blocked += 1,
+                        Reject::DensityOutOfRange => stats.density_out_of_range += 1,
+                        Reject::Unclassified => stats.unclassified += 1,
+                    }
+                    // Retry one second later.
+                    i0 += (1.0 / scene.dt).round().max(1.0) as usize;
+                }
+            }
+        }
+    }
+    out
+}
+
+fn export_agents(
+    scene: &Scene,
+    index: &StepIndex,
+    ego: usize,
+    s0: i64,
+    steps: i64,
+    a: [f64; 2],
+    b: [f64; 2],
+    opts: &MiningOptions,
+) -> Vec<AgentTrack> {
+    let mut ids: Vec<usize> = Vec::new();
+    for s in s0..=s0 + steps {
+        for &j in index.at(s) {
+            let j = j as usize;
+            if j == ego || ids.contains(&j) {
+                continue;
+            }
+            let t: &Track = &scene.tracks[j];
+            if let Some(k) = t.local(s)
+                && segment_distance(t.positions[k], a, b) <= opts.export_radius
+            {
+                ids.push(j);
+            }
+        }
+    }
+    ids.sort_unstable();
+    ids.into_iter()
+        .map(|j| {
+            let t = &scene.tracks[j];
+            let from = t.start.max(s0);
+            let to = t.end().min(s0 + steps + 1);
+            AgentTrack {
+                id: t.id,
+                start_step: (from - s0) as usize,
+                positions: (from..to)
+                    .filter_map(|s| t.local(s).map(|k| t.positions[k]))
+                    .collect(),
+                radius: opts.agent_radius,
+            }
+        })
+        .collect()
+}
+
+/// Picks up to `per_class` episodes of each class, spreading them over densities: classes are
+/// filled round-robin over density values, each density's candidates in a seeded shuffled
+/// order. The result is sorted by class, then id. Deterministic for a given input order.
+pub fn select(candidates: Vec<Episode>, per_class: usize, seed: u64) -> Vec<Episode> {
+    let mut out = Vec::new();
+    for class in ScenarioClass::ALL {
+        let mut by_density: BTreeMap<usize, Vec<Episode>> = BTreeMap::new();
+        for e in candidates.iter().filter(|e| e.scenario == class) {
+            by_density.entry(e.density).or_default().push(e.clone());
+        }
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
+            seed ^ (class.index() as u64).wrapping_mul(0x9E37_79B9),
+        );
+        for v in by_density.values_mut() {
+            v.shuffle(&mut rng);
+            v.reverse(); // pop() takes from the shuffled front
+        }
+        let mut picked = Vec::new();
+        while picked.len() < per_class && by_density.values().any(|v| !v.is_empty()) {
+            for v in by_density.values_mut() {
+                if picked.len() >= per_class {
+                    break;
+                }
+                if let Some(e) = v.pop() {
+                    picked.push(e);
+                }
+            }
+        }
+        picked.sort_by(|a, b| a.id.cmp(&b.id));
+        out.extend(picked);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flows_follow_the_angle_thresholds() {
+        let o = ClassifyOptions::default();
+        let u = [2.0, 0.0];
+        assert_eq!(flow_of(u, [1.0, 0.9], &o), Some(ScenarioClass::CoFlow)); // 42°
+        assert_eq!(flow_of(u, [1.0, 1.1], &o), Some(ScenarioClass::CrossFlow)); // 47.7°
+        assert_eq!(flow_of(u, [0.0, -1.0], &o), Some(ScenarioClass::CrossFlow));
+        assert_eq!(
+            flow_of(u, [-1.0, 0.9], &o),
+            Some(ScenarioClass::CounterFlow)
+        );
+        assert_eq!(flow_of(u, [0.1, 0.1], &o), None); // 0.14 m/s: standing
+    }
+
+    #[test]
+    fn majority_and_mixture_rules() {
+        let o = ClassifyOptions::default();
+        let u = [0.0, 1.0];
+        let co = [0.0, 1.2];
+        let cross = [1.2, 0.0];
+        let counter = [0.0, -1.2];
+        assert_eq!(
+            classify(u, [co, co, co, cross], &o),
+            Some(ScenarioClass::CoFlow)
+        ); // 75 %
+        assert_eq!(
+            classify(u, [co, co, cross], &o),
+            Some(ScenarioClass::MultidirectionFlow)
+        ); // 67 %
+        assert_eq!(
+            classify(u, [counter, [0.0, 0.0]], &o),
+            Some(ScenarioClass::CounterFlow)
+        );
+        assert_eq!(
+            classify(u, [cross, [-1.0, 0.1]], &o),
+            Some(ScenarioClass::CrossFlow)
+        );
+        assert_eq!(classify(u, [[0.0, 0.1]], &o), None);
+        assert_eq!(
+            classify(u, [co, counter, cross], &o),
+            Some(ScenarioClass::MultidirectionFlow)
+        );
+    }
+
+    #[test]
+    fn class_names_round_trip() {
+        for c in ScenarioClass::ALL {
+            assert_eq!(ScenarioClass::parse(c.name()), Some(c));
+            assert_eq!(ScenarioClass::from_index(c.index()), Some(c));
+            let json = serde_json::to_string(&c).unwrap();
+            assert_eq!(json, format!("\"{}\"", c.name()));
+        }
+    }
+
+    #[test]
+    fn segment_distance_closed_forms() {
+        assert!((segment_distance([1.0, 2.0], [0.0, 0.0], [4.0, 0.0]) - 2.0).abs() < 1e-12);
+        assert!((segment_distance([-3.0, 4.0], [0.0, 0.0], [4.0, 0.0]) - 5.0).abs() < 1e-12);
+    }
+}

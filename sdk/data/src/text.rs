@@ -1,0 +1,58 @@
+//! Small helpers for line-oriented numeric text files: every number is checked to be finite
+//! and every error names the file and the 1-based line.
+
+use crate::error::DataError;
+use std::path::Path;
+
+/// Reads a whole text file.
+pub(crate) fn read(path: &Path) -> Result<String, DataError> {
+    std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))
+}
+
+/// Parses one finite `f64` token; `field` names the column in the error.
+pub(crate) fn number(tok: &str, path: &Path, line: usize, field: &str) -> Result<f64, DataError> {
+    let v: f64 = tok
+        .trim()
+        .parse()
+        .map_err(|_| DataError::parse(path, line, format!("{field}: `{tok}` is not a number")))?;
+    if !v.is_finite() {
+        return Err(DataError::NonFinite {
+            path: path.to_path_buf(),
+            line,
+            field: field.to_string(),
+            value: tok.to_string(),
+        });
+    }
+    Ok(v)
+}
+
+/// Parses a non-negative integer that may be written as a float (`7.8000000e+02`).
+pub(crate) fn integer(tok: &str, path: &Path, line: usize, field: &str) -> Result<i64, DataError> {
+    let v = number(tok, path, line, field)?;
+    if v.fract() != 0.0 || v.abs() > 9.0e15 {
+        return Err(DataError::parse(
+            path,
+            line,
+            format!("{field}: `{tok}` is not an integer"),
+        ));
+    }
+    Ok(v as i64)
+}
+
+/// Splits a line into whitespace-separated tokens and checks there are at least `n`.
+pub(crate) fn fields<'a>(
+    text: &'a str,
+    n: usize,
+    path: &Path,
+    line: usize,
+) -> Result<Vec<&'a str>, DataError> {
+    let toks: Vec<&str> = text.split_whitespace().collect();
+    if toks.len() < n {
+        return Err(DataError::parse(
+            path,
+            line,
+            format!("expected at least {n} columns, found {}", toks.len()),
+        ));
+    }
+    Ok(toks)
+}

@@ -10,12 +10,14 @@
 //! * [`bev`]: the ego-centred bird's-eye-view raster shared by training and inference.
 //! * [`flow`], [`guidance`]: the flow-model interface and feasibility guidance (Algorithm 1).
 //! * [`planner`]: the `Planner` trait, observations and plans.
+//! * [`human2nav`]: the reference planner (sampling, guidance, selection).
 
 pub mod bev;
 pub mod constraint;
 pub mod embodiment;
 pub mod flow;
 pub mod guidance;
+pub mod human2nav;
 pub mod limits;
 pub mod planner;
 pub mod robot;

@@ -68,12 +68,21 @@ pub struct Plan {
 
 impl Plan {
     /// The "stop in place" plan: every waypoint equals the current pose.
-    pub fn stop_in_place(obs: &Observation, dt: f64, horizon: usize, why: impl Into<String>) -> Plan {
+    pub fn stop_in_place(
+        obs: &Observation,
+        dt: f64,
+        horizon: usize,
+        why: impl Into<String>,
+    ) -> Plan {
         Plan {
             t0: obs.time,
             dt,
             poses: vec![obs.ego; horizon.max(1)],
-            info: PlanInfo { fallback: true, notes: vec![why.into()], ..PlanInfo::default() },
+            info: PlanInfo {
+                fallback: true,
+                notes: vec![why.into()],
+                ..PlanInfo::default()
+            },
         }
     }
 
@@ -93,6 +102,8 @@ impl Plan {
 pub enum PlanError {
     #[error("invalid observation: {0}")]
     InvalidObservation(String),
+    #[error("invalid planner settings: {0}")]
+    InvalidSettings(String),
     #[error("planner `{planner}` failed: {message}")]
     Failed { planner: String, message: String },
     #[error("planner `{planner}` is unusable after an earlier failure: {message}")]

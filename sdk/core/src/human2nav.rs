@@ -1,0 +1,451 @@
+//! The reference Human2Nav planner: flow-model sampling, feasibility guidance (Algorithm 1) and
+//! candidate selection behind the [`Planner`] trait.
+//!
+//! One planning call:
+//! 1. validates the [`Observation`] and builds the condition in the **ego frame** of the
+//!    planning instant: the BEV raster of the other agents ([`crate::bev`]), the goal (clipped
+//!    to [`Human2NavSettings::goal_clip`], the range of goals seen in training) and the ego's
+//!    body velocity;
+//! 2. draws `K` source samples `x0 = exp(ξ0)`, `ξ0 ~ N(0, diag(σ²))` with `σ` from
+//!    [`FlowModel::source_std`], and integrates them in one batch with guidance
+//!    ([`guidance::sample_guided`]; with guidance off, the plain rollout);
+//! 3. scores every candidate (and the previous plan, shifted to the current time: the warm
+//!    start of receding-horizon use) and keeps the lowest score (see [`SelectionWeights`]);
+//! 4. returns the plan in the world frame: the current pose followed by the `T` future poses at
+//!    `dt` = [`Human2NavSettings::dt`].
+//!
+//! # Selection rule
+//! `score = w_feas·(1 − TFS) + w_goal·d_end/d_0 + w_clear·C + w_cons·D`, where TFS is the
+//! trajectory feasibility score of the candidate ([`crate::tfs`]), `d_end/d_0` the remaining
+//! distance to the (clipped) goal relative to the current one, `C` the mean over waypoints of
+//! `max(0, margin − gap)²/margin²` with `gap` the distance between the robot's footprint and each
+//! agent's disc, agents predicted at constant velocity, plus [`COLLISION_PENALTY`] per predicted
+//! overlap, and `D` the mean distance (m) to the previous plan at the same times (0 without one).
+//!
+//! # Safe fallback
+//! A planner never returns a non-finite number. If the flow model or guidance fails, or every
+//! candidate is non-finite, the plan is "stop in place" ([`Plan::stop_in_place`]) with
+//! `info.fallback = true` and the reason in `info.notes`. An invalid observation (a non-finite
+//! input) is an error instead, because the caller must fix it.
+
+use crate::bev::{self, BevSpec};
+use crate::constraint::{ConstraintContext, Phi};
+use crate::flow::{FlowCondition, FlowModel};
+use crate::guidance::{self, GuidanceSettings, GuidanceWorkspace};
+use crate::limits::Limits;
+use crate::planner::{AgentState, Observation, Plan, PlanError, PlanInfo, Planner};
+use crate::se2::{Pose2, Twist2};
+use crate::tfs;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+
+/// Score added for each predicted overlap between the footprint and an agent's disc.
+pub const COLLISION_PENALTY: f64 = 10.0;
+
+/// Weights of the selection rule (see the module docs). All finite and ≥ 0.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SelectionWeights {
+    /// Weight of `1 − TFS`. Default 4.
+    pub feasibility: f64,
+    /// Weight of the remaining goal distance ratio. Default 1.
+    pub goal: f64,
+    /// Weight of the clearance penalty. Default 2.
+    pub clearance: f64,
+    /// Weight of the distance to the previous plan (m). Default 0.1.
+    pub consistency: f64,
+    /// Gap (m) between footprint and agent disc below which clearance is penalised. Default 0.5.
+    pub margin: f64,
+}
+
+impl Default for SelectionWeights {
+    fn default() -> Self {
+        Self {
+            feasibility: 4.0,
+            goal: 1.0,
+            clearance: 2.0,
+            consistency: 0.1,
+            margin: 0.5,
+        }
+    }
+}
+
+/// Settings of the Human2Nav planner (TOML table; every field optional).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Human2NavSettings {
+    /// Number of sampled candidates `K`. Default 16.
+    pub samples: usize,
+    /// Time between plan poses (s); must match the model's training data. Default 0.1.
+    pub dt: f64,
+    /// Goals farther than this (m) are pulled in along the same bearing. Default 6.
+    pub goal_clip: f64,
+    /// Seed of the source noise; the planner is deterministic given the seed and the inputs.
+    pub seed: u64,
+    /// Keep the previous plan as a candidate (warm start). Default true.
+    pub warm_start: bool,
+    /// Algorithm 1's parameters; `guidance.enabled = false` is the "w/o guidance" ablation.
+    pub guidance: GuidanceSettings,
+    pub selection: SelectionWeights,
+}
+
+impl Default for Human2NavSettings {
+    fn default() -> Self {
+        Self {
+            samples: 16,
+            dt: 0.1,
+            goal_clip: 6.0,
+            seed: 0,
+            warm_start: true,
+            guidance: GuidanceSettings::default(),
+            selection: SelectionWeights::default(),
+        }
+    }
+}
+
+impl Human2NavSettings {
+    /// Checks every field; the error names the first offending one.
+    pub fn validate(&self) -> Result<(), PlanError> {
+        let bad = |field: &str, why: &str| {
+            Err(PlanError::InvalidSettings(format!(
+                "human2nav.{field}: {why}"
+            )))
+        };
+        if self.samples == 0 {
+            return bad("samples", "must be at least 1");
+        }
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return bad("dt", "must be finite and > 0");
+        }
+        if !(self.goal_clip.is_finite() && self.goal_clip > 0.0) {
+            return bad("goal_clip", "must be finite and > 0");
+        }
+        let s = &self.selection;
+        for (name, v) in [
+            ("selection.feasibility", s.feasibility),
+            ("selection.goal", s.goal),
+            ("selection.clearance", s.clearance),
+            ("selection.consistency", s.consistency),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(name, "must be finite and ≥ 0");
+            }
+        }
+        if !(s.margin.is_finite() && s.margin > 0.0) {
+            return bad("selection.margin", "must be finite and > 0");
+        }
+        self.guidance
+            .validate()
+            .map_err(|e| PlanError::InvalidSettings(format!("human2nav.guidance: {e}")))
+    }
+}
+
+/// What the planner needs to know about the robot.
+#[derive(Debug)]
+pub struct RobotModel {
+    /// The robot's hard limits (TFS and selection).
+    pub limits: Limits,
+    /// Footprint radius from the URDF (m).
+    pub footprint_radius: f64,
+    /// Φ: the profile's built-in terms plus any plugin terms.
+    pub phi: Phi,
+}
+
+/// The reference planner. Generic over the flow model so it runs with the libtorch network or
+/// an analytic field alike.
+pub struct Human2Nav<M> {
+    name: String,
+    model: M,
+    robot: RobotModel,
+    bev: BevSpec,
+    settings: Human2NavSettings,
+    rng: ChaCha8Rng,
+    workspace: GuidanceWorkspace,
+    previous: Option<Plan>,
+    raster: Vec<f32>,
+}
+
+impl<M> std::fmt::Debug for Human2Nav<M> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Human2Nav")
+            .field("name", &self.name)
+            .field("settings", &self.settings)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<M: FlowModel> Human2Nav<M> {
+    /// A planner named `human2nav` (or `human2nav-noguide` when guidance is off).
+    pub fn new(
+        model: M,
+        robot: RobotModel,
+        bev: BevSpec,
+        settings: Human2NavSettings,
+    ) -> Result<Self, PlanError> {
+        settings.validate()?;
+        bev.validate()
+            .map_err(|e| PlanError::InvalidSettings(format!("bev: {e}")))?;
+        if model.horizon() == 0 {
+            return Err(PlanError::InvalidSettings(
+                "flow model has a horizon of 0 poses".into(),
+            ));
+        }
+        let name = if settings.guidance.enabled {
+            "human2nav"
+        } else {
+            "human2nav-noguide"
+        };
+        Ok(Self {
+            name: name.to_string(),
+            raster: vec![0.0; bev.len()],
+            rng: ChaCha8Rng::seed_from_u64(settings.seed),
+            model,
+            robot,
+            bev,
+            settings,
+            workspace: GuidanceWorkspace::new(),
+            previous: None,
+        })
+    }
+
+    /// The settings in force.
+    pub fn settings(&self) -> &Human2NavSettings {
+        &self.settings
+    }
+
+    /// Builds the ego-frame condition and the ego-frame agents for one observation.
+    pub fn condition(&mut self, obs: &Observation) -> (FlowCondition, Vec<AgentState>) {
+        bev::rasterize(self.bev, obs.ego, &obs.agents, &mut self.raster);
+        let mut goal = obs.ego.inverse_act(obs.goal);
+        let dist = goal[0].hypot(goal[1]);
+        if dist > self.settings.goal_clip {
+            let s = self.settings.goal_clip / dist;
+            goal = [goal[0] * s, goal[1] * s];
+        }
+        let agents = obs
+            .agents
+            .iter()
+            .map(|a| AgentState {
+                position: obs.ego.inverse_act(a.position),
+                velocity: obs.ego.inverse_rotate(a.velocity),
+                history: a.history.iter().map(|p| obs.ego.inverse_act(*p)).collect(),
+                ..a.clone()
+            })
+            .collect();
+        let cond = FlowCondition {
+            bev: self.raster.clone(),
+            goal,
+            velocity: [obs.ego_velocity.vx, obs.ego_velocity.vy],
+        };
+        (cond, agents)
+    }
+
+    fn draw_source(&mut self, k: usize, t: usize) -> Vec<f64> {
+        let std = self.model.source_std();
+        let mut x0 = vec![0.0; k * t * 3];
+        for p in x0.chunks_exact_mut(3) {
+            let mut xi = [0.0; 3];
+            for (d, s) in xi.iter_mut().zip(std) {
+                let z: f64 = StandardNormal.sample(&mut self.rng);
+                *d = z * s;
+            }
+            p.copy_from_slice(&Pose2::exp(Twist2::new(xi[0], xi[1], xi[2])).to_array());
+        }
+        x0
+    }
+
+    /// Plans, returning the plan or the reason the flow stage failed (for [`Planner::plan`],
+    /// which turns such failures into the stop-in-place fallback).
+    fn try_plan(&mut self, obs: &Observation) -> Result<Plan, String> {
+        let horizon = self.model.horizon();
+        let k = self.settings.samples;
+        let dt = self.settings.dt;
+        let (cond, agents) = self.condition(obs);
+        let x0 = self.draw_source(k, horizon);
+        let ctx = ConstraintContext {
+            dt,
+            limits: &self.robot.limits,
+            initial_velocity: obs.ego_velocity,
+            agents: &agents,
+        };
+        let result = guidance::sample_guided(
+            &self.model,
+            &cond,
+            &x0,
+            &self.robot.phi,
+            &ctx,
+            &self.settings.guidance,
+            &mut self.workspace,
+        )
+        .map_err(|e| format!("sampling failed: {e}"))?;
+
+        let mut candidates: Vec<Vec<Pose2>> = (0..k).map(|i| result.guided_poses(i)).collect();
+        let warm = if self.settings.warm_start {
+            self.shifted_previous(obs, horizon)
+        } else {
+            None
+        };
+        if let Some(prev) = &warm {
+            candidates.push(prev.clone());
+        }
+        let previous_ego = warm.as_deref();
+        let goal = cond.goal;
+        let mut best: Option<(usize, f64)> = None;
+        for (i, c) in candidates.iter().enumerate() {
+            if !c.iter().all(|p| p.is_finite()) {
+                continue;
+            }
+            let s = self.score(c, goal, &agents, obs.ego_velocity, previous_ego);
+            if s.is_finite() && best.is_none_or(|(_, b)| s < b) {
+                best = Some((i, s));
+            }
+        }
+        let Some((chosen, _)) = best else {
+            return Err("every candidate trajectory was non-finite".into());
+        };
+
+        let to_world = |traj: &[Pose2]| -> Vec<Pose2> {
+            std::iter::once(obs.ego)
+                .chain(traj.iter().map(|p| obs.ego.compose(*p)))
+                .collect()
+        };
+        let poses = to_world(&candidates[chosen]);
+        let unguided: Vec<Vec<Pose2>> = (0..k)
+            .map(|i| to_world(&result.unguided_poses(i)))
+            .collect();
+        let guided: Vec<Vec<Pose2>> = if self.settings.guidance.enabled {
+            candidates[..k].iter().map(|c| to_world(c)).collect()
+        } else {
+            Vec::new()
+        };
+        let from_model = chosen < k;
+        let info = PlanInfo {
+            candidates: unguided,
+            guided,
+            selected: Some(chosen),
+            phi_before: from_model.then(|| result.phi_before[chosen]),
+            phi_after: from_model.then(|| result.phi_after[chosen]),
+            fallback: false,
+            notes: if from_model {
+                Vec::new()
+            } else {
+                vec!["kept the previous plan".into()]
+            },
+        };
+        Ok(Plan {
+            t0: obs.time,
+            dt,
+            poses,
+            info,
+        })
+    }
+
+    /// The previous plan re-expressed in the current ego frame at the current time, `T` future
+    /// poses (holding the last pose past its end), or `None` without a usable previous plan.
+    fn shifted_previous(&self, obs: &Observation, horizon: usize) -> Option<Vec<Pose2>> {
+        let prev = self.previous.as_ref()?;
+        if prev.poses.len() < 2 || (prev.dt - self.settings.dt).abs() > 1e-9 {
+            return None;
+        }
+        let inv = obs.ego.inverse();
+        let out: Vec<Pose2> = (1..=horizon)
+            .map(|j| inv.compose(pose_at(prev, obs.time + j as f64 * self.settings.dt)))
+            .collect();
+        out.iter().all(|p| p.is_finite()).then_some(out)
+    }
+
+    /// The selection score of one ego-frame candidate (lower is better).
+    fn score(
+        &self,
+        traj: &[Pose2],
+        goal: [f64; 2],
+        agents: &[AgentState],
+        v0: Twist2,
+        previous: Option<&[Pose2]>,
+    ) -> f64 {
+        let w = &self.settings.selection;
+        let dt = self.settings.dt;
+        let mut with_start = Vec::with_capacity(traj.len() + 1);
+        with_start.push(Pose2::IDENTITY);
+        with_start.extend_from_slice(traj);
+        let feas = tfs::tfs_plan(&with_start, dt, &self.robot.limits, v0);
+
+        let d0 = goal[0].hypot(goal[1]).max(1e-3);
+        let end = traj.last().map_or([0.0, 0.0], |p| [p.x, p.y]);
+        let progress = (end[0] - goal[0]).hypot(end[1] - goal[1]) / d0;
+
+        let mut clearance = 0.0;
+        for (j, p) in traj.iter().enumerate() {
+            let t = (j + 1) as f64 * dt;
+            for a in agents {
+                let ax = a.position[0] + a.velocity[0] * t;
+                let ay = a.position[1] + a.velocity[1] * t;
+                let gap = (p.x - ax).hypot(p.y - ay) - self.robot.footprint_radius - a.radius;
+                if gap < 0.0 {
+                    clearance += COLLISION_PENALTY;
+                } else if gap < w.margin {
+                    clearance += ((w.margin - gap) / w.margin).powi(2);
+                }
+            }
+        }
+        clearance /= traj.len().max(1) as f64;
+
+        let consistency = previous.map_or(0.0, |prev| {
+            let n = prev.len().min(traj.len()).max(1);
+            prev.iter()
+                .zip(traj)
+                .map(|(a, b)| (a.x - b.x).hypot(a.y - b.y))
+                .sum::<f64>()
+                / n as f64
+        });
+
+        w.feasibility * (1.0 - feas)
+            + w.goal * progress
+            + w.clearance * clearance
+            + w.consistency * consistency
+    }
+}
+
+/// The plan's pose at absolute time `t` (geodesic interpolation between waypoints, held at the
+/// ends).
+pub fn pose_at(plan: &Plan, t: f64) -> Pose2 {
+    let n = plan.poses.len();
+    if n == 0 {
+        return Pose2::IDENTITY;
+    }
+    let s = ((t - plan.t0) / plan.dt).max(0.0);
+    let i = s.floor() as usize;
+    if i + 1 >= n {
+        return plan.poses[n - 1];
+    }
+    plan.poses[i].interpolate(plan.poses[i + 1], s - i as f64)
+}
+
+impl<M: FlowModel + Send> Planner for Human2Nav<M> {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn reset(&mut self) {
+        self.previous = None;
+        self.rng = ChaCha8Rng::seed_from_u64(self.settings.seed);
+    }
+
+    fn plan(&mut self, obs: &Observation) -> Result<Plan, PlanError> {
+        obs.validate()?;
+        let plan = match self.try_plan(obs) {
+            Ok(plan) if plan.is_finite() => plan,
+            Ok(_) => Plan::stop_in_place(
+                obs,
+                self.settings.dt,
+                self.model.horizon() + 1,
+                "the selected plan was not finite",
+            ),
+            Err(why) => Plan::stop_in_place(obs, self.settings.dt, self.model.horizon() + 1, why),
+        };
+        self.previous = (!plan.info.fallback).then(|| plan.clone());
+        Ok(plan)
+    }
+}

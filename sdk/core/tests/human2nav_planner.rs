@@ -1,0 +1,243 @@
+//! The reference planner on analytic flow models: frames, guidance on/off, determinism and the
+//! safe fallback.
+
+use approx::assert_relative_eq;
+use human2nav_core::bev::BevSpec;
+use human2nav_core::constraint::Phi;
+use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
+use human2nav_core::guidance::analytic::ConstantField;
+use human2nav_core::human2nav::{Human2Nav, Human2NavSettings, RobotModel, pose_at};
+use human2nav_core::tfs::tfs_plan;
+use human2nav_core::{AgentState, GuidanceWeights, Limits, Observation, Planner, Pose2, Twist2};
+
+fn limits() -> Limits {
+    Limits {
+        v_max: 1.0,
+        v_reverse_max: 0.3,
+        a_max: 1.0,
+        omega_max: 1.0,
+        kappa_max: None,
+        lateral_speed_max: 0.05,
+    }
+}
+
+fn robot() -> RobotModel {
+    let limits = limits();
+    RobotModel {
+        limits,
+        footprint_radius: 0.3,
+        phi: Phi::from_weights(&GuidanceWeights::default(), &limits),
+    }
+}
+
+/// A "human" future the robot cannot follow: straight ahead at 1.6 m/s, 32 poses at 0.1 s.
+///
+/// The field is `f_k = log(target_k)` for every sample and time, started from (almost) the
+/// identity, so the plain rollout lands on the target and any steering survives to the end:
+/// the behaviour of a trained field whose data has spread, unlike a field that snaps every
+/// sample onto one fixed target.
+#[derive(Debug)]
+struct HumanFuture(ConstantField);
+
+fn fast_straight() -> HumanFuture {
+    let twists = (1..=32)
+        .flat_map(|k| Pose2::new(0.16 * k as f64, 0.0, 0.0).log().to_array())
+        .collect();
+    HumanFuture(ConstantField { twists })
+}
+
+impl FlowModel for HumanFuture {
+    fn horizon(&self) -> usize {
+        self.0.horizon()
+    }
+    fn source_std(&self) -> [f64; 3] {
+        [1e-4; 3]
+    }
+    fn velocity(
+        &self,
+        x: &[f64],
+        t: f64,
+        c: &FlowCondition,
+        out: &mut [f64],
+    ) -> Result<(), FlowError> {
+        self.0.velocity(x, t, c, out)
+    }
+    fn velocity_vjp(
+        &self,
+        x: &[f64],
+        t: f64,
+        c: &FlowCondition,
+        cot: &[f64],
+        out: &mut [f64],
+        vjp: &mut [f64],
+    ) -> Result<(), FlowError> {
+        self.0.velocity_vjp(x, t, c, cot, out, vjp)
+    }
+}
+
+fn observation() -> Observation {
+    Observation {
+        time: 2.0,
+        ego: Pose2::new(3.0, -1.0, 0.7),
+        ego_velocity: Twist2::new(0.8, 0.0, 0.0),
+        goal: [10.0, 5.0],
+        agents: vec![AgentState {
+            id: 7,
+            position: [6.0, 2.0],
+            velocity: [-0.5, 0.0],
+            radius: 0.25,
+            history: vec![],
+        }],
+    }
+}
+
+fn planner(guided: bool) -> Human2Nav<HumanFuture> {
+    let mut settings = Human2NavSettings::default();
+    settings.guidance.enabled = guided;
+    Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings).unwrap()
+}
+
+/// The plan relative to the ego pose, as the TFS helper wants it.
+fn ego_frame(plan: &[Pose2], ego: Pose2) -> Vec<Pose2> {
+    plan.iter().map(|p| ego.between(*p)).collect()
+}
+
+#[test]
+fn plan_starts_at_the_robot_and_is_in_the_world_frame() {
+    let obs = observation();
+    let plan = planner(false).plan(&obs).unwrap();
+    assert_eq!(plan.poses.len(), 33);
+    assert_relative_eq!(plan.t0, obs.time);
+    assert_relative_eq!(plan.dt, 0.1);
+    assert_eq!(plan.poses[0], obs.ego);
+    // Unguided, the rollout lands on the human future: 0.16 m per step straight ahead in the
+    // ego frame (up to the 1e-4 source noise).
+    let last = obs.ego.between(plan.poses[32]);
+    assert_relative_eq!(last.x, 0.16 * 32.0, epsilon = 1e-3);
+    assert_relative_eq!(last.y, 0.0, epsilon = 1e-3);
+    assert!(!plan.info.fallback);
+    assert_eq!(plan.info.candidates.len(), 16);
+    assert!(plan.info.guided.is_empty());
+}
+
+#[test]
+fn guidance_makes_an_infeasible_human_trajectory_feasible() {
+    let obs = observation();
+    let unguided = planner(false).plan(&obs).unwrap();
+    let guided = planner(true).plan(&obs).unwrap();
+    let tfs_u = tfs_plan(
+        &ego_frame(&unguided.poses, obs.ego),
+        0.1,
+        &limits(),
+        obs.ego_velocity,
+    );
+    let tfs_g = tfs_plan(
+        &ego_frame(&guided.poses, obs.ego),
+        0.1,
+        &limits(),
+        obs.ego_velocity,
+    );
+    let (before, after) = (
+        guided.info.phi_before.unwrap(),
+        guided.info.phi_after.unwrap(),
+    );
+    eprintln!("TFS unguided {tfs_u:.3}, guided {tfs_g:.3}; Φ {before:.4} → {after:.4}");
+    assert!(
+        tfs_u < 0.1,
+        "1.6 m/s everywhere must violate v_max = 1 m/s (TFS {tfs_u})"
+    );
+    assert!(tfs_g >= 0.95, "guided TFS {tfs_g}");
+    assert!(after < 0.1 * before, "Φ {before} → {after}");
+    assert_eq!(guided.info.guided.len(), 16);
+}
+
+#[test]
+fn same_seed_same_plan_after_reset() {
+    let obs = observation();
+    let mut p = planner(true);
+    let a = p.plan(&obs).unwrap();
+    p.reset();
+    let b = p.plan(&obs).unwrap();
+    assert_eq!(a.poses, b.poses);
+}
+
+#[test]
+fn warm_start_keeps_the_previous_plan_available() {
+    let mut p = planner(true);
+    let obs = observation();
+    let first = p.plan(&obs).unwrap();
+    // A tenth of a second later, on the previous plan.
+    let mut next = obs.clone();
+    next.time += 0.1;
+    next.ego = pose_at(&first, next.time);
+    let second = p.plan(&next).unwrap();
+    assert!(second.is_finite());
+    // 16 model candidates plus the shifted previous plan.
+    assert!(second.info.selected.unwrap() <= 16);
+}
+
+#[test]
+fn non_finite_observation_is_an_error() {
+    let mut obs = observation();
+    obs.goal[1] = f64::NAN;
+    let err = planner(true).plan(&obs).unwrap_err();
+    assert!(err.to_string().contains("goal"), "{err}");
+}
+
+/// A model whose output is NaN: the planner must stop in place, never pass the NaN on.
+struct Broken;
+
+impl FlowModel for Broken {
+    fn horizon(&self) -> usize {
+        32
+    }
+    fn velocity(
+        &self,
+        _: &[f64],
+        _: f64,
+        _: &FlowCondition,
+        out: &mut [f64],
+    ) -> Result<(), FlowError> {
+        out.fill(f64::NAN);
+        Ok(())
+    }
+    fn velocity_vjp(
+        &self,
+        x: &[f64],
+        t: f64,
+        c: &FlowCondition,
+        _: &[f64],
+        out: &mut [f64],
+        vjp: &mut [f64],
+    ) -> Result<(), FlowError> {
+        vjp.fill(f64::NAN);
+        self.velocity(x, t, c, out)
+    }
+}
+
+#[test]
+fn a_broken_model_gives_the_stop_in_place_fallback() {
+    let obs = observation();
+    let mut p = Human2Nav::new(
+        Broken,
+        robot(),
+        BevSpec::default(),
+        Human2NavSettings::default(),
+    )
+    .unwrap();
+    let plan = p.plan(&obs).unwrap();
+    assert!(plan.is_finite());
+    assert!(plan.info.fallback);
+    assert!(plan.poses.iter().all(|q| *q == obs.ego));
+    assert!(!plan.info.notes.is_empty());
+}
+
+#[test]
+fn invalid_settings_name_the_field() {
+    let settings = Human2NavSettings {
+        samples: 0,
+        ..Human2NavSettings::default()
+    };
+    let err = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings).unwrap_err();
+    assert!(err.to_string().contains("samples"), "{err}");
+}

@@ -1,6 +1,8 @@
 //! The `human2nav` command-line tool: glue between the SDK crates, nothing more.
 
+mod plugin;
 mod robot;
+mod train;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -17,12 +19,19 @@ enum Command {
     /// Inspect and validate robot profiles.
     #[command(subcommand)]
     Robot(robot::RobotCommand),
+    /// Inspect plugin libraries.
+    #[command(subcommand)]
+    Plugin(plugin::PluginCommand),
+    /// Train the conditional flow-matching model (checkpoints, resume, model card, evaluation).
+    Train(train::TrainArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Robot(cmd) => robot::run(cmd),
+        Command::Plugin(cmd) => plugin::run(cmd),
+        Command::Train(args) => train::run(args),
     };
     match result {
         Ok(code) => code,

@@ -615,6 +615,9 @@ fn plan_fail(e: PlanError) -> Fail {
         PlanError::Failed { message, .. } | PlanError::Unusable { message, .. } => {
             Fail::error(message)
         }
+        // PlanError may grow variants; they all cross as ordinary errors.
+        #[allow(unreachable_patterns)]
+        other => Fail::error(other.to_string()),
     }
 }
 

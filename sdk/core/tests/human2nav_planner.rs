@@ -1,4 +1,6 @@
 //! The reference planner on analytic flow models: frames, guidance on/off, determinism and the
+
+#![allow(clippy::unwrap_used)] // test helpers outside #[test] functions unwrap too
 //! safe fallback.
 
 use approx::assert_relative_eq;

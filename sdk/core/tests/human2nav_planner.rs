@@ -1,7 +1,7 @@
 //! The reference planner on analytic flow models: frames, guidance on/off, determinism and the
+//! safe fallback.
 
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] functions unwrap too
-//! safe fallback.
 
 use approx::assert_relative_eq;
 use human2nav_core::bev::BevSpec;

@@ -1,5 +1,6 @@
 //! The `human2nav` command-line tool: glue between the SDK crates, nothing more.
 
+mod data;
 mod plugin;
 mod robot;
 mod train;
@@ -19,6 +20,9 @@ enum Command {
     /// Inspect and validate robot profiles.
     #[command(subcommand)]
     Robot(robot::RobotCommand),
+    /// Pedestrian data: tuple cache, statistics, benchmark episodes, association evaluation.
+    #[command(subcommand)]
+    Data(data::DataCommand),
     /// Inspect plugin libraries.
     #[command(subcommand)]
     Plugin(plugin::PluginCommand),
@@ -30,6 +34,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Robot(cmd) => robot::run(cmd),
+        Command::Data(cmd) => data::run(cmd),
         Command::Plugin(cmd) => plugin::run(cmd),
         Command::Train(args) => train::run(args),
     };

@@ -8,11 +8,14 @@
 //! tracks from identity-free detections with the Hungarian algorithm, [`homography`] maps image
 //! to world (Eq. 1), [`synthetic`] generates crowds of the four flow classes.
 
+pub mod association;
 pub mod cache;
+pub mod config;
 pub mod error;
 pub mod homography;
 pub mod loaders;
 pub mod paths;
+pub mod pipeline;
 pub mod resample;
 pub mod scenario;
 pub mod synthetic;

@@ -305,8 +305,13 @@ pub fn episodes_with(
 
 /// `n` synthetic scenes cycling through the four classes, deterministic in `seed`.
 pub fn scenes(n: usize, seed: u64) -> Vec<Scene> {
+    scenes_range(0, n, seed)
+}
+
+/// Scenes `first .. first + n` of the sequence [`scenes`] draws (for parallel generation).
+pub fn scenes_range(first: usize, n: usize, seed: u64) -> Vec<Scene> {
     let opts = MiningOptions::default();
-    (0..n as u64)
+    (first as u64..(first + n) as u64)
         .filter_map(|i| {
             let class = ScenarioClass::ALL[(i % 4) as usize];
             let mut rng = rng_for(seed, i);

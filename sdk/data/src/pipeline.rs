@@ -1,0 +1,580 @@
+//! End-to-end jobs: dataset discovery, the tuple cache build, episode mining and the
+//! association evaluation. Scenes are processed in parallel (rayon) and collected in name
+//! order, so the output is identical for any number of threads.
+
+use crate::association::{AssociationReport, associate, evaluate, sdd_detections};
+use crate::cache::{Manifest, SceneInfo, TupleCache};
+use crate::config::DataConfig;
+use crate::error::DataError;
+use crate::loaders::{eth, sdd, sgan, ucy};
+use crate::paths;
+use crate::resample::{Scene, median, resample};
+use crate::scenario::{EpisodeSuite, MiningStats, ScenarioClass, mine_scene, select};
+use crate::synthetic;
+use crate::track::RawScene;
+use crate::tuples::{CompactTuple, Split, TupleStats, scene_tuples};
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// Receives progress of long jobs (the CLI draws a bar).
+pub trait Progress: Sync {
+    /// A new stage with `total` units of work.
+    fn stage(&self, name: &str, total: u64);
+    /// `n` units done.
+    fn inc(&self, n: u64);
+}
+
+/// Progress that goes nowhere.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NoProgress;
+
+impl Progress for NoProgress {
+    fn stage(&self, _: &str, _: u64) {}
+    fn inc(&self, _: u64) {}
+}
+
+/// How to read one source file.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SourceKind {
+    EwapObsmat {
+        path: PathBuf,
+    },
+    UcyVsp {
+        path: PathBuf,
+        ucy_root: PathBuf,
+        scene: String,
+    },
+    Sgan {
+        path: PathBuf,
+    },
+    SddRaw {
+        path: PathBuf,
+        scales: PathBuf,
+        video: String,
+    },
+    SddTrajnet {
+        path: PathBuf,
+    },
+}
+
+/// One scene to load.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Source {
+    /// `dataset/scene`.
+    pub name: String,
+    pub kind: SourceKind,
+}
+
+/// UCY scenes with a usable homography (arxiepiskopi's unit is unknown).
+pub const UCY_SCENES: [&str; 6] = [
+    "zara01",
+    "zara02",
+    "zara03",
+    "students01",
+    "students03",
+    "uni_examples",
+];
+
+fn sorted_dir(dir: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .collect();
+    v.sort();
+    v
+}
+
+/// Lists the scenes of the enabled sources under `root`, sorted by name, with notes on
+/// sources that were enabled but not found.
+pub fn discover(root: &Path, cfg: &DataConfig) -> (Vec<Source>, Vec<String>) {
+    let mut out = Vec::new();
+    let mut notes = Vec::new();
+    let s = &cfg.sources;
+    if s.eth {
+        for (seq, scene) in [("seq_eth", "eth"), ("seq_hotel", "hotel")] {
+            let path = root
+                .join("eth_ucy/opentraj_raw/ETH")
+                .join(seq)
+                .join("obsmat.txt");
+            if path.is_file() {
+                out.push(Source {
+                    name: format!("eth/{scene}"),
+                    kind: SourceKind::EwapObsmat { path },
+                });
+            } else {
+                notes.push(format!("eth: {} not found", path.display()));
+            }
+        }
+    }
+    if s.ucy {
+        let ucy_root = root.join("eth_ucy/opentraj_raw/UCY");
+        for scene in UCY_SCENES {
+            let path = ucy_root.join(scene).join("annotation.vsp");
+            if path.is_file() {
+                out.push(Source {
+                    name: format!("ucy/{scene}"),
+                    kind: SourceKind::UcyVsp {
+                        path,
+                        ucy_root: ucy_root.clone(),
+                        scene: scene.to_string(),
+                    },
+                });
+            } else {
+                notes.push(format!("ucy: {} not found", path.display()));
+            }
+        }
+    }
+    let mut sdd_videos: Vec<String> = Vec::new();
+    if s.sdd_raw {
+        let base = root.join("sdd/opentraj_raw");
+        let scales = base.join("estimated_scales.yaml");
+        for scene_dir in sorted_dir(&base).into_iter().filter(|p| p.is_dir()) {
+            for video_dir in sorted_dir(&scene_dir) {
+                let path = video_dir.join("annotations.txt");
+                if !path.is_file() {
+                    continue;
+                }
+                let scene = scene_dir
+                    .file_name()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_default();
+                let n = video_dir
+                    .file_name()
+                    .map(|s| s.to_string_lossy().trim_start_matches("video").to_string())
+                    .unwrap_or_default();
+                let video = format!("{scene}_{n}");
+                sdd_videos.push(video.clone());
+                out.push(Source {
+                    name: format!("sdd/{video}"),
+                    kind: SourceKind::SddRaw {
+                        path,
+                        scales: scales.clone(),
+                        video,
+                    },
+                });
+            }
+        }
+        if sdd_videos.is_empty() {
+            notes.push(format!("sdd_raw: no annotations under {}", base.display()));
+        }
+    }
+    if s.sdd_trajnet {
+        let base = root.join("sdd/trajnet_split_socialvae");
+        let mut found = false;
+        for split in ["train", "test"] {
+            for path in sorted_dir(&base.join(split)) {
+                if path.extension().is_none_or(|e| e != "txt") {
+                    continue;
+                }
+                found = true;
+                let video = path
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_default();
+                if sdd_videos.contains(&video) {
+                    continue; // the raw annotations of this video are used instead
+                }
+                out.push(Source {
+                    name: format!("sdd/{video}"),
+                    kind: SourceKind::SddTrajnet { path },
+                });
+            }
+        }
+        if !found {
+            notes.push(format!("sdd_trajnet: no files under {}", base.display()));
+        }
+    }
+    if s.sgan {
+        let base = root.join("eth_ucy/trajectron_sgan_format/raw/all_data");
+        for path in sorted_dir(&base) {
+            let stem = path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            out.push(Source {
+                name: format!("sgan/{stem}"),
+                kind: SourceKind::Sgan { path },
+            });
+        }
+    }
+    out.sort_by(|a, b| a.name.cmp(&b.name));
+    (out, notes)
+}
+
+/// Loads one source as a raw scene.
+pub fn load_source(src: &Source, cfg: &DataConfig) -> Result<RawScene, DataError> {
+    match &src.kind {
+        SourceKind::EwapObsmat { path } => eth::load_obsmat(path, &src.name),
+        SourceKind::UcyVsp {
+            path,
+            ucy_root,
+            scene,
+        } => {
+            let h = ucy::load_homography(ucy_root, scene)?;
+            ucy::load_vsp(path, &h, ucy::VspConvention::of(scene), &src.name)
+        }
+        SourceKind::Sgan { path } => sgan::load(path, &src.name, "sgan"),
+        SourceKind::SddRaw {
+            path,
+            scales,
+            video,
+        } => {
+            let scale = sdd::SddScales::load(scales)?.scale(video)?;
+            sdd::load_raw(path, scale, &src.name, &cfg.sdd)
+        }
+        SourceKind::SddTrajnet { path } => sdd::load_trajnet(path, &src.name),
+    }
+}
+
+/// Resolved locations of a job.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Locations {
+    pub workspace: PathBuf,
+    pub data_root: PathBuf,
+    pub cache_dir: PathBuf,
+    pub episodes: PathBuf,
+}
+
+impl Locations {
+    /// Resolves the config's paths; `config_path` locates the workspace root (its nearest
+    /// ancestor with a `[workspace]` manifest, else the current directory).
+    pub fn resolve(cfg: &DataConfig, config_path: &Path) -> Self {
+        let workspace = config_path
+            .parent()
+            .and_then(paths::find_workspace_root)
+            .or_else(|| {
+                std::env::current_dir()
+                    .ok()
+                    .and_then(|d| paths::find_workspace_root(&d))
+            })
+            .unwrap_or_else(|| PathBuf::from("."));
+        let data_root = paths::data_root(Some(&cfg.paths.data_root), &workspace);
+        Self {
+            cache_dir: paths::output_path(&cfg.paths.cache_dir, &workspace),
+            episodes: paths::output_path(&cfg.paths.episodes, &workspace),
+            data_root,
+            workspace,
+        }
+    }
+}
+
+/// The scenes of a job: real ones when the dataset directory exists, else (if allowed) the
+/// synthetic fallback. Second value: `"real"` or `"synthetic"`; third: notes for the user.
+pub fn scenes(
+    cfg: &DataConfig,
+    loc: &Locations,
+    progress: &dyn Progress,
+) -> Result<(Vec<Scene>, String, Vec<String>), DataError> {
+    if !loc.data_root.is_dir() {
+        if !cfg.sources.synthetic_fallback {
+            return Err(DataError::NoData(format!(
+                "{} does not exist (set paths.data_root or ${})",
+                loc.data_root.display(),
+                paths::DATA_ENV
+            )));
+        }
+        let n = cfg.sources.synthetic_scenes;
+        progress.stage("synthetic", n as u64);
+        let scenes: Vec<Scene> = (0..n)
+            .into_par_iter()
+            .map(|i| {
+                let s = synthetic::scenes_range(i, 1, cfg.sources.seed);
+                progress.inc(1);
+                s
+            })
+            .flatten()
+            .collect();
+        let note = format!(
+            "no datasets at {}: using {} synthetic social-force scenes",
+            loc.data_root.display(),
+            scenes.len()
+        );
+        return Ok((scenes, "synthetic".into(), vec![note]));
+    }
+    let (sources, notes) = discover(&loc.data_root, cfg);
+    let sources: Vec<Source> = sources
+        .into_iter()
+        .filter(|s| cfg.split.of(&s.name).is_some())
+        .collect();
+    if sources.is_empty() {
+        return Err(DataError::NoData(format!(
+            "no enabled source found under {}",
+            loc.data_root.display()
+        )));
+    }
+    let names: Vec<&str> = sources.iter().map(|s| s.name.as_str()).collect();
+    let unknown: Vec<&String> = cfg
+        .split
+        .test
+        .iter()
+        .chain(&cfg.split.val)
+        .filter(|n| !names.contains(&n.as_str()))
+        .collect();
+    if !unknown.is_empty() {
+        return Err(DataError::option(
+            "split",
+            format!("unknown scenes {unknown:?} (known: {names:?})"),
+        ));
+    }
+    progress.stage("load", sources.len() as u64);
+    let scenes = sources
+        .par_iter()
+        .map(|src| {
+            let raw = load_source(src, cfg)?;
+            let scene = resample(&raw, &cfg.resample);
+            progress.inc(1);
+            Ok(scene)
+        })
+        .collect::<Result<Vec<Scene>, DataError>>()?;
+    Ok((scenes, "real".into(), notes))
+}
+
+/// Split of a scene: the config's for real scenes; synthetic scenes go 80/10/10 by index.
+fn split_of(cfg: &DataConfig, scene: &Scene, index: usize) -> Option<Split> {
+    if scene.dataset == "synthetic" {
+        return Some(match index % 10 {
+            0 => Split::Test,
+            1 => Split::Val,
+            _ => Split::Train,
+        });
+    }
+    cfg.split.of(&scene.name)
+}
+
+/// What `build_cache` did.
+#[derive(Clone, Debug)]
+pub struct BuildReport {
+    pub cache: TupleCache,
+    pub notes: Vec<String>,
+    /// `(dataset, split) → tuples`.
+    pub counts: BTreeMap<(String, Split), usize>,
+}
+
+/// Loads, resamples and converts every scene, and writes the tuple cache.
+pub fn build_cache(
+    cfg: &DataConfig,
+    loc: &Locations,
+    progress: &dyn Progress,
+) -> Result<BuildReport, DataError> {
+    let (scenes, source, notes) = scenes(cfg, loc, progress)?;
+    if scenes.len() > u16::MAX as usize {
+        return Err(DataError::option("sources", "more than 65535 scenes"));
+    }
+    progress.stage("tuples", scenes.len() as u64);
+    let built: Vec<(Vec<CompactTuple>, TupleStats)> = scenes
+        .par_iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let r = scene_tuples(s, i as u16, &cfg.bev, &cfg.tuples);
+            progress.inc(1);
+            r
+        })
+        .collect();
+    let mut infos = Vec::with_capacity(scenes.len());
+    let mut splits: Vec<(Split, Vec<CompactTuple>)> =
+        Split::ALL.iter().map(|s| (*s, Vec::new())).collect();
+    let mut stats = TupleStats::default();
+    let mut counts = BTreeMap::new();
+    for (i, (scene, (tuples, st))) in scenes.iter().zip(built).enumerate() {
+        let Some(split) = split_of(cfg, scene, i) else {
+            continue;
+        };
+        stats.add(&st);
+        let mut skipped: BTreeMap<String, usize> = scene.dropped.iter().cloned().collect();
+        for (k, v) in [
+            ("empty_tracks", scene.stats.empty_tracks),
+            ("short_segments", scene.stats.short_segments),
+            ("gap_splits", scene.stats.gap_splits),
+            ("too_short_tracks", st.too_short_tracks),
+            ("stationary_windows", st.stationary_windows),
+        ] {
+            if v > 0 {
+                skipped.insert(k.to_string(), v);
+            }
+        }
+        infos.push(SceneInfo {
+            name: scene.name.clone(),
+            dataset: scene.dataset.clone(),
+            format: scene.format.clone(),
+            split,
+            duration: scene.duration(),
+            tracks: scene.tracks.len(),
+            tuples: tuples.len(),
+            median_speed: median(scene.speeds(0.2)),
+            skipped,
+        });
+        *counts.entry((scene.dataset.clone(), split)).or_default() += tuples.len();
+        // Scene indices must point into `infos`, which skips excluded scenes.
+        let idx = (infos.len() - 1) as u16;
+        let target = &mut splits[split as usize].1;
+        target.extend(tuples.into_iter().map(|mut t| {
+            t.scene = idx;
+            t
+        }));
+    }
+    let manifest = Manifest {
+        version: crate::cache::CACHE_VERSION,
+        source,
+        bev: cfg.bev,
+        horizon: cfg.tuples.horizon,
+        dt: cfg.resample.dt,
+        tuples: cfg.tuples.clone(),
+        scenes: infos,
+        counts: BTreeMap::new(),
+        stats,
+    };
+    let cache = TupleCache::write(&loc.cache_dir, manifest, &splits)?;
+    Ok(BuildReport {
+        cache,
+        notes,
+        counts,
+    })
+}
+
+/// What `build_episodes` did.
+#[derive(Clone, Debug)]
+pub struct EpisodeReport {
+    pub suite: EpisodeSuite,
+    pub stats: MiningStats,
+    pub notes: Vec<String>,
+    /// Test scenes mined.
+    pub scenes: Vec<String>,
+}
+
+/// Mines episodes from the test scenes (or generates synthetic ones) and selects up to
+/// `episodes.per_class` per class.
+pub fn build_episodes(
+    cfg: &DataConfig,
+    loc: &Locations,
+    progress: &dyn Progress,
+) -> Result<EpisodeReport, DataError> {
+    let opts = &cfg.episodes;
+    if !loc.data_root.is_dir() {
+        if !cfg.sources.synthetic_fallback {
+            return Err(DataError::NoData(format!(
+                "{} does not exist",
+                loc.data_root.display()
+            )));
+        }
+        progress.stage("synthetic episodes", 4);
+        let episodes: Vec<_> = ScenarioClass::ALL
+            .par_iter()
+            .map(|&c| {
+                let e = synthetic::episodes_with(c, opts.per_class, opts.seed, opts);
+                progress.inc(1);
+                e
+            })
+            .flatten()
+            .collect();
+        let note = format!(
+            "no datasets at {}: synthetic social-force episodes",
+            loc.data_root.display()
+        );
+        return Ok(EpisodeReport {
+            suite: EpisodeSuite::new("synthetic", episodes),
+            stats: MiningStats::default(),
+            notes: vec![note],
+            scenes: Vec::new(),
+        });
+    }
+    let (sources, notes) = discover(&loc.data_root, cfg);
+    let sources: Vec<Source> = sources
+        .into_iter()
+        .filter(|s| cfg.split.of(&s.name) == Some(Split::Test))
+        .collect();
+    if sources.is_empty() {
+        return Err(DataError::NoData(
+            "no test scene found (see [split] test)".into(),
+        ));
+    }
+    progress.stage("mine", sources.len() as u64);
+    let mined = sources
+        .par_iter()
+        .map(|src| {
+            let raw = load_source(src, cfg)?;
+            let scene = resample(&raw, &cfg.resample);
+            let mut stats = MiningStats::default();
+            let eps = mine_scene(&scene, opts, &mut stats);
+            progress.inc(1);
+            Ok((eps, stats))
+        })
+        .collect::<Result<Vec<_>, DataError>>()?;
+    let mut all = Vec::new();
+    let mut stats = MiningStats::default();
+    for (eps, st) in mined {
+        all.extend(eps);
+        stats.windows += st.windows;
+        stats.goal_not_reached += st.goal_not_reached;
+        stats.outside_recording += st.outside_recording;
+        stats.start_blocked += st.start_blocked;
+        stats.density_out_of_range += st.density_out_of_range;
+        stats.unclassified += st.unclassified;
+        for (c, n) in st.candidates {
+            *stats.candidates.entry(c).or_default() += n;
+        }
+    }
+    let names: Vec<String> = sources.iter().map(|s| s.name.clone()).collect();
+    let episodes = select(all, opts.per_class, opts.seed);
+    Ok(EpisodeReport {
+        suite: EpisodeSuite::new(format!("real: {}", names.join(", ")), episodes),
+        stats,
+        notes,
+        scenes: names,
+    })
+}
+
+/// Association quality per SDD raw video (identities removed, pedestrians only by default).
+pub fn evaluate_association(
+    cfg: &DataConfig,
+    loc: &Locations,
+    progress: &dyn Progress,
+) -> Result<Vec<(String, AssociationReport)>, DataError> {
+    let mut only_raw = cfg.clone();
+    only_raw.sources = crate::config::SourcesConfig {
+        eth: false,
+        ucy: false,
+        sdd_raw: true,
+        sdd_trajnet: false,
+        sgan: false,
+        ..cfg.sources.clone()
+    };
+    let (sources, _) = discover(&loc.data_root, &only_raw);
+    if sources.is_empty() {
+        return Err(DataError::NoData(format!(
+            "no SDD raw annotations under {}",
+            loc.data_root.display()
+        )));
+    }
+    progress.stage("associate", sources.len() as u64);
+    sources
+        .par_iter()
+        .map(|src| {
+            let SourceKind::SddRaw {
+                path,
+                scales,
+                video,
+            } = &src.kind
+            else {
+                return Err(DataError::NoData(format!(
+                    "{} is not an SDD raw video",
+                    src.name
+                )));
+            };
+            let scale = sdd::SddScales::load(scales)?.scale(video)?;
+            let rows = sdd::parse_raw(path)?;
+            let (frames, truth) = sdd_detections(
+                &rows,
+                scale,
+                cfg.association.frame_step,
+                cfg.sdd.pedestrians_only,
+                cfg.sources.seed,
+            );
+            let pred = associate(&frames, &cfg.association);
+            progress.inc(1);
+            Ok((src.name.clone(), evaluate(&truth, &pred)))
+        })
+        .collect()
+}

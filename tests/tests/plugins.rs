@@ -198,6 +198,25 @@ fn plugin_gradient_matches_finite_differences_through_the_boundary() {
 }
 
 #[test]
+fn the_custom_constraint_example_loads_and_its_gradient_holds() {
+    let library = PluginLibrary::load(&lib("human2nav_proximity_speed")).unwrap();
+    assert_eq!(library.name(), "proximity_speed");
+    let term = PluginHost::new()
+        .constraint(
+            &lib("human2nav_proximity_speed"),
+            "proximity_speed",
+            "v_near = 0.4",
+            None,
+        )
+        .unwrap();
+    // Fast trajectories (about 2 m/s) near the agents cost something.
+    let data = batch(3, 10);
+    let (cost, _) = evaluate(&term, &data, 3, 10);
+    assert!(cost.iter().all(|c| *c > 1e-3), "{cost:?}");
+    check_gradient(&term, &data, 3, 10);
+}
+
+#[test]
 fn c_plugin_computes_what_its_rust_twin_computes() {
     let host = PluginHost::new();
     let c_lib = PluginLibrary::load(&lib("human2nav_c_personal_space")).unwrap();

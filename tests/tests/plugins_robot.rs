@@ -160,3 +160,21 @@ fn a_profile_naming_a_missing_plugin_fails_with_the_library_path() {
     assert!(err.to_string().contains("plugins/nowhere"), "{err}");
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
+
+#[test]
+fn the_add_robot_example_profile_loads() {
+    let p = RobotProfile::load(&workspace_root().join("examples/add_robot/cart/robot.toml"))
+        .expect("examples/add_robot/cart/robot.toml loads");
+    assert_eq!(p.name, "cart");
+    // The README's claim: the URDF wheels cap v_max at 15 rad/s × 0.08 m.
+    assert_relative_eq!(p.limits.v_max, 1.2, max_relative = 1e-12);
+    assert_relative_eq!(
+        p.footprint_radius,
+        (0.3f64.powi(2) + 0.225f64.powi(2)).sqrt(),
+        max_relative = 1e-9
+    );
+    let e = PluginHost::new()
+        .robot_embodiment(&p)
+        .expect("built-in embodiment");
+    assert_eq!(e.name(), "differential_drive");
+}

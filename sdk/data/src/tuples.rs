@@ -282,3 +282,118 @@ pub fn scene_tuples(
     stats.tuples = out.len();
     (out, stats)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::resample::{ResampleStats, Track, central_difference, headings};
+    use approx::assert_relative_eq;
+
+    fn track(id: u64, start: i64, positions: Vec<[f64; 2]>) -> Track {
+        let opts = crate::resample::ResampleOptions::default();
+        let velocities = central_difference(&positions, 0.1);
+        let (headings, _) = headings(&positions, 0.1, &opts);
+        Track {
+            id,
+            source_id: id,
+            class: AgentClass::Pedestrian,
+            start,
+            positions,
+            velocities,
+            headings,
+        }
+    }
+
+    fn scene(tracks: Vec<Track>) -> Scene {
+        Scene {
+            name: "t/t".into(),
+            dataset: "t".into(),
+            format: "test".into(),
+            dt: 0.1,
+            tracks,
+            stats: ResampleStats::default(),
+            dropped: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn straight_walker_gives_closed_form_tuples() {
+        // Ego walks along world +y at 1.2 m/s for 10 s; a neighbour starts 2 m ahead of it and
+        // drifts along −x at 0.5 m/s while keeping pace.
+        let ego: Vec<[f64; 2]> = (0..100).map(|k| [1.0, 0.12 * k as f64]).collect();
+        let other: Vec<[f64; 2]> = (0..100)
+            .map(|k| [1.0 - 0.05 * k as f64, 2.0 + 0.12 * k as f64])
+            .collect();
+        let sc = scene(vec![track(0, 0, ego), track(1, 0, other)]);
+        let opts = TupleOptions::default();
+        let spec = BevSpec::default();
+        let (tuples, stats) = scene_tuples(&sc, 3, &spec, &opts);
+        // Ego: windows k = 0, 5, …, 65 (k + 32 < 100) → 14; the neighbour is an ego too.
+        assert_eq!(stats.ego_tracks, 2);
+        assert_eq!(tuples.len(), 28);
+        let t = &tuples[2]; // ego 0 at k = 10
+        assert_eq!(t.scene, 3);
+        // Ego frame: x along world +y. Goal 5 s ahead = 6 m.
+        assert_relative_eq!(t.goal[0], 6.0, epsilon = 1e-5);
+        assert_relative_eq!(t.goal[1], 0.0, epsilon = 1e-5);
+        assert_relative_eq!(t.velocity[0], 1.2, epsilon = 1e-5);
+        assert_relative_eq!(t.velocity[1], 0.0, epsilon = 1e-5);
+        assert_eq!(t.future.len(), 32);
+        for (j, p) in t.future.iter().enumerate() {
+            assert_relative_eq!(p[0], 0.12 * (j + 1) as f32, epsilon = 1e-5);
+            assert_relative_eq!(p[1], 0.0, epsilon = 1e-5);
+            assert_relative_eq!(p[2], 0.0, epsilon = 1e-5);
+        }
+        // Neighbour at world (1 − 0.5, 2 + 1.2) vs ego (1, 1.2): ego frame (2, 0.5); velocity
+        // world (−0.5, 1.2) → ego frame (1.2, 0.5).
+        assert_eq!(t.agents.len(), 1);
+        let a = t.agents[0];
+        assert_relative_eq!(a[0], 2.0, epsilon = 1e-5);
+        assert_relative_eq!(a[1], 0.5, epsilon = 1e-5);
+        assert_relative_eq!(a[2], 1.2, epsilon = 1e-5);
+        assert_relative_eq!(a[3], 0.5, epsilon = 1e-5);
+        assert_relative_eq!(a[4], 0.3, epsilon = 1e-7);
+        assert_eq!(t.class, Some(ScenarioClass::CoFlow));
+        // The dense raster has the neighbour's disc at (2, 0.5) with its ego-frame velocity.
+        let dense = t.to_tuple(&spec);
+        let (r, c) = spec.cell_of([2.0, 0.5]).unwrap();
+        assert_eq!(dense.bev[spec.index(0, r, c)], 1.0);
+        assert_relative_eq!(dense.bev[spec.index(1, r, c)], 1.2, epsilon = 1e-5);
+        assert_relative_eq!(dense.bev[spec.index(2, r, c)], 0.5, epsilon = 1e-5);
+        // Goal near the end of the track: clipped to the last sample.
+        let last = tuples.iter().filter(|t| t.scene == 3).nth(13).unwrap();
+        assert_relative_eq!(last.goal[0], 0.12 * (99 - 65) as f32, epsilon = 1e-4);
+    }
+
+    #[test]
+    fn standing_and_short_tracks_are_skipped_and_counted() {
+        let stand: Vec<[f64; 2]> = vec![[0.0, 0.0]; 60];
+        let short: Vec<[f64; 2]> = (0..20).map(|k| [0.1 * k as f64, 0.0]).collect();
+        let sc = scene(vec![track(0, 0, stand), track(1, 0, short)]);
+        let (tuples, stats) = scene_tuples(&sc, 0, &BevSpec::default(), &TupleOptions::default());
+        assert!(tuples.is_empty());
+        assert_eq!(stats.too_short_tracks, 1);
+        assert_eq!(stats.stationary_windows, 6); // k = 0, 5, …, 25
+    }
+
+    #[test]
+    fn options_validate() {
+        assert!(TupleOptions::default().validate().is_ok());
+        assert!(
+            TupleOptions {
+                stride: 0,
+                ..Default::default()
+            }
+            .validate()
+            .is_err()
+        );
+        assert!(
+            TupleOptions {
+                agent_radius: f64::NAN,
+                ..Default::default()
+            }
+            .validate()
+            .is_err()
+        );
+    }
+}

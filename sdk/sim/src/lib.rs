@@ -1,1 +1,31 @@
-//! (being written)
+//! Closed-loop crowd-navigation benchmark (paper §IV–V): a SocNavBench-like simulator that
+//! replays real (or synthetic) pedestrians non-reactively around a robot driven by any
+//! [`human2nav_core::Planner`] through its embodiment's tracking controller, the per-episode
+//! metrics (SR, TFS, ...), the benchmark runner over suites × robots × methods, and the report
+//! (`results.csv`, `report.md`, PNG figures). No libtorch: planners come in as trait objects.
+//!
+//! * [`episode`]: the episode types (from the data crate).
+//! * [`replay`]: pedestrians interpolated to the simulation step.
+//! * [`runner`]: the closed loop, collision/goal/budget rules ([`runner::SimConfig`]).
+//! * [`metrics`]: per-episode metrics.
+//! * [`straight`]: the straight-to-goal sanity baseline.
+//! * [`bench`]: methods as planner factories, suites, the parallel deterministic runner.
+//! * [`config`]: the benchmark TOML and suite building.
+//! * [`report`], [`figures`]: `results.csv`, `report.md` and the PNGs.
+
+pub mod bench;
+pub mod config;
+pub mod driver;
+pub mod episode;
+pub mod error;
+pub mod figures;
+pub mod metrics;
+pub mod replay;
+pub mod report;
+pub mod runner;
+pub mod straight;
+
+pub use bench::{MethodSpec, PlannerContext, ResultRow, Suite, SuiteKind, run_bench};
+pub use error::SimError;
+pub use metrics::EpisodeMetrics;
+pub use runner::{EpisodeRun, Outcome, RobotSetup, SimConfig, run_episode};

@@ -1,0 +1,235 @@
+//! The benchmark: suites of episodes × robots × methods, run in parallel, one result row each.
+//!
+//! Methods come in as [`MethodSpec`]s: a name plus a factory that builds a fresh
+//! `Box<dyn Planner>` for one episode from a [`PlannerContext`] (the robot, the simulation
+//! settings, the episode and a per-episode seed). A method that needs expensive shared state
+//! (a loaded model) captures it in the closure, behind an `Arc`.
+//!
+//! Determinism: every episode gets the seed `mix(seed, suite, episode id, robot)` (the same
+//! for every method, so methods are compared on identical draws), episodes run on rayon's
+//! pool, and the rows come back in job order (suite, robot, method, episode), whatever the
+//! scheduling.
+
+use crate::episode::{Episode, ScenarioClass};
+use crate::error::SimError;
+use crate::metrics::EpisodeMetrics;
+use crate::runner::{EpisodeRun, RobotSetup, SimConfig, run_episode};
+use crate::straight::{StraightConfig, StraightPlanner};
+use human2nav_core::Planner;
+use indicatif::ProgressBar;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// A boxed error from a method factory.
+pub type BoxError = Box<dyn std::error::Error + Send + Sync>;
+
+/// What a method factory gets to build a planner for one episode.
+#[derive(Clone, Copy, Debug)]
+pub struct PlannerContext<'a> {
+    pub robot: &'a RobotSetup,
+    pub sim: &'a SimConfig,
+    pub episode: &'a Episode,
+    /// Deterministic per-episode seed for stochastic planners.
+    pub seed: u64,
+}
+
+/// The factory signature of a [`MethodSpec`].
+pub type PlannerFactory =
+    dyn Fn(&PlannerContext<'_>) -> Result<Box<dyn Planner>, BoxError> + Send + Sync;
+
+/// A benchmarked method: a report name and a planner factory.
+pub struct MethodSpec {
+    pub name: String,
+    make: Box<PlannerFactory>,
+}
+
+impl std::fmt::Debug for MethodSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MethodSpec")
+            .field("name", &self.name)
+            .finish_non_exhaustive()
+    }
+}
+
+impl MethodSpec {
+    /// A method from any factory.
+    pub fn new(
+        name: impl Into<String>,
+        make: impl Fn(&PlannerContext<'_>) -> Result<Box<dyn Planner>, BoxError> + Send + Sync + 'static,
+    ) -> Self {
+        Self {
+            name: name.into(),
+            make: Box::new(make),
+        }
+    }
+
+    /// Builds the planner for one episode.
+    pub fn make(&self, ctx: &PlannerContext<'_>) -> Result<Box<dyn Planner>, BoxError> {
+        (self.make)(ctx)
+    }
+
+    /// The built-in `straight` baseline. Keys of `table` override [`StraightConfig`]; `speed`
+    /// and `accel` default to the robot's `v_max` and `a_max`.
+    pub fn straight(name: impl Into<String>, table: &toml::Table) -> Result<Self, BoxError> {
+        let base: StraightConfig = table.clone().try_into()?;
+        base.validate()?;
+        let (has_speed, has_accel) = (table.contains_key("speed"), table.contains_key("accel"));
+        Ok(Self::new(name, move |ctx| {
+            let mut cfg = base.clone();
+            if !has_speed {
+                cfg.speed = ctx.robot.limits.v_max;
+            }
+            if !has_accel {
+                cfg.accel = ctx.robot.limits.a_max;
+            }
+            Ok(Box::new(StraightPlanner::new(cfg)?) as Box<dyn Planner>)
+        }))
+    }
+}
+
+/// What kind of suite a set of episodes is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SuiteKind {
+    /// Held-out real episodes.
+    Real,
+    /// Episodes from the synthetic crowd generator.
+    Synthetic,
+    /// Episodes with every pedestrian removed (sanity: every working method must succeed).
+    Empty,
+}
+
+impl SuiteKind {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SuiteKind::Real => "real",
+            SuiteKind::Synthetic => "synthetic",
+            SuiteKind::Empty => "empty",
+        }
+    }
+}
+
+/// A named list of episodes.
+#[derive(Clone, Debug)]
+pub struct Suite {
+    pub name: String,
+    pub kind: SuiteKind,
+    pub episodes: Vec<Episode>,
+    /// Anything the report should say about how the suite was obtained (a fallback, say).
+    pub note: Option<String>,
+}
+
+/// One result row: an episode × robot × method.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ResultRow {
+    pub suite: String,
+    pub suite_kind: SuiteKind,
+    pub scenario: ScenarioClass,
+    pub episode: String,
+    pub scene: String,
+    pub robot: String,
+    pub method: String,
+    pub seed: u64,
+    /// Pedestrians in the episode.
+    pub agents: usize,
+    /// Relevant pedestrians (the data crate's density).
+    pub density: usize,
+    pub metrics: EpisodeMetrics,
+}
+
+/// SplitMix64 finaliser.
+fn mix64(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// FNV-1a of a string (stable across platforms and releases, unlike `DefaultHasher`).
+fn fnv1a(s: &str) -> u64 {
+    s.bytes().fold(0xCBF2_9CE4_8422_2325, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01B3)
+    })
+}
+
+/// The per-episode seed (see the module docs).
+pub fn episode_seed(seed: u64, suite: &str, episode: &str, robot: &str) -> u64 {
+    mix64(seed ^ mix64(fnv1a(suite) ^ mix64(fnv1a(episode) ^ mix64(fnv1a(robot)))))
+}
+
+/// Runs one episode of one method on one robot and returns the run and its metrics.
+pub fn run_one(
+    suite: &Suite,
+    episode: &Episode,
+    robot: &RobotSetup,
+    method: &MethodSpec,
+    sim: &SimConfig,
+    seed: u64,
+) -> Result<(EpisodeRun, ResultRow), SimError> {
+    let seed = episode_seed(seed, &suite.name, &episode.id, &robot.name);
+    let ctx = PlannerContext {
+        robot,
+        sim,
+        episode,
+        seed,
+    };
+    let mut planner = method.make(&ctx).map_err(|e| SimError::Method {
+        method: method.name.clone(),
+        robot: robot.name.clone(),
+        episode: episode.id.clone(),
+        message: e.to_string(),
+    })?;
+    let run = run_episode(episode, robot, planner.as_mut(), sim);
+    let metrics = EpisodeMetrics::compute(&run, &robot.limits);
+    let row = ResultRow {
+        suite: suite.name.clone(),
+        suite_kind: suite.kind,
+        scenario: episode.scenario,
+        episode: episode.id.clone(),
+        scene: episode.scene.clone(),
+        robot: robot.name.clone(),
+        method: method.name.clone(),
+        seed,
+        agents: episode.agents.len(),
+        density: episode.density,
+        metrics,
+    };
+    Ok((run, row))
+}
+
+/// Runs every suite × robot × method × episode in parallel; rows in job order.
+pub fn run_bench(
+    suites: &[Suite],
+    robots: &[RobotSetup],
+    methods: &[MethodSpec],
+    sim: &SimConfig,
+    seed: u64,
+    progress: &ProgressBar,
+) -> Result<Vec<ResultRow>, SimError> {
+    let mut jobs = Vec::new();
+    for s in suites {
+        for r in robots {
+            for m in methods {
+                for e in &s.episodes {
+                    jobs.push((s, r, m, e));
+                }
+            }
+        }
+    }
+    if jobs.is_empty() {
+        return Err(SimError::Empty(
+            "no suite, robot, method or episode selected".into(),
+        ));
+    }
+    progress.set_length(jobs.len() as u64);
+    let rows: Result<Vec<ResultRow>, SimError> = jobs
+        .par_iter()
+        .map(|&(s, r, m, e)| {
+            let out = run_one(s, e, r, m, sim, seed).map(|(_, row)| row);
+            progress.inc(1);
+            out
+        })
+        .collect();
+    progress.finish();
+    rows
+}

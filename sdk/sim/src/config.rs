@@ -1,0 +1,347 @@
+//! The benchmark configuration (TOML) and how suites are built from it.
+//!
+//! ```toml
+//! seed = 7
+//! robots = ["robots/diablo/robot.toml"]         # relative to the workspace root
+//! snapshot_method = "orca"                      # method drawn in the Fig. 4 snapshots
+//!
+//! [sim]                                         # runner::SimConfig
+//! dt = 0.05
+//! replan_hz = 10.0
+//!
+//! [[methods]]
+//! name = "orca"                                 # name in the report
+//! kind = "orca"                                 # resolved by the caller (the CLI)
+//! config = { time_horizon = 5.0 }               # passed to the method, kind-specific
+//!
+//! [[suites]]
+//! name = "real"
+//! kind = "real"                                 # real | synthetic | empty
+//! episodes = "out/data/episodes.json"          # real only (`human2nav data episodes`)
+//! per_class = 50                                # episodes per scenario class
+//! quick_per_class = 3                           # with --quick
+//! ```
+//!
+//! Relative paths are resolved against the workspace root (the nearest ancestor of the config
+//! file with a `[workspace]` manifest), like the data configuration's.
+//!
+//! A `real` suite whose episode file is missing becomes a `synthetic` suite of the same size
+//! (with a note in the report). An `empty` suite takes the episodes of the first other suite
+//! (or synthetic ones when there is none) and removes every pedestrian.
+
+use crate::bench::{Suite, SuiteKind};
+use crate::episode::{Episode, EpisodeSuite, ScenarioClass};
+use crate::error::SimError;
+use crate::runner::SimConfig;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// One benchmarked method as configured.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MethodConfig {
+    /// Name in the report (unique).
+    pub name: String,
+    /// What to build (`straight`, `orca`, `human2nav`, ...); resolved by the caller.
+    pub kind: String,
+    /// Kind-specific settings.
+    #[serde(default)]
+    pub config: toml::Table,
+}
+
+/// One suite as configured.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SuiteConfig {
+    /// Name in the report (unique).
+    pub name: String,
+    pub kind: SuiteKind,
+    /// Episode file of a `real` suite (`EpisodeSuite` JSON), relative to the workspace root.
+    #[serde(default)]
+    pub episodes: Option<PathBuf>,
+    /// Episodes per scenario class. Default 50.
+    #[serde(default = "default_per_class")]
+    pub per_class: usize,
+    /// Episodes per scenario class with `--quick`. Default 3.
+    #[serde(default = "default_quick_per_class")]
+    pub quick_per_class: usize,
+    /// Seed of the synthetic generator; default: the benchmark seed.
+    #[serde(default)]
+    pub seed: Option<u64>,
+}
+
+fn default_per_class() -> usize {
+    50
+}
+
+fn default_quick_per_class() -> usize {
+    3
+}
+
+/// The whole benchmark configuration.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct BenchConfig {
+    /// Master seed. Default 7.
+    pub seed: u64,
+    /// Robot profiles (`robot.toml`), relative to the workspace root.
+    pub robots: Vec<PathBuf>,
+    pub sim: SimConfig,
+    pub methods: Vec<MethodConfig>,
+    pub suites: Vec<SuiteConfig>,
+    /// Method drawn in the trajectory snapshots; default the first method that is not
+    /// `straight`.
+    pub snapshot_method: Option<String>,
+    /// The directory relative paths are resolved against (the workspace root, else the config
+    /// file's directory; not read from the file).
+    #[serde(skip)]
+    pub base_dir: PathBuf,
+}
+
+impl Default for BenchConfig {
+    fn default() -> Self {
+        Self {
+            seed: 7,
+            robots: Vec::new(),
+            sim: SimConfig::default(),
+            methods: Vec::new(),
+            suites: Vec::new(),
+            snapshot_method: None,
+            base_dir: PathBuf::from("."),
+        }
+    }
+}
+
+impl BenchConfig {
+    /// Reads, parses and validates a config file; relative paths resolve against the workspace
+    /// root above it (else its own directory).
+    pub fn load(path: &Path) -> Result<Self, SimError> {
+        let text = std::fs::read_to_string(path).map_err(|e| SimError::io(path, e))?;
+        let mut cfg: BenchConfig = toml::from_str(&text).map_err(|e| SimError::Parse {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        let dir = path
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_else(|| PathBuf::from("."));
+        cfg.base_dir = human2nav_data::paths::find_workspace_root(&dir).unwrap_or(dir);
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// Checks the simulation settings, that names are unique and that every `real` suite names
+    /// its episode file.
+    pub fn validate(&self) -> Result<(), SimError> {
+        self.sim.validate()?;
+        if self.robots.is_empty() {
+            return Err(SimError::setting(
+                "bench",
+                "robots",
+                "list at least one robot profile",
+            ));
+        }
+        if self.methods.is_empty() {
+            return Err(SimError::setting(
+                "bench",
+                "methods",
+                "list at least one method",
+            ));
+        }
+        if self.suites.is_empty() {
+            return Err(SimError::setting(
+                "bench",
+                "suites",
+                "list at least one suite",
+            ));
+        }
+        for (i, m) in self.methods.iter().enumerate() {
+            if m.name.is_empty() || self.methods[..i].iter().any(|o| o.name == m.name) {
+                return Err(SimError::setting(
+                    format!("methods[{i}]"),
+                    "name",
+                    format!("`{}` is empty or repeated", m.name),
+                ));
+            }
+        }
+        for (i, s) in self.suites.iter().enumerate() {
+            let section = format!("suites[{i}]");
+            if s.name.is_empty() || self.suites[..i].iter().any(|o| o.name == s.name) {
+                return Err(SimError::setting(
+                    section,
+                    "name",
+                    format!("`{}` is empty or repeated", s.name),
+                ));
+            }
+            if s.kind == SuiteKind::Real && s.episodes.is_none() {
+                return Err(SimError::setting(
+                    section,
+                    "episodes",
+                    "a real suite needs its episode file",
+                ));
+            }
+            if s.per_class == 0 || s.quick_per_class == 0 {
+                return Err(SimError::setting(
+                    section,
+                    "per_class",
+                    "episode counts must be ≥ 1",
+                ));
+            }
+        }
+        if let Some(m) = &self.snapshot_method {
+            if !self.methods.iter().any(|x| &x.name == m) {
+                return Err(SimError::setting(
+                    "bench",
+                    "snapshot_method",
+                    format!("`{m}` is not a configured method"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// A path from the config resolved against [`BenchConfig::base_dir`].
+    pub fn resolve(&self, p: &Path) -> PathBuf {
+        if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            self.base_dir.join(p)
+        }
+    }
+
+    /// The method drawn in the snapshots.
+    pub fn snapshot_method(&self) -> Option<&str> {
+        self.snapshot_method
+            .as_deref()
+            .or_else(|| {
+                self.methods
+                    .iter()
+                    .find(|m| m.kind != "straight")
+                    .map(|m| m.name.as_str())
+            })
+            .or_else(|| self.methods.first().map(|m| m.name.as_str()))
+    }
+}
+
+/// The first `n` episodes of each class, in the classes' order and then file order.
+pub fn take_per_class(episodes: &[Episode], n: usize) -> Vec<Episode> {
+    let mut out = Vec::new();
+    for c in ScenarioClass::ALL {
+        out.extend(episodes.iter().filter(|e| e.scenario == c).take(n).cloned());
+    }
+    out
+}
+
+/// `n` synthetic episodes per class from the data crate's generator.
+pub fn synthetic_episodes(n: usize, seed: u64) -> Result<Vec<Episode>, SimError> {
+    let mut out = Vec::new();
+    for c in ScenarioClass::ALL {
+        out.extend(human2nav_data::synthetic::episodes(c, n, seed));
+    }
+    Ok(out)
+}
+
+/// Builds every configured suite (see the module docs for the fallbacks).
+pub fn build_suites(cfg: &BenchConfig, quick: bool) -> Result<Vec<Suite>, SimError> {
+    let mut suites: Vec<Suite> = Vec::new();
+    for s in &cfg.suites {
+        let n = if quick {
+            s.quick_per_class
+        } else {
+            s.per_class
+        };
+        let seed = s.seed.unwrap_or(cfg.seed);
+        let suite = match s.kind {
+            SuiteKind::Real => {
+                let file = cfg.resolve(s.episodes.as_deref().unwrap_or(Path::new("")));
+                if file.is_file() {
+                    let loaded = EpisodeSuite::load(&file).map_err(|e| SimError::Episodes {
+                        suite: s.name.clone(),
+                        message: e.to_string(),
+                    })?;
+                    let episodes = take_per_class(&loaded.episodes, n);
+                    let short: Vec<String> = ScenarioClass::ALL
+                        .iter()
+                        .filter_map(|c| {
+                            let k = episodes.iter().filter(|e| e.scenario == *c).count();
+                            (k < n).then(|| format!("{} has {k}", c.name()))
+                        })
+                        .collect();
+                    let note = format!(
+                        "Held-out real episodes from `{}` ({}){}",
+                        file.display(),
+                        loaded.source,
+                        if short.is_empty() {
+                            String::new()
+                        } else {
+                            format!("; fewer than {n} per class: {}", short.join(", "))
+                        }
+                    );
+                    Suite {
+                        name: s.name.clone(),
+                        kind: SuiteKind::Real,
+                        episodes,
+                        note: Some(note),
+                    }
+                } else {
+                    Suite {
+                        name: s.name.clone(),
+                        kind: SuiteKind::Synthetic,
+                        episodes: synthetic_episodes(n, seed)?,
+                        note: Some(format!(
+                            "The real episode file `{}` is absent (`human2nav data episodes` writes it when the \
+                             datasets are present); this suite fell back to {n} synthetic episodes per class",
+                            file.display()
+                        )),
+                    }
+                }
+            }
+            SuiteKind::Synthetic => Suite {
+                name: s.name.clone(),
+                kind: SuiteKind::Synthetic,
+                episodes: synthetic_episodes(n, seed)?,
+                note: Some(format!(
+                    "{n} episodes per class from the synthetic social-force generator, seed {seed}"
+                )),
+            },
+            SuiteKind::Empty => {
+                let source = suites.iter().find(|x| x.kind != SuiteKind::Empty);
+                let (base, from) = match source {
+                    Some(src) => (
+                        take_per_class(&src.episodes, n),
+                        format!("suite `{}`", src.name),
+                    ),
+                    None => (
+                        synthetic_episodes(n, seed)?,
+                        "the synthetic generator".to_string(),
+                    ),
+                };
+                let episodes = base
+                    .into_iter()
+                    .map(|mut e| {
+                        e.agents.clear();
+                        e.density = 0;
+                        e.id = format!("{}-empty", e.id);
+                        e
+                    })
+                    .collect();
+                Suite {
+                    name: s.name.clone(),
+                    kind: SuiteKind::Empty,
+                    episodes,
+                    note: Some(format!(
+                        "Start, goal and budget of {n} episodes per class of {from}, every pedestrian removed"
+                    )),
+                }
+            }
+        };
+        if suite.episodes.is_empty() {
+            return Err(SimError::Episodes {
+                suite: s.name.clone(),
+                message: "no episode selected".into(),
+            });
+        }
+        suites.push(suite);
+    }
+    Ok(suites)
+}

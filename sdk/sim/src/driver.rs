@@ -1,0 +1,217 @@
+//! One benchmark run end to end: suites × robots × methods in parallel, then `results.csv`,
+//! the figures and `report.md` in the output directory.
+
+use crate::bench::{MethodSpec, ResultRow, Suite, SuiteKind, run_bench, run_one};
+use crate::episode::ScenarioClass;
+use crate::error::SimError;
+use crate::figures::{self, Snapshot};
+use crate::report::{self, ReportContext, summarize};
+use crate::runner::{RobotSetup, SimConfig};
+use indicatif::ProgressBar;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Everything a run needs besides the suites.
+#[derive(Debug)]
+pub struct BenchPlan<'a> {
+    pub suites: &'a [Suite],
+    pub robots: &'a [RobotSetup],
+    pub methods: &'a [MethodSpec],
+    pub sim: &'a SimConfig,
+    pub seed: u64,
+    pub quick: bool,
+    /// Method drawn in the snapshots (default: the first).
+    pub snapshot_method: Option<&'a str>,
+    /// How the run was started, for the report.
+    pub command: String,
+}
+
+/// What a run produced.
+#[derive(Debug)]
+pub struct BenchOutcome {
+    pub rows: Vec<ResultRow>,
+    pub results_csv: PathBuf,
+    pub report_md: PathBuf,
+    pub figures: Vec<PathBuf>,
+    /// `(method, robot, SR)` on the empty-world suites, where SR < 1.
+    pub empty_world_failures: Vec<(String, String, f64)>,
+    pub wall_time: f64,
+}
+
+/// Runs the plan and writes every output into `out_dir` (created when missing).
+pub fn run(
+    plan: &BenchPlan<'_>,
+    out_dir: &Path,
+    progress: &ProgressBar,
+) -> Result<BenchOutcome, SimError> {
+    std::fs::create_dir_all(out_dir).map_err(|e| SimError::io(out_dir, e))?;
+    let started = Instant::now();
+    let rows = run_bench(
+        plan.suites,
+        plan.robots,
+        plan.methods,
+        plan.sim,
+        plan.seed,
+        progress,
+    )?;
+
+    let results_csv = out_dir.join("results.csv");
+    std::fs::write(&results_csv, report::results_csv(&rows))
+        .map_err(|e| SimError::io(&results_csv, e))?;
+
+    let method_names: Vec<String> = plan.methods.iter().map(|m| m.name.clone()).collect();
+    let robot_names: Vec<String> = plan.robots.iter().map(|r| r.name.clone()).collect();
+    let mut figure_list: Vec<(String, String)> = Vec::new();
+    let mut figure_paths = Vec::new();
+    if let Some(primary) = plan.suites.iter().find(|s| s.kind != SuiteKind::Empty) {
+        let f6 = out_dir.join("fig6_sr_per_scenario.png");
+        figures::sr_per_scenario(&f6, &rows, &primary.name, &method_names)?;
+        figure_list.push((
+            "fig6_sr_per_scenario.png".into(),
+            format!(
+                "Fig. 6: success rate per scenario and method, suite `{}`, all robots",
+                primary.name
+            ),
+        ));
+        figure_paths.push(f6);
+        let f7 = out_dir.join("fig7_tfs_sr_per_robot.png");
+        figures::tfs_sr_per_robot(&f7, &rows, &primary.name, &robot_names, &method_names)?;
+        figure_list.push((
+            "fig7_tfs_sr_per_robot.png".into(),
+            format!(
+                "Fig. 7: TFS and SR per robot and method, suite `{}`",
+                primary.name
+            ),
+        ));
+        figure_paths.push(f7);
+        let snaps = snapshots(plan, primary)?;
+        if !snaps.is_empty() {
+            let f4 = out_dir.join("fig4_snapshots.png");
+            figures::trajectory_snapshots(&f4, &snaps)?;
+            figure_list.push((
+                "fig4_snapshots.png".into(),
+                "Fig. 4: one episode per scenario at the moment of closest approach; pedestrians grey with their \
+                 last positions and 0.6 s velocity arrows, robot red (path so far solid, whole path faint), plan \
+                 orange, start green star, goal blue star"
+                    .into(),
+            ));
+            figure_paths.push(f4);
+        }
+    }
+
+    let wall_time = started.elapsed().as_secs_f64();
+    let ctx = ReportContext {
+        command: plan.command.clone(),
+        seed: plan.seed,
+        quick: plan.quick,
+        sim: sim_table(plan.sim),
+        robots: plan
+            .robots
+            .iter()
+            .map(|r| {
+                let l = &r.limits;
+                format!(
+                    "`{}` ({}): footprint radius {:.2} m, v_max {:.2} m/s, a_max {:.2} m/s², ω_max {:.2} rad/s, {}",
+                    r.name,
+                    r.embodiment.name(),
+                    r.footprint_radius,
+                    l.v_max,
+                    l.a_max,
+                    l.omega_max,
+                    match l.kappa_max {
+                        Some(k) => format!("min turning radius {:.2} m", 1.0 / k),
+                        None => "turns in place".into(),
+                    }
+                )
+            })
+            .collect(),
+        methods: method_names.clone(),
+        suites: plan.suites.iter().map(|s| (s.name.clone(), s.kind, s.episodes.len(), s.note.clone())).collect(),
+        robot_names: robot_names.clone(),
+        figures: figure_list,
+        wall_time: Some(wall_time),
+    };
+    let report_md = out_dir.join("report.md");
+    std::fs::write(&report_md, report::report_markdown(&rows, &ctx))
+        .map_err(|e| SimError::io(&report_md, e))?;
+
+    let mut empty_world_failures = Vec::new();
+    for s in plan.suites.iter().filter(|s| s.kind == SuiteKind::Empty) {
+        for m in &method_names {
+            for r in &robot_names {
+                let sum = summarize(
+                    rows.iter()
+                        .filter(|x| x.suite == s.name && &x.method == m && &x.robot == r),
+                );
+                if sum.n > 0 && sum.sr < 1.0 {
+                    empty_world_failures.push((m.clone(), r.clone(), sum.sr));
+                }
+            }
+        }
+    }
+    Ok(BenchOutcome {
+        rows,
+        results_csv,
+        report_md,
+        figures: figure_paths,
+        empty_world_failures,
+        wall_time,
+    })
+}
+
+/// The settings table of the report.
+fn sim_table(sim: &SimConfig) -> Vec<(String, String)> {
+    vec![
+        ("simulation step".into(), format!("{} s", sim.dt)),
+        (
+            "replanning rate".into(),
+            format!("{} Hz (every {} steps)", sim.replan_hz, sim.replan_every()),
+        ),
+        ("goal tolerance".into(), format!("{} m", sim.goal_tolerance)),
+        ("sensor range".into(), format!("{} m", sim.sensor_range)),
+        (
+            "pedestrian history".into(),
+            format!("{} positions", sim.history_len),
+        ),
+        (
+            "time budget".into(),
+            format!(
+                "max(episode budget, {} × empty-world minimum time + {} s)",
+                sim.budget_factor, sim.budget_margin
+            ),
+        ),
+        ("start heading".into(), format!("{:?}", sim.start_heading)),
+        (
+            "collision".into(),
+            "robot footprint disc overlaps a pedestrian disc (checked every step)".into(),
+        ),
+    ]
+}
+
+/// The first episode of each class of `suite`, run by the snapshot method on the first robot.
+fn snapshots(plan: &BenchPlan<'_>, suite: &Suite) -> Result<Vec<Snapshot>, SimError> {
+    let Some(robot) = plan.robots.first() else {
+        return Ok(Vec::new());
+    };
+    let method = plan
+        .snapshot_method
+        .and_then(|name| plan.methods.iter().find(|m| m.name == name))
+        .or_else(|| plan.methods.first());
+    let Some(method) = method else {
+        return Ok(Vec::new());
+    };
+    let mut out = Vec::new();
+    for c in ScenarioClass::ALL {
+        if let Some(ep) = suite.episodes.iter().find(|e| e.scenario == c) {
+            let (run, _) = run_one(suite, ep, robot, method, plan.sim, plan.seed)?;
+            out.push(Snapshot {
+                episode: ep.clone(),
+                run,
+                robot: robot.name.clone(),
+                method: method.name.clone(),
+                footprint_radius: robot.footprint_radius,
+            });
+        }
+    }
+    Ok(out)
+}

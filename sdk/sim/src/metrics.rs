@@ -1,0 +1,142 @@
+//! Per-episode metrics computed from an [`EpisodeRun`].
+//!
+//! * **success / collision / timeout**: the [`Outcome`]; SR is the mean of `success`.
+//! * **TFS** = `min(TFS_plan, TFS_executed)` (paper §IV, [`human2nav_core::tfs`]): `TFS_plan` is
+//!   the fraction of all planned waypoints of the episode (every plan, pooled) that satisfy the
+//!   robot's limits, each plan checked from the robot's velocity when it was requested;
+//!   `TFS_executed` is the fraction of the tracking controller's commands *before saturation*
+//!   that are within the limits (so a planner whose plans demand the impossible is not rescued
+//!   by the saturation). Both are 1 when there is nothing to score.
+//! * **path length**: `Σ ‖p_{n+1} − p_n‖` of the executed positions.
+//! * **time to goal**: the end time of a successful episode.
+//! * **minimum clearance**: the smallest `‖p_robot − p_ped‖ − r_footprint − r_ped` over the
+//!   episode (negative at a collision; absent when nobody was ever present). The centre distance
+//!   is this plus both radii.
+//! * **time within 0.45 m / 1.2 m**: time during which the clearance was below Hall's intimate
+//!   (0.45 m) and personal (1.2 m) distances, each step counting `dt`.
+//! * **mean jerk**: the mean norm of the third finite difference of the executed world
+//!   positions, `‖a_{n+1} − a_n‖ / dt` with `a_n = (v_{n+1} − v_n)/dt`,
+//!   `v_n = (p_{n+1} − p_n)/dt` and `v_{−1} = 0` (the robot starts at rest); 0 when the episode
+//!   is too short for one value.
+
+use crate::runner::{EpisodeRun, Outcome};
+use human2nav_core::Limits;
+use human2nav_core::tfs;
+use serde::{Deserialize, Serialize};
+
+/// Hall's intimate distance (m).
+pub const INTIMATE_DISTANCE: f64 = 0.45;
+/// Hall's personal distance (m).
+pub const PERSONAL_DISTANCE: f64 = 1.2;
+
+/// The metrics of one episode.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeMetrics {
+    pub outcome: Outcome,
+    pub success: bool,
+    pub collision: bool,
+    pub timeout: bool,
+    /// `min(tfs_plan, tfs_executed)`.
+    pub tfs: f64,
+    pub tfs_plan: f64,
+    pub tfs_executed: f64,
+    pub path_length: f64,
+    /// End time of a successful episode (s).
+    pub time_to_goal: Option<f64>,
+    /// Time simulated (s).
+    pub duration: f64,
+    /// The budget that applied (s).
+    pub budget: f64,
+    /// Smallest footprint-to-pedestrian clearance (m).
+    pub min_clearance: Option<f64>,
+    /// Time with clearance below [`INTIMATE_DISTANCE`] (s).
+    pub time_within_intimate: f64,
+    /// Time with clearance below [`PERSONAL_DISTANCE`] (s).
+    pub time_within_personal: f64,
+    /// Mean jerk norm of the executed path (m/s³).
+    pub mean_jerk: f64,
+    /// Number of planner calls.
+    pub plans: usize,
+    /// Plans that were stop-in-place fallbacks (the planner's own or the simulator's).
+    pub fallbacks: usize,
+    /// Planner errors, panics and rejected plans.
+    pub planner_errors: usize,
+}
+
+impl EpisodeMetrics {
+    /// Computes every metric of `run` for a robot with `limits`.
+    pub fn compute(run: &EpisodeRun, limits: &Limits) -> Self {
+        let positions: Vec<[f64; 2]> = run.states.iter().map(|s| [s.pose.x, s.pose.y]).collect();
+        let path_length = positions
+            .windows(2)
+            .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+            .sum();
+        let steps = run.clearance.len().saturating_sub(1);
+        let within =
+            |thr: f64| run.clearance[..steps].iter().filter(|&&c| c < thr).count() as f64 * run.dt;
+        let min_clearance = run.clearance.iter().copied().fold(f64::INFINITY, f64::min);
+        let (tfs_plan, tfs_executed) = tfs_scores(run, limits);
+        EpisodeMetrics {
+            outcome: run.outcome,
+            success: run.outcome == Outcome::Success,
+            collision: run.outcome == Outcome::Collision,
+            timeout: run.outcome == Outcome::Timeout,
+            tfs: tfs::tfs_min(tfs_plan, tfs_executed),
+            tfs_plan,
+            tfs_executed,
+            path_length,
+            time_to_goal: (run.outcome == Outcome::Success).then_some(run.end_time),
+            duration: run.end_time,
+            budget: run.budget,
+            min_clearance: min_clearance.is_finite().then_some(min_clearance),
+            time_within_intimate: within(INTIMATE_DISTANCE),
+            time_within_personal: within(PERSONAL_DISTANCE),
+            mean_jerk: mean_jerk(&positions, run.dt),
+            plans: run.plans.len(),
+            fallbacks: run.plans.iter().filter(|p| p.fallback).count(),
+            planner_errors: run.planner_errors.len(),
+        }
+    }
+}
+
+/// `(TFS_plan, TFS_executed)` of a run (see the module docs).
+pub fn tfs_scores(run: &EpisodeRun, limits: &Limits) -> (f64, f64) {
+    let (mut feasible, mut total) = (0usize, 0usize);
+    for p in &run.plans {
+        let v = tfs::plan_violations(&p.poses, p.dt, limits, p.initial_velocity);
+        feasible += v.iter().filter(|x| x.feasible()).count();
+        total += v.len();
+    }
+    let plan = if total == 0 {
+        1.0
+    } else {
+        feasible as f64 / total as f64
+    };
+    (plan, tfs::tfs_executed(&run.raw_commands, run.dt, limits))
+}
+
+/// Mean jerk norm of positions sampled every `dt`, starting at rest (see the module docs).
+pub fn mean_jerk(positions: &[[f64; 2]], dt: f64) -> f64 {
+    if positions.len() < 2 || dt.is_nan() || dt <= 0.0 {
+        return 0.0;
+    }
+    let mut v = vec![[0.0, 0.0]];
+    v.extend(
+        positions
+            .windows(2)
+            .map(|w| [(w[1][0] - w[0][0]) / dt, (w[1][1] - w[0][1]) / dt]),
+    );
+    let a: Vec<[f64; 2]> = v
+        .windows(2)
+        .map(|w| [(w[1][0] - w[0][0]) / dt, (w[1][1] - w[0][1]) / dt])
+        .collect();
+    let jerks: Vec<f64> = a
+        .windows(2)
+        .map(|w| ((w[1][0] - w[0][0]) / dt).hypot((w[1][1] - w[0][1]) / dt))
+        .collect();
+    if jerks.is_empty() {
+        0.0
+    } else {
+        jerks.iter().sum::<f64>() / jerks.len() as f64
+    }
+}

@@ -1,0 +1,132 @@
+//! Non-reactive pedestrian replay: recorded tracks interpolated to any simulation time.
+//!
+//! A track with samples `q_0 … q_{n−1}` at times `t_k = (start_step + k)·dt` is *present* for
+//! `t ∈ [t_0, t_{n−1}]` (a single-sample track only at `t_0`, within half a simulation step).
+//! Between samples the position is interpolated linearly; the velocity is the finite difference
+//! of the segment containing `t` (`(q_{k+1} − q_k)/dt`; the last segment at the final sample;
+//! zero for a single sample). Pedestrians never react to the robot.
+
+use crate::episode::{AgentTrack, Episode};
+use human2nav_core::AgentState;
+
+/// Tolerance on presence tests, in units of the episode step.
+const PRESENCE_EPS: f64 = 1e-9;
+
+/// One pedestrian's state at a given time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PedestrianSample {
+    pub id: u64,
+    pub position: [f64; 2],
+    pub velocity: [f64; 2],
+    pub radius: f64,
+}
+
+/// Replays an episode's pedestrians.
+#[derive(Clone, Copy, Debug)]
+pub struct CrowdReplay<'a> {
+    episode: &'a Episode,
+}
+
+impl<'a> CrowdReplay<'a> {
+    pub fn new(episode: &'a Episode) -> Self {
+        Self { episode }
+    }
+
+    /// The episode being replayed.
+    pub fn episode(&self) -> &'a Episode {
+        self.episode
+    }
+
+    /// The state of `track` at time `t`, or `None` when it is not present then.
+    pub fn sample(&self, track: &AgentTrack, t: f64) -> Option<PedestrianSample> {
+        let dt = self.episode.dt;
+        let n = track.positions.len();
+        if n == 0 || dt.is_nan() || dt <= 0.0 || !t.is_finite() {
+            return None;
+        }
+        // Position along the track in (fractional) samples.
+        let s = t / dt - track.start_step as f64;
+        if s < -PRESENCE_EPS || s > (n - 1) as f64 + PRESENCE_EPS {
+            return None;
+        }
+        if n == 1 {
+            return Some(PedestrianSample {
+                id: track.id,
+                position: track.positions[0],
+                velocity: [0.0, 0.0],
+                radius: track.radius,
+            });
+        }
+        let s = s.clamp(0.0, (n - 1) as f64);
+        let k = (s.floor() as usize).min(n - 2);
+        let f = s - k as f64;
+        let (a, b) = (track.positions[k], track.positions[k + 1]);
+        Some(PedestrianSample {
+            id: track.id,
+            position: [a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])],
+            velocity: [(b[0] - a[0]) / dt, (b[1] - a[1]) / dt],
+            radius: track.radius,
+        })
+    }
+
+    /// Every pedestrian present at `t`, in track order.
+    pub fn at(&self, t: f64) -> Vec<PedestrianSample> {
+        self.episode
+            .agents
+            .iter()
+            .filter_map(|tr| self.sample(tr, t))
+            .collect()
+    }
+
+    /// The pedestrians present at `t` within `range` of `centre` (centre distance), as the
+    /// planner observes them, with up to `history_len` recorded positions (at the episode's
+    /// step, oldest first, ending at the last sample not after `t`).
+    pub fn observe(
+        &self,
+        t: f64,
+        centre: [f64; 2],
+        range: f64,
+        history_len: usize,
+    ) -> Vec<AgentState> {
+        let dt = self.episode.dt;
+        let mut out = Vec::new();
+        for tr in &self.episode.agents {
+            let Some(s) = self.sample(tr, t) else {
+                continue;
+            };
+            let (dx, dy) = (s.position[0] - centre[0], s.position[1] - centre[1]);
+            if dx.hypot(dy) > range {
+                continue;
+            }
+            let history = if history_len == 0 {
+                Vec::new()
+            } else {
+                let idx = ((t / dt - tr.start_step as f64 + PRESENCE_EPS)
+                    .floor()
+                    .max(0.0) as usize)
+                    .min(tr.positions.len() - 1);
+                let from = (idx + 1).saturating_sub(history_len);
+                tr.positions[from..=idx].to_vec()
+            };
+            out.push(AgentState {
+                id: s.id,
+                position: s.position,
+                velocity: s.velocity,
+                radius: s.radius,
+                history,
+            });
+        }
+        out
+    }
+
+    /// The last time any pedestrian is present (0 for an empty episode).
+    pub fn end_time(&self) -> f64 {
+        let dt = self.episode.dt;
+        self.episode
+            .agents
+            .iter()
+            .filter(|t| !t.positions.is_empty())
+            .map(|t| (t.start_step + t.positions.len() - 1) as f64 * dt)
+            .fold(0.0, f64::max)
+    }
+}

@@ -1,0 +1,375 @@
+//! `results.csv` and `report.md`: one row per episode × method × robot, and the tables of the
+//! paper's Fig. 6 (SR per scenario and method) and Fig. 7 (TFS and SR per robot and method),
+//! the other metrics, and the empty-world sanity check.
+
+use crate::bench::{ResultRow, SuiteKind};
+use crate::episode::{ScenarioClass, ScenarioTitle};
+use std::fmt::Write as _;
+
+/// The header of `results.csv`.
+pub const CSV_HEADER: &str = "suite,suite_kind,scenario,episode,scene,robot,method,seed,agents,density,outcome,\
+success,collision,timeout,tfs,tfs_plan,tfs_executed,path_length,time_to_goal,duration,budget,min_clearance,\
+time_within_0_45,time_within_1_2,mean_jerk,plans,fallbacks,planner_errors";
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+fn num(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.6}")
+    } else {
+        String::new()
+    }
+}
+
+fn opt(v: Option<f64>) -> String {
+    v.map(num).unwrap_or_default()
+}
+
+/// `results.csv` (header plus one line per row, `\n` line ends, six decimals).
+pub fn results_csv(rows: &[ResultRow]) -> String {
+    let mut out = String::with_capacity(256 * (rows.len() + 1));
+    out.push_str(CSV_HEADER);
+    out.push('\n');
+    for r in rows {
+        let m = &r.metrics;
+        let fields = [
+            csv_field(&r.suite),
+            r.suite_kind.as_str().to_string(),
+            r.scenario.name().to_string(),
+            csv_field(&r.episode),
+            csv_field(&r.scene),
+            csv_field(&r.robot),
+            csv_field(&r.method),
+            r.seed.to_string(),
+            r.agents.to_string(),
+            r.density.to_string(),
+            m.outcome.as_str().to_string(),
+            u8::from(m.success).to_string(),
+            u8::from(m.collision).to_string(),
+            u8::from(m.timeout).to_string(),
+            num(m.tfs),
+            num(m.tfs_plan),
+            num(m.tfs_executed),
+            num(m.path_length),
+            opt(m.time_to_goal),
+            num(m.duration),
+            num(m.budget),
+            opt(m.min_clearance),
+            num(m.time_within_intimate),
+            num(m.time_within_personal),
+            num(m.mean_jerk),
+            m.plans.to_string(),
+            m.fallbacks.to_string(),
+            m.planner_errors.to_string(),
+        ];
+        out.push_str(&fields.join(","));
+        out.push('\n');
+    }
+    out
+}
+
+/// Aggregates over a group of rows.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Summary {
+    pub n: usize,
+    /// Success rate.
+    pub sr: f64,
+    /// Standard error of the success rate, `sqrt(SR·(1 − SR)/n)`.
+    pub sr_se: f64,
+    pub collision_rate: f64,
+    pub timeout_rate: f64,
+    pub tfs: f64,
+    pub tfs_plan: f64,
+    pub tfs_executed: f64,
+    pub path_length: f64,
+    /// Mean over successful episodes.
+    pub time_to_goal: Option<f64>,
+    /// Mean over episodes with pedestrians.
+    pub min_clearance: Option<f64>,
+    pub time_within_intimate: f64,
+    pub time_within_personal: f64,
+    pub mean_jerk: f64,
+    /// Fraction of plans that were fallbacks.
+    pub fallback_rate: f64,
+}
+
+fn mean(it: impl Iterator<Item = f64>) -> Option<f64> {
+    let (s, n) = it.fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+    (n > 0).then(|| s / n as f64)
+}
+
+/// Summarises `rows` (an empty group gives `n = 0` and zeros).
+pub fn summarize<'a>(rows: impl IntoIterator<Item = &'a ResultRow>) -> Summary {
+    let rows: Vec<&ResultRow> = rows.into_iter().collect();
+    let n = rows.len();
+    if n == 0 {
+        return Summary::default();
+    }
+    let rate =
+        |f: &dyn Fn(&ResultRow) -> bool| rows.iter().filter(|r| f(r)).count() as f64 / n as f64;
+    let avg = |f: &dyn Fn(&ResultRow) -> f64| mean(rows.iter().map(|r| f(r))).unwrap_or(0.0);
+    let sr = rate(&|r| r.metrics.success);
+    let plans: usize = rows.iter().map(|r| r.metrics.plans).sum();
+    let fallbacks: usize = rows.iter().map(|r| r.metrics.fallbacks).sum();
+    Summary {
+        n,
+        sr,
+        sr_se: (sr * (1.0 - sr) / n as f64).sqrt(),
+        collision_rate: rate(&|r| r.metrics.collision),
+        timeout_rate: rate(&|r| r.metrics.timeout),
+        tfs: avg(&|r| r.metrics.tfs),
+        tfs_plan: avg(&|r| r.metrics.tfs_plan),
+        tfs_executed: avg(&|r| r.metrics.tfs_executed),
+        path_length: avg(&|r| r.metrics.path_length),
+        time_to_goal: mean(rows.iter().filter_map(|r| r.metrics.time_to_goal)),
+        min_clearance: mean(rows.iter().filter_map(|r| r.metrics.min_clearance)),
+        time_within_intimate: avg(&|r| r.metrics.time_within_intimate),
+        time_within_personal: avg(&|r| r.metrics.time_within_personal),
+        mean_jerk: avg(&|r| r.metrics.mean_jerk),
+        fallback_rate: if plans > 0 {
+            fallbacks as f64 / plans as f64
+        } else {
+            0.0
+        },
+    }
+}
+
+/// What the report says about the run besides the numbers.
+#[derive(Clone, Debug, Default)]
+pub struct ReportContext {
+    /// The command line (or a description) that produced the report.
+    pub command: String,
+    pub seed: u64,
+    pub quick: bool,
+    /// Simulation settings, one `key = value` per line.
+    pub sim: Vec<(String, String)>,
+    /// One line per robot (name, embodiment, footprint, limits).
+    pub robots: Vec<String>,
+    /// Method names in order.
+    pub methods: Vec<String>,
+    /// Suites: (name, kind, episode count, optional note).
+    pub suites: Vec<(String, SuiteKind, usize, Option<String>)>,
+    /// Robot names in order.
+    pub robot_names: Vec<String>,
+    /// Figure files (relative to the report) with captions.
+    pub figures: Vec<(String, String)>,
+    /// Wall time of the run (s), if measured.
+    pub wall_time: Option<f64>,
+}
+
+fn pct(v: f64) -> String {
+    format!("{:.1}", 100.0 * v)
+}
+
+fn f2(v: f64) -> String {
+    format!("{v:.2}")
+}
+
+fn opt2(v: Option<f64>) -> String {
+    v.map(f2).unwrap_or_else(|| "–".into())
+}
+
+/// Writes `report.md`.
+pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
+    let mut md = String::new();
+    let _ = writeln!(md, "# Closed-loop crowd-navigation benchmark\n");
+    let _ = writeln!(
+        md,
+        "Produced by `{}`{} with seed {}. One row per episode × method × robot is in \
+         [`results.csv`](results.csv). SR = success rate (goal reached within the time budget \
+         without collision); TFS = trajectory feasibility score, min(plan, executed).\n",
+        ctx.command,
+        if ctx.quick {
+            " (quick mode: a few episodes per class)"
+        } else {
+            ""
+        },
+        ctx.seed
+    );
+    if let Some(w) = ctx.wall_time {
+        let _ = writeln!(md, "Wall time: {w:.1} s for {} episode runs.\n", rows.len());
+    }
+
+    let _ = writeln!(md, "## Setup\n");
+    let _ = writeln!(md, "| setting | value |\n|---|---|");
+    for (k, v) in &ctx.sim {
+        let _ = writeln!(md, "| {k} | {v} |");
+    }
+    let _ = writeln!(md, "\nRobots:\n");
+    for r in &ctx.robots {
+        let _ = writeln!(md, "- {r}");
+    }
+    let _ = writeln!(md, "\nMethods: {}.\n\nSuites:\n", ctx.methods.join(", "));
+    for (name, kind, n, note) in &ctx.suites {
+        let _ = write!(md, "- `{name}` ({}): {n} episodes", kind.as_str());
+        if let Some(note) = note {
+            let _ = write!(md, ". {note}");
+        }
+        let _ = writeln!(md);
+    }
+    let _ = writeln!(md);
+
+    for (suite, kind, _, _) in ctx.suites.iter().filter(|s| s.1 != SuiteKind::Empty) {
+        let in_suite: Vec<&ResultRow> = rows.iter().filter(|r| &r.suite == suite).collect();
+        let _ = writeln!(md, "## Suite `{suite}` ({})\n", kind.as_str());
+
+        let _ = writeln!(
+            md,
+            "### Success rate (%) per scenario and method, all robots (Fig. 6)\n"
+        );
+        let _ = write!(md, "| method |");
+        for c in ScenarioClass::ALL {
+            let _ = write!(md, " {} |", c.title());
+        }
+        let _ = writeln!(md, " all |\n|---|---|---|---|---|---|");
+        for m in &ctx.methods {
+            let _ = write!(md, "| {m} |");
+            for c in ScenarioClass::ALL {
+                let s = summarize(
+                    in_suite
+                        .iter()
+                        .copied()
+                        .filter(|r| &r.method == m && r.scenario == c),
+                );
+                let _ = write!(md, " {} |", cell_sr(&s));
+            }
+            let s = summarize(in_suite.iter().copied().filter(|r| &r.method == m));
+            let _ = writeln!(md, " {} |", cell_sr(&s));
+        }
+
+        let _ = writeln!(
+            md,
+            "\n### Success rate (%) per robot, scenario and method\n"
+        );
+        let _ = write!(md, "| robot | method |");
+        for c in ScenarioClass::ALL {
+            let _ = write!(md, " {} |", c.title());
+        }
+        let _ = writeln!(md, "\n|---|---|---|---|---|---|");
+        for robot in &ctx.robot_names {
+            for m in &ctx.methods {
+                let _ = write!(md, "| {robot} | {m} |");
+                for c in ScenarioClass::ALL {
+                    let s = summarize(
+                        in_suite
+                            .iter()
+                            .copied()
+                            .filter(|r| &r.robot == robot && &r.method == m && r.scenario == c),
+                    );
+                    let _ = write!(md, " {} |", cell_sr(&s));
+                }
+                let _ = writeln!(md);
+            }
+        }
+
+        let _ = writeln!(md, "\n### TFS and SR per robot and method (Fig. 7)\n");
+        let _ = writeln!(
+            md,
+            "| robot | method | n | TFS | TFS plan | TFS executed | SR (%) |\n|---|---|---|---|---|---|---|"
+        );
+        for robot in &ctx.robot_names {
+            for m in &ctx.methods {
+                let s = summarize(
+                    in_suite
+                        .iter()
+                        .copied()
+                        .filter(|r| &r.robot == robot && &r.method == m),
+                );
+                let _ = writeln!(
+                    md,
+                    "| {robot} | {m} | {} | {:.3} | {:.3} | {:.3} | {} |",
+                    s.n,
+                    s.tfs,
+                    s.tfs_plan,
+                    s.tfs_executed,
+                    pct(s.sr)
+                );
+            }
+        }
+
+        let _ = writeln!(
+            md,
+            "\n### Other metrics per method, all robots (means over episodes)\n"
+        );
+        let _ = writeln!(
+            md,
+            "| method | n | collision (%) | timeout (%) | path length (m) | time to goal (s) | \
+             min clearance (m) | time < 0.45 m (s) | time < 1.2 m (s) | mean jerk (m/s³) | fallback plans (%) |\n\
+             |---|---|---|---|---|---|---|---|---|---|---|"
+        );
+        for m in &ctx.methods {
+            let s = summarize(in_suite.iter().copied().filter(|r| &r.method == m));
+            let _ = writeln!(
+                md,
+                "| {m} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                s.n,
+                pct(s.collision_rate),
+                pct(s.timeout_rate),
+                f2(s.path_length),
+                opt2(s.time_to_goal),
+                opt2(s.min_clearance),
+                f2(s.time_within_intimate),
+                f2(s.time_within_personal),
+                f2(s.mean_jerk),
+                pct(s.fallback_rate)
+            );
+        }
+        let _ = writeln!(md);
+    }
+
+    for (suite, _, _, _) in ctx.suites.iter().filter(|s| s.1 == SuiteKind::Empty) {
+        let in_suite: Vec<&ResultRow> = rows.iter().filter(|r| &r.suite == suite).collect();
+        let _ = writeln!(md, "## Empty-world sanity suite `{suite}`\n");
+        let _ = writeln!(
+            md,
+            "Every working method must reach SR = 100 % on every robot.\n"
+        );
+        let _ = write!(md, "| method |");
+        for robot in &ctx.robot_names {
+            let _ = write!(md, " {robot} |");
+        }
+        let _ = write!(md, " verdict |\n|---|");
+        for _ in &ctx.robot_names {
+            let _ = write!(md, "---|");
+        }
+        let _ = writeln!(md, "---|");
+        for m in &ctx.methods {
+            let _ = write!(md, "| {m} |");
+            let mut all_pass = true;
+            for robot in &ctx.robot_names {
+                let s = summarize(
+                    in_suite
+                        .iter()
+                        .copied()
+                        .filter(|r| &r.robot == robot && &r.method == m),
+                );
+                all_pass &= s.n > 0 && s.sr == 1.0;
+                let _ = write!(md, " {} |", cell_sr(&s));
+            }
+            let _ = writeln!(md, " {} |", if all_pass { "pass" } else { "FAIL" });
+        }
+        let _ = writeln!(md);
+    }
+
+    if !ctx.figures.is_empty() {
+        let _ = writeln!(md, "## Figures\n");
+        for (file, caption) in &ctx.figures {
+            let _ = writeln!(md, "![{caption}]({file})\n\n*{caption}*\n");
+        }
+    }
+    md
+}
+
+fn cell_sr(s: &Summary) -> String {
+    if s.n == 0 {
+        "–".into()
+    } else {
+        format!("{} ± {} (n={})", pct(s.sr), pct(s.sr_se), s.n)
+    }
+}

@@ -1,0 +1,455 @@
+//! The closed loop: pedestrians replayed, a planner called at a fixed rate, the plan followed by
+//! the embodiment's tracking controller, commands saturated, the kinematic model stepped.
+//!
+//! Per simulation step `n` (time `t_n = n·dt`, default `dt` = 0.05 s):
+//! 1. the pedestrians are sampled at `t_n` ([`crate::replay`]); the clearance to each is
+//!    `‖p_robot − p_ped‖ − r_footprint − r_ped` (robot footprint disc against pedestrian disc);
+//! 2. a negative clearance is a **collision** (the episode ends); a robot within
+//!    `goal_tolerance` of the goal is a **success**; reaching the time budget is a **timeout**;
+//! 3. every `replan_every = round(1 / (replan_hz·dt))` steps (default 10 Hz, every 2nd step)
+//!    the planner receives an [`Observation`] (pedestrians within `sensor_range`, with history)
+//!    and returns a plan; a planner error, panic or non-finite plan is recorded and replaced by
+//!    [`Plan::stop_in_place`];
+//! 4. the tracking controller turns the current plan into a command at `t_n` (recorded before
+//!    saturation: the TFS of execution is measured on what the planner asked for), the command
+//!    is saturated to the robot's limits and the kinematic model advances by `dt`.
+//!
+//! Start, goal and budget: the robot starts at rest at the episode's start position, facing
+//! its goal (default; the recorded heading belongs to a pedestrian, not to a robot, and an
+//! Ackermann robot cannot turn in place). The budget is
+//! `max(episode.time_budget, budget_factor·t_empty + budget_margin)` where `t_empty` is the
+//! minimum time the robot needs in an empty scene (rest-to-cruise at `a_max`, then `v_max`, over
+//! the start-goal distance minus the tolerance, plus turning toward the goal when the start
+//! heading is the episode's), so every robot can reach the goal of every episode in an empty
+//! world within its budget.
+
+use crate::episode::Episode;
+use crate::error::SimError;
+use crate::replay::CrowdReplay;
+use human2nav_core::embodiment::{Embodiment, RobotState};
+use human2nav_core::{
+    ControllerGains, Limits, Observation, Plan, PlanError, Planner, Pose2, Twist2,
+};
+use serde::{Deserialize, Serialize};
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::Arc;
+
+/// How the robot's initial heading is chosen.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StartHeading {
+    /// Facing the goal (default).
+    #[default]
+    FaceGoal,
+    /// The episode's recorded start heading.
+    Episode,
+}
+
+/// Settings of the closed loop. All times in seconds, distances in metres.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SimConfig {
+    /// Simulation step. Default 0.05.
+    pub dt: f64,
+    /// Replanning rate (Hz); `1 / (replan_hz·dt)` must be a whole number. Default 10.
+    pub replan_hz: f64,
+    /// Success radius around the goal. Default 0.3.
+    pub goal_tolerance: f64,
+    /// Pedestrians beyond this centre distance are not observed. Default 10.
+    pub sensor_range: f64,
+    /// Recorded positions per observed pedestrian (at the episode's step). Default 8.
+    pub history_len: usize,
+    /// Budget rule factor (see the module docs). Default 1.5.
+    pub budget_factor: f64,
+    /// Budget rule margin (s). Default 3.
+    pub budget_margin: f64,
+    /// Initial heading. Default `face_goal`.
+    pub start_heading: StartHeading,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self {
+            dt: 0.05,
+            replan_hz: 10.0,
+            goal_tolerance: 0.3,
+            sensor_range: 10.0,
+            history_len: 8,
+            budget_factor: 1.5,
+            budget_margin: 3.0,
+            start_heading: StartHeading::FaceGoal,
+        }
+    }
+}
+
+impl SimConfig {
+    /// Checks ranges and that the replanning period is a whole number of steps.
+    pub fn validate(&self) -> Result<(), SimError> {
+        let bad = |field: &str, message: String| Err(SimError::setting("sim", field, message));
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        if !positive(self.dt) {
+            return bad("dt", format!("must be finite and > 0, got {}", self.dt));
+        }
+        if !positive(self.replan_hz) {
+            return bad(
+                "replan_hz",
+                format!("must be finite and > 0, got {}", self.replan_hz),
+            );
+        }
+        let ratio = 1.0 / (self.replan_hz * self.dt);
+        if ratio < 1.0 - 1e-9 || (ratio - ratio.round()).abs() > 1e-6 {
+            return bad(
+                "replan_hz",
+                format!(
+                    "the period 1/{} s must be a whole number (≥ 1) of steps of {} s",
+                    self.replan_hz, self.dt
+                ),
+            );
+        }
+        if !positive(self.goal_tolerance) {
+            return bad(
+                "goal_tolerance",
+                format!("must be finite and > 0, got {}", self.goal_tolerance),
+            );
+        }
+        if !positive(self.sensor_range) {
+            return bad(
+                "sensor_range",
+                format!("must be finite and > 0, got {}", self.sensor_range),
+            );
+        }
+        if !(self.budget_factor.is_finite() && self.budget_factor >= 1.0) {
+            return bad(
+                "budget_factor",
+                format!("must be finite and ≥ 1, got {}", self.budget_factor),
+            );
+        }
+        if !(self.budget_margin.is_finite() && self.budget_margin >= 0.0) {
+            return bad(
+                "budget_margin",
+                format!("must be finite and ≥ 0, got {}", self.budget_margin),
+            );
+        }
+        Ok(())
+    }
+
+    /// Simulation steps between two planner calls.
+    pub fn replan_every(&self) -> usize {
+        (1.0 / (self.replan_hz * self.dt)).round().max(1.0) as usize
+    }
+
+    /// The robot's initial pose for `episode`.
+    pub fn start_pose(&self, episode: &Episode) -> Pose2 {
+        match self.start_heading {
+            StartHeading::Episode => episode.start,
+            StartHeading::FaceGoal => {
+                let (dx, dy) = (
+                    episode.goal[0] - episode.start.x,
+                    episode.goal[1] - episode.start.y,
+                );
+                let theta = if dx.hypot(dy) > 0.0 {
+                    dy.atan2(dx)
+                } else {
+                    episode.start.theta
+                };
+                Pose2::new(episode.start.x, episode.start.y, theta)
+            }
+        }
+    }
+
+    /// Minimum time the robot needs to reach the goal tolerance of `episode` in an empty scene:
+    /// turning toward the goal (in place at `ω_max`, or along a minimum-radius arc at
+    /// `min(ω_max, κ_max·v_max)` plus the `π·r_min / v_max` detour of a three-point turn when it
+    /// cannot turn in place), then accelerating from rest at `a_max` to `v_max` over the
+    /// remaining distance.
+    pub fn empty_world_time(&self, episode: &Episode, limits: &Limits) -> f64 {
+        let start = self.start_pose(episode);
+        let (dx, dy) = (episode.goal[0] - start.x, episode.goal[1] - start.y);
+        let dist = (dx.hypot(dy) - self.goal_tolerance).max(0.0);
+        let heading_error = human2nav_core::se2::wrap_angle(dy.atan2(dx) - start.theta).abs();
+        let turn = if heading_error < 1e-9 {
+            0.0
+        } else {
+            match limits.kappa_max {
+                None => heading_error / limits.omega_max,
+                Some(k) => {
+                    let rate = limits.omega_max.min(k * limits.v_max);
+                    heading_error / rate + std::f64::consts::PI / (k * limits.v_max)
+                }
+            }
+        };
+        let (v, a) = (limits.v_max, limits.a_max);
+        let ramp = v * v / (2.0 * a);
+        let drive = if dist >= ramp {
+            dist / v + v / (2.0 * a)
+        } else {
+            (2.0 * dist / a).sqrt()
+        };
+        turn + drive
+    }
+
+    /// The budget of `episode` for a robot with `limits` (see the module docs).
+    pub fn budget_for(&self, episode: &Episode, limits: &Limits) -> f64 {
+        let rule = self.budget_factor * self.empty_world_time(episode, limits) + self.budget_margin;
+        if episode.time_budget.is_finite() {
+            episode.time_budget.max(rule)
+        } else {
+            rule
+        }
+    }
+}
+
+/// A robot as the simulator needs it: its name, footprint, limits and embodiment.
+#[derive(Clone)]
+pub struct RobotSetup {
+    pub name: String,
+    /// Radius of the footprint disc used for collisions (m).
+    pub footprint_radius: f64,
+    pub limits: Limits,
+    /// Gains of the tracking controller (passed on to plugin planners and embodiments).
+    pub gains: ControllerGains,
+    pub embodiment: Arc<dyn Embodiment>,
+}
+
+impl RobotSetup {
+    /// Loads a robot with a built-in embodiment from its profile (`robot.toml` + URDF).
+    /// Plugin embodiments are built by the plugin host and passed in directly instead.
+    pub fn load(path: &std::path::Path) -> Result<RobotSetup, SimError> {
+        let profile =
+            human2nav_core::robot::RobotProfile::load(path).map_err(|e| SimError::Robot {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })?;
+        let embodiment = profile
+            .builtin_embodiment()
+            .ok_or_else(|| SimError::Robot {
+                path: path.to_path_buf(),
+                message: "the embodiment is a plugin; load it through the plugin host".into(),
+            })?;
+        Ok(RobotSetup {
+            name: profile.name.clone(),
+            footprint_radius: profile.footprint_radius,
+            limits: profile.limits,
+            gains: profile.controller,
+            embodiment: Arc::from(embodiment),
+        })
+    }
+}
+
+impl std::fmt::Debug for RobotSetup {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RobotSetup")
+            .field("name", &self.name)
+            .field("footprint_radius", &self.footprint_radius)
+            .field("limits", &self.limits)
+            .field("embodiment", &self.embodiment.name())
+            .finish()
+    }
+}
+
+/// How an episode ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Outcome {
+    Success,
+    Collision,
+    Timeout,
+}
+
+impl Outcome {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Outcome::Success => "success",
+            Outcome::Collision => "collision",
+            Outcome::Timeout => "timeout",
+        }
+    }
+}
+
+/// One plan the planner returned, with the robot velocity it started from.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlanSample {
+    pub t0: f64,
+    pub dt: f64,
+    pub poses: Vec<Pose2>,
+    /// The robot's body velocity when the plan was requested.
+    pub initial_velocity: Twist2,
+    /// True when the plan is the simulator's or the planner's stop-in-place fallback.
+    pub fallback: bool,
+}
+
+/// Everything recorded while running one episode.
+#[derive(Clone, Debug)]
+pub struct EpisodeRun {
+    pub outcome: Outcome,
+    /// Time at which the episode ended (s).
+    pub end_time: f64,
+    /// The budget that applied (s).
+    pub budget: f64,
+    /// Simulation step (s).
+    pub dt: f64,
+    /// Robot states at `t_n = n·dt`, `n = 0 … N` (the last at `end_time`).
+    pub states: Vec<RobotState>,
+    /// Tracking-controller commands before saturation, one per step (`N` values).
+    pub raw_commands: Vec<Twist2>,
+    /// Saturated (executed) commands, one per step.
+    pub commands: Vec<Twist2>,
+    /// Smallest clearance to any pedestrian at each `t_n` (`+∞` with nobody present),
+    /// `N + 1` values.
+    pub clearance: Vec<f64>,
+    /// Every plan, in order.
+    pub plans: Vec<PlanSample>,
+    /// Planner failures (errors, panics, non-finite plans), in order, as messages.
+    pub planner_errors: Vec<String>,
+    /// Pedestrian id of the collision, when there was one.
+    pub collided_with: Option<u64>,
+}
+
+/// Runs one episode closed loop.
+pub fn run_episode(
+    episode: &Episode,
+    robot: &RobotSetup,
+    planner: &mut dyn Planner,
+    cfg: &SimConfig,
+) -> EpisodeRun {
+    let replay = CrowdReplay::new(episode);
+    let dt = cfg.dt;
+    let budget = cfg.budget_for(episode, &robot.limits);
+    let max_steps = (budget / dt - 1e-9).ceil().max(0.0) as usize;
+    let replan_every = cfg.replan_every();
+    let emb = robot.embodiment.as_ref();
+
+    let mut state = RobotState {
+        pose: cfg.start_pose(episode),
+        velocity: Twist2::ZERO,
+    };
+    let mut run = EpisodeRun {
+        outcome: Outcome::Timeout,
+        end_time: 0.0,
+        budget,
+        dt,
+        states: vec![state],
+        raw_commands: Vec::with_capacity(max_steps),
+        commands: Vec::with_capacity(max_steps),
+        clearance: Vec::with_capacity(max_steps + 1),
+        plans: Vec::new(),
+        planner_errors: Vec::new(),
+        collided_with: None,
+    };
+    planner.reset();
+    let mut plan: Option<Plan> = None;
+
+    for n in 0..=max_steps {
+        let t = n as f64 * dt;
+        run.end_time = t;
+        // 1-2: clearance, collision, goal, budget.
+        let (clearance, nearest) =
+            nearest_clearance(&replay, t, state.pose, robot.footprint_radius);
+        run.clearance.push(clearance);
+        if clearance < 0.0 {
+            run.outcome = Outcome::Collision;
+            run.collided_with = nearest;
+            break;
+        }
+        let to_goal = (episode.goal[0] - state.pose.x).hypot(episode.goal[1] - state.pose.y);
+        if to_goal <= cfg.goal_tolerance {
+            run.outcome = Outcome::Success;
+            break;
+        }
+        if n == max_steps {
+            run.outcome = Outcome::Timeout;
+            break;
+        }
+        // 3: replanning.
+        if n % replan_every == 0 || plan.is_none() {
+            let obs = Observation {
+                time: t,
+                ego: state.pose,
+                ego_velocity: state.velocity,
+                goal: episode.goal,
+                agents: replay.observe(
+                    t,
+                    [state.pose.x, state.pose.y],
+                    cfg.sensor_range,
+                    cfg.history_len,
+                ),
+            };
+            let horizon = plan.as_ref().map_or(32, |p| p.poses.len());
+            let result = catch_unwind(AssertUnwindSafe(|| planner.plan(&obs)));
+            let new_plan = match result {
+                Ok(Ok(p)) if p.is_finite() && !p.poses.is_empty() && p.dt > 0.0 => p,
+                Ok(Ok(_)) => fallback(
+                    &obs,
+                    horizon,
+                    &mut run,
+                    "planner returned an empty or non-finite plan".into(),
+                ),
+                Ok(Err(e)) => fallback(&obs, horizon, &mut run, plan_error_message(&e)),
+                Err(panic) => fallback(
+                    &obs,
+                    horizon,
+                    &mut run,
+                    format!("planner panicked: {}", panic_message(&panic)),
+                ),
+            };
+            run.plans.push(PlanSample {
+                t0: new_plan.t0,
+                dt: new_plan.dt,
+                poses: new_plan.poses.clone(),
+                initial_velocity: state.velocity,
+                fallback: new_plan.info.fallback,
+            });
+            plan = Some(new_plan);
+        }
+        // 4: track, saturate, step.
+        let Some(current) = plan.as_ref() else { break };
+        let raw = emb.track(&state, current, t);
+        let cmd = emb.saturate(&state, raw, dt);
+        state = emb.step(&state, cmd, dt);
+        run.raw_commands.push(raw);
+        run.commands.push(cmd);
+        run.states.push(state);
+    }
+    run
+}
+
+fn fallback(obs: &Observation, horizon: usize, run: &mut EpisodeRun, why: String) -> Plan {
+    run.planner_errors.push(why.clone());
+    Plan::stop_in_place(obs, human2nav_core::trajectory::DEFAULT_DT, horizon, why)
+}
+
+fn plan_error_message(e: &PlanError) -> String {
+    e.to_string()
+}
+
+fn panic_message(p: &Box<dyn std::any::Any + Send>) -> String {
+    if let Some(s) = p.downcast_ref::<&str>() {
+        (*s).to_string()
+    } else if let Some(s) = p.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "unknown panic payload".to_string()
+    }
+}
+
+/// The smallest clearance between the robot's footprint disc at `pose` and any pedestrian
+/// present at `t` (`+∞` when nobody is), and that pedestrian's id.
+pub fn nearest_clearance(
+    replay: &CrowdReplay<'_>,
+    t: f64,
+    pose: Pose2,
+    footprint_radius: f64,
+) -> (f64, Option<u64>) {
+    let mut best = (f64::INFINITY, None);
+    for tr in &replay.episode().agents {
+        if let Some(s) = replay.sample(tr, t) {
+            let c = (s.position[0] - pose.x).hypot(s.position[1] - pose.y)
+                - footprint_radius
+                - s.radius;
+            if c < best.0 {
+                best = (c, Some(s.id));
+            }
+        }
+    }
+    best
+}

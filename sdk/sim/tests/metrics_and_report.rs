@@ -1,0 +1,260 @@
+//! Metrics closed forms, the deterministic parallel runner, CSV, report and figures.
+
+mod common;
+
+use approx::assert_relative_eq;
+use common::{episode, robot, robots, standing, walking};
+use human2nav_core::embodiment::RobotState;
+use human2nav_core::{Pose2, Twist2};
+use human2nav_sim::bench::{MethodSpec, Suite, SuiteKind, episode_seed, run_bench};
+use human2nav_sim::driver::{self, BenchPlan};
+use human2nav_sim::episode::ScenarioClass;
+use human2nav_sim::metrics::{EpisodeMetrics, mean_jerk, tfs_scores};
+use human2nav_sim::report::{CSV_HEADER, results_csv};
+use human2nav_sim::runner::{EpisodeRun, PlanSample};
+use human2nav_sim::{Outcome, SimConfig};
+use indicatif::ProgressBar;
+
+#[test]
+fn jerk_of_constant_velocity_from_rest() {
+    // p_n = v·n·dt (N positions, N − 2 jerks): the only non-zero jerk is the start, (0 − v/dt)/dt.
+    let (v, dt, n) = (1.2, 0.05, 11);
+    let p: Vec<[f64; 2]> = (0..n).map(|k| [v * dt * k as f64, 0.0]).collect();
+    assert_relative_eq!(
+        mean_jerk(&p, dt),
+        v / (dt * dt) / (n - 2) as f64,
+        epsilon = 1e-9
+    );
+    // Constant acceleration from rest, p = ½·a·t²: v_n = a·dt·(n + ½), a_{−1} = a/2, then a;
+    // the jerks are a/(2·dt) and zeros.
+    let a = 0.8;
+    let p: Vec<[f64; 2]> = (0..n)
+        .map(|k| [0.0, 0.5 * a * (dt * k as f64).powi(2)])
+        .collect();
+    assert_relative_eq!(
+        mean_jerk(&p, dt),
+        a / (2.0 * dt) / (n - 2) as f64,
+        epsilon = 1e-9
+    );
+    assert_eq!(mean_jerk(&p[..1], dt), 0.0);
+}
+
+fn run_with(
+    states: Vec<RobotState>,
+    raw: Vec<Twist2>,
+    clearance: Vec<f64>,
+    plans: Vec<PlanSample>,
+) -> EpisodeRun {
+    EpisodeRun {
+        outcome: Outcome::Success,
+        end_time: 0.05 * raw.len() as f64,
+        budget: 10.0,
+        dt: 0.05,
+        commands: raw.clone(),
+        raw_commands: raw,
+        states,
+        clearance,
+        plans,
+        planner_errors: vec![],
+        collided_with: None,
+    }
+}
+
+#[test]
+fn tfs_pools_plan_waypoints_and_takes_the_minimum() {
+    let r = robot("diablo");
+    let l = r.limits;
+    // Plan A: 4 poses at 1 m/s along x from rest... the first waypoint needs (1 − 0)/0.1 =
+    // 10 m/s² > a_max: 2 of 3 waypoints feasible. Plan B: standing still, 3 of 3 feasible.
+    let a: Vec<Pose2> = (0..4)
+        .map(|k| Pose2::new(0.1 * k as f64, 0.0, 0.0))
+        .collect();
+    let b = vec![Pose2::new(0.0, 0.0, 0.0); 4];
+    let plans = vec![
+        PlanSample {
+            t0: 0.0,
+            dt: 0.1,
+            poses: a,
+            initial_velocity: Twist2::ZERO,
+            fallback: false,
+        },
+        PlanSample {
+            t0: 0.1,
+            dt: 0.1,
+            poses: b,
+            initial_velocity: Twist2::ZERO,
+            fallback: true,
+        },
+    ];
+    // Commands: one beyond v_max out of four, accelerations small.
+    let raw = vec![
+        Twist2::new(0.0, 0.0, 0.0),
+        Twist2::new(0.02, 0.0, 0.0),
+        Twist2::new(0.04, 0.0, 9.0),
+        Twist2::new(0.06, 0.0, 0.0),
+    ];
+    let states = vec![RobotState::default(); 5];
+    let run = run_with(states, raw, vec![f64::INFINITY; 5], plans);
+    let (p, e) = tfs_scores(&run, &l);
+    assert_relative_eq!(p, 5.0 / 6.0, epsilon = 1e-12);
+    assert_relative_eq!(e, 3.0 / 4.0, epsilon = 1e-12);
+    let m = EpisodeMetrics::compute(&run, &l);
+    assert_relative_eq!(m.tfs, 0.75, epsilon = 1e-12);
+    assert_eq!(m.fallbacks, 1);
+    assert_eq!(m.plans, 2);
+    assert!(m.min_clearance.is_none());
+}
+
+#[test]
+fn clearance_times_and_path_length() {
+    let l = robot("go2").limits;
+    let states: Vec<RobotState> = (0..5)
+        .map(|k| RobotState {
+            pose: Pose2::new(0.3 * k as f64, 0.4 * k as f64, 0.0),
+            velocity: Twist2::ZERO,
+        })
+        .collect();
+    // Clearances per instant; the last (terminal) instant is not counted as time.
+    let clearance = vec![2.0, 1.0, 0.3, 0.5, 0.1];
+    let run = run_with(states, vec![Twist2::ZERO; 4], clearance, vec![]);
+    let m = EpisodeMetrics::compute(&run, &l);
+    assert_relative_eq!(m.path_length, 2.0, epsilon = 1e-12);
+    assert_relative_eq!(m.time_within_intimate, 0.05, epsilon = 1e-12);
+    assert_relative_eq!(m.time_within_personal, 0.15, epsilon = 1e-12);
+    assert_relative_eq!(m.min_clearance.unwrap(), 0.1);
+    assert_relative_eq!(m.time_to_goal.unwrap(), 0.2, epsilon = 1e-12);
+}
+
+fn small_suite() -> Suite {
+    let mut episodes = Vec::new();
+    for (i, c) in ScenarioClass::ALL.into_iter().enumerate() {
+        let agents = match c {
+            ScenarioClass::CoFlow => vec![walking(1, [1.0, 0.5], [0.8, 0.0], 100)],
+            ScenarioClass::CrossFlow => vec![walking(1, [2.5, -3.0], [0.0, 1.0], 100)],
+            ScenarioClass::CounterFlow => vec![
+                walking(1, [6.0, 0.0], [-1.0, 0.0], 100),
+                standing(2, [3.0, 2.0], 100),
+            ],
+            ScenarioClass::MultidirectionFlow => {
+                vec![
+                    walking(1, [4.0, 3.0], [0.0, -1.0], 100),
+                    walking(2, [0.0, 3.0], [1.0, -1.0], 100),
+                ]
+            }
+        };
+        episodes.push(episode(&format!("e{i}"), c, 0.0, agents));
+    }
+    Suite {
+        name: "hand".into(),
+        kind: SuiteKind::Synthetic,
+        episodes,
+        note: None,
+    }
+}
+
+fn empty_suite() -> Suite {
+    let mut s = small_suite();
+    for e in &mut s.episodes {
+        e.agents.clear();
+    }
+    Suite {
+        name: "empty".into(),
+        kind: SuiteKind::Empty,
+        episodes: s.episodes,
+        note: None,
+    }
+}
+
+#[test]
+fn bench_is_deterministic_and_ordered() {
+    let suites = [small_suite(), empty_suite()];
+    let robots = robots();
+    let methods = [MethodSpec::straight("straight", &toml::Table::new()).unwrap()];
+    let sim = SimConfig::default();
+    let a = run_bench(&suites, &robots, &methods, &sim, 7, &ProgressBar::hidden()).unwrap();
+    let b = run_bench(&suites, &robots, &methods, &sim, 7, &ProgressBar::hidden()).unwrap();
+    assert_eq!(a, b);
+    assert_eq!(a.len(), 2 * 3 * 4);
+    // Job order: suite, robot, method, episode.
+    assert_eq!(a[0].suite, "hand");
+    assert_eq!(a[0].robot, "diablo");
+    assert_eq!(a[3].scenario, ScenarioClass::MultidirectionFlow);
+    assert_eq!(a[4].robot, "go2");
+    // Empty world: the straight planner always succeeds.
+    assert!(
+        a.iter()
+            .filter(|r| r.suite == "empty")
+            .all(|r| r.metrics.success)
+    );
+    // Seeds depend on suite, episode and robot only.
+    assert_eq!(a[0].seed, episode_seed(7, "hand", "e0", "diablo"));
+    assert_ne!(
+        episode_seed(7, "hand", "e0", "diablo"),
+        episode_seed(7, "hand", "e0", "go2")
+    );
+    assert_ne!(
+        episode_seed(7, "hand", "e0", "diablo"),
+        episode_seed(8, "hand", "e0", "diablo")
+    );
+
+    let csv = results_csv(&a);
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines[0], CSV_HEADER);
+    assert_eq!(lines.len(), a.len() + 1);
+    let columns = CSV_HEADER.split(',').count();
+    assert!(lines.iter().all(|l| l.split(',').count() == columns));
+}
+
+#[test]
+fn driver_writes_csv_report_and_figures() {
+    let suites = [small_suite(), empty_suite()];
+    let robots = [robot("diablo"), robot("ackermann")];
+    let methods = [
+        MethodSpec::straight("straight", &toml::Table::new()).unwrap(),
+        MethodSpec::straight("slow", &toml::toml! { speed = 0.5 }).unwrap(),
+    ];
+    let sim = SimConfig::default();
+    let plan = BenchPlan {
+        suites: &suites,
+        robots: &robots,
+        methods: &methods,
+        sim: &sim,
+        seed: 3,
+        quick: true,
+        snapshot_method: Some("slow"),
+        command: "test".into(),
+    };
+    let out = std::env::temp_dir().join(format!("h2n-sim-driver-{}", std::process::id()));
+    let res = driver::run(&plan, &out, &ProgressBar::hidden()).unwrap();
+    assert_eq!(res.rows.len(), 2 * 2 * 2 * 4);
+    assert!(
+        res.empty_world_failures.is_empty(),
+        "{:?}",
+        res.empty_world_failures
+    );
+    let report = std::fs::read_to_string(&res.report_md).unwrap();
+    for needle in [
+        "Fig. 6",
+        "Fig. 7",
+        "Empty-world sanity",
+        "| straight | 100.0",
+        "pass",
+    ] {
+        assert!(
+            report.contains(needle),
+            "report lacks `{needle}`:\n{report}"
+        );
+    }
+    assert_eq!(res.figures.len(), 3);
+    for f in &res.figures {
+        let bytes = std::fs::read(f).unwrap();
+        assert!(
+            bytes.len() > 1000 && bytes.starts_with(b"\x89PNG"),
+            "{} is not a PNG",
+            f.display()
+        );
+    }
+    let csv = std::fs::read_to_string(&res.results_csv).unwrap();
+    assert_eq!(csv.lines().count(), res.rows.len() + 1);
+    std::fs::remove_dir_all(&out).unwrap();
+}

@@ -740,3 +740,307 @@ where
         )
     }
 }
+
+#[cfg(test)]
+mod tests {
+    //! The shims called directly with the pointers a faulty host could pass: every bad pointer
+    //! or length must come back as a status and a message, never as undefined behaviour.
+
+    use super::*;
+    use human2nav_core::constraint::{ConstraintContext, ConstraintError, TrajBatch};
+
+    /// Cost `Σ x` per trajectory, gradient 1 on every `x`.
+    struct SumX;
+
+    impl ConstraintTerm for SumX {
+        fn name(&self) -> &str {
+            "sum_x"
+        }
+
+        fn evaluate(
+            &self,
+            batch: TrajBatch<'_>,
+            _ctx: &ConstraintContext<'_>,
+            cost: &mut [f64],
+            grad: &mut [f64],
+        ) -> Result<(), ConstraintError> {
+            for b in 0..batch.batch {
+                for (k, p) in batch.trajectory(b).chunks_exact(3).enumerate() {
+                    cost[b] += p[0];
+                    grad[(b * batch.horizon + k) * 3] += 1.0;
+                }
+            }
+            Ok(())
+        }
+    }
+
+    #[derive(serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct SumXConfig {
+        #[serde(default)]
+        panic: bool,
+    }
+
+    fn ctor(init: &PluginInit<'_>) -> Result<SumX, InitError> {
+        let c: SumXConfig = init.config()?;
+        if c.panic {
+            panic!("constructor panicked on request");
+        }
+        Ok(SumX)
+    }
+
+    fn args(config: &str) -> H2nCreateArgs {
+        H2nCreateArgs {
+            struct_size: std::mem::size_of::<H2nCreateArgs>() as u32,
+            kind: H2N_KIND_CONSTRAINT,
+            config: H2nStr::new(config),
+            has_robot: 0,
+            reserved: 0,
+            limits: H2nLimits::default(),
+            gains: H2nGains::default(),
+            footprint_radius: 0.0,
+        }
+    }
+
+    fn create(args: *const H2nCreateArgs) -> (H2nStatus, H2nObject, String) {
+        let mut out = H2nObject {
+            instance: std::ptr::null_mut(),
+            vtable: std::ptr::null(),
+        };
+        let mut buf = [0u8; 256];
+        let mut err = H2nBuffer {
+            data: buf.as_mut_ptr(),
+            capacity: buf.len(),
+            len: 0,
+        };
+        // SAFETY: valid (or deliberately null) pointers for the duration of the call.
+        let status = unsafe { create_constraint(args, &mut out, &mut err, ctor) };
+        let msg = String::from_utf8_lossy(&buf[..err.len.min(buf.len())]).into_owned();
+        (status, out, msg)
+    }
+
+    fn vtable(obj: &H2nObject) -> &'static H2nConstraintVTable {
+        // SAFETY: `create_constraint` returns a constraint vtable in static memory.
+        unsafe { &*obj.vtable.cast::<H2nConstraintVTable>() }
+    }
+
+    fn last_error_of(obj: &H2nObject) -> String {
+        let mut buf = [0u8; 256];
+        let mut out = H2nBuffer {
+            data: buf.as_mut_ptr(),
+            capacity: buf.len(),
+            len: 0,
+        };
+        // SAFETY: live instance, host-owned buffer.
+        unsafe { (vtable(obj).last_error)(obj.instance, &mut out) };
+        String::from_utf8_lossy(&buf[..out.len.min(buf.len())]).into_owned()
+    }
+
+    fn context() -> H2nConstraintContext {
+        H2nConstraintContext {
+            struct_size: std::mem::size_of::<H2nConstraintContext>() as u32,
+            reserved: 0,
+            dt: 0.1,
+            limits: H2nLimits::default(),
+            initial_velocity: H2nTwist::default(),
+            agents: std::ptr::null(),
+            agent_count: 0,
+        }
+    }
+
+    #[test]
+    fn create_checks_its_arguments() {
+        let (status, _, msg) = create(std::ptr::null());
+        assert_eq!(status, H2N_INVALID_ARGUMENT);
+        assert!(msg.contains("null"), "{msg}");
+        let mut small = args("");
+        small.struct_size = 8;
+        assert_eq!(create(&small).0, H2N_INVALID_ARGUMENT);
+        let mut wrong_kind = args("");
+        wrong_kind.kind = H2N_KIND_PLANNER;
+        assert_eq!(create(&wrong_kind).0, H2N_INVALID_ARGUMENT);
+        let bad_utf8 = [0xff_u8, 0xfe];
+        let mut not_text = args("");
+        not_text.config = H2nStr {
+            ptr: bad_utf8.as_ptr(),
+            len: 2,
+        };
+        assert_eq!(create(&not_text).0, H2N_INVALID_ARGUMENT);
+        let (status, _, msg) = create(&args("speed = 1"));
+        assert_eq!(status, H2N_CONFIG);
+        assert!(msg.contains("speed"), "{msg}");
+        let (status, _, msg) = create(&args("panic = true"));
+        assert_eq!(status, H2N_PANIC);
+        assert!(msg.contains("constructor panicked on request"), "{msg}");
+    }
+
+    #[test]
+    fn error_messages_are_truncated_to_the_host_buffer_with_the_full_length_reported() {
+        let mut out = H2nObject {
+            instance: std::ptr::null_mut(),
+            vtable: std::ptr::null(),
+        };
+        let mut buf = [0u8; 5];
+        let mut err = H2nBuffer {
+            data: buf.as_mut_ptr(),
+            capacity: buf.len(),
+            len: 0,
+        };
+        let a = args("speed = 1");
+        // SAFETY: valid pointers for the call.
+        let status = unsafe { create_constraint(&a, &mut out, &mut err, ctor) };
+        assert_eq!(status, H2N_CONFIG);
+        assert!(err.len > 5);
+        assert_eq!(&buf, b"confi");
+        // A null buffer is simply not written.
+        // SAFETY: as above, with a null error buffer (allowed).
+        let status = unsafe { create_constraint(&a, &mut out, std::ptr::null_mut(), ctor) };
+        assert_eq!(status, H2N_CONFIG);
+    }
+
+    #[test]
+    fn evaluate_checks_pointers_and_lengths() {
+        let (status, obj, _) = create(&args(""));
+        assert_eq!(status, H2N_OK);
+        let vt = vtable(&obj);
+        // SAFETY: live instance; the returned view lives as long as it.
+        assert_eq!(unsafe { (vt.name)(obj.instance).as_str() }, Ok("sum_x"));
+        let data = [1.0, 0.0, 0.0, 2.0, 0.0, 0.0];
+        let good = H2nTrajBatch {
+            data: data.as_ptr(),
+            len: 6,
+            batch: 1,
+            horizon: 2,
+            dim: 3,
+        };
+        let ctx = context();
+        let mut cost = [0.0];
+        let mut grad = [0.0; 6];
+        let eval = |batch: *const H2nTrajBatch,
+                    ctx: *const H2nConstraintContext,
+                    cost: &mut [f64],
+                    cost_len: usize,
+                    grad: &mut [f64]| {
+            let c = H2nF64Out {
+                data: cost.as_mut_ptr(),
+                len: cost_len,
+            };
+            let g = H2nF64Out {
+                data: grad.as_mut_ptr(),
+                len: grad.len(),
+            };
+            // SAFETY: live instance; pointers valid or deliberately null.
+            unsafe { (vt.evaluate)(obj.instance, batch, ctx, c, g) }
+        };
+        assert_eq!(eval(&good, &ctx, &mut cost, 1, &mut grad), H2N_OK);
+        assert_eq!((cost, grad), ([3.0], [1.0, 0.0, 0.0, 1.0, 0.0, 0.0]));
+
+        assert_eq!(
+            eval(std::ptr::null(), &ctx, &mut cost, 1, &mut grad),
+            H2N_INVALID_ARGUMENT
+        );
+        assert!(last_error_of(&obj).contains("batch is null"));
+        assert_eq!(
+            eval(&good, std::ptr::null(), &mut cost, 1, &mut grad),
+            H2N_INVALID_ARGUMENT
+        );
+        let two_d = H2nTrajBatch { dim: 2, ..good };
+        assert_eq!(
+            eval(&two_d, &ctx, &mut cost, 1, &mut grad),
+            H2N_INVALID_ARGUMENT
+        );
+        let short = H2nTrajBatch { len: 5, ..good };
+        assert_eq!(
+            eval(&short, &ctx, &mut cost, 1, &mut grad),
+            H2N_INVALID_ARGUMENT
+        );
+        let overflow = H2nTrajBatch {
+            batch: usize::MAX,
+            horizon: 2,
+            ..good
+        };
+        assert_eq!(
+            eval(&overflow, &ctx, &mut cost, 1, &mut grad),
+            H2N_INVALID_ARGUMENT
+        );
+        let null_data = H2nTrajBatch {
+            data: std::ptr::null(),
+            ..good
+        };
+        assert_eq!(
+            eval(&null_data, &ctx, &mut cost, 1, &mut grad),
+            H2N_INVALID_ARGUMENT
+        );
+        assert!(
+            last_error_of(&obj).contains("batch data is null"),
+            "{}",
+            last_error_of(&obj)
+        );
+        let mut cost2 = [0.0; 2];
+        assert_eq!(
+            eval(&good, &ctx, &mut cost2, 2, &mut grad),
+            H2N_INVALID_ARGUMENT
+        );
+        let old_ctx = H2nConstraintContext {
+            struct_size: 16,
+            ..context()
+        };
+        assert_eq!(
+            eval(&good, &old_ctx, &mut cost, 1, &mut grad),
+            H2N_INVALID_ARGUMENT
+        );
+        let null_agents = H2nConstraintContext {
+            agent_count: 3,
+            ..context()
+        };
+        assert_eq!(
+            eval(&good, &null_agents, &mut cost, 1, &mut grad),
+            H2N_INVALID_ARGUMENT
+        );
+        // None of these poisoned the instance.
+        assert_eq!(eval(&good, &ctx, &mut cost, 1, &mut grad), H2N_OK);
+        // A null instance is refused too.
+        let c = H2nF64Out {
+            data: cost.as_mut_ptr(),
+            len: 1,
+        };
+        let g = H2nF64Out {
+            data: grad.as_mut_ptr(),
+            len: 6,
+        };
+        // SAFETY: a null instance is part of what the shim must survive.
+        let status = unsafe { (vt.evaluate)(std::ptr::null_mut(), &good, &ctx, c, g) };
+        assert_eq!(status, H2N_INVALID_ARGUMENT);
+        // SAFETY: destroyed exactly once; null is a no-op.
+        unsafe {
+            (vt.destroy)(obj.instance);
+            (vt.destroy)(std::ptr::null_mut());
+        }
+    }
+
+    #[test]
+    fn agents_cross_with_their_histories() {
+        let history = [[1.0, 2.0], [3.0, 4.0]];
+        let agent = H2nAgent {
+            id: 5,
+            position: [0.5, 0.25],
+            velocity: [0.0, 1.0],
+            radius: 0.3,
+            history: history.as_ptr().cast(),
+            history_len: 2,
+        };
+        // SAFETY: one valid agent with two history points.
+        let agents = unsafe { agents_from_abi(&agent, 1) }
+            .ok()
+            .unwrap_or_default();
+        assert_eq!(agents.len(), 1);
+        assert_eq!(agents[0].history, vec![[1.0, 2.0], [3.0, 4.0]]);
+        assert_eq!((agents[0].id, agents[0].radius), (5, 0.3));
+        let broken = H2nAgent {
+            history: std::ptr::null(),
+            ..agent
+        };
+        // SAFETY: the null history with a non-zero length must be refused, not read.
+        assert!(unsafe { agents_from_abi(&broken, 1) }.is_err());
+    }
+}

@@ -6,7 +6,9 @@
 //! velocity, 32 future SE(2) poses) in a versioned binary [`cache`] split by scene, and
 //! [`scenario`] mining of benchmark [`Episode`]s from held-out scenes. [`association`] builds
 //! tracks from identity-free detections with the Hungarian algorithm, [`homography`] maps image
-//! to world (Eq. 1), [`synthetic`] generates crowds of the four flow classes.
+//! to world (Eq. 1), [`synthetic`] generates crowds of the four flow classes. [`config`] is the
+//! `data.toml` schema, [`pipeline`] the parallel, thread-count-independent jobs behind
+//! `human2nav data build | episodes | associate`, and [`paths`] locates datasets and outputs.
 
 pub mod association;
 pub mod cache;

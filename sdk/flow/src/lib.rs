@@ -10,6 +10,8 @@
 //!   resumable training state.
 //! * [`eval`]: best-of-K ADE/FDE, the constant-velocity baseline and the proximity rate.
 //! * [`card`]: the TOML model card shipped with the weights.
+//! * [`planner`]: the reference planner with this model, built from a robot profile and a model
+//!   folder; guided-vs-unguided comparison and planning latency.
 //!
 //! Source distribution: the model works in normalised coordinates (translations divided by
 //! `s`, see [`config::Normalisation`]) where `ξ0 ~ N(0, I)` as in the paper; in metric units
@@ -25,6 +27,7 @@ pub mod eval;
 pub mod model;
 pub mod net;
 pub mod perf;
+pub mod planner;
 pub mod plot;
 pub mod sampler;
 pub mod train;

@@ -12,6 +12,7 @@
 //! * [`bench`]: methods as planner factories, suites, the parallel deterministic runner.
 //! * [`config`]: the benchmark TOML and suite building.
 //! * [`report`], [`figures`]: `results.csv`, `report.md` and the PNGs.
+//! * [`plan_figure`]: one planning step from an episode, drawn like the paper's Fig. 4.
 
 pub mod bench;
 pub mod config;
@@ -20,6 +21,7 @@ pub mod episode;
 pub mod error;
 pub mod figures;
 pub mod metrics;
+pub mod plan_figure;
 pub mod replay;
 pub mod report;
 pub mod runner;

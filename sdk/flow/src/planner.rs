@@ -1,0 +1,769 @@
+//! The reference planner with the trained flow model: a [`Human2Nav<CfmModel>`] built from a
+//! robot profile (`robot.toml` + URDF + plugin constraint terms) and a model folder
+//! (`model.toml` card + weights), plus the two measurements the issue asks of it:
+//!
+//! * [`compare_guidance`] / [`GuidanceSummary`]: the same planning step with and without
+//!   feasibility guidance (TFS of both plans, how far guidance moved the plan, Φ before/after);
+//! * [`measure_latency`] / [`LatencyStats`]: p50/p95 wall time of one planning call, and
+//!   [`TimedModel`], which splits that time into flow-network calls and everything else.
+//!
+//! # Configuration
+//! [`PlannerConfig`] is the TOML of `sdk/configs/planner.toml`: the model folder, the number of
+//! libtorch threads and the [`Human2NavSettings`] table (`[human2nav]`, with
+//! `[human2nav.guidance]` and `[human2nav.selection]`). Unknown keys are rejected.
+//!
+//! # The BEV raster
+//! The planner must rasterise the crowd exactly as the training tuples were rasterised
+//! ([`bev_spec`]): the number of cells is the network's input size (`net.bev_cells` of the
+//! card) and the cell size comes from the card's training record.
+
+use crate::card::ModelCard;
+use crate::error::CfmError;
+use crate::model::CfmModel;
+use human2nav_core::bev::BevSpec;
+use human2nav_core::constraint::Phi;
+use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
+use human2nav_core::human2nav::{Human2Nav, Human2NavSettings, RobotModel};
+use human2nav_core::robot::RobotProfile;
+use human2nav_core::tfs;
+use human2nav_core::{Limits, Observation, Plan, PlanError, Planner, Pose2};
+use human2nav_plugin::PluginHost;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+use tch::Device;
+
+/// The shipped model's folder, relative to the workspace root.
+pub const DEFAULT_MODEL_DIR: &str = "models/human2nav-cfm";
+
+/// Why a planner could not be built or measured.
+#[derive(Debug, thiserror::Error)]
+pub enum PlannerError {
+    /// A planner configuration file could not be read or parsed.
+    #[error("{path}: {message}")]
+    Config { path: PathBuf, message: String },
+    /// A configuration value is out of range; `field` is its TOML path.
+    #[error("invalid planner setting `{field}`: {message}")]
+    Setting { field: String, message: String },
+    /// The robot profile could not be loaded.
+    #[error("robot profile {path}: {message}")]
+    Profile { path: PathBuf, message: String },
+    /// A plugin constraint term of the profile could not be instantiated.
+    #[error("robot profile {path}: plugin constraint: {message}")]
+    Plugin { path: PathBuf, message: String },
+    /// The model folder could not be loaded.
+    #[error("model {path}: {source}")]
+    Model {
+        path: PathBuf,
+        #[source]
+        source: CfmError,
+    },
+    /// The planner rejected its settings or an observation.
+    #[error(transparent)]
+    Plan(#[from] PlanError),
+}
+
+/// Contents of `sdk/configs/planner.toml` (every key optional).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PlannerConfig {
+    /// Model folder (`model.toml` + weights); relative paths are resolved against the workspace
+    /// root. Default [`DEFAULT_MODEL_DIR`].
+    pub model: PathBuf,
+    /// libtorch intra-op threads for planning. Default 1 (one core per robot; the latency
+    /// targets are stated for one thread).
+    pub threads: usize,
+    /// The planner's settings (sampling, guidance, selection).
+    pub human2nav: Human2NavSettings,
+}
+
+impl Default for PlannerConfig {
+    fn default() -> Self {
+        Self {
+            model: PathBuf::from(DEFAULT_MODEL_DIR),
+            threads: 1,
+            human2nav: Human2NavSettings::default(),
+        }
+    }
+}
+
+impl PlannerConfig {
+    /// Checks every field; the error names the first offending one.
+    pub fn validate(&self) -> Result<(), PlannerError> {
+        if self.threads == 0 {
+            return Err(PlannerError::Setting {
+                field: "threads".into(),
+                message: "must be at least 1".into(),
+            });
+        }
+        if self.model.as_os_str().is_empty() {
+            return Err(PlannerError::Setting {
+                field: "model".into(),
+                message: "must name a model folder".into(),
+            });
+        }
+        self.human2nav.validate()?;
+        Ok(())
+    }
+
+    /// Parses and validates the TOML text of a planner configuration; `path` is only used in
+    /// error messages.
+    pub fn from_toml_str(text: &str, path: &Path) -> Result<Self, PlannerError> {
+        let cfg: Self = toml::from_str(text).map_err(|e| PlannerError::Config {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// Reads, parses and validates a planner configuration file.
+    pub fn load(path: &Path) -> Result<Self, PlannerError> {
+        let text = std::fs::read_to_string(path).map_err(|e| PlannerError::Config {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        Self::from_toml_str(&text, path)
+    }
+
+    /// The model folder, resolved against `workspace` when relative.
+    pub fn model_dir(&self, workspace: &Path) -> PathBuf {
+        if self.model.is_absolute() {
+            self.model.clone()
+        } else {
+            workspace.join(&self.model)
+        }
+    }
+}
+
+/// Where a planner's BEV cell size came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BevOrigin {
+    /// The model card's training record.
+    Card,
+    /// The card has no training record (an untrained model): the data pipeline's default.
+    Default,
+}
+
+/// The BEV raster the model was trained on.
+///
+/// The number of cells is the network's input size, `card.net.bev_cells`. The cell size is
+/// read from the card's training record, which `human2nav train` writes as
+/// `"… BEV 32×32 cells of 0.3 m …"` in `training.data`; a card without that record (a freshly
+/// initialised model) gets [`BevSpec::default`]'s resolution, the data pipeline's default.
+pub fn bev_spec(card: &ModelCard) -> (BevSpec, BevOrigin) {
+    let cells = card.net.bev_cells;
+    let from_card = card
+        .training
+        .as_ref()
+        .and_then(|t| resolution_from_record(&t.data));
+    match from_card {
+        Some(resolution) => (BevSpec { cells, resolution }, BevOrigin::Card),
+        None => (
+            BevSpec {
+                cells,
+                ..BevSpec::default()
+            },
+            BevOrigin::Default,
+        ),
+    }
+}
+
+/// The number after `cells of` in a training record, if it is a positive finite length.
+fn resolution_from_record(data: &str) -> Option<f64> {
+    let (_, rest) = data.split_once("cells of ")?;
+    let number: String = rest
+        .chars()
+        .take_while(|c| c.is_ascii_digit() || *c == '.' || *c == 'e' || *c == '-')
+        .collect();
+    number
+        .parse::<f64>()
+        .ok()
+        .filter(|r| r.is_finite() && *r > 0.0)
+}
+
+/// Φ of a robot: the profile's built-in soft-margin terms (Eq. 8-9, weighted by its
+/// `[guidance]` table) plus every `[[constraint]]` plugin term it names.
+pub fn robot_phi(profile: &RobotProfile) -> Result<Phi, PlannerError> {
+    PluginHost::new()
+        .phi(profile)
+        .map_err(|e| PlannerError::Plugin {
+            path: profile.source.clone(),
+            message: e.to_string(),
+        })
+}
+
+/// What the planner needs to know about a robot, from its profile and its Φ.
+pub fn robot_model(profile: &RobotProfile, phi: Phi) -> RobotModel {
+    RobotModel {
+        limits: profile.limits,
+        footprint_radius: profile.footprint_radius,
+        phi,
+    }
+}
+
+/// Loads a robot profile, naming the file in the error.
+pub fn load_profile(path: &Path) -> Result<RobotProfile, PlannerError> {
+    RobotProfile::load(path).map_err(|e| PlannerError::Profile {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
+}
+
+/// Loads a model folder on the CPU, naming the folder in the error.
+pub fn load_model(dir: &Path) -> Result<CfmModel, PlannerError> {
+    CfmModel::load(dir, Device::Cpu).map_err(|source| PlannerError::Model {
+        path: dir.to_path_buf(),
+        source,
+    })
+}
+
+/// A Human2Nav planner for one robot, with what it was built from.
+#[derive(Debug)]
+pub struct RobotPlanner {
+    /// The robot.
+    pub profile: RobotProfile,
+    /// The BEV raster the planner rasterises (the model's training raster).
+    pub bev: BevSpec,
+    /// Where `bev`'s cell size came from.
+    pub bev_origin: BevOrigin,
+    /// The planner.
+    pub planner: Human2Nav<CfmModel>,
+}
+
+impl RobotPlanner {
+    /// A planner for `profile` with an already loaded `model`: Φ from the profile (built-in and
+    /// plugin terms), the BEV raster from the model card.
+    pub fn new(
+        profile: RobotProfile,
+        model: CfmModel,
+        settings: Human2NavSettings,
+    ) -> Result<Self, PlannerError> {
+        let phi = robot_phi(&profile)?;
+        let (bev, bev_origin) = bev_spec(model.card());
+        let planner = Human2Nav::new(model, robot_model(&profile, phi), bev, settings)?;
+        Ok(Self {
+            profile,
+            bev,
+            bev_origin,
+            planner,
+        })
+    }
+
+    /// Loads the robot profile at `robot_toml` and the model folder `model_dir`, and builds the
+    /// planner.
+    pub fn load(
+        robot_toml: &Path,
+        model_dir: &Path,
+        settings: Human2NavSettings,
+    ) -> Result<Self, PlannerError> {
+        let profile = load_profile(robot_toml)?;
+        let model = load_model(model_dir)?;
+        Self::new(profile, model, settings)
+    }
+
+    /// The robot's hard limits.
+    pub fn limits(&self) -> &Limits {
+        &self.profile.limits
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Guided vs unguided
+// ---------------------------------------------------------------------------------------------
+
+/// Mean distance (m) between the positions of two pose sequences, over the poses both have.
+pub fn mean_displacement(a: &[Pose2], b: &[Pose2]) -> f64 {
+    let n = a.len().min(b.len());
+    if n == 0 {
+        return 0.0;
+    }
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| (p.x - q.x).hypot(p.y - q.y))
+        .sum::<f64>()
+        / n as f64
+}
+
+/// TFS of a plan (its pose 0 is the robot at the planning instant), see [`tfs::tfs_plan`].
+pub fn plan_tfs(plan: &Plan, limits: &Limits, obs: &Observation) -> f64 {
+    tfs::tfs_plan(&plan.poses, plan.dt, limits, obs.ego_velocity)
+}
+
+/// One planning step planned twice, with and without guidance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GuidanceComparison {
+    /// TFS of the plan of the planner without guidance.
+    pub tfs_unguided: f64,
+    /// TFS of the plan of the planner with guidance.
+    pub tfs_guided: f64,
+    /// Mean distance (m) between the guided and the unguided plan at equal times.
+    pub plan_displacement: f64,
+    /// Mean distance (m) between the guided plan and the same source sample before guidance
+    /// (`None` when the guided planner kept something other than a fresh sample).
+    pub sample_displacement: Option<f64>,
+    /// Φ of the unguided plan.
+    pub phi_unguided: Option<f64>,
+    /// Φ of the guided plan's sample before and after guidance.
+    pub phi_before: Option<f64>,
+    pub phi_after: Option<f64>,
+    /// True when either planner fell back to stopping in place.
+    pub fallback: bool,
+}
+
+/// Plans `obs` with both planners (each reset first, so neither has a warm start) and
+/// compares the plans. With the same settings but `guidance.enabled` and the same seed, both
+/// planners draw the same source samples, so the comparison isolates guidance (and the
+/// selection it changes).
+pub fn compare_guidance<G, U>(
+    guided: &mut G,
+    unguided: &mut U,
+    obs: &Observation,
+    limits: &Limits,
+) -> Result<GuidanceComparison, PlanError>
+where
+    G: Planner + ?Sized,
+    U: Planner + ?Sized,
+{
+    guided.reset();
+    unguided.reset();
+    let g = guided.plan(obs)?;
+    let u = unguided.plan(obs)?;
+    let sample_displacement = g
+        .info
+        .selected
+        .and_then(|i| g.info.candidates.get(i))
+        .filter(|_| g.info.phi_after.is_some())
+        .map(|before| mean_displacement(&g.poses, before));
+    Ok(GuidanceComparison {
+        tfs_unguided: plan_tfs(&u, limits, obs),
+        tfs_guided: plan_tfs(&g, limits, obs),
+        plan_displacement: mean_displacement(&g.poses, &u.poses),
+        sample_displacement,
+        phi_unguided: u.info.phi_before,
+        phi_before: g.info.phi_before,
+        phi_after: g.info.phi_after,
+        fallback: g.info.fallback || u.info.fallback,
+    })
+}
+
+/// Means over many [`GuidanceComparison`]s (Φ and displacement means skip missing values).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct GuidanceSummary {
+    /// Number of planning steps.
+    pub windows: usize,
+    pub tfs_unguided: f64,
+    pub tfs_guided: f64,
+    /// Fraction of steps whose plan is entirely feasible (TFS = 1).
+    pub all_feasible_unguided: f64,
+    pub all_feasible_guided: f64,
+    pub plan_displacement: f64,
+    pub sample_displacement: f64,
+    pub phi_unguided: f64,
+    pub phi_before: f64,
+    pub phi_after: f64,
+    /// Number of steps where a planner fell back to stopping in place.
+    pub fallbacks: usize,
+}
+
+impl GuidanceSummary {
+    /// Summarises a set of comparisons.
+    pub fn of(results: &[GuidanceComparison]) -> Self {
+        let n = results.len();
+        let mean = |f: &dyn Fn(&GuidanceComparison) -> f64| {
+            if n == 0 {
+                f64::NAN
+            } else {
+                results.iter().map(f).sum::<f64>() / n as f64
+            }
+        };
+        let mean_some = |f: &dyn Fn(&GuidanceComparison) -> Option<f64>| {
+            let v: Vec<f64> = results.iter().filter_map(f).collect();
+            if v.is_empty() {
+                f64::NAN
+            } else {
+                v.iter().sum::<f64>() / v.len() as f64
+            }
+        };
+        let ones = |f: &dyn Fn(&GuidanceComparison) -> f64| {
+            mean(&|r| if f(r) >= 1.0 { 1.0 } else { 0.0 })
+        };
+        Self {
+            windows: n,
+            tfs_unguided: mean(&|r| r.tfs_unguided),
+            tfs_guided: mean(&|r| r.tfs_guided),
+            all_feasible_unguided: ones(&|r| r.tfs_unguided),
+            all_feasible_guided: ones(&|r| r.tfs_guided),
+            plan_displacement: mean(&|r| r.plan_displacement),
+            sample_displacement: mean_some(&|r| r.sample_displacement),
+            phi_unguided: mean_some(&|r| r.phi_unguided),
+            phi_before: mean_some(&|r| r.phi_before),
+            phi_after: mean_some(&|r| r.phi_after),
+            fallbacks: results.iter().filter(|r| r.fallback).count(),
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Latency
+// ---------------------------------------------------------------------------------------------
+
+/// Percentiles of planning-call wall times, milliseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct LatencyStats {
+    /// Timed calls.
+    pub calls: usize,
+    pub p50_ms: f64,
+    pub p95_ms: f64,
+    pub mean_ms: f64,
+    pub max_ms: f64,
+}
+
+impl LatencyStats {
+    /// Statistics of a set of durations in milliseconds (nearest-rank percentiles: the value
+    /// at index `ceil(q·n) − 1` of the sorted list).
+    pub fn of(ms: &[f64]) -> Self {
+        let mut v: Vec<f64> = ms.iter().copied().filter(|x| x.is_finite()).collect();
+        if v.is_empty() {
+            return Self {
+                calls: 0,
+                p50_ms: f64::NAN,
+                p95_ms: f64::NAN,
+                mean_ms: f64::NAN,
+                max_ms: f64::NAN,
+            };
+        }
+        v.sort_by(f64::total_cmp);
+        let rank = |q: f64| {
+            let i = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1;
+            v[i]
+        };
+        Self {
+            calls: v.len(),
+            p50_ms: rank(0.5),
+            p95_ms: rank(0.95),
+            mean_ms: v.iter().sum::<f64>() / v.len() as f64,
+            max_ms: v[v.len() - 1],
+        }
+    }
+}
+
+/// Wall time of `repeats` planning calls cycling through `observations` (after `warmup`
+/// untimed calls). The planner is reset before every call, so each call is a cold single step
+/// (no warm start; a new observation also misses the model's condition cache, as in closed
+/// loop). `on_call` runs after every timed call (for a progress bar).
+pub fn measure_latency<P: Planner + ?Sized>(
+    planner: &mut P,
+    observations: &[Observation],
+    warmup: usize,
+    repeats: usize,
+    mut on_call: impl FnMut(),
+) -> Result<LatencyStats, PlanError> {
+    if observations.is_empty() {
+        return Ok(LatencyStats::of(&[]));
+    }
+    for obs in observations.iter().cycle().take(warmup) {
+        planner.reset();
+        planner.plan(obs)?;
+    }
+    let mut ms = Vec::with_capacity(repeats);
+    for obs in observations.iter().cycle().take(repeats) {
+        planner.reset();
+        let start = Instant::now();
+        let plan = planner.plan(obs)?;
+        ms.push(start.elapsed().as_secs_f64() * 1e3);
+        std::hint::black_box(plan);
+        on_call();
+    }
+    Ok(LatencyStats::of(&ms))
+}
+
+/// Calls and wall time spent inside a flow model, accumulated by [`TimedModel`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FlowCallStats {
+    /// Calls of [`FlowModel::velocity`] and their total time (s).
+    pub velocity_calls: u64,
+    pub velocity_s: f64,
+    /// Calls of [`FlowModel::velocity_vjp`] and their total time (s).
+    pub vjp_calls: u64,
+    pub vjp_s: f64,
+}
+
+/// A flow model that times every call of the model it wraps (a profiler for the planner:
+/// the planning time minus the time recorded here is sampling arithmetic, Φ, the adjoint
+/// pass, selection and rasterisation). The counters are shared through [`Self::stats`], so they
+/// can be read while a planner owns the model.
+#[derive(Debug)]
+pub struct TimedModel<M> {
+    inner: M,
+    stats: Arc<Mutex<FlowCallStats>>,
+}
+
+impl<M> TimedModel<M> {
+    /// Wraps `inner` with zeroed counters.
+    pub fn new(inner: M) -> Self {
+        Self {
+            inner,
+            stats: Arc::new(Mutex::new(FlowCallStats::default())),
+        }
+    }
+
+    /// A handle on the counters.
+    pub fn stats(&self) -> Arc<Mutex<FlowCallStats>> {
+        Arc::clone(&self.stats)
+    }
+
+    fn record(&self, vjp: bool, seconds: f64) {
+        if let Ok(mut s) = self.stats.lock() {
+            if vjp {
+                s.vjp_calls += 1;
+                s.vjp_s += seconds;
+            } else {
+                s.velocity_calls += 1;
+                s.velocity_s += seconds;
+            }
+        }
+    }
+}
+
+impl<M: FlowModel> FlowModel for TimedModel<M> {
+    fn horizon(&self) -> usize {
+        self.inner.horizon()
+    }
+
+    fn source_std(&self) -> [f64; 3] {
+        self.inner.source_std()
+    }
+
+    fn velocity(
+        &self,
+        x: &[f64],
+        t: f64,
+        cond: &FlowCondition,
+        out: &mut [f64],
+    ) -> Result<(), FlowError> {
+        let start = Instant::now();
+        let r = self.inner.velocity(x, t, cond, out);
+        self.record(false, start.elapsed().as_secs_f64());
+        r
+    }
+
+    fn velocity_vjp(
+        &self,
+        x: &[f64],
+        t: f64,
+        cond: &FlowCondition,
+        cotangent: &[f64],
+        out: &mut [f64],
+        vjp: &mut [f64],
+    ) -> Result<(), FlowError> {
+        let start = Instant::now();
+        let r = self.inner.velocity_vjp(x, t, cond, cotangent, out, vjp);
+        self.record(true, start.elapsed().as_secs_f64());
+        r
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::card::TrainingInfo;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn bev_resolution_comes_from_the_training_record() {
+        let mut card = ModelCard::default();
+        card.net.bev_cells = 24;
+        let (spec, origin) = bev_spec(&card);
+        assert_eq!(origin, BevOrigin::Default);
+        assert_eq!(spec.cells, 24);
+        assert_relative_eq!(spec.resolution, BevSpec::default().resolution);
+
+        card.training = Some(TrainingInfo {
+            data: "tuple cache `out/data/cache` (real data: eth, sdd), BEV 24×24 cells of 0.25 m, \
+                   32 poses at 0.1 s"
+                .into(),
+            ..TrainingInfo::default()
+        });
+        let (spec, origin) = bev_spec(&card);
+        assert_eq!(origin, BevOrigin::Card);
+        assert_eq!(spec.cells, 24);
+        assert_relative_eq!(spec.resolution, 0.25, epsilon = 1e-15);
+
+        // A record without a usable length falls back to the default.
+        for data in ["BEV cells of x m", "cells of -1 m", "no raster here"] {
+            assert_eq!(resolution_from_record(data), None, "{data}");
+        }
+    }
+
+    #[test]
+    fn config_defaults_round_trip_and_reject_unknown_keys() {
+        let path = Path::new("planner.toml");
+        let cfg = PlannerConfig::from_toml_str("", path).unwrap();
+        assert_eq!(cfg, PlannerConfig::default());
+        let cfg = PlannerConfig::from_toml_str(
+            "threads = 2\n[human2nav]\nsamples = 8\n[human2nav.guidance]\niterations_m = 3\n",
+            path,
+        )
+        .unwrap();
+        assert_eq!(cfg.threads, 2);
+        assert_eq!(cfg.human2nav.samples, 8);
+        assert_eq!(cfg.human2nav.guidance.iterations_m, 3);
+        let err = PlannerConfig::from_toml_str("[human2nav]\nsamplez = 8\n", path).unwrap_err();
+        assert!(err.to_string().contains("samplez"), "{err}");
+        let err = PlannerConfig::from_toml_str("threads = 0\n", path).unwrap_err();
+        assert!(matches!(err, PlannerError::Setting { ref field, .. } if field == "threads"));
+        let err = PlannerConfig::from_toml_str("[human2nav]\nsamples = 0\n", path).unwrap_err();
+        assert!(err.to_string().contains("samples"), "{err}");
+        assert_eq!(
+            cfg.model_dir(Path::new("/ws")),
+            Path::new("/ws").join(DEFAULT_MODEL_DIR)
+        );
+    }
+
+    #[test]
+    fn latency_percentiles_are_nearest_rank() {
+        let ms: Vec<f64> = (1..=20).map(f64::from).collect();
+        let s = LatencyStats::of(&ms);
+        assert_eq!(s.calls, 20);
+        assert_relative_eq!(s.p50_ms, 10.0);
+        assert_relative_eq!(s.p95_ms, 19.0);
+        assert_relative_eq!(s.mean_ms, 10.5);
+        assert_relative_eq!(s.max_ms, 20.0);
+        let one = LatencyStats::of(&[3.0]);
+        assert_relative_eq!(one.p50_ms, 3.0);
+        assert_relative_eq!(one.p95_ms, 3.0);
+        assert!(LatencyStats::of(&[]).p50_ms.is_nan());
+    }
+
+    fn workspace() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+    }
+
+    /// A small freshly initialised model saved to a temporary folder.
+    fn small_model_dir(tag: &str) -> PathBuf {
+        use crate::config::{NetConfig, Normalisation};
+        tch::manual_seed(11);
+        let net = NetConfig {
+            horizon: 16,
+            bev_cells: 16,
+            down_dims: vec![8, 16],
+            n_groups: 4,
+            bev_channels: [4, 8, 8],
+            time_embed_dim: 8,
+            bev_embed_dim: 8,
+            goal_embed_dim: 8,
+            ..NetConfig::default()
+        };
+        let norm = Normalisation {
+            position_scale: 1.5,
+            velocity_std: [0.8, 0.3, 0.5],
+            goal_scale: 4.0,
+            speed_scale: 1.0,
+        };
+        let dir = std::env::temp_dir().join(format!("h2n-planner-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        CfmModel::new(&net, &norm, Device::Cpu).unwrap().save(&dir).unwrap();
+        dir
+    }
+
+    fn observation() -> Observation {
+        Observation {
+            time: 1.5,
+            ego: Pose2::new(2.0, -1.0, 0.4),
+            ego_velocity: human2nav_core::Twist2::new(0.6, 0.0, 0.0),
+            goal: [7.0, 1.0],
+            agents: vec![human2nav_core::AgentState {
+                id: 3,
+                position: [3.5, -0.2],
+                velocity: [-0.8, 0.1],
+                radius: 0.3,
+                history: vec![[3.7, -0.25], [3.6, -0.22]],
+            }],
+        }
+    }
+
+    /// Profile + model folder → planner; guidance never raises Φ of the kept sample, the plan
+    /// starts at the robot, and guided and unguided planners with one seed share their samples.
+    #[test]
+    fn planner_from_profile_and_model_folder() {
+        let dir = small_model_dir("e2e");
+        let robot = workspace().join("robots/diablo/robot.toml");
+        let settings = Human2NavSettings {
+            samples: 6,
+            ..Human2NavSettings::default()
+        };
+        let mut guided = RobotPlanner::load(&robot, &dir, settings).unwrap();
+        assert_eq!(guided.profile.name, "diablo");
+        assert_eq!(guided.bev.cells, 16);
+        assert_eq!(guided.bev_origin, BevOrigin::Default);
+        let mut off = settings;
+        off.guidance.enabled = false;
+        let mut unguided = RobotPlanner::load(&robot, &dir, off).unwrap();
+        assert_eq!(unguided.planner.name(), "human2nav-noguide");
+
+        let obs = observation();
+        let limits = *guided.limits();
+        let plan = guided.planner.plan(&obs).unwrap();
+        assert!(plan.is_finite());
+        assert!(!plan.info.fallback, "{:?}", plan.info.notes);
+        assert_eq!(plan.poses.len(), 17);
+        assert_eq!(plan.poses[0], obs.ego);
+        let (before, after) = (plan.info.phi_before.unwrap(), plan.info.phi_after.unwrap());
+        assert!(after <= before + 1e-12, "Φ {before} → {after}");
+
+        let cmp =
+            compare_guidance(&mut guided.planner, &mut unguided.planner, &obs, &limits).unwrap();
+        assert!((0.0..=1.0).contains(&cmp.tfs_guided));
+        assert!((0.0..=1.0).contains(&cmp.tfs_unguided));
+        assert!(cmp.plan_displacement.is_finite() && cmp.plan_displacement >= 0.0);
+        // Both planners drew the same source samples: identical pre-guidance candidates.
+        guided.planner.reset();
+        unguided.planner.reset();
+        let g = guided.planner.plan(&obs).unwrap();
+        let u = unguided.planner.plan(&obs).unwrap();
+        assert_eq!(g.info.candidates, u.info.candidates);
+        let summary = GuidanceSummary::of(&[cmp, cmp]);
+        assert_eq!(summary.windows, 2);
+        assert_relative_eq!(summary.tfs_guided, cmp.tfs_guided, epsilon = 1e-12);
+
+        // The timing wrapper counts the calls Algorithm 1 documents: N for the first rollout,
+        // then N per iteration forward and N − 1 VJPs backward.
+        let model = load_model(&dir).unwrap();
+        let timed = TimedModel::new(model);
+        let stats = timed.stats();
+        let (bev, _) = bev_spec(timed.inner.card());
+        let mut p = Human2Nav::new(
+            timed,
+            robot_model(&guided.profile, robot_phi(&guided.profile).unwrap()),
+            bev,
+            settings,
+        )
+        .unwrap();
+        let lat = measure_latency(&mut p, std::slice::from_ref(&obs), 0, 1, || ()).unwrap();
+        assert_eq!(lat.calls, 1);
+        let s = *stats.lock().unwrap();
+        let n = settings.guidance.steps_n as u64;
+        assert!(s.velocity_calls >= n && s.velocity_calls % n == 0, "{s:?}");
+        let iterations = s.velocity_calls / n - 1;
+        assert_eq!(s.vjp_calls, iterations * (n - 1), "{s:?}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn missing_model_and_profile_are_named() {
+        let err = load_model(Path::new("no/such/model")).unwrap_err();
+        assert!(err.to_string().contains("no/such/model"), "{err}");
+        let err = load_profile(Path::new("no/such/robot.toml")).unwrap_err();
+        assert!(matches!(err, PlannerError::Profile { .. }), "{err}");
+    }
+
+    #[test]
+    fn displacement_is_the_mean_position_gap() {
+        let a = [Pose2::new(0.0, 0.0, 0.0), Pose2::new(1.0, 0.0, 0.3)];
+        let b = [Pose2::new(0.0, 0.0, 1.0), Pose2::new(1.0, 2.0, 0.0)];
+        assert_relative_eq!(mean_displacement(&a, &b), 1.0);
+        assert_relative_eq!(mean_displacement(&a, &[]), 0.0);
+    }
+}

@@ -1,0 +1,907 @@
+//! One planning step as a picture in the style of the paper's Fig. 4, and the helpers that set
+//! such a step up from a benchmark episode.
+//!
+//! # The step
+//! [`observation_at`] places the robot at the episode's start pose (heading per
+//! [`StartHeading`], as the simulator starts an episode), moving straight ahead at
+//! [`StepOptions::ego_speed`], and observes the replayed crowd at [`StepOptions::time`]: every
+//! pedestrian present within [`StepOptions::sensor_range`] of the robot, with up to
+//! [`StepOptions::history_len`] recorded positions, through [`CrowdReplay::observe`].
+//!
+//! # The picture ([`draw_plan_figure`])
+//! World frame around the robot, 1 m grid:
+//! * pedestrians: grey discs, their recent history as grey dots, a heading arrow (0.6 s of
+//!   their velocity);
+//! * the robot: red disc of its footprint radius with a black heading tick;
+//! * start: green star; goal: blue star (the paper's convention);
+//! * the `K` sampled candidates before guidance: thin light blue lines; after guidance: faint
+//!   violet lines; the kept sample before guidance: dashed orange;
+//! * the final plan: each segment green when the waypoint it reaches is feasible and red when
+//!   not ([`human2nav_core::tfs::feasibility_mask`]), waypoints as dots;
+//! * top left, the planner's ego-frame BEV raster (forward is up): free cells light grey,
+//!   occupied cells coloured by the direction of their velocity channels (hue, the wheel in the
+//!   corner) with saturation growing with speed (a static pedestrian is dark grey), black
+//!   arrows for the observed velocities, the robot as a red triangle;
+//! * the title: robot, guidance on/off, TFS of the plan (and of the kept sample before
+//!   guidance) and Φ before → after guidance.
+
+use crate::episode::{Episode, EpisodeSuite};
+use crate::error::SimError;
+use crate::figures::{disc, star};
+use crate::replay::CrowdReplay;
+use crate::runner::StartHeading;
+use human2nav_core::bev::{self, BevSpec};
+use human2nav_core::tfs;
+use human2nav_core::{Limits, Observation, Plan, Pose2, Twist2};
+use plotters::coord::Shift;
+use plotters::element::DashedPathElement;
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+use std::path::Path;
+
+/// How a planning step is set up from an episode (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepOptions {
+    /// Episode time of the crowd (s). Default 0.
+    pub time: f64,
+    /// Pedestrians beyond this distance from the robot are not observed (m). Default 10, the
+    /// simulator's default.
+    pub sensor_range: f64,
+    /// Recorded positions per observed pedestrian. Default 8 (0.8 s), the simulator's default.
+    pub history_len: usize,
+    /// The robot's forward speed (m/s). Default 0: an episode starts at rest.
+    pub ego_speed: f64,
+    /// The robot's heading. Default: facing the goal.
+    pub start_heading: StartHeading,
+}
+
+impl Default for StepOptions {
+    fn default() -> Self {
+        Self {
+            time: 0.0,
+            sensor_range: 10.0,
+            history_len: 8,
+            ego_speed: 0.0,
+            start_heading: StartHeading::FaceGoal,
+        }
+    }
+}
+
+impl StepOptions {
+    /// Checks every field; the error names the first offending one.
+    pub fn validate(&self) -> Result<(), SimError> {
+        let bad = |field: &str, message: String| Err(SimError::setting("step", field, message));
+        if !(self.time.is_finite() && self.time >= 0.0) {
+            return bad("time", format!("must be finite and ≥ 0, got {}", self.time));
+        }
+        if !(self.sensor_range.is_finite() && self.sensor_range > 0.0) {
+            return bad(
+                "sensor_range",
+                format!("must be finite and > 0, got {}", self.sensor_range),
+            );
+        }
+        if !self.ego_speed.is_finite() {
+            return bad("ego_speed", format!("must be finite, got {}", self.ego_speed));
+        }
+        Ok(())
+    }
+}
+
+/// Reads an episode file: an [`EpisodeSuite`] (`human2nav data episodes`) or one [`Episode`]
+/// as JSON.
+pub fn load_episodes(path: &Path) -> Result<Vec<Episode>, SimError> {
+    let text = std::fs::read_to_string(path).map_err(|e| SimError::io(path, e))?;
+    let value: serde_json::Value = serde_json::from_str(&text).map_err(|e| SimError::Parse {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    let parse_err = |e: serde_json::Error| SimError::Parse {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    };
+    let episodes = if value.get("episodes").is_some() {
+        serde_json::from_value::<EpisodeSuite>(value)
+            .map_err(parse_err)?
+            .episodes
+    } else {
+        vec![serde_json::from_value::<Episode>(value).map_err(parse_err)?]
+    };
+    if episodes.is_empty() {
+        return Err(SimError::Empty(format!(
+            "{} holds no episode",
+            path.display()
+        )));
+    }
+    Ok(episodes)
+}
+
+/// The episode with identifier `id` if given, else the one at `index`.
+pub fn select_episode<'a>(
+    episodes: &'a [Episode],
+    index: usize,
+    id: Option<&str>,
+) -> Result<&'a Episode, SimError> {
+    let found = match id {
+        Some(id) => episodes.iter().find(|e| e.id == id),
+        None => episodes.get(index),
+    };
+    found.ok_or_else(|| SimError::Episodes {
+        suite: "episode file".into(),
+        message: match id {
+            Some(id) => format!("no episode with id `{id}`"),
+            None => format!(
+                "index {index} is out of range ({} episodes)",
+                episodes.len()
+            ),
+        },
+    })
+}
+
+/// The robot's start pose in an episode.
+pub fn start_pose(episode: &Episode, heading: StartHeading) -> Pose2 {
+    let s = episode.start;
+    match heading {
+        StartHeading::Episode => s,
+        StartHeading::FaceGoal => {
+            let (dx, dy) = (episode.goal[0] - s.x, episode.goal[1] - s.y);
+            let theta = if dx.hypot(dy) > 1e-9 {
+                dy.atan2(dx)
+            } else {
+                s.theta
+            };
+            Pose2::new(s.x, s.y, theta)
+        }
+    }
+}
+
+/// The observation of one planning step on `episode` (see the module docs).
+pub fn observation_at(episode: &Episode, opts: &StepOptions) -> Result<Observation, SimError> {
+    opts.validate()?;
+    let ego = start_pose(episode, opts.start_heading);
+    let agents = CrowdReplay::new(episode).observe(
+        opts.time,
+        [ego.x, ego.y],
+        opts.sensor_range,
+        opts.history_len,
+    );
+    Ok(Observation {
+        time: opts.time,
+        ego,
+        ego_velocity: Twist2::new(opts.ego_speed, 0.0, 0.0),
+        goal: episode.goal,
+        agents,
+    })
+}
+
+/// What [`draw_plan_figure`] draws.
+#[derive(Clone, Copy, Debug)]
+pub struct PlanFigure<'a> {
+    /// Robot name (title).
+    pub robot: &'a str,
+    /// A label of the scene, e.g. the episode id (title; may be empty).
+    pub label: &'a str,
+    /// Whether the planner ran with guidance (title).
+    pub guidance: bool,
+    /// The observation the plan was made from.
+    pub observation: &'a Observation,
+    /// The episode's start pose (green star); `None` draws it at the robot.
+    pub start: Option<Pose2>,
+    /// The plan with its diagnostics (candidates, guided candidates, Φ).
+    pub plan: &'a Plan,
+    /// The robot's limits (segment colours, TFS).
+    pub limits: &'a Limits,
+    /// Footprint radius of the robot (m).
+    pub footprint_radius: f64,
+    /// The planner's BEV raster spec (inset).
+    pub bev: BevSpec,
+}
+
+/// Numbers shown on a [`PlanFigure`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlanFigureNumbers {
+    /// TFS of the plan.
+    pub tfs: f64,
+    /// TFS of the kept sample before guidance (when the plan is a fresh guided sample).
+    pub tfs_before: Option<f64>,
+    /// Feasible waypoints / all waypoints of the plan.
+    pub feasible: usize,
+    pub waypoints: usize,
+}
+
+/// The numbers the figure reports for a plan (pure; used by [`draw_plan_figure`]).
+pub fn plan_numbers(fig: &PlanFigure<'_>) -> PlanFigureNumbers {
+    let v0 = fig.observation.ego_velocity;
+    let plan = fig.plan;
+    let mask = tfs::feasibility_mask(&plan.poses, plan.dt, fig.limits, v0);
+    let waypoints = mask.len().saturating_sub(1);
+    let feasible = mask.iter().skip(1).filter(|f| **f).count();
+    let tfs_before = before_guidance(fig)
+        .map(|poses| tfs::tfs_plan(poses, plan.dt, fig.limits, v0));
+    PlanFigureNumbers {
+        tfs: tfs::tfs_plan(&plan.poses, plan.dt, fig.limits, v0),
+        tfs_before,
+        feasible,
+        waypoints,
+    }
+}
+
+/// The kept sample before guidance, when guidance ran and the plan is a fresh sample.
+fn before_guidance<'a>(fig: &PlanFigure<'a>) -> Option<&'a [Pose2]> {
+    let info = &fig.plan.info;
+    if !fig.guidance || info.phi_after.is_none() {
+        return None;
+    }
+    info.selected
+        .and_then(|i| info.candidates.get(i))
+        .map(Vec::as_slice)
+}
+
+type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+
+const GREY: RGBColor = RGBColor(120, 120, 120);
+const EGO_RED: RGBColor = RGBColor(214, 39, 40);
+const FEASIBLE: RGBColor = RGBColor(30, 160, 60);
+const INFEASIBLE: RGBColor = RGBColor(220, 30, 30);
+const CANDIDATE: RGBColor = RGBColor(110, 160, 220);
+const GUIDED: RGBColor = RGBColor(150, 90, 200);
+const BEFORE: RGBColor = RGBColor(255, 140, 0);
+const START: RGBColor = RGBColor(44, 160, 44);
+const GOAL: RGBColor = RGBColor(31, 119, 180);
+
+/// Image size in pixels.
+const WIDTH: u32 = 1000;
+const HEIGHT: u32 = 1060;
+
+/// Draws the figure as a PNG at `path` (parent directories are created) and returns the
+/// numbers it shows.
+pub fn draw_plan_figure(path: &Path, fig: &PlanFigure<'_>) -> Result<PlanFigureNumbers, SimError> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| SimError::io(dir, e))?;
+    }
+    let numbers = plan_numbers(fig);
+    let err = |message: String| SimError::Figure {
+        file: path.to_path_buf(),
+        message,
+    };
+    let root = BitMapBackend::new(path, (WIDTH, HEIGHT)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
+    draw(&root, fig, &numbers).map_err(err)?;
+    root.present().map_err(|e| err(e.to_string()))?;
+    Ok(numbers)
+}
+
+fn fmt_opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or_else(|| "–".to_string(), |x| format!("{x:.digits$}"))
+}
+
+/// The square world window `(centre, half side)` showing the robot, the plan, the candidates
+/// and the goal (when it is within 12 m).
+fn view(fig: &PlanFigure<'_>) -> ([f64; 2], f64) {
+    let obs = fig.observation;
+    let mut pts: Vec<[f64; 2]> = vec![[obs.ego.x, obs.ego.y]];
+    pts.extend(fig.plan.poses.iter().map(|p| [p.x, p.y]));
+    for c in fig.plan.info.candidates.iter().chain(&fig.plan.info.guided) {
+        pts.extend(c.iter().map(|p| [p.x, p.y]));
+    }
+    let near = |p: [f64; 2]| (p[0] - obs.ego.x).hypot(p[1] - obs.ego.y) <= 12.0;
+    if near(obs.goal) {
+        pts.push(obs.goal);
+    }
+    if let Some(s) = fig.start.filter(|s| near([s.x, s.y])) {
+        pts.push([s.x, s.y]);
+    }
+    let pts: Vec<[f64; 2]> = pts
+        .into_iter()
+        .filter(|p| p[0].is_finite() && p[1].is_finite() && near(*p))
+        .collect();
+    let (mut x0, mut x1, mut y0, mut y1) = (obs.ego.x, obs.ego.x, obs.ego.y, obs.ego.y);
+    for p in &pts {
+        x0 = x0.min(p[0]);
+        x1 = x1.max(p[0]);
+        y0 = y0.min(p[1]);
+        y1 = y1.max(p[1]);
+    }
+    let half = (0.5 * (x1 - x0).max(y1 - y0) + 1.5).max(4.0);
+    // Room in the top-left corner for the inset: shift the window so the robot sits in the
+    // lower-right part when the content is small.
+    ([0.5 * (x0 + x1), 0.5 * (y0 + y1)], half)
+}
+
+fn arrow(from: (f64, f64), to: (f64, f64), head: f64) -> (Vec<(f64, f64)>, Vec<(f64, f64)>) {
+    let (dx, dy) = (to.0 - from.0, to.1 - from.1);
+    let len = dx.hypot(dy);
+    if len < 1e-9 {
+        return (vec![from, to], Vec::new());
+    }
+    let (ux, uy) = (dx / len, dy / len);
+    let h = head.min(0.5 * len);
+    let base = (to.0 - ux * h, to.1 - uy * h);
+    let w = 0.5 * h;
+    let tri = vec![
+        to,
+        (base.0 - uy * w, base.1 + ux * w),
+        (base.0 + uy * w, base.1 - ux * w),
+    ];
+    (vec![from, base], tri)
+}
+
+fn draw(root: &Area<'_>, fig: &PlanFigure<'_>, numbers: &PlanFigureNumbers) -> Result<(), String> {
+    let e = |x: &dyn std::fmt::Display| x.to_string();
+    let obs = fig.observation;
+    let info = &fig.plan.info;
+    let (c, half) = view(fig);
+
+    let title = format!(
+        "{} — guidance {} — TFS {:.2}{} — Φ {} → {}",
+        fig.robot,
+        if fig.guidance { "on" } else { "off" },
+        numbers.tfs,
+        numbers
+            .tfs_before
+            .map_or(String::new(), |t| format!(" (before guidance {t:.2})")),
+        fmt_opt(info.phi_before, 3),
+        fmt_opt(info.phi_after, 3),
+    );
+    let (top, body) = root.split_vertically(64);
+    top.draw(&Text::new(
+        title,
+        (WIDTH as i32 / 2, 8),
+        ("sans-serif", 24)
+            .into_font()
+            .color(&BLACK)
+            .pos(Pos::new(HPos::Center, VPos::Top)),
+    ))
+    .map_err(|x| e(&x))?;
+    let sub = format!(
+        "{}t = {:.1} s, {} pedestrians observed, robot speed {:.2} m/s; {} of {} waypoints feasible{}",
+        if fig.label.is_empty() {
+            String::new()
+        } else {
+            format!("{} — ", fig.label)
+        },
+        obs.time,
+        obs.agents.len(),
+        obs.ego_velocity.vx.hypot(obs.ego_velocity.vy),
+        numbers.feasible,
+        numbers.waypoints,
+        if info.fallback {
+            " — FALLBACK: stop in place"
+        } else {
+            ""
+        },
+    );
+    top.draw(&Text::new(
+        sub,
+        (WIDTH as i32 / 2, 38),
+        ("sans-serif", 16)
+            .into_font()
+            .color(&RGBColor(60, 60, 60))
+            .pos(Pos::new(HPos::Center, VPos::Top)),
+    ))
+    .map_err(|x| e(&x))?;
+
+    let mut chart = ChartBuilder::on(&body)
+        .margin(10)
+        .margin_right(24)
+        .x_label_area_size(40)
+        .y_label_area_size(50)
+        .build_cartesian_2d((c[0] - half)..(c[0] + half), (c[1] - half)..(c[1] + half))
+        .map_err(|x| e(&x))?;
+    chart
+        .configure_mesh()
+        .x_desc("x (m)")
+        .y_desc("y (m)")
+        .x_labels(12)
+        .y_labels(12)
+        .light_line_style(RGBColor(238, 238, 238))
+        .bold_line_style(RGBColor(215, 215, 215))
+        .label_style(("sans-serif", 14))
+        .draw()
+        .map_err(|x| e(&x))?;
+    let inside = |p: [f64; 2]| (p[0] - c[0]).abs() < half && (p[1] - c[1]).abs() < half;
+
+    // Pedestrians: history dots, disc, heading arrow.
+    for a in &obs.agents {
+        if !inside(a.position) {
+            continue;
+        }
+        chart
+            .draw_series(
+                a.history
+                    .iter()
+                    .map(|q| Circle::new((q[0], q[1]), 3, GREY.mix(0.55).filled())),
+            )
+            .map_err(|x| e(&x))?;
+        chart
+            .draw_series(std::iter::once(Polygon::new(
+                disc(a.position, a.radius),
+                GREY.mix(0.65).filled(),
+            )))
+            .map_err(|x| e(&x))?;
+        let from = (a.position[0], a.position[1]);
+        let to = (from.0 + 0.6 * a.velocity[0], from.1 + 0.6 * a.velocity[1]);
+        let (shaft, head) = arrow(from, to, 0.18);
+        chart
+            .draw_series(std::iter::once(PathElement::new(
+                shaft,
+                RGBColor(70, 70, 70).stroke_width(2),
+            )))
+            .map_err(|x| e(&x))?;
+        if !head.is_empty() {
+            chart
+                .draw_series(std::iter::once(Polygon::new(
+                    head,
+                    RGBColor(70, 70, 70).filled(),
+                )))
+                .map_err(|x| e(&x))?;
+        }
+    }
+    // Legend entry for pedestrians.
+    chart
+        .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+        .map_err(|x| e(&x))?
+        .label("pedestrian (history dots, heading arrow)")
+        .legend(|(x, y)| Circle::new((x + 8, y), 6, GREY.mix(0.65).filled()));
+
+    // Candidates before and after guidance.
+    let xy = |p: &[Pose2]| p.iter().map(|q| (q.x, q.y)).collect::<Vec<_>>();
+    for (i, cand) in info.candidates.iter().enumerate() {
+        let s = chart
+            .draw_series(std::iter::once(PathElement::new(
+                xy(cand),
+                CANDIDATE.mix(0.55).stroke_width(1),
+            )))
+            .map_err(|x| e(&x))?;
+        if i == 0 {
+            s.label(format!("{} samples before guidance", info.candidates.len()))
+                .legend(|(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 18, y)], CANDIDATE.stroke_width(2))
+                });
+        }
+    }
+    for (i, cand) in info.guided.iter().enumerate() {
+        let s = chart
+            .draw_series(std::iter::once(PathElement::new(
+                xy(cand),
+                GUIDED.mix(0.35).stroke_width(1),
+            )))
+            .map_err(|x| e(&x))?;
+        if i == 0 {
+            s.label("samples after guidance").legend(|(x, y)| {
+                PathElement::new(vec![(x, y), (x + 18, y)], GUIDED.mix(0.6).stroke_width(2))
+            });
+        }
+    }
+    if let Some(before) = before_guidance(fig) {
+        chart
+            .draw_series(std::iter::once(DashedPathElement::new(
+                xy(before),
+                6,
+                4,
+                BEFORE.stroke_width(2),
+            )))
+            .map_err(|x| e(&x))?
+            .label("kept sample before guidance")
+            .legend(|(x, y)| {
+                DashedPathElement::new(vec![(x, y), (x + 18, y)], 5, 3, BEFORE.stroke_width(2))
+            });
+    }
+
+    // The plan, segment by segment.
+    let mask = tfs::feasibility_mask(&fig.plan.poses, fig.plan.dt, fig.limits, obs.ego_velocity);
+    let segs: Vec<(Vec<(f64, f64)>, bool)> = fig
+        .plan
+        .poses
+        .windows(2)
+        .zip(mask.iter().skip(1))
+        .map(|(w, ok)| (vec![(w[0].x, w[0].y), (w[1].x, w[1].y)], *ok))
+        .collect();
+    for (seg, ok) in &segs {
+        let col = if *ok { FEASIBLE } else { INFEASIBLE };
+        chart
+            .draw_series(std::iter::once(PathElement::new(
+                seg.clone(),
+                col.stroke_width(4),
+            )))
+            .map_err(|x| e(&x))?;
+    }
+    chart
+        .draw_series(
+            fig.plan
+                .poses
+                .iter()
+                .zip(&mask)
+                .skip(1)
+                .map(|(p, ok)| {
+                    let col = if *ok { FEASIBLE } else { INFEASIBLE };
+                    Circle::new((p.x, p.y), 3, col.filled())
+                }),
+        )
+        .map_err(|x| e(&x))?;
+    chart
+        .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+        .map_err(|x| e(&x))?
+        .label("plan: feasible segment")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], FEASIBLE.stroke_width(4)));
+    chart
+        .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+        .map_err(|x| e(&x))?
+        .label("plan: infeasible segment")
+        .legend(|(x, y)| {
+            PathElement::new(vec![(x, y), (x + 18, y)], INFEASIBLE.stroke_width(4))
+        });
+
+    // Robot, start and goal.
+    let ego = obs.ego;
+    chart
+        .draw_series(std::iter::once(Polygon::new(
+            disc([ego.x, ego.y], fig.footprint_radius),
+            EGO_RED.mix(0.85).filled(),
+        )))
+        .map_err(|x| e(&x))?
+        .label("robot (footprint)")
+        .legend(|(x, y)| Circle::new((x + 8, y), 6, EGO_RED.filled()));
+    let head = (
+        ego.x + 1.6 * fig.footprint_radius * ego.theta.cos(),
+        ego.y + 1.6 * fig.footprint_radius * ego.theta.sin(),
+    );
+    chart
+        .draw_series(std::iter::once(PathElement::new(
+            vec![(ego.x, ego.y), head],
+            BLACK.stroke_width(2),
+        )))
+        .map_err(|x| e(&x))?;
+    let r = 0.045 * half;
+    let start = fig.start.unwrap_or(ego);
+    if inside([start.x, start.y]) {
+        chart
+            .draw_series(std::iter::once(Polygon::new(
+                star([start.x, start.y], r),
+                START.filled(),
+            )))
+            .map_err(|x| e(&x))?
+            .label("start")
+            .legend(|(x, y)| Polygon::new(star_px(x + 8, y), START.filled()));
+    }
+    if inside(obs.goal) {
+        chart
+            .draw_series(std::iter::once(Polygon::new(star(obs.goal, r), GOAL.filled())))
+            .map_err(|x| e(&x))?
+            .label("goal")
+            .legend(|(x, y)| Polygon::new(star_px(x + 8, y), GOAL.filled()));
+    } else {
+        // Goal off the window: an arrow at the robot pointing to it.
+        let (dx, dy) = (obs.goal[0] - ego.x, obs.goal[1] - ego.y);
+        let d = dx.hypot(dy).max(1e-9);
+        let to = (ego.x + 0.8 * half * dx / d, ego.y + 0.8 * half * dy / d);
+        let (shaft, tip) = arrow((ego.x, ego.y), to, 0.3);
+        chart
+            .draw_series(std::iter::once(DashedPathElement::new(
+                shaft,
+                8,
+                6,
+                GOAL.stroke_width(2),
+            )))
+            .map_err(|x| e(&x))?
+            .label(format!("direction to the goal ({d:.1} m away)"))
+            .legend(|(x, y)| {
+                DashedPathElement::new(vec![(x, y), (x + 18, y)], 5, 3, GOAL.stroke_width(2))
+            });
+        chart
+            .draw_series(std::iter::once(Polygon::new(tip, GOAL.filled())))
+            .map_err(|x| e(&x))?;
+    }
+
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.88))
+        .border_style(RGBColor(160, 160, 160))
+        .label_font(("sans-serif", 15))
+        .margin(8)
+        .draw()
+        .map_err(|x| e(&x))?;
+
+    // The BEV inset in the top-left corner of the plotting area.
+    let (px, py) = chart.plotting_area().get_base_pixel();
+    let size = 250;
+    let inset = root.clone().shrink((px + 6, py + 6), (size, size + 22));
+    draw_bev_inset(&inset, fig).map_err(|x| e(&x))?;
+    Ok(())
+}
+
+/// A star polygon in pixel coordinates (legend marker).
+fn star_px(x: i32, y: i32) -> Vec<(i32, i32)> {
+    star([x as f64, y as f64], 8.0)
+        .into_iter()
+        .map(|(a, b)| (a.round() as i32, (2.0 * y as f64 - b).round() as i32))
+        .collect()
+}
+
+/// The colour of one occupied BEV cell with ego-frame velocity `(vx, vy)`.
+fn velocity_colour(vx: f32, vy: f32) -> RGBColor {
+    let speed = f64::from(vx).hypot(f64::from(vy));
+    if speed < 0.1 {
+        return RGBColor(70, 70, 70);
+    }
+    // Hue by direction in the image (forward = up): angle measured from "forward".
+    let hue = (f64::from(vy).atan2(f64::from(vx)) / std::f64::consts::TAU).rem_euclid(1.0);
+    let sat = (0.35 + 0.65 * (speed / 1.5).min(1.0)).min(1.0);
+    let (r, g, b) = hsl_to_rgb(hue, sat, 0.45);
+    RGBColor(r, g, b)
+}
+
+fn hsl_to_rgb(h: f64, s: f64, l: f64) -> (u8, u8, u8) {
+    let c = (1.0 - (2.0 * l - 1.0).abs()) * s;
+    let hp = h * 6.0;
+    let x = c * (1.0 - (hp.rem_euclid(2.0) - 1.0).abs());
+    let (r, g, b) = match hp as u32 {
+        0 => (c, x, 0.0),
+        1 => (x, c, 0.0),
+        2 => (0.0, c, x),
+        3 => (0.0, x, c),
+        4 => (x, 0.0, c),
+        _ => (c, 0.0, x),
+    };
+    let m = l - 0.5 * c;
+    let to = |v: f64| ((v + m) * 255.0).round().clamp(0.0, 255.0) as u8;
+    (to(r), to(g), to(b))
+}
+
+fn draw_bev_inset<'b>(
+    area: &Area<'b>,
+    fig: &PlanFigure<'_>,
+) -> Result<(), DrawingAreaErrorKind<<BitMapBackend<'b> as DrawingBackend>::ErrorType>> {
+    let spec = fig.bev;
+    let obs = fig.observation;
+    let n = spec.cells;
+    let mut raster = vec![0f32; spec.len()];
+    bev::rasterize(spec, obs.ego, &obs.agents, &mut raster);
+
+    area.fill(&WHITE)?;
+    let (w, h) = area.dim_in_pixel();
+    let (label, grid) = area.split_vertically(22);
+    label.draw(&Text::new(
+        format!(
+            "BEV input {n}×{n} × {:.2} m (ego frame, forward up)",
+            spec.resolution
+        ),
+        (2, 3),
+        ("sans-serif", 13).into_font().color(&BLACK),
+    ))?;
+    let nf = n as f64;
+    // x = column (left of the ego is column 0), y = nf − row (row 0 is farthest ahead).
+    let grid = grid.apply_coord_spec(Cartesian2d::<
+        plotters::coord::types::RangedCoordf64,
+        plotters::coord::types::RangedCoordf64,
+    >::new(
+        0.0..nf,
+        0.0..nf,
+        (0..w as i32, 0..(h as i32 - 22)),
+    ));
+    let plane = n * n;
+    for row in 0..n {
+        for col in 0..n {
+            let k = row * n + col;
+            let colour = if raster[k] > 0.5 {
+                velocity_colour(raster[plane + k], raster[2 * plane + k])
+            } else {
+                RGBColor(240, 240, 240)
+            };
+            let (x, y) = (col as f64, nf - row as f64);
+            grid.draw(&Rectangle::new([(x, y - 1.0), (x + 1.0, y)], colour.filled()))?;
+        }
+    }
+    // Ego-frame point → inset coordinates.
+    let to_grid = |p: [f64; 2]| {
+        let r = (spec.ahead() - p[0]) / spec.resolution;
+        let c = (spec.half_width() - p[1]) / spec.resolution;
+        (c, nf - r)
+    };
+    let in_grid = |q: (f64, f64)| q.0 >= 0.0 && q.0 <= nf && q.1 >= 0.0 && q.1 <= nf;
+    for a in &obs.agents {
+        let p = obs.ego.inverse_act(a.position);
+        let v = obs.ego.inverse_rotate(a.velocity);
+        let from = to_grid(p);
+        let to = to_grid([p[0] + 0.6 * v[0], p[1] + 0.6 * v[1]]);
+        if !in_grid(from) {
+            continue;
+        }
+        let (shaft, head) = arrow(from, to, 0.8);
+        grid.draw(&PathElement::new(shaft, BLACK.stroke_width(1)))?;
+        if !head.is_empty() {
+            grid.draw(&Polygon::new(head, BLACK.filled()))?;
+        }
+    }
+    // The robot: a red triangle pointing forward (up).
+    let (ex, ey) = to_grid([0.0, 0.0]);
+    let s = (0.35 / spec.resolution).max(0.8);
+    grid.draw(&Polygon::new(
+        vec![(ex, ey + s), (ex - 0.7 * s, ey - 0.7 * s), (ex + 0.7 * s, ey - 0.7 * s)],
+        EGO_RED.filled(),
+    ))?;
+    // Colour wheel of the velocity hue, bottom-right corner of the inset.
+    let (wc, wr) = (nf - 3.2, 3.2);
+    for i in 0..24 {
+        let a0 = std::f64::consts::TAU * i as f64 / 24.0;
+        let a1 = std::f64::consts::TAU * (i + 1) as f64 / 24.0;
+        // Image direction for ego-frame heading a: forward (a = 0) is up, left (a = π/2) is
+        // to the left.
+        let pt = |a: f64, r: f64| (wc - r * a.sin(), wr + r * a.cos());
+        let colour = velocity_colour(a0.cos() as f32 * 1.5, a0.sin() as f32 * 1.5);
+        grid.draw(&Polygon::new(
+            vec![pt(a0, 0.0), pt(a0, 2.4), pt(a1, 2.4)],
+            colour.filled(),
+        ))?;
+    }
+    area.draw(&Rectangle::new(
+        [(0, 0), (w as i32 - 1, h as i32 - 1)],
+        RGBColor(120, 120, 120).stroke_width(1),
+    ))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::episode::{AgentTrack, ScenarioClass};
+    use approx::assert_relative_eq;
+    use human2nav_core::PlanInfo;
+
+    fn episode() -> Episode {
+        Episode {
+            id: "test/0".into(),
+            scene: "test".into(),
+            source: "synthetic".into(),
+            scenario: ScenarioClass::CrossFlow,
+            dt: 0.1,
+            start: Pose2::new(1.0, 1.0, 2.0),
+            goal: [4.0, 5.0],
+            time_budget: 12.5,
+            agents: vec![
+                AgentTrack {
+                    id: 1,
+                    start_step: 0,
+                    positions: (0..40).map(|k| [2.0 + 0.1 * k as f64, 2.0]).collect(),
+                    radius: 0.3,
+                },
+                AgentTrack {
+                    id: 2,
+                    start_step: 0,
+                    positions: vec![[40.0, 40.0]; 5],
+                    radius: 0.3,
+                },
+            ],
+            density: 1,
+        }
+    }
+
+    #[test]
+    fn observation_faces_the_goal_and_sees_the_crowd_in_range() {
+        let ep = episode();
+        let opts = StepOptions {
+            time: 1.0,
+            ego_speed: 0.5,
+            ..StepOptions::default()
+        };
+        let obs = observation_at(&ep, &opts).unwrap();
+        assert_relative_eq!(obs.ego.theta, (4.0f64).atan2(3.0), epsilon = 1e-12);
+        assert_relative_eq!(obs.ego_velocity.vx, 0.5);
+        assert_eq!(obs.agents.len(), 1, "the far pedestrian is out of range");
+        let a = &obs.agents[0];
+        assert_relative_eq!(a.position[0], 3.0, epsilon = 1e-9);
+        assert_relative_eq!(a.velocity[0], 1.0, epsilon = 1e-9);
+        assert_eq!(a.history.len(), 8);
+        let recorded = StepOptions {
+            start_heading: StartHeading::Episode,
+            ..StepOptions::default()
+        };
+        assert_relative_eq!(observation_at(&ep, &recorded).unwrap().ego.theta, 2.0);
+        let bad = StepOptions {
+            time: f64::NAN,
+            ..StepOptions::default()
+        };
+        assert!(observation_at(&ep, &bad).is_err());
+    }
+
+    #[test]
+    fn episode_files_hold_a_suite_or_one_episode() {
+        let dir = std::env::temp_dir().join(format!("h2n-planfig-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let one = dir.join("one.json");
+        std::fs::write(&one, serde_json::to_string(&episode()).unwrap()).unwrap();
+        assert_eq!(load_episodes(&one).unwrap().len(), 1);
+        let suite = dir.join("suite.json");
+        let mut second = episode();
+        second.id = "test/1".into();
+        EpisodeSuite::new("synthetic", vec![episode(), second])
+            .save(&suite)
+            .unwrap();
+        let eps = load_episodes(&suite).unwrap();
+        assert_eq!(eps.len(), 2);
+        assert_eq!(select_episode(&eps, 1, None).unwrap().id, "test/1");
+        assert_eq!(select_episode(&eps, 0, Some("test/1")).unwrap().id, "test/1");
+        assert!(select_episode(&eps, 5, None).is_err());
+        assert!(select_episode(&eps, 0, Some("nope")).is_err());
+        let bad = dir.join("bad.json");
+        std::fs::write(&bad, "{").unwrap();
+        assert!(matches!(load_episodes(&bad), Err(SimError::Parse { .. })));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    fn limits() -> Limits {
+        Limits {
+            v_max: 1.0,
+            v_reverse_max: 0.3,
+            a_max: 1.0,
+            omega_max: 1.0,
+            kappa_max: None,
+            lateral_speed_max: 0.05,
+        }
+    }
+
+    /// A plan at 0.05 m then 0.2 m per step (0.5 then 2 m/s): the first waypoints are feasible,
+    /// the fast ones not; the figure's numbers say so and the PNG is written.
+    #[test]
+    fn figure_numbers_and_png() {
+        let ep = episode();
+        let obs = observation_at(&ep, &StepOptions::default()).unwrap();
+        let ego = obs.ego;
+        let mut poses = vec![ego];
+        let mut x = 0.0;
+        for k in 1..=10 {
+            x += if k <= 4 { 0.05 } else { 0.2 };
+            poses.push(ego.compose(Pose2::new(x, 0.0, 0.0)));
+        }
+        let slow: Vec<Pose2> = (0..=10)
+            .map(|k| ego.compose(Pose2::new(0.05 * k as f64, 0.0, 0.0)))
+            .collect();
+        let plan = Plan {
+            t0: 0.0,
+            dt: 0.1,
+            poses,
+            info: PlanInfo {
+                candidates: vec![slow.clone(), slow],
+                guided: Vec::new(),
+                selected: Some(0),
+                phi_before: Some(0.5),
+                phi_after: Some(0.1),
+                ..PlanInfo::default()
+            },
+        };
+        let lim = limits();
+        let fig = PlanFigure {
+            robot: "test",
+            label: &ep.id,
+            guidance: true,
+            observation: &obs,
+            start: Some(ep.start),
+            plan: &plan,
+            limits: &lim,
+            footprint_radius: 0.3,
+            bev: BevSpec::default(),
+        };
+        let n = plan_numbers(&fig);
+        assert_eq!(n.waypoints, 10);
+        // Waypoint 1 accelerates from rest to 0.5 m/s in 0.1 s (5 m/s² > a_max), 2-4 are
+        // fine, 5 jumps to 2 m/s, 6-10 are too fast.
+        assert_eq!(n.feasible, 3);
+        assert_relative_eq!(n.tfs, 0.3, epsilon = 1e-12);
+        // The kept sample before guidance: 0.5 m/s from rest, only the first step too brisk.
+        assert_relative_eq!(n.tfs_before.unwrap(), 0.9, epsilon = 1e-12);
+        let png = std::env::temp_dir().join(format!("h2n-planfig-{}.png", std::process::id()));
+        let drawn = draw_plan_figure(&png, &fig).unwrap();
+        assert_eq!(drawn, n);
+        assert!(std::fs::metadata(&png).unwrap().len() > 10_000);
+        let _ = std::fs::remove_file(&png);
+    }
+
+    #[test]
+    fn velocity_colours_follow_direction() {
+        assert_eq!(velocity_colour(0.0, 0.0), RGBColor(70, 70, 70));
+        // Forward (hue 0) is red-dominant, sideways differs.
+        let f = velocity_colour(1.5, 0.0);
+        assert!(f.0 > f.1 && f.0 > f.2, "{f:?}");
+        assert_ne!(velocity_colour(0.0, 1.5), f);
+    }
+}

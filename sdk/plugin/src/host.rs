@@ -449,12 +449,15 @@ impl PluginHost {
         let obj = lib.create(kind, name, config, robot)?;
         let label = format!("{kind} `{name}` from {}", lib.path.display());
         let health = Health::new(label);
-        self.instances
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .push(Arc::clone(&health));
-        // The vtable's first field is its size; destroy/last_error/name follow at the same
-        // offsets in every kind's vtable, checked per kind by the callers below.
+        {
+            let mut instances = self.instances.lock().unwrap_or_else(|e| e.into_inner());
+            // Forget healthy instances that were dropped (a benchmark creates one planner per
+            // episode); failed ones stay listed for `failures`.
+            instances.retain(|h| Arc::strong_count(h) > 1 || h.poisoned());
+            instances.push(Arc::clone(&health));
+        }
+        // The callers replace `destroy` and `last_error` with the kind's vtable entries before
+        // anything can drop the handle.
         Ok((
             Handle {
                 // SAFETY: `create` checked it is non-null.

@@ -259,7 +259,8 @@ mod tests {
     fn each_limit_type_is_detected() {
         let dt = 0.1;
         let l = limits(Some(0.5));
-        let cases: [(Twist2, fn(&Violations) -> bool); 5] = [
+        type Which = fn(&Violations) -> bool;
+        let cases: [(Twist2, Which); 5] = [
             (Twist2::new(-0.5, 0.0, 0.0), |v| v.reverse),
             (Twist2::new(0.5, 0.0, 1.5), |v| v.yaw_rate),
             (Twist2::new(0.5, 0.0, 0.5), |v| v.curvature),

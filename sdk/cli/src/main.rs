@@ -1,5 +1,6 @@
 //! The `human2nav` command-line tool: glue between the SDK crates, nothing more.
 
+mod bench;
 mod data;
 mod plugin;
 mod robot;
@@ -28,6 +29,8 @@ enum Command {
     Plugin(plugin::PluginCommand),
     /// Train the conditional flow-matching model (checkpoints, resume, model card, evaluation).
     Train(train::TrainArgs),
+    /// Run the closed-loop benchmark and write results.csv, report.md and the figures.
+    Bench(bench::BenchArgs),
 }
 
 fn main() -> ExitCode {
@@ -37,6 +40,7 @@ fn main() -> ExitCode {
         Command::Data(cmd) => data::run(cmd),
         Command::Plugin(cmd) => plugin::run(cmd),
         Command::Train(args) => train::run(args),
+        Command::Bench(args) => bench::run(args),
     };
     match result {
         Ok(code) => code,

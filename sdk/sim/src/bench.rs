@@ -20,6 +20,12 @@ use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+/// Share of `a_max` the `straight` baseline plans with by default. The tracking controller
+/// follows a 10 Hz plan of straight segments, so its feed-forward speed steps by `a·0.1 s` at
+/// every replanning and its derivative term adds `k_d` of that step: planning at 80 % of `a_max`
+/// keeps the commands it asks for (the executed TFS) within `a_max`.
+pub const STRAIGHT_ACCEL_SHARE: f64 = 0.8;
+
 /// A boxed error from a method factory.
 pub type BoxError = Box<dyn std::error::Error + Send + Sync>;
 
@@ -69,7 +75,7 @@ impl MethodSpec {
     }
 
     /// The built-in `straight` baseline. Keys of `table` override [`StraightConfig`]; `speed`
-    /// and `accel` default to the robot's `v_max` and `a_max`.
+    /// and `accel` default to the robot's `v_max` and [`STRAIGHT_ACCEL_SHARE`]` · a_max`.
     pub fn straight(name: impl Into<String>, table: &toml::Table) -> Result<Self, BoxError> {
         let base: StraightConfig = table.clone().try_into()?;
         base.validate()?;
@@ -80,7 +86,7 @@ impl MethodSpec {
                 cfg.speed = ctx.robot.limits.v_max;
             }
             if !has_accel {
-                cfg.accel = ctx.robot.limits.a_max;
+                cfg.accel = STRAIGHT_ACCEL_SHARE * ctx.robot.limits.a_max;
             }
             Ok(Box::new(StraightPlanner::new(cfg)?) as Box<dyn Planner>)
         }))

@@ -11,7 +11,9 @@
 //!
 //! [[methods]]
 //! name = "orca"                                 # name in the report
-//! kind = "orca"                                 # resolved by the caller (the CLI)
+//! kind = "plugin"                               # straight | plugin | ... (resolved by the CLI)
+//! library = "target/{profile}/human2nav_orca"   # plugin library (kind = "plugin")
+//! plugin = "orca"                               # factory name in the library
 //! config = { time_horizon = 5.0 }               # passed to the method, kind-specific
 //!
 //! [[suites]]
@@ -29,12 +31,15 @@
 //! (with a note in the report). An `empty` suite takes the episodes of the first other suite
 //! (or synthetic ones when there is none) and removes every pedestrian.
 
-use crate::bench::{Suite, SuiteKind};
+use crate::bench::{MethodSpec, Suite, SuiteKind};
 use crate::episode::{Episode, EpisodeSuite, ScenarioClass};
 use crate::error::SimError;
-use crate::runner::SimConfig;
+use crate::runner::{RobotSetup, SimConfig};
+use human2nav_core::Planner;
+use human2nav_plugin::{PluginHost, RobotContext};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// One benchmarked method as configured.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -42,8 +47,15 @@ use std::path::{Path, PathBuf};
 pub struct MethodConfig {
     /// Name in the report (unique).
     pub name: String,
-    /// What to build (`straight`, `orca`, `human2nav`, ...); resolved by the caller.
+    /// What to build (`straight`, `plugin`, `human2nav`, ...); resolved by the caller.
     pub kind: String,
+    /// The plugin library of a `plugin` method, relative to the workspace root; `{profile}` and
+    /// a missing `lib` prefix or extension are resolved by the plugin host.
+    #[serde(default)]
+    pub library: Option<PathBuf>,
+    /// The planner factory's name in the library (default: the method's `name`).
+    #[serde(default)]
+    pub plugin: Option<String>,
     /// Kind-specific settings.
     #[serde(default)]
     pub config: toml::Table,
@@ -161,6 +173,13 @@ impl BenchConfig {
                     format!("methods[{i}]"),
                     "name",
                     format!("`{}` is empty or repeated", m.name),
+                ));
+            }
+            if m.kind == "plugin" && m.library.is_none() {
+                return Err(SimError::setting(
+                    format!("methods[{i}]"),
+                    "library",
+                    "a plugin method names its library",
                 ));
             }
         }
@@ -344,4 +363,66 @@ pub fn build_suites(cfg: &BenchConfig, quick: bool) -> Result<Vec<Suite>, SimErr
         suites.push(suite);
     }
     Ok(suites)
+}
+
+/// The robots of the configuration (built-in embodiments), in order.
+pub fn load_robots(cfg: &BenchConfig) -> Result<Vec<RobotSetup>, SimError> {
+    cfg.robots.iter().map(|p| RobotSetup::load(&cfg.resolve(p))).collect()
+}
+
+/// Builds the methods whose kind the simulator knows without libtorch:
+///
+/// * `straight`: [`MethodSpec::straight`] with the method's `config`;
+/// * `plugin`: a planner from the plugin library `library` (factory `plugin`, default the
+///   method's name), created per episode through `host` with the robot's limits, gains and
+///   footprint and the method's `config` as its TOML. The library is loaded once here, so a
+///   missing build fails before any episode runs.
+///
+/// Returns `Ok(None)` for any other kind (the caller resolves those, e.g. `human2nav`).
+pub fn builtin_method(
+    m: &MethodConfig,
+    cfg: &BenchConfig,
+    host: &Arc<PluginHost>,
+) -> Result<Option<MethodSpec>, SimError> {
+    let section = || format!("methods[{}]", m.name);
+    match m.kind.as_str() {
+        "straight" => MethodSpec::straight(&m.name, &m.config)
+            .map(Some)
+            .map_err(|e| SimError::setting(section(), "config", e.to_string())),
+        "plugin" => {
+            let Some(library) = &m.library else {
+                return Err(SimError::setting(section(), "library", "a plugin method names its library"));
+            };
+            let library = cfg.resolve(library);
+            let factory = m.plugin.clone().unwrap_or_else(|| m.name.clone());
+            let config = toml::to_string(&m.config)
+                .map_err(|e| SimError::setting(section(), "config", e.to_string()))?;
+            let lib = host.load_library(&library).map_err(|e| {
+                SimError::setting(
+                    section(),
+                    "library",
+                    format!("{e} (build the plugin with `cargo build --workspace`, or `--release` for a release binary)"),
+                )
+            })?;
+            if !lib.factories().iter().any(|f| f.name == factory) {
+                let known: Vec<&str> = lib.factories().iter().map(|f| f.name.as_str()).collect();
+                return Err(SimError::setting(
+                    section(),
+                    "plugin",
+                    format!("{} has no factory `{factory}` (it has: {})", lib.path().display(), known.join(", ")),
+                ));
+            }
+            let host = Arc::clone(host);
+            Ok(Some(MethodSpec::new(m.name.clone(), move |ctx| {
+                let robot = RobotContext {
+                    limits: ctx.robot.limits,
+                    gains: ctx.robot.gains,
+                    footprint_radius: ctx.robot.footprint_radius,
+                };
+                let planner = host.planner(&library, &factory, &config, Some(&robot))?;
+                Ok(Box::new(planner) as Box<dyn Planner>)
+            })))
+        }
+        _ => Ok(None),
+    }
 }

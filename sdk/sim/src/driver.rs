@@ -24,6 +24,8 @@ pub struct BenchPlan<'a> {
     pub snapshot_method: Option<&'a str>,
     /// How the run was started, for the report.
     pub command: String,
+    /// Worker threads (`None`: rayon's default, one per core).
+    pub threads: Option<usize>,
 }
 
 /// What a run produced.
@@ -46,14 +48,15 @@ pub fn run(
 ) -> Result<BenchOutcome, SimError> {
     std::fs::create_dir_all(out_dir).map_err(|e| SimError::io(out_dir, e))?;
     let started = Instant::now();
-    let rows = run_bench(
-        plan.suites,
-        plan.robots,
-        plan.methods,
-        plan.sim,
-        plan.seed,
-        progress,
-    )?;
+    let bench = || run_bench(plan.suites, plan.robots, plan.methods, plan.sim, plan.seed, progress);
+    let rows = match plan.threads {
+        None => bench()?,
+        Some(n) => rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build()
+            .map_err(|e| SimError::setting("bench", "threads", e.to_string()))?
+            .install(bench)?,
+    };
 
     let results_csv = out_dir.join("results.csv");
     std::fs::write(&results_csv, report::results_csv(&rows))

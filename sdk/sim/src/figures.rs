@@ -83,10 +83,12 @@ fn grouped_bars(
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], c.filled()));
     }
     for (gi, g) in groups.iter().enumerate() {
+        // backend_coord is in whole-image pixels; the area draws relative to its own corner.
         let (px, py) = chart.backend_coord(&(gi as f64 + 0.5, 0.0));
+        let (bx, by) = area.get_base_pixel();
         area.draw(&Text::new(
             g.clone(),
-            (px, py + 8),
+            (px - bx, py - by + 8),
             ("sans-serif", 16).into_font().color(&BLACK).pos(
                 plotters::style::text_anchor::Pos::new(
                     plotters::style::text_anchor::HPos::Center,

@@ -29,5 +29,8 @@ pub mod straight;
 
 pub use bench::{MethodSpec, PlannerContext, ResultRow, Suite, SuiteKind, run_bench};
 pub use error::SimError;
+/// The progress bar type the benchmark reports to (re-exported so callers need no direct
+/// dependency; `ProgressBar::hidden()` for silence).
+pub use indicatif::ProgressBar;
 pub use metrics::EpisodeMetrics;
 pub use runner::{EpisodeRun, Outcome, RobotSetup, SimConfig, run_episode};

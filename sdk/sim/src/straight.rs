@@ -1,8 +1,8 @@
 //! `straight`: a sanity baseline that drives straight at the goal, ignoring everybody.
 //!
 //! The plan starts at the current pose; the following poses lie on the segment to the goal with
-//! heading along it, at a speed that ramps from the robot's current forward speed to `speed` at
-//! `accel` and stops at the goal. It reaches every goal of an empty world and collides whenever
+//! heading along it, at a speed that ramps (exactly, `s = v0·t + a·t²/2`) from the robot's current
+//! forward speed to `speed` at `accel`, and stops at the goal. It reaches every goal of an empty world and collides whenever
 //! somebody is in the way, which is exactly what an empty-world sanity suite and a lower bound
 //! need.
 
@@ -16,8 +16,8 @@ use serde::{Deserialize, Serialize};
 pub struct StraightConfig {
     /// Cruise speed (m/s). Default 1.0; the benchmark sets the robot's `v_max`.
     pub speed: f64,
-    /// Acceleration of the speed ramp (m/s²). Default 1.0; the benchmark sets the robot's
-    /// `a_max`.
+    /// Acceleration of the speed ramp (m/s²). Default 1.0; the benchmark sets 80 % of the
+    /// robot's `a_max` (see [`crate::bench::STRAIGHT_ACCEL_SHARE`]).
     pub accel: f64,
     /// Spacing of the plan's poses (s). Default 0.1.
     pub plan_dt: f64,
@@ -92,11 +92,19 @@ impl Planner for StraightPlanner {
         };
         let mut poses = Vec::with_capacity(c.horizon);
         poses.push(obs.ego);
-        let mut s = 0.0;
-        let mut v = obs.ego_velocity.vx.clamp(0.0, c.speed);
-        for _ in 1..c.horizon {
-            v = (v + c.accel * c.plan_dt).min(c.speed);
-            s = (s + v * c.plan_dt).min(dist);
+        // Exact arc length of the ramp: s(t) = v0·t + a·t²/2 until the cruise speed is reached
+        // (at t_c = (speed − v0)/a), then cruise; never past the goal.
+        let v0 = obs.ego_velocity.vx.clamp(0.0, c.speed);
+        let t_c = (c.speed - v0) / c.accel;
+        let arc = |t: f64| {
+            if t <= t_c {
+                v0 * t + 0.5 * c.accel * t * t
+            } else {
+                v0 * t_c + 0.5 * c.accel * t_c * t_c + c.speed * (t - t_c)
+            }
+        };
+        for k in 1..c.horizon {
+            let s = arc(k as f64 * c.plan_dt).min(dist);
             poses.push(Pose2::new(obs.ego.x + s * ux, obs.ego.y + s * uy, heading));
         }
         Ok(Plan {

@@ -223,6 +223,7 @@ fn driver_writes_csv_report_and_figures() {
         quick: true,
         snapshot_method: Some("slow"),
         command: "test".into(),
+        threads: Some(2),
     };
     let out = std::env::temp_dir().join(format!("h2n-sim-driver-{}", std::process::id()));
     let res = driver::run(&plan, &out, &ProgressBar::hidden()).unwrap();

@@ -1,0 +1,186 @@
+//! The benchmark's quick mode end to end with the shipped configurations: ORCA loaded from its
+//! built plugin library, the straight baseline, every robot of the workspace, the real held-out
+//! episodes when `human2nav data episodes` has written them (else the synthetic fallback), the
+//! synthetic suite, and the `human2nav bench --quick` command itself. Run after
+//! `cargo build --workspace` (as `sdk/dev.sh test` does), which builds the plugin and the CLI.
+
+use human2nav_integration_tests::{target_profile_dir, workspace_root};
+use human2nav_plugin::PluginHost;
+use human2nav_sim::config::{BenchConfig, build_suites, builtin_method, load_robots};
+use human2nav_sim::driver::{self, BenchOutcome, BenchPlan};
+use human2nav_sim::report::CSV_HEADER;
+use human2nav_sim::{MethodSpec, ProgressBar, SuiteKind};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+fn scratch(name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("h2n-{name}-{}", std::process::id()))
+}
+
+/// Runs a shipped config in quick mode with the methods this crate can build (methods that
+/// need libtorch are left out with a note).
+fn quick(config: &str, out: &Path) -> (BenchConfig, Vec<String>, BenchOutcome) {
+    let cfg = BenchConfig::load(&workspace_root().join(config)).unwrap();
+    let robots = load_robots(&cfg).unwrap();
+    let host = Arc::new(PluginHost::new());
+    let mut methods: Vec<MethodSpec> = Vec::new();
+    for m in &cfg.methods {
+        match builtin_method(m, &cfg, &host) {
+            Ok(Some(spec)) => methods.push(spec),
+            Ok(None) => eprintln!(
+                "{config}: method `{}` (kind `{}`) needs the CLI; left out",
+                m.name, m.kind
+            ),
+            Err(e) => panic!(
+                "{e}: build the workspace first (`cargo build --workspace`, as sdk/dev.sh test does)"
+            ),
+        }
+    }
+    let names: Vec<String> = methods.iter().map(|m| m.name.clone()).collect();
+    assert!(
+        names.iter().any(|n| n == "orca"),
+        "{config} must benchmark ORCA"
+    );
+    let suites = build_suites(&cfg, true).unwrap();
+    let plan = BenchPlan {
+        suites: &suites,
+        robots: &robots,
+        methods: &methods,
+        sim: &cfg.sim,
+        seed: cfg.seed,
+        quick: true,
+        snapshot_method: Some("orca"),
+        command: format!("quick test of {config}"),
+        threads: None,
+    };
+    let res = driver::run(&plan, out, &ProgressBar::hidden()).unwrap();
+    let expected: usize =
+        suites.iter().map(|s| s.episodes.len()).sum::<usize>() * robots.len() * methods.len();
+    assert_eq!(res.rows.len(), expected);
+    (cfg, names, res)
+}
+
+fn check_outputs(res: &BenchOutcome, methods: &[String]) {
+    // The empty-world sanity suite: every method reaches SR = 1 on every robot.
+    assert!(
+        res.empty_world_failures.is_empty(),
+        "empty-world failures: {:?}",
+        res.empty_world_failures
+    );
+    for r in &res.rows {
+        let m = &r.metrics;
+        assert_eq!(
+            u8::from(m.success) + u8::from(m.collision) + u8::from(m.timeout),
+            1
+        );
+        assert!((0.0..=1.0).contains(&m.tfs) && m.tfs <= m.tfs_plan && m.tfs <= m.tfs_executed);
+        assert!(m.duration <= m.budget + 1e-9 && m.path_length >= 0.0);
+        assert!(m.time_within_intimate <= m.time_within_personal + 1e-12);
+        assert_eq!(
+            m.planner_errors, 0,
+            "{} on {} in {}: planner errors",
+            r.method, r.robot, r.episode
+        );
+        if let Some(c) = m.min_clearance {
+            assert_eq!(
+                c < 0.0,
+                m.collision,
+                "{}: clearance {c} vs collision {}",
+                r.episode,
+                m.collision
+            );
+        }
+    }
+    let csv = std::fs::read_to_string(&res.results_csv).unwrap();
+    assert!(csv.starts_with(CSV_HEADER));
+    assert_eq!(csv.lines().count(), res.rows.len() + 1);
+    let report = std::fs::read_to_string(&res.report_md).unwrap();
+    for m in methods {
+        assert!(
+            report.contains(&format!("| {m} |")),
+            "report lacks method {m}"
+        );
+    }
+    assert_eq!(res.figures.len(), 3);
+    for f in &res.figures {
+        let bytes = std::fs::read(f).unwrap();
+        assert!(
+            bytes.starts_with(b"\x89PNG"),
+            "{} is not a PNG",
+            f.display()
+        );
+    }
+}
+
+#[test]
+fn quick_bench_with_the_shipped_config_is_sane_and_deterministic() {
+    let (a_dir, b_dir) = (scratch("bench-a"), scratch("bench-b"));
+    let (cfg, methods, a) = quick("sdk/configs/bench.toml", &a_dir);
+    check_outputs(&a, &methods);
+    let real = cfg.suites.iter().any(|s| s.kind == SuiteKind::Real);
+    eprintln!(
+        "bench.toml quick: {} rows, real suite configured: {real}",
+        a.rows.len()
+    );
+    // Deterministic: a second run writes the same results.csv byte for byte.
+    let (_, _, b) = quick("sdk/configs/bench.toml", &b_dir);
+    let (ca, cb) = (
+        std::fs::read(&a.results_csv).unwrap(),
+        std::fs::read(&b.results_csv).unwrap(),
+    );
+    assert!(
+        ca == cb,
+        "results.csv differs between two runs with the same seed"
+    );
+    std::fs::remove_dir_all(&a_dir).unwrap();
+    std::fs::remove_dir_all(&b_dir).unwrap();
+}
+
+#[test]
+fn quick_bench_on_the_synthetic_suite() {
+    let dir = scratch("bench-synthetic");
+    let (_, methods, res) = quick("sdk/configs/bench_synthetic.toml", &dir);
+    check_outputs(&res, &methods);
+    assert!(
+        res.rows
+            .iter()
+            .any(|r| r.suite == "synthetic" && r.agents > 0)
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn cli_bench_quick_writes_the_report() {
+    let exe = target_profile_dir().join(format!("human2nav{}", std::env::consts::EXE_SUFFIX));
+    if !exe.is_file() {
+        eprintln!(
+            "skipping cli_bench_quick_writes_the_report: {} not built (cargo build --workspace)",
+            exe.display()
+        );
+        return;
+    }
+    let out = scratch("bench-cli");
+    let status = std::process::Command::new(&exe)
+        .current_dir(workspace_root())
+        .args([
+            "bench",
+            "--config",
+            "sdk/configs/bench.toml",
+            "--quick",
+            "--out",
+        ])
+        .arg(&out)
+        .status()
+        .unwrap();
+    assert!(status.success(), "human2nav bench --quick failed: {status}");
+    for f in [
+        "results.csv",
+        "report.md",
+        "fig4_snapshots.png",
+        "fig6_sr_per_scenario.png",
+        "fig7_tfs_sr_per_robot.png",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    std::fs::remove_dir_all(&out).unwrap();
+}

@@ -149,8 +149,10 @@ impl ModelCard {
     /// Reads and checks a card.
     pub fn load(path: &Path) -> Result<Self, CfmError> {
         let text = std::fs::read_to_string(path).map_err(|e| CfmError::io(path, e))?;
-        let card: ModelCard = toml::from_str(&text)
-            .map_err(|e| CfmError::Toml { path: path.to_path_buf(), message: e.to_string() })?;
+        let card: ModelCard = toml::from_str(&text).map_err(|e| CfmError::Toml {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
         if card.format_version != FORMAT_VERSION {
             return Err(CfmError::Toml {
                 path: path.to_path_buf(),
@@ -167,9 +169,12 @@ impl ModelCard {
 
     /// Writes the card as TOML.
     pub fn save(&self, path: &Path) -> Result<(), CfmError> {
-        let text = toml::to_string_pretty(self)
-            .map_err(|e| CfmError::Toml { path: path.to_path_buf(), message: e.to_string() })?;
-        let header = "# human2nav flow-model card: architecture, normalisation, provenance, metrics.\n";
+        let text = toml::to_string_pretty(self).map_err(|e| CfmError::Toml {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        let header =
+            "# human2nav flow-model card: architecture, normalisation, provenance, metrics.\n";
         std::fs::write(path, format!("{header}{text}")).map_err(|e| CfmError::io(path, e))
     }
 }

@@ -75,7 +75,11 @@ pub struct TimeDistribution {
 
 impl Default for TimeDistribution {
     fn default() -> Self {
-        Self { alpha: 1.5, beta: 1.0, s: 0.999 }
+        Self {
+            alpha: 1.5,
+            beta: 1.0,
+            s: 0.999,
+        }
     }
 }
 
@@ -83,10 +87,16 @@ impl TimeDistribution {
     /// Checks the shapes are positive and `0 < s ≤ 1`.
     pub fn validate(&self) -> Result<(), CfmError> {
         if !(self.alpha.is_finite() && self.alpha > 0.0) {
-            return Err(CfmError::option("train.time.alpha", "must be finite and > 0"));
+            return Err(CfmError::option(
+                "train.time.alpha",
+                "must be finite and > 0",
+            ));
         }
         if !(self.beta.is_finite() && self.beta > 0.0) {
-            return Err(CfmError::option("train.time.beta", "must be finite and > 0"));
+            return Err(CfmError::option(
+                "train.time.beta",
+                "must be finite and > 0",
+            ));
         }
         if !(self.s > 0.0 && self.s <= 1.0) {
             return Err(CfmError::option("train.time.s", "must lie in (0, 1]"));

@@ -35,7 +35,12 @@ pub enum CfmError {
 
     /// A tensor in a weights file has the wrong shape.
     #[error("{path}: tensor `{name}` has shape {found:?}, the architecture expects {expected:?}")]
-    TensorShape { path: PathBuf, name: String, expected: Vec<i64>, found: Vec<i64> },
+    TensorShape {
+        path: PathBuf,
+        name: String,
+        expected: Vec<i64>,
+        found: Vec<i64>,
+    },
 
     /// A training example does not match the model's input spec.
     #[error("training example {index}: {reason}")]
@@ -60,10 +65,16 @@ pub enum CfmError {
 
 impl CfmError {
     pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Self::Io { path: path.into(), source }
+        Self::Io {
+            path: path.into(),
+            source,
+        }
     }
 
     pub(crate) fn option(field: &'static str, reason: impl Into<String>) -> Self {
-        Self::Option { field, reason: reason.into() }
+        Self::Option {
+            field,
+            reason: reason.into(),
+        }
     }
 }

@@ -46,7 +46,13 @@ pub struct EvalOptions {
 
 impl Default for EvalOptions {
     fn default() -> Self {
-        Self { samples: 20, steps: 10, dt: 0.1, radius: 0.3, seed: 0 }
+        Self {
+            samples: 20,
+            steps: 10,
+            dt: 0.1,
+            radius: 0.3,
+            seed: 0,
+        }
     }
 }
 
@@ -81,7 +87,11 @@ pub fn displacement_errors(pred: &[f64], truth: &[Pose2]) -> (f64, f64) {
 /// The constant-velocity prediction of `horizon` waypoints, flat `[T, 3]` (heading along the
 /// velocity, or 0 when standing).
 pub fn constant_velocity(velocity: [f64; 2], horizon: usize, dt: f64) -> Vec<f64> {
-    let heading = if velocity[0].hypot(velocity[1]) > 1e-6 { velocity[1].atan2(velocity[0]) } else { 0.0 };
+    let heading = if velocity[0].hypot(velocity[1]) > 1e-6 {
+        velocity[1].atan2(velocity[0])
+    } else {
+        0.0
+    };
     (0..horizon)
         .flat_map(|j| {
             let s = (j + 1) as f64 * dt;
@@ -116,7 +126,10 @@ pub fn evaluate<M: FlowModel + ?Sized>(
     mut progress: impl FnMut(usize),
 ) -> Result<EvalMetrics, FlowError> {
     let t = model.horizon();
-    let mut m = EvalMetrics { windows: windows.len(), ..EvalMetrics::default() };
+    let mut m = EvalMetrics {
+        windows: windows.len(),
+        ..EvalMetrics::default()
+    };
     if windows.is_empty() {
         return Ok(m);
     }

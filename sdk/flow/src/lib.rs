@@ -33,7 +33,7 @@ pub mod sampler;
 pub mod train;
 
 pub use card::ModelCard;
-pub use config::{NetConfig, Normalisation};
+pub use config::{Activation, NetConfig, Normalisation};
 pub use error::CfmError;
 pub use model::CfmModel;
 /// The libtorch bindings this crate is built on (for thread count and device selection).

@@ -10,7 +10,7 @@
 use crate::card::{FORMAT_VERSION, ModelCard, SourceInfo};
 use crate::config::{NetConfig, Normalisation};
 use crate::error::CfmError;
-use crate::net::{CondUnet1d, store_kind};
+use crate::net::{CondUnet1d, Film, store_kind};
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -59,9 +59,14 @@ pub fn trajectory_features(poses: &[f64], out: &mut [f32]) {
     }
 }
 
+/// At most this many flow times keep their FiLM parameters cached per condition.
+const FILM_CACHE: usize = 64;
+
 struct CachedCondition {
     cond: FlowCondition,
     embedding: Tensor,
+    /// FiLM parameters per flow time (keyed by the bits of `t`).
+    films: Vec<(u64, Film)>,
 }
 
 /// A conditional flow-matching model on SE(2): network, normalisation and model card.
@@ -69,10 +74,8 @@ pub struct CfmModel {
     vs: nn::VarStore,
     net: CondUnet1d,
     card: ModelCard,
-    /// `[1, 1, 3]` multiplier from standardised network output to metric velocity.
-    out_scale: Tensor,
-    /// `[1, T]` waypoint-position feature `(i + 1)/T`.
-    tau: Tensor,
+    /// Multiplier from standardised network output to metric velocity, per component.
+    out_scale: [f64; 3],
     cache: Mutex<Option<CachedCondition>>,
 }
 
@@ -100,7 +103,10 @@ impl CfmModel {
             weights: WEIGHTS_FILE.into(),
             net: net.clone(),
             normalisation: norm.clone(),
-            source: SourceInfo { std: norm.source_std(), steps: 10 },
+            source: SourceInfo {
+                std: norm.source_std(),
+                steps: 10,
+            },
             ..ModelCard::default()
         };
         Ok(Self::from_card(card, device))
@@ -109,19 +115,20 @@ impl CfmModel {
     fn from_card(card: ModelCard, device: Device) -> Self {
         let vs = nn::VarStore::new(device);
         let net = CondUnet1d::new(&vs.root(), &card.net);
-        let (out_scale, tau) = Self::constants(&card, Kind::Float, device);
-        Self { vs, net, card, out_scale, tau, cache: Mutex::new(None) }
-    }
-
-    fn constants(card: &ModelCard, kind: Kind, device: Device) -> (Tensor, Tensor) {
         let n = &card.normalisation;
         let s = n.position_scale;
-        let scale = [s * n.velocity_std[0], s * n.velocity_std[1], n.velocity_std[2]];
-        let out_scale = Tensor::from_slice(&scale).to_kind(kind).to_device(device).view([1, 1, 3]);
-        let t = card.net.horizon;
-        let tau: Vec<f64> = (1..=t).map(|i| i as f64 / t as f64).collect();
-        let tau = Tensor::from_slice(&tau).to_kind(kind).to_device(device).view([1, t as i64]);
-        (out_scale, tau)
+        let out_scale = [
+            s * n.velocity_std[0],
+            s * n.velocity_std[1],
+            n.velocity_std[2],
+        ];
+        Self {
+            vs,
+            net,
+            card,
+            out_scale,
+            cache: Mutex::new(None),
+        }
     }
 
     /// Loads a model folder (`model.toml` + the weights it names) or a card file directly.
@@ -130,10 +137,16 @@ impl CfmModel {
     /// known, none may be missing, and every shape must match; a truncated or corrupt file
     /// fails with [`CfmError::Corrupt`].
     pub fn load(path: &Path, device: Device) -> Result<Self, CfmError> {
-        let card_path =
-            if path.is_dir() { path.join(CARD_FILE) } else { path.to_path_buf() };
+        let card_path = if path.is_dir() {
+            path.join(CARD_FILE)
+        } else {
+            path.to_path_buf()
+        };
         let card = ModelCard::load(&card_path)?;
-        let dir = card_path.parent().map(Path::to_path_buf).unwrap_or_default();
+        let dir = card_path
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_default();
         let weights = dir.join(&card.weights);
         let model = Self::from_card(card, device);
         model.load_weights(&weights, "")?;
@@ -157,7 +170,10 @@ impl CfmModel {
         let vars = self.vs.variables();
         if prefix.is_empty() {
             if let Some(name) = tensors.keys().find(|n| !vars.contains_key(n.as_str())) {
-                return Err(CfmError::UnexpectedTensor { path: path.into(), name: name.clone() });
+                return Err(CfmError::UnexpectedTensor {
+                    path: path.into(),
+                    name: name.clone(),
+                });
             }
         }
         let _guard = tch::no_grad_guard();
@@ -166,7 +182,10 @@ impl CfmModel {
         for name in names {
             let key = format!("{prefix}{name}");
             let Some(src) = tensors.get(&key) else {
-                return Err(CfmError::MissingTensor { path: path.into(), name: key });
+                return Err(CfmError::MissingTensor {
+                    path: path.into(),
+                    name: key,
+                });
             };
             let mut dst = vars[name].shallow_clone();
             if src.size() != dst.size() {
@@ -197,7 +216,12 @@ impl CfmModel {
             .vs
             .variables()
             .into_iter()
-            .map(|(n, t)| (format!("{prefix}{n}"), t.detach().to_kind(Kind::Float).to_device(Device::Cpu)))
+            .map(|(n, t)| {
+                (
+                    format!("{prefix}{n}"),
+                    t.detach().to_kind(Kind::Float).to_device(Device::Cpu),
+                )
+            })
             .collect();
         v.sort_by(|a, b| a.0.cmp(&b.0));
         v
@@ -238,9 +262,6 @@ impl CfmModel {
     /// Converts the weights to float64 (for finite-difference tests of the autograd VJP).
     pub fn to_double(&mut self) {
         self.vs.double();
-        let (o, t) = Self::constants(&self.card, Kind::Double, self.vs.device());
-        self.out_scale = o;
-        self.tau = t;
         self.invalidate_cache();
     }
 
@@ -273,83 +294,162 @@ impl CfmModel {
         );
         let (kind, device) = (self.kind(), self.device());
         let c = cells as i64;
-        let bev = Tensor::from_slice(&bev).view([1, 3, c, c]).to_kind(kind).to_device(device);
-        let gv = Tensor::from_slice(&gv).view([1, 4]).to_kind(kind).to_device(device);
+        let bev = Tensor::from_slice(&bev)
+            .view([1, 3, c, c])
+            .to_kind(kind)
+            .to_device(device);
+        let gv = Tensor::from_slice(&gv)
+            .view([1, 4])
+            .to_kind(kind)
+            .to_device(device);
         Ok((bev, gv))
     }
 
     /// The static condition embedding `[1, ·]`, from the cache when `cond` is unchanged.
     pub fn condition_embedding(&self, cond: &FlowCondition) -> Result<Tensor, FlowError> {
+        self.with_cached(cond, |c| Ok(c.embedding.shallow_clone()))
+    }
+
+    /// FiLM parameters for `(t, cond)`, from the cache when both are unchanged.
+    fn film(&self, cond: &FlowCondition, t: f64) -> Result<Film, FlowError> {
+        self.with_cached(cond, |c| {
+            let key = t.to_bits();
+            if let Some((_, f)) = c.films.iter().find(|(k, _)| *k == key) {
+                return Ok(f.shallow_clone());
+            }
+            let tt = Tensor::from_slice(&[t])
+                .to_kind(self.kind())
+                .to_device(self.device());
+            let film = tch::no_grad(|| self.net.film(&tt, &c.embedding));
+            if c.films.len() >= FILM_CACHE {
+                c.films.remove(0);
+            }
+            c.films.push((key, film.shallow_clone()));
+            Ok(film)
+        })
+    }
+
+    fn with_cached<R>(
+        &self,
+        cond: &FlowCondition,
+        f: impl FnOnce(&mut CachedCondition) -> Result<R, FlowError>,
+    ) -> Result<R, FlowError> {
         let mut cache = self
             .cache
             .lock()
             .map_err(|_| FlowError::Backend("condition cache poisoned".into()))?;
-        if let Some(c) = cache.as_ref() {
-            if c.cond == *cond {
-                return Ok(c.embedding.shallow_clone());
-            }
+        let hit = cache.as_ref().is_some_and(|c| c.cond == *cond);
+        if !hit {
+            let (bev, gv) = self.condition_tensors(cond)?;
+            let embedding = tch::no_grad(|| self.net.encode_condition(&bev, &gv));
+            *cache = Some(CachedCondition {
+                cond: cond.clone(),
+                embedding,
+                films: Vec::new(),
+            });
         }
-        let (bev, gv) = self.condition_tensors(cond)?;
-        let embedding = tch::no_grad(|| self.net.encode_condition(&bev, &gv));
-        *cache = Some(CachedCondition { cond: cond.clone(), embedding: embedding.shallow_clone() });
-        Ok(embedding)
+        match cache.as_mut() {
+            Some(c) => f(c),
+            None => Err(FlowError::Backend("condition cache empty".into())),
+        }
     }
 
-    /// Trajectory features `[K, 5, T]` of metric poses `x: [K, T, 3]` (differentiable).
-    pub fn features(&self, x: &Tensor) -> Tensor {
-        let inv_s = 1.0 / self.card.normalisation.position_scale;
-        let xy = x.narrow(2, 0, 2) * inv_s;
-        let th = x.narrow(2, 2, 1);
-        let k = x.size()[0];
-        let tau = self.tau.view([1, -1, 1]).expand([k, -1, 1], false);
-        Tensor::cat(&[xy, th.cos(), th.sin(), tau], 2).permute([0, 2, 1])
-    }
-
-    /// Metric velocity `[K, T, 3]` of metric poses `x: [K, T, 3]` at flow time `t` with a
-    /// static condition embedding from [`Self::condition_embedding`].
-    pub fn velocity_tensor(&self, x: &Tensor, t: f64, embedding: &Tensor) -> Tensor {
-        let t = Tensor::from_slice(&[t]).to_kind(x.kind()).to_device(x.device());
-        let out = self.net.forward(&self.features(x), &t, embedding);
-        out.permute([0, 2, 1]) * &self.out_scale
-    }
-
-    fn input_tensor(&self, x: &[f64], what: &str) -> Result<(Tensor, i64), FlowError> {
+    /// Network features `[K, 5, T]` of metric poses (flat `[K, T, 3]`), in the model's kind:
+    /// the same values as [`trajectory_features`] of the normalised poses.
+    pub fn feature_tensor(&self, x: &[f64]) -> Result<(Tensor, usize), FlowError> {
         let t = self.card.net.horizon;
         if x.is_empty() || x.len() % (3 * t) != 0 {
             return Err(FlowError::Shape(format!(
-                "{what} has {} values, not a positive multiple of T·3 = {}",
+                "x has {} values, not a positive multiple of T·3 = {}",
                 x.len(),
                 3 * t
             )));
         }
-        let k = (x.len() / (3 * t)) as i64;
-        let tensor = Tensor::from_slice(x)
-            .view([k, t as i64, 3])
-            .to_kind(self.kind())
-            .to_device(self.device());
-        Ok((tensor, k))
+        let k = x.len() / (3 * t);
+        let inv_s = 1.0 / self.card.normalisation.position_scale;
+        let mut f = vec![0f64; k * 5 * t];
+        for (traj, out) in x.chunks_exact(3 * t).zip(f.chunks_exact_mut(5 * t)) {
+            for (j, p) in traj.chunks_exact(3).enumerate() {
+                let (sin, cos) = p[2].sin_cos();
+                out[j] = p[0] * inv_s;
+                out[t + j] = p[1] * inv_s;
+                out[2 * t + j] = cos;
+                out[3 * t + j] = sin;
+                out[4 * t + j] = (j + 1) as f64 / t as f64;
+            }
+        }
+        let shape = [k as i64, 5, t as i64];
+        Ok((tensor_of(&f, &shape, self.kind(), self.device()), k))
+    }
+
+    /// Writes `out[k, j, c] = net[k, c, j]·scale_c` (metric velocity from standardised output).
+    fn write_velocity(&self, net_out: &Tensor, out: &mut [f64]) -> Result<(), FlowError> {
+        let t = self.card.net.horizon;
+        let raw = values_of(net_out, out.len())?;
+        for (o_traj, r_traj) in out.chunks_exact_mut(3 * t).zip(raw.chunks_exact(3 * t)) {
+            for j in 0..t {
+                for c in 0..3 {
+                    o_traj[3 * j + c] = r_traj[c * t + j] * self.out_scale[c];
+                }
+            }
+        }
+        if out.iter().any(|v| !v.is_finite()) {
+            return Err(FlowError::NonFinite);
+        }
+        Ok(())
     }
 }
 
-fn copy_out(src: &Tensor, out: &mut [f64]) -> Result<(), FlowError> {
-    let src = src.detach().to_device(Device::Cpu).to_kind(Kind::Double).contiguous();
-    if src.numel() != out.len() {
+/// A tensor of the given kind and shape from `f64` values (built directly as `f32` for
+/// float models).
+fn tensor_of(v: &[f64], shape: &[i64], kind: Kind, device: Device) -> Tensor {
+    let t = match kind {
+        Kind::Double => Tensor::from_slice(v),
+        Kind::Float => {
+            let f: Vec<f32> = v.iter().map(|&x| x as f32).collect();
+            Tensor::from_slice(&f)
+        }
+        _ => Tensor::from_slice(v).to_kind(kind),
+    };
+    t.view(shape).to_device(device)
+}
+
+/// The values of a tensor (any float kind) as `f64`, checking the count.
+fn values_of(t: &Tensor, n: usize) -> Result<Vec<f64>, FlowError> {
+    let t = t.detach().to_device(Device::Cpu).contiguous();
+    if t.numel() != n {
         return Err(FlowError::Shape(format!(
-            "output buffer has {} values, expected {}",
-            out.len(),
-            src.numel()
+            "network output has {} values, expected {n}",
+            t.numel()
         )));
     }
-    src.f_copy_data(out, out.len()).map_err(|e| FlowError::Backend(e.to_string()))?;
-    if out.iter().any(|v| !v.is_finite()) {
-        return Err(FlowError::NonFinite);
+    let backend = |e: tch::TchError| FlowError::Backend(e.to_string());
+    match t.kind() {
+        Kind::Float => {
+            let mut v = vec![0f32; n];
+            t.f_copy_data(&mut v, n).map_err(backend)?;
+            Ok(v.into_iter().map(f64::from).collect())
+        }
+        Kind::Double => {
+            let mut v = vec![0f64; n];
+            t.f_copy_data(&mut v, n).map_err(backend)?;
+            Ok(v)
+        }
+        _ => {
+            let mut v = vec![0f64; n];
+            t.to_kind(Kind::Double)
+                .f_copy_data(&mut v, n)
+                .map_err(backend)?;
+            Ok(v)
+        }
     }
-    Ok(())
 }
 
 fn check_len(name: &str, got: usize, want: usize) -> Result<(), FlowError> {
     if got != want {
-        return Err(FlowError::Shape(format!("{name} has {got} values, expected {want}")));
+        return Err(FlowError::Shape(format!(
+            "{name} has {got} values, expected {want}"
+        )));
     }
     Ok(())
 }
@@ -371,12 +471,14 @@ impl FlowModel for CfmModel {
         out: &mut [f64],
     ) -> Result<(), FlowError> {
         check_len("out", out.len(), x.len())?;
-        let emb = self.condition_embedding(cond)?;
-        let (xt, _) = self.input_tensor(x, "x")?;
-        let v = tch::no_grad(|| self.velocity_tensor(&xt, t, &emb));
-        copy_out(&v, out)
+        let (feat, _) = self.feature_tensor(x)?;
+        let film = self.film(cond, t)?;
+        let v = tch::no_grad(|| self.net.forward_film(&feat, &film));
+        self.write_velocity(&v, out)
     }
 
+    /// The network runs in autograd mode on its input features; the pull-back through the
+    /// features `(x/s, y/s, cos θ, sin θ)` and the output scaling is done here in closed form.
     fn velocity_vjp(
         &self,
         x: &[f64],
@@ -389,14 +491,27 @@ impl FlowModel for CfmModel {
         check_len("out", out.len(), x.len())?;
         check_len("vjp", vjp.len(), x.len())?;
         check_len("cotangent", cotangent.len(), x.len())?;
-        let emb = self.condition_embedding(cond)?;
-        let (xt, _) = self.input_tensor(x, "x")?;
-        let (ct, _) = self.input_tensor(cotangent, "cotangent")?;
+        let h = self.card.net.horizon;
+        let (feat, k) = self.feature_tensor(x)?;
+        let film = self.film(cond, t)?;
+        // Cotangent of the standardised output [K, 3, T]: cot[k, j, c]·scale_c.
+        let mut cot = vec![0f64; x.len()];
+        for (c_traj, src) in cot
+            .chunks_exact_mut(3 * h)
+            .zip(cotangent.chunks_exact(3 * h))
+        {
+            for j in 0..h {
+                for c in 0..3 {
+                    c_traj[c * h + j] = src[3 * j + c] * self.out_scale[c];
+                }
+            }
+        }
+        let cot = tensor_of(&cot, &[k as i64, 3, h as i64], self.kind(), self.device());
         let (v, grad) = tch::with_grad(|| -> Result<(Tensor, Tensor), FlowError> {
-            let xt = xt.set_requires_grad(true);
-            let v = self.velocity_tensor(&xt, t, &emb);
-            let s = (&v * &ct).sum(Kind::Double);
-            let grads = Tensor::f_run_backward(&[&s], &[&xt], false, false)
+            let feat = feat.set_requires_grad(true);
+            let v = self.net.forward_film(&feat, &film);
+            let s = (&v * &cot).sum(v.kind());
+            let grads = Tensor::f_run_backward(&[&s], &[&feat], false, false)
                 .map_err(|e| FlowError::Backend(e.to_string()))?;
             let g = grads
                 .into_iter()
@@ -404,8 +519,25 @@ impl FlowModel for CfmModel {
                 .ok_or_else(|| FlowError::Backend("autograd returned no gradient".into()))?;
             Ok((v, g))
         })?;
-        copy_out(&v, out)?;
-        copy_out(&grad, vjp)
+        self.write_velocity(&v, out)?;
+        let g = values_of(&grad, k * 5 * h)?;
+        let inv_s = 1.0 / self.card.normalisation.position_scale;
+        let rows = vjp
+            .chunks_exact_mut(3 * h)
+            .zip(g.chunks_exact(5 * h))
+            .zip(x.chunks_exact(3 * h));
+        for ((o, gf), xt) in rows {
+            for j in 0..h {
+                let (sin, cos) = xt[3 * j + 2].sin_cos();
+                o[3 * j] = gf[j] * inv_s;
+                o[3 * j + 1] = gf[h + j] * inv_s;
+                o[3 * j + 2] = -sin * gf[2 * h + j] + cos * gf[3 * h + j];
+            }
+        }
+        if vjp.iter().any(|v| !v.is_finite()) {
+            return Err(FlowError::NonFinite);
+        }
+        Ok(())
     }
 }
 
@@ -417,16 +549,20 @@ pub(crate) fn read_safetensors(path: &Path) -> Result<BTreeMap<String, Tensor>, 
             std::io::Error::new(std::io::ErrorKind::NotFound, "weights file not found"),
         ));
     }
-    let list = Tensor::read_safetensors(path)
-        .map_err(|e| CfmError::Corrupt { path: PathBuf::from(path), message: e.to_string() })?;
+    let list = Tensor::read_safetensors(path).map_err(|e| CfmError::Corrupt {
+        path: PathBuf::from(path),
+        message: e.to_string(),
+    })?;
     Ok(list.into_iter().collect())
 }
 
 /// Writes named tensors to a safetensors file (atomically: temporary file, then rename).
 pub(crate) fn write_safetensors(path: &Path, tensors: &[(String, Tensor)]) -> Result<(), CfmError> {
     let tmp = path.with_extension("safetensors.tmp");
-    Tensor::write_safetensors(tensors, &tmp)
-        .map_err(|e| CfmError::Corrupt { path: tmp.clone(), message: e.to_string() })?;
+    Tensor::write_safetensors(tensors, &tmp).map_err(|e| CfmError::Corrupt {
+        path: tmp.clone(),
+        message: e.to_string(),
+    })?;
     std::fs::rename(&tmp, path).map_err(|e| CfmError::io(path, e))
 }
 
@@ -446,6 +582,9 @@ mod tests {
             bev_embed_dim: 8,
             goal_embed_dim: 8,
             kernel_size: 3,
+            blocks_per_level: 2,
+            mid_blocks: 2,
+            activation: crate::config::Activation::Mish,
         }
     }
 
@@ -461,9 +600,16 @@ mod tests {
     fn condition(cfg: &NetConfig, seed: u32) -> FlowCondition {
         let n = cfg.bev_len();
         let bev = (0..n)
-            .map(|i| ((((i as u32) ^ seed.wrapping_mul(7919)).wrapping_mul(2654435761) >> 16) % 7) as f32 / 7.0)
+            .map(|i| {
+                ((((i as u32) ^ seed.wrapping_mul(7919)).wrapping_mul(2654435761) >> 16) % 7) as f32
+                    / 7.0
+            })
             .collect();
-        FlowCondition { bev, goal: [3.0, -1.0], velocity: [1.1, 0.2] }
+        FlowCondition {
+            bev,
+            goal: [3.0, -1.0],
+            velocity: [1.1, 0.2],
+        }
     }
 
     fn poses(k: usize, t: usize) -> Vec<f64> {
@@ -482,8 +628,9 @@ mod tests {
         let cfg = small();
         let model = CfmModel::new(&cfg, &norm(), Device::Cpu).unwrap();
         let x = poses(2, cfg.horizon);
-        let xt = Tensor::from_slice(&x).view([2, cfg.horizon as i64, 3]).to_kind(Kind::Float);
-        let f = model.features(&xt).contiguous();
+        let (f, k) = model.feature_tensor(&x).unwrap();
+        assert_eq!(k, 2);
+        let f = f.contiguous();
         let mut rust = vec![0f32; 5 * cfg.horizon];
         let s = norm().position_scale;
         for k in 0..2 {
@@ -511,10 +658,14 @@ mod tests {
         let cond = condition(&cfg, 3);
         let k = 2;
         let x = poses(k, cfg.horizon);
-        let cot: Vec<f64> = (0..x.len()).map(|i| ((i * 7 % 11) as f64 - 5.0) / 5.0).collect();
+        let cot: Vec<f64> = (0..x.len())
+            .map(|i| ((i * 7 % 11) as f64 - 5.0) / 5.0)
+            .collect();
         let mut out = vec![0.0; x.len()];
         let mut vjp = vec![0.0; x.len()];
-        model.velocity_vjp(&x, 0.37, &cond, &cot, &mut out, &mut vjp).unwrap();
+        model
+            .velocity_vjp(&x, 0.37, &cond, &cot, &mut out, &mut vjp)
+            .unwrap();
         let mut out2 = vec![0.0; x.len()];
         model.velocity(&x, 0.37, &cond, &mut out2).unwrap();
         for (a, b) in out.iter().zip(&out2) {
@@ -551,7 +702,9 @@ mod tests {
         model.velocity(&x, 0.5, &cond, &mut out).unwrap();
         let n = cfg.horizon * 3;
         let mut single = vec![0.0; n];
-        model.velocity(&x[n..2 * n], 0.5, &cond, &mut single).unwrap();
+        model
+            .velocity(&x[n..2 * n], 0.5, &cond, &mut single)
+            .unwrap();
         for (a, b) in single.iter().zip(&out[n..2 * n]) {
             assert_relative_eq!(*a, *b, epsilon = 1e-5, max_relative = 1e-5);
         }
@@ -559,7 +712,11 @@ mod tests {
         let other = condition(&cfg, 99);
         let mut out_other = vec![0.0; x.len()];
         model.velocity(&x, 0.5, &other, &mut out_other).unwrap();
-        assert!(out.iter().zip(&out_other).any(|(a, b)| (a - b).abs() > 1e-6));
+        assert!(
+            out.iter()
+                .zip(&out_other)
+                .any(|(a, b)| (a - b).abs() > 1e-6)
+        );
         // And going back reproduces the first result.
         let mut again = vec![0.0; x.len()];
         model.velocity(&x, 0.5, &cond, &mut again).unwrap();
@@ -572,11 +729,20 @@ mod tests {
         let model = CfmModel::new(&cfg, &norm(), Device::Cpu).unwrap();
         let cond = condition(&cfg, 1);
         let mut out = vec![0.0; 5];
-        assert!(matches!(model.velocity(&[0.0; 5], 0.1, &cond, &mut out), Err(FlowError::Shape(_))));
-        let bad = FlowCondition { bev: vec![0.0; 10], ..cond };
+        assert!(matches!(
+            model.velocity(&[0.0; 5], 0.1, &cond, &mut out),
+            Err(FlowError::Shape(_))
+        ));
+        let bad = FlowCondition {
+            bev: vec![0.0; 10],
+            ..cond
+        };
         let x = poses(1, cfg.horizon);
         let mut out = vec![0.0; x.len()];
-        assert!(matches!(model.velocity(&x, 0.1, &bad, &mut out), Err(FlowError::Shape(_))));
+        assert!(matches!(
+            model.velocity(&x, 0.1, &bad, &mut out),
+            Err(FlowError::Shape(_))
+        ));
     }
 
     #[test]
@@ -613,7 +779,10 @@ mod tests {
         card.net.down_dims = vec![8, 16];
         card.save(&dir.join(CARD_FILE)).unwrap();
         let mut named = model.named_tensors("");
-        named.push(("extra.weight".into(), Tensor::zeros([2], (Kind::Float, Device::Cpu))));
+        named.push((
+            "extra.weight".into(),
+            Tensor::zeros([2], (Kind::Float, Device::Cpu)),
+        ));
         write_safetensors(&dir.join(WEIGHTS_FILE), &named).unwrap();
         let err = CfmModel::load(&dir, Device::Cpu).unwrap_err();
         assert!(matches!(err, CfmError::UnexpectedTensor { .. }), "{err}");

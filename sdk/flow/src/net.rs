@@ -6,10 +6,11 @@
 //!   `(i + 1)/T` (convolutions are shift-invariant; the waypoint index matters here).
 //! * Output `[B, 3, T]`: the standardised body velocity `(v_x, v_y, ω)` per waypoint.
 //! * Conditioning by FiLM: every residual block scales and shifts its first convolution's
-//!   output per channel with a linear map of `Mish(c)`, where `c = [time embedding, BEV
+//!   output per channel with a linear map of `act(c)`, where `c = [time embedding, BEV
 //!   embedding, goal embedding]`.
-//! * BEV encoder: three stride-2 3×3 convolutions with GroupNorm and Mish, an adaptive average
-//!   pool to 4×4 and a linear layer. Goal encoder: a two-layer MLP on
+//! * BEV encoder: three stride-2 3×3 convolutions with GroupNorm and the activation, an adaptive average
+//!   pool to 4×4 and a linear layer. The activation is SiLU by default (Mish, as in
+//!   Diffusion Policy, is available; see [`Activation`]). Goal encoder: a two-layer MLP on
 //!   `(g_x, g_y)/goal_scale, (v_x, v_y)/speed_scale`. Time: sinusoidal embedding of `100·t`
 //!   followed by a two-layer MLP.
 //!
@@ -17,7 +18,7 @@
 //! condition, so [`CondUnet1d::encode_condition`] is separate from [`CondUnet1d::forward`] and
 //! can be computed once per planning call.
 
-use crate::config::NetConfig;
+use crate::config::{Activation, NetConfig};
 use tch::nn::{self, Module};
 use tch::{Kind, Tensor};
 
@@ -30,55 +31,73 @@ pub const GOAL_FEATURES: i64 = 4;
 /// Frequency multiplier of the sinusoidal time embedding (flow time `t ∈ [0, 1]`).
 const TIME_SCALE: f64 = 100.0;
 
-/// Conv1d → GroupNorm → Mish.
+fn act(a: Activation, x: &Tensor) -> Tensor {
+    match a {
+        Activation::Silu => x.silu(),
+        Activation::Mish => x.mish(),
+    }
+}
+
+/// Conv1d → GroupNorm → activation.
 #[derive(Debug)]
 struct Conv1dBlock {
     conv: nn::Conv1D,
     norm: nn::GroupNorm,
+    act: Activation,
 }
 
 impl Conv1dBlock {
-    fn new(p: nn::Path<'_>, cin: i64, cout: i64, k: i64, groups: i64) -> Self {
-        let cfg = nn::ConvConfig { padding: k / 2, ..Default::default() };
+    fn new(p: nn::Path<'_>, cin: i64, cout: i64, k: i64, groups: i64, act: Activation) -> Self {
+        let cfg = nn::ConvConfig {
+            padding: k / 2,
+            ..Default::default()
+        };
         Self {
             conv: nn::conv1d(&p / "conv", cin, cout, k, cfg),
             norm: nn::group_norm(&p / "norm", groups, cout, Default::default()),
+            act,
         }
     }
 
     fn forward(&self, x: &Tensor) -> Tensor {
-        self.norm.forward(&self.conv.forward(x)).mish()
+        act(self.act, &self.norm.forward(&self.conv.forward(x)))
     }
 }
 
-/// Residual block with FiLM conditioning (`ConditionalResidualBlock1D`).
+/// Residual block with FiLM conditioning (`ConditionalResidualBlock1D`). Its FiLM scale and
+/// bias come from the network's fused FiLM layer ([`Film`]).
 #[derive(Debug)]
 struct ResBlock {
     block0: Conv1dBlock,
     block1: Conv1dBlock,
-    film: nn::Linear,
     residual: Option<nn::Conv1D>,
-    cout: i64,
+    /// Index of this block's `(scale, bias)` in [`Film`].
+    film_index: usize,
 }
 
 impl ResBlock {
-    fn new(p: nn::Path<'_>, cin: i64, cout: i64, cond_dim: i64, k: i64, groups: i64) -> Self {
-        let residual = (cin != cout)
-            .then(|| nn::conv1d(&p / "residual", cin, cout, 1, Default::default()));
+    fn new(
+        p: nn::Path<'_>,
+        cin: i64,
+        cout: i64,
+        (k, groups, a): (i64, i64, Activation),
+        film: &mut Vec<i64>,
+    ) -> Self {
+        let residual =
+            (cin != cout).then(|| nn::conv1d(&p / "residual", cin, cout, 1, Default::default()));
+        film.push(cout);
         Self {
-            block0: Conv1dBlock::new(&p / "block0", cin, cout, k, groups),
-            block1: Conv1dBlock::new(&p / "block1", cout, cout, k, groups),
-            film: nn::linear(&p / "film", cond_dim, 2 * cout, Default::default()),
+            block0: Conv1dBlock::new(&p / "block0", cin, cout, k, groups, a),
+            block1: Conv1dBlock::new(&p / "block1", cout, cout, k, groups, a),
             residual,
-            cout,
+            film_index: film.len() - 1,
         }
     }
 
-    /// `x`: `[B, cin, L]`; `mish_c`: `Mish(c)`, `[B, cond]` or `[1, cond]` (broadcast).
-    fn forward(&self, x: &Tensor, mish_c: &Tensor) -> Tensor {
-        let h = self.block0.forward(x);
-        let film = self.film.forward(mish_c).view([-1, 2, self.cout, 1]);
-        let h = &h * film.select(1, 0) + film.select(1, 1);
+    /// `x`: `[B, cin, L]`; FiLM scale and bias `[B or 1, cout, 1]` (broadcast over the batch).
+    fn forward(&self, x: &Tensor, film: &Film) -> Tensor {
+        let (scale, bias) = &film.per_block[self.film_index];
+        let h = bias.addcmul(&self.block0.forward(x), scale);
         let h = self.block1.forward(&h);
         match &self.residual {
             Some(r) => h + r.forward(x),
@@ -87,17 +106,35 @@ impl ResBlock {
     }
 }
 
+/// FiLM parameters of every residual block for one `(t, c)`: `(scale, bias)`, each
+/// `[B, C, 1]` (or `[1, C, 1]` when shared by the batch).
+#[derive(Debug)]
+pub struct Film {
+    per_block: Vec<(Tensor, Tensor)>,
+}
+
+impl Film {
+    /// A shallow copy (the tensors share storage).
+    pub fn shallow_clone(&self) -> Film {
+        Film {
+            per_block: self
+                .per_block
+                .iter()
+                .map(|(s, b)| (s.shallow_clone(), b.shallow_clone()))
+                .collect(),
+        }
+    }
+}
+
 #[derive(Debug)]
 struct DownLevel {
-    res0: ResBlock,
-    res1: ResBlock,
+    blocks: Vec<ResBlock>,
     down: Option<nn::Conv1D>,
 }
 
 #[derive(Debug)]
 struct UpLevel {
-    res0: ResBlock,
-    res1: ResBlock,
+    blocks: Vec<ResBlock>,
     up: nn::ConvTranspose1D,
 }
 
@@ -111,6 +148,9 @@ pub struct CondUnet1d {
     bev_fc: nn::Linear,
     goal_fc0: nn::Linear,
     goal_fc1: nn::Linear,
+    film: nn::Linear,
+    /// Channels of each residual block, in [`Film`] order.
+    film_channels: Vec<i64>,
     down: Vec<DownLevel>,
     mid: Vec<ResBlock>,
     up: Vec<UpLevel>,
@@ -123,6 +163,8 @@ impl CondUnet1d {
     pub fn new(p: &nn::Path<'_>, cfg: &NetConfig) -> Self {
         let k = cfg.kernel_size as i64;
         let g = cfg.n_groups as i64;
+        let a = cfg.activation;
+        let kga = (k, g, a);
         let cond = cfg.cond_dim() as i64;
         let tdim = cfg.time_embed_dim as i64;
 
@@ -135,13 +177,22 @@ impl CondUnet1d {
         let mut cin = 3i64;
         for (i, &c) in cfg.bev_channels.iter().enumerate() {
             let c = c as i64;
-            let conv_cfg = nn::ConvConfig { stride: 2, padding: 1, ..Default::default() };
+            let conv_cfg = nn::ConvConfig {
+                stride: 2,
+                padding: 1,
+                ..Default::default()
+            };
             let conv = nn::conv2d(&bev / format!("conv{i}"), cin, c, 3, conv_cfg);
             let norm = nn::group_norm(&bev / format!("norm{i}"), g, c, Default::default());
             bev_convs.push((conv, norm));
             cin = c;
         }
-        let bev_fc = nn::linear(&bev / "fc", cin * 16, cfg.bev_embed_dim as i64, Default::default());
+        let bev_fc = nn::linear(
+            &bev / "fc",
+            cin * 16,
+            cfg.bev_embed_dim as i64,
+            Default::default(),
+        );
 
         let goal = p / "goal";
         let gdim = cfg.goal_embed_dim as i64;
@@ -153,39 +204,67 @@ impl CondUnet1d {
             .chain(cfg.down_dims.iter().map(|&d| d as i64))
             .collect();
         let levels = cfg.down_dims.len();
+        let nb = cfg.blocks_per_level;
+        let mut film_channels = Vec::new();
         let mut down = Vec::new();
         for i in 0..levels {
             let (din, dout) = (dims[i], dims[i + 1]);
             let lp = &unet / "down" / i;
             let last = i + 1 == levels;
+            let blocks = (0..nb)
+                .map(|b| {
+                    let cin = if b == 0 { din } else { dout };
+                    ResBlock::new(&lp / format!("res{b}"), cin, dout, kga, &mut film_channels)
+                })
+                .collect();
             down.push(DownLevel {
-                res0: ResBlock::new(&lp / "res0", din, dout, cond, k, g),
-                res1: ResBlock::new(&lp / "res1", dout, dout, cond, k, g),
+                blocks,
                 down: (!last).then(|| {
-                    let c = nn::ConvConfig { stride: 2, padding: 1, ..Default::default() };
+                    let c = nn::ConvConfig {
+                        stride: 2,
+                        padding: 1,
+                        ..Default::default()
+                    };
                     nn::conv1d(&lp / "downsample", dout, dout, 3, c)
                 }),
             });
         }
         let dmid = dims[levels];
-        let mid = (0..2)
-            .map(|i| ResBlock::new(&unet / "mid" / i, dmid, dmid, cond, k, g))
+        let mid = (0..cfg.mid_blocks)
+            .map(|i| ResBlock::new(&unet / "mid" / i, dmid, dmid, kga, &mut film_channels))
             .collect();
         let mut up = Vec::new();
         // Levels levels-1 .. 1, coarse to fine: (dim_in, dim_out) = (dims[i], dims[i+1]).
         for (j, i) in (1..levels).rev().enumerate() {
             let (din, dout) = (dims[i], dims[i + 1]);
             let lp = &unet / "up" / j;
-            let c = nn::ConvTransposeConfig { stride: 2, padding: 1, ..Default::default() };
+            let c = nn::ConvTransposeConfig {
+                stride: 2,
+                padding: 1,
+                ..Default::default()
+            };
+            let blocks = (0..nb)
+                .map(|b| {
+                    let cin = if b == 0 { 2 * dout } else { din };
+                    ResBlock::new(&lp / format!("res{b}"), cin, din, kga, &mut film_channels)
+                })
+                .collect();
             up.push(UpLevel {
-                res0: ResBlock::new(&lp / "res0", 2 * dout, din, cond, k, g),
-                res1: ResBlock::new(&lp / "res1", din, din, cond, k, g),
+                blocks,
                 up: nn::conv_transpose1d(&lp / "upsample", din, din, 4, c),
             });
         }
+        let film_width: i64 = film_channels.iter().map(|c| 2 * c).sum();
+        let film = nn::linear(&unet / "film", cond, film_width, Default::default());
         let d0 = dims[1];
-        let final_block = Conv1dBlock::new(&unet / "final_block", d0, d0, k, g);
-        let final_conv = nn::conv1d(&unet / "final_conv", d0, OUT_CHANNELS, 1, Default::default());
+        let final_block = Conv1dBlock::new(&unet / "final_block", d0, d0, k, g, a);
+        let final_conv = nn::conv1d(
+            &unet / "final_conv",
+            d0,
+            OUT_CHANNELS,
+            1,
+            Default::default(),
+        );
 
         Self {
             cfg: cfg.clone(),
@@ -195,6 +274,8 @@ impl CondUnet1d {
             bev_fc,
             goal_fc0,
             goal_fc1,
+            film,
+            film_channels,
             down,
             mid,
             up,
@@ -213,13 +294,16 @@ impl CondUnet1d {
     /// `bev`: `[B, 3, H, W]` (velocity channels already divided by the speed scale);
     /// `goal_vel`: `[B, 4]` normalised goal and ego velocity.
     pub fn encode_condition(&self, bev: &Tensor, goal_vel: &Tensor) -> Tensor {
+        let a = self.cfg.activation;
         let mut h = bev.shallow_clone();
         for (conv, norm) in &self.bev_convs {
-            h = norm.forward(&conv.forward(&h)).mish();
+            h = act(a, &norm.forward(&conv.forward(&h)));
         }
         let h = h.adaptive_avg_pool2d([4, 4]).flatten(1, -1);
-        let bev_emb = self.bev_fc.forward(&h).mish();
-        let goal_emb = self.goal_fc1.forward(&self.goal_fc0.forward(goal_vel).mish());
+        let bev_emb = act(a, &self.bev_fc.forward(&h));
+        let goal_emb = self
+            .goal_fc1
+            .forward(&act(a, &self.goal_fc0.forward(goal_vel)));
         Tensor::cat(&[bev_emb, goal_emb], 1)
     }
 
@@ -230,13 +314,14 @@ impl CondUnet1d {
         let freqs = (Tensor::arange(half, (t.kind(), t.device())) * -step).exp();
         let args = t.view([-1, 1]) * TIME_SCALE * freqs.view([1, -1]);
         let emb = Tensor::cat(&[args.sin(), args.cos()], 1);
-        self.time_mlp1.forward(&self.time_mlp0.forward(&emb).mish())
+        self.time_mlp1
+            .forward(&act(self.cfg.activation, &self.time_mlp0.forward(&emb)))
     }
 
-    /// The standardised velocity `[B, 3, T]` for trajectory features `x` (`[B, 5, T]`), flow
-    /// time `t` (`[B]`, or `[1]` shared by the batch) and static condition `cond` (from
-    /// [`Self::encode_condition`], `[B, ·]` or `[1, ·]` shared by the batch).
-    pub fn forward(&self, x: &Tensor, t: &Tensor, cond: &Tensor) -> Tensor {
+    /// FiLM parameters of every block for flow time `t` (`[B]`, or `[1]` shared by the batch)
+    /// and static condition `cond` (from [`Self::encode_condition`], `[B, ·]` or `[1, ·]`).
+    /// Depends only on `(t, c)`, so a sampler can cache it per time step.
+    pub fn film(&self, t: &Tensor, cond: &Tensor) -> Film {
         let temb = self.encode_time(t);
         let (bt, bc) = (temb.size()[0], cond.size()[0]);
         let c = if bt == bc {
@@ -246,30 +331,49 @@ impl CondUnet1d {
         } else {
             Tensor::cat(&[&temb, &cond.expand([bt, -1], false)], 1)
         };
-        let c = c.mish();
+        let all = self.film.forward(&act(self.cfg.activation, &c));
+        let mut per_block = Vec::with_capacity(self.film_channels.len());
+        let mut off = 0;
+        for &ch in &self.film_channels {
+            let f = all.narrow(1, off, 2 * ch).view([-1, 2, ch, 1]);
+            per_block.push((f.select(1, 0), f.select(1, 1)));
+            off += 2 * ch;
+        }
+        Film { per_block }
+    }
 
+    /// The standardised velocity `[B, 3, T]` for trajectory features `x` (`[B, 5, T]`) under
+    /// precomputed FiLM parameters.
+    pub fn forward_film(&self, x: &Tensor, film: &Film) -> Tensor {
         let mut h = x.shallow_clone();
         let mut skips = Vec::with_capacity(self.down.len());
         for lvl in &self.down {
-            h = lvl.res0.forward(&h, &c);
-            h = lvl.res1.forward(&h, &c);
+            for b in &lvl.blocks {
+                h = b.forward(&h, film);
+            }
             skips.push(h.shallow_clone());
             if let Some(d) = &lvl.down {
                 h = d.forward(&h);
             }
         }
         for m in &self.mid {
-            h = m.forward(&h, &c);
+            h = m.forward(&h, film);
         }
         for lvl in &self.up {
             if let Some(skip) = skips.pop() {
                 h = Tensor::cat(&[&h, &skip], 1);
             }
-            h = lvl.res0.forward(&h, &c);
-            h = lvl.res1.forward(&h, &c);
+            for b in &lvl.blocks {
+                h = b.forward(&h, film);
+            }
             h = lvl.up.forward(&h);
         }
         self.final_conv.forward(&self.final_block.forward(&h))
+    }
+
+    /// [`Self::film`] followed by [`Self::forward_film`].
+    pub fn forward(&self, x: &Tensor, t: &Tensor, cond: &Tensor) -> Tensor {
+        self.forward_film(x, &self.film(t, cond))
     }
 }
 
@@ -277,9 +381,11 @@ impl CondUnet1d {
 /// (convolutions and linear layers; normalisations and activations are not counted).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Complexity {
-    /// U-Net plus time MLP and FiLM layers, per trajectory.
+    /// U-Net convolutions, per trajectory.
     pub unet_macs: u64,
-    /// BEV and goal encoders, per condition.
+    /// Time MLP and the fused FiLM layer, once per `(t, c)` (shared by the batch).
+    pub film_macs: u64,
+    /// BEV and goal encoders, once per condition.
     pub condition_macs: u64,
 }
 
@@ -289,14 +395,23 @@ impl Complexity {
         let k = cfg.kernel_size as u64;
         let cond = cfg.cond_dim() as u64;
         let conv1d = |cin: u64, cout: u64, k: u64, len: u64| cin * cout * k * len;
+        // FiLM layers depend on (t, c) only and are counted once per call, not per trajectory.
         let res = |cin: u64, cout: u64, len: u64| {
             conv1d(cin, cout, k, len)
                 + conv1d(cout, cout, k, len)
-                + cond * 2 * cout
-                + if cin != cout { conv1d(cin, cout, 1, len) } else { 0 }
+                + if cin != cout {
+                    conv1d(cin, cout, 1, len)
+                } else {
+                    0
+                }
+        };
+        let nb = cfg.blocks_per_level as u64;
+        let block_run = |cin: u64, cout: u64, len: u64| {
+            res(cin, cout, len) + nb.saturating_sub(1) * res(cout, cout, len)
         };
         let tdim = cfg.time_embed_dim as u64;
-        let mut unet = tdim * 4 * tdim * 2;
+        let _ = cond;
+        let mut unet = 0u64;
         let dims: Vec<u64> = std::iter::once(TRAJ_CHANNELS as u64)
             .chain(cfg.down_dims.iter().map(|&d| d as u64))
             .collect();
@@ -304,16 +419,16 @@ impl Complexity {
         let mut len = cfg.horizon as u64;
         for i in 0..levels {
             let (din, dout) = (dims[i], dims[i + 1]);
-            unet += res(din, dout, len) + res(dout, dout, len);
+            unet += block_run(din, dout, len);
             if i + 1 < levels {
                 len /= 2;
                 unet += conv1d(dout, dout, 3, len);
             }
         }
-        unet += 2 * res(dims[levels], dims[levels], len);
+        unet += cfg.mid_blocks as u64 * res(dims[levels], dims[levels], len);
         for i in (1..levels).rev() {
             let (din, dout) = (dims[i], dims[i + 1]);
-            unet += res(2 * dout, din, len) + res(din, din, len);
+            unet += block_run(2 * dout, din, len);
             unet += conv1d(din, din, 4, len);
             len *= 2;
         }
@@ -331,7 +446,20 @@ impl Complexity {
         condition += cin * 16 * cfg.bev_embed_dim as u64;
         let gdim = cfg.goal_embed_dim as u64;
         condition += GOAL_FEATURES as u64 * gdim + gdim * gdim;
-        Self { unet_macs: unet, condition_macs: condition }
+        let mut film_width = 0u64;
+        for i in 0..levels {
+            film_width += 2 * dims[i + 1] * nb;
+        }
+        film_width += 2 * dims[levels] * cfg.mid_blocks as u64;
+        for i in 1..levels {
+            film_width += 2 * dims[i] * nb;
+        }
+        let film = tdim * 4 * tdim * 2 + cond * film_width;
+        Self {
+            unet_macs: unet,
+            film_macs: film,
+            condition_macs: condition,
+        }
     }
 }
 
@@ -342,7 +470,10 @@ pub fn parameter_count(vs: &nn::VarStore) -> usize {
 
 /// Kind of the variables in `vs` (Float unless converted with `VarStore::double`).
 pub(crate) fn store_kind(vs: &nn::VarStore) -> Kind {
-    vs.trainable_variables().first().map(Tensor::kind).unwrap_or(Kind::Float)
+    vs.trainable_variables()
+        .first()
+        .map(Tensor::kind)
+        .unwrap_or(Kind::Float)
 }
 
 #[cfg(test)]
@@ -353,7 +484,10 @@ mod tests {
     #[test]
     fn shapes_for_two_and_three_levels() {
         for dims in [vec![32, 64], vec![16, 32, 64]] {
-            let cfg = NetConfig { down_dims: dims, ..NetConfig::default() };
+            let cfg = NetConfig {
+                down_dims: dims,
+                ..NetConfig::default()
+            };
             cfg.validate().unwrap();
             let vs = nn::VarStore::new(Device::Cpu);
             let net = CondUnet1d::new(&vs.root(), &cfg);
@@ -362,7 +496,10 @@ mod tests {
             let bev = Tensor::zeros([b, 3, 32, 32], (Kind::Float, Device::Cpu));
             let g = Tensor::ones([b, 4], (Kind::Float, Device::Cpu));
             let cond = net.encode_condition(&bev, &g);
-            assert_eq!(cond.size(), vec![b, (cfg.bev_embed_dim + cfg.goal_embed_dim) as i64]);
+            assert_eq!(
+                cond.size(),
+                vec![b, (cfg.bev_embed_dim + cfg.goal_embed_dim) as i64]
+            );
             // Per-sample time and condition.
             let t = Tensor::from_slice(&[0.1f32, 0.5, 0.9]);
             assert_eq!(net.forward(&x, &t, &cond).size(), vec![b, 3, 32]);
@@ -376,7 +513,10 @@ mod tests {
     #[test]
     fn complexity_counts_grow_with_width() {
         let small = Complexity::of(&NetConfig::default());
-        let wide = Complexity::of(&NetConfig { down_dims: vec![64, 128], ..NetConfig::default() });
+        let wide = Complexity::of(&NetConfig {
+            down_dims: vec![64, 128],
+            ..NetConfig::default()
+        });
         assert!(small.unet_macs > 0 && small.condition_macs > 0);
         // Doubling every channel roughly quadruples the convolution cost.
         let ratio = wide.unet_macs as f64 / small.unet_macs as f64;

@@ -38,7 +38,11 @@ pub fn bench_condition(cells: usize) -> FlowCondition {
             bev[2 * plane + i] = 0.3;
         }
     }
-    FlowCondition { bev, goal: [4.0, 0.5], velocity: [1.2, 0.0] }
+    FlowCondition {
+        bev,
+        goal: [4.0, 0.5],
+        velocity: [1.2, 0.0],
+    }
 }
 
 /// Median latency of `velocity` and `velocity_vjp` at batch 1 and 16 (condition cached, as in
@@ -55,8 +59,9 @@ pub fn measure_latency(model: &CfmModel, threads: usize) -> Result<PerformanceIn
         let mut out = vec![0.0; x.len()];
         let mut vjp = vec![0.0; x.len()];
         lat[i] = median_ms(5, 50, || model.velocity(&x, 0.5, &cond, &mut out))?;
-        lat[2 + i] =
-            median_ms(5, 50, || model.velocity_vjp(&x, 0.5, &cond, &cot, &mut out, &mut vjp))?;
+        lat[2 + i] = median_ms(5, 50, || {
+            model.velocity_vjp(&x, 0.5, &cond, &cot, &mut out, &mut vjp)
+        })?;
     }
     let encode = median_ms(3, 30, || {
         model.invalidate_cache();
@@ -65,7 +70,9 @@ pub fn measure_latency(model: &CfmModel, threads: usize) -> Result<PerformanceIn
     Ok(PerformanceInfo {
         machine: format!(
             "{} logical CPUs, {}",
-            std::thread::available_parallelism().map(|n| n.get()).unwrap_or(0),
+            std::thread::available_parallelism()
+                .map(|n| n.get())
+                .unwrap_or(0),
             std::env::consts::ARCH
         ),
         threads,

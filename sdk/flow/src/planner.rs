@@ -386,9 +386,8 @@ impl GuidanceSummary {
                 v.iter().sum::<f64>() / v.len() as f64
             }
         };
-        let ones = |f: &dyn Fn(&GuidanceComparison) -> f64| {
-            mean(&|r| if f(r) >= 1.0 { 1.0 } else { 0.0 })
-        };
+        let ones =
+            |f: &dyn Fn(&GuidanceComparison) -> f64| mean(&|r| if f(r) >= 1.0 { 1.0 } else { 0.0 });
         Self {
             windows: n,
             tfs_unguided: mean(&|r| r.tfs_unguided),
@@ -664,7 +663,10 @@ mod tests {
         };
         let dir = std::env::temp_dir().join(format!("h2n-planner-{tag}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        CfmModel::new(&net, &norm, Device::Cpu).unwrap().save(&dir).unwrap();
+        CfmModel::new(&net, &norm, Device::Cpu)
+            .unwrap()
+            .save(&dir)
+            .unwrap();
         dir
     }
 

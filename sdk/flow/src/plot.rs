@@ -7,7 +7,10 @@ use std::path::Path;
 
 /// Draws training and validation loss against optimiser step (log-scaled loss) as a PNG.
 pub fn loss_curve(path: &Path, history: &[LossRecord], title: &str) -> Result<(), CfmError> {
-    let err = |e: String| CfmError::Plot { path: path.to_path_buf(), message: e };
+    let err = |e: String| CfmError::Plot {
+        path: path.to_path_buf(),
+        message: e,
+    };
     let finite = |v: f64| v.is_finite() && v > 0.0;
     let values: Vec<f64> = history
         .iter()
@@ -37,10 +40,16 @@ pub fn loss_curve(path: &Path, history: &[LossRecord], title: &str) -> Result<()
         .y_label_formatter(&|v| format!("{v:.3}"))
         .draw()
         .map_err(|e| err(e.to_string()))?;
-    let train: Vec<(u64, f64)> =
-        history.iter().filter(|r| finite(r.train_loss)).map(|r| (r.step, r.train_loss)).collect();
-    let val: Vec<(u64, f64)> =
-        history.iter().filter(|r| finite(r.val_loss)).map(|r| (r.step, r.val_loss)).collect();
+    let train: Vec<(u64, f64)> = history
+        .iter()
+        .filter(|r| finite(r.train_loss))
+        .map(|r| (r.step, r.train_loss))
+        .collect();
+    let val: Vec<(u64, f64)> = history
+        .iter()
+        .filter(|r| finite(r.val_loss))
+        .map(|r| (r.step, r.val_loss))
+        .collect();
     let blue = RGBColor(31, 119, 180);
     let orange = RGBColor(255, 127, 14);
     chart
@@ -54,7 +63,10 @@ pub fn loss_curve(path: &Path, history: &[LossRecord], title: &str) -> Result<()
         .label("validation (EMA weights)")
         .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], orange.stroke_width(2)));
     chart
-        .draw_series(val.iter().map(|&(s, v)| Circle::new((s, v), 3, orange.filled())))
+        .draw_series(
+            val.iter()
+                .map(|&(s, v)| Circle::new((s, v), 3, orange.filled())),
+        )
         .map_err(|e| err(e.to_string()))?;
     chart
         .configure_series_labels()

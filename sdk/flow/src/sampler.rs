@@ -18,7 +18,9 @@ pub fn integrate<M: FlowModel + ?Sized>(
     steps: usize,
 ) -> Result<(), FlowError> {
     if steps == 0 {
-        return Err(FlowError::Shape("integration needs at least one step".into()));
+        return Err(FlowError::Shape(
+            "integration needs at least one step".into(),
+        ));
     }
     let dt = 1.0 / steps as f64;
     let mut v = vec![0.0; x.len()];
@@ -59,15 +61,32 @@ mod tests {
         fn horizon(&self) -> usize {
             self.x1.len()
         }
-        fn velocity(&self, x: &[f64], t: f64, _: &FlowCondition, out: &mut [f64]) -> Result<(), FlowError> {
+        fn velocity(
+            &self,
+            x: &[f64],
+            t: f64,
+            _: &FlowCondition,
+            out: &mut [f64],
+        ) -> Result<(), FlowError> {
             let n = self.x1.len();
             for (i, (p, o)) in x.chunks_exact(3).zip(out.chunks_exact_mut(3)).enumerate() {
-                let v = Pose2::from_slice(p).between(self.x1[i % n]).log().scale(1.0 / (1.0 - t));
+                let v = Pose2::from_slice(p)
+                    .between(self.x1[i % n])
+                    .log()
+                    .scale(1.0 / (1.0 - t));
                 o.copy_from_slice(&v.to_array());
             }
             Ok(())
         }
-        fn velocity_vjp(&self, _: &[f64], _: f64, _: &FlowCondition, _: &[f64], _: &mut [f64], _: &mut [f64]) -> Result<(), FlowError> {
+        fn velocity_vjp(
+            &self,
+            _: &[f64],
+            _: f64,
+            _: &FlowCondition,
+            _: &[f64],
+            _: &mut [f64],
+            _: &mut [f64],
+        ) -> Result<(), FlowError> {
             Err(FlowError::Backend("not needed".into()))
         }
     }
@@ -75,9 +94,17 @@ mod tests {
     #[test]
     fn exact_field_transports_every_source_sample_to_the_target() {
         use rand::SeedableRng;
-        let x1 = vec![Pose2::new(1.0, 0.2, 0.3), Pose2::new(2.0, 0.5, -0.4), Pose2::new(3.0, 1.5, 1.2)];
+        let x1 = vec![
+            Pose2::new(1.0, 0.2, 0.3),
+            Pose2::new(2.0, 0.5, -0.4),
+            Pose2::new(3.0, 1.5, 1.2),
+        ];
         let model = ToTarget { x1: x1.clone() };
-        let cond = FlowCondition { bev: vec![], goal: [0.0; 2], velocity: [0.0; 2] };
+        let cond = FlowCondition {
+            bev: vec![],
+            goal: [0.0; 2],
+            velocity: [0.0; 2],
+        };
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
         let x = sample(&model, &cond, 5, 4, &mut rng).unwrap();
         for (i, p) in x.chunks_exact(3).enumerate() {
@@ -87,6 +114,6 @@ mod tests {
             assert_relative_eq!(p[2], target.theta, epsilon = 1e-9);
         }
         let _ = Twist2::ZERO;
-        assert!(integrate(&model, &mut vec![0.0; 9], &cond, 0).is_err());
+        assert!(integrate(&model, &mut [0.0; 9], &cond, 0).is_err());
     }
 }

@@ -9,7 +9,9 @@
 use crate::cfm::{TimeDistribution, TimeSampler, geodesic_point, target_velocity};
 use crate::config::{NetConfig, Normalisation};
 use crate::error::CfmError;
-use crate::model::{CfmModel, normalise_condition, read_safetensors, trajectory_features, write_safetensors};
+use crate::model::{
+    CfmModel, normalise_condition, read_safetensors, trajectory_features, write_safetensors,
+};
 use human2nav_core::se2::{Pose2, Twist2};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -86,7 +88,11 @@ pub fn check_examples<S: TrainingSample>(net: &NetConfig, data: &[S]) -> Result<
         if s.bev().len() != net.bev_len() {
             return Err(CfmError::Example {
                 index,
-                reason: format!("BEV has {} values, expected {}", s.bev().len(), net.bev_len()),
+                reason: format!(
+                    "BEV has {} values, expected {}",
+                    s.bev().len(),
+                    net.bev_len()
+                ),
             });
         }
         if s.future_len() != net.horizon {
@@ -98,7 +104,10 @@ pub fn check_examples<S: TrainingSample>(net: &NetConfig, data: &[S]) -> Result<
         let finite = s.goal().iter().chain(&s.velocity()).all(|v| v.is_finite())
             && (0..net.horizon).all(|i| s.future_pose(i).is_finite());
         if !finite {
-            return Err(CfmError::Example { index, reason: "non-finite goal, velocity or pose".into() });
+            return Err(CfmError::Example {
+                index,
+                reason: "non-finite goal, velocity or pose".into(),
+            });
         }
     }
     Ok(())
@@ -129,7 +138,7 @@ impl Normalisation {
         let position_scale = (d2 / n.max(1) as f64).sqrt().max(0.1);
         let goal_scale = (g2 / m).sqrt().max(0.1);
         let speed_scale = (v2 / m).sqrt().max(0.1);
-        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_0f_5ca1e);
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x05ee_d0f5_ca1e);
         let mut acc = [0.0; 3];
         let mut count = 0usize;
         let take = data.len().min(4096);
@@ -148,7 +157,12 @@ impl Normalisation {
             }
         }
         let velocity_std = acc.map(|a| (a / count.max(1) as f64).sqrt().max(1e-3));
-        let norm = Self { position_scale, velocity_std, goal_scale, speed_scale };
+        let norm = Self {
+            position_scale,
+            velocity_std,
+            goal_scale,
+            speed_scale,
+        };
         norm.validate()?;
         Ok(norm)
     }
@@ -232,18 +246,22 @@ impl TrainOptions {
         if !(self.lr_min >= 0.0 && self.lr_min <= self.lr) {
             return Err(CfmError::option("train.lr_min", "must lie in [0, lr]"));
         }
-        for (f, v) in [("train.beta1", self.beta1), ("train.beta2", self.beta2), ("train.ema_decay", self.ema_decay)] {
+        for (f, v) in [
+            ("train.beta1", self.beta1),
+            ("train.beta2", self.beta2),
+            ("train.ema_decay", self.ema_decay),
+        ] {
             if !(0.0..1.0).contains(&v) {
                 return Err(CfmError::option(f, "must lie in [0, 1)"));
             }
         }
-        if !(self.eps > 0.0) {
+        if self.eps.is_nan() || self.eps <= 0.0 {
             return Err(CfmError::option("train.eps", "must be > 0"));
         }
-        if !(self.weight_decay >= 0.0) {
+        if self.weight_decay.is_nan() || self.weight_decay < 0.0 {
             return Err(CfmError::option("train.weight_decay", "must be >= 0"));
         }
-        if !(self.grad_clip > 0.0) {
+        if self.grad_clip.is_nan() || self.grad_clip <= 0.0 {
             return Err(CfmError::option("train.grad_clip", "must be > 0"));
         }
         self.time.validate()
@@ -264,8 +282,15 @@ impl TrainOptions {
         format!(
             "AdamW (beta1 {}, beta2 {}, eps {:e}, weight decay {:e}), lr {:e} with {} warm-up \
              steps then cosine to {:e}, gradient clipping at global norm {}, EMA decay {}",
-            self.beta1, self.beta2, self.eps, self.weight_decay, self.lr, self.warmup_steps,
-            self.lr_min, self.grad_clip, self.ema_decay
+            self.beta1,
+            self.beta2,
+            self.eps,
+            self.weight_decay,
+            self.lr,
+            self.warmup_steps,
+            self.lr_min,
+            self.grad_clip,
+            self.ema_decay
         )
     }
 }
@@ -371,9 +396,13 @@ fn build_batch<S: TrainingSample, R: Rng + ?Sized>(
     Batch {
         x: Tensor::from_slice(&x).view([bi, 5, ti]).to_device(device),
         t: Tensor::from_slice(&ts).to_device(device),
-        bev: Tensor::from_slice(&bev).view([bi, 3, ci, ci]).to_device(device),
+        bev: Tensor::from_slice(&bev)
+            .view([bi, 3, ci, ci])
+            .to_device(device),
         goal_vel: Tensor::from_slice(&gv).view([bi, 4]).to_device(device),
-        target: Tensor::from_slice(&target).view([bi, 3, ti]).to_device(device),
+        target: Tensor::from_slice(&target)
+            .view([bi, 3, ti])
+            .to_device(device),
     }
 }
 
@@ -496,9 +525,12 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
         device: Device,
     ) -> Result<Self, CfmError> {
         let state_path = dir.join("state.toml");
-        let text = std::fs::read_to_string(&state_path).map_err(|e| CfmError::io(&state_path, e))?;
-        let state: StateFile = toml::from_str(&text)
-            .map_err(|e| CfmError::Toml { path: state_path.clone(), message: e.to_string() })?;
+        let text =
+            std::fs::read_to_string(&state_path).map_err(|e| CfmError::io(&state_path, e))?;
+        let state: StateFile = toml::from_str(&text).map_err(|e| CfmError::Toml {
+            path: state_path.clone(),
+            message: e.to_string(),
+        })?;
         let mut same = state.options.clone();
         same.steps = opts.steps;
         if same != *opts {
@@ -519,9 +551,10 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
         for (i, name) in tr.names.iter().enumerate() {
             for (prefix, dst) in [("adam_m.", &tr.adam_m[i]), ("adam_v.", &tr.adam_v[i])] {
                 let key = format!("{prefix}{name}");
-                let src = tensors
-                    .get(&key)
-                    .ok_or_else(|| CfmError::MissingTensor { path: tensors_path.clone(), name: key.clone() })?;
+                let src = tensors.get(&key).ok_or_else(|| CfmError::MissingTensor {
+                    path: tensors_path.clone(),
+                    name: key.clone(),
+                })?;
                 if src.size() != dst.size() {
                     return Err(CfmError::TensorShape {
                         path: tensors_path.clone(),
@@ -530,7 +563,8 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
                         found: src.size(),
                     });
                 }
-                dst.shallow_clone().copy_(&src.to_kind(dst.kind()).to_device(dst.device()));
+                dst.shallow_clone()
+                    .copy_(&src.to_kind(dst.kind()).to_device(dst.device()));
             }
         }
         tr.step = state.step;
@@ -546,8 +580,14 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
         let mut tensors = self.model.named_tensors("param.");
         tensors.extend(self.ema.named_tensors("ema."));
         for (i, n) in self.names.iter().enumerate() {
-            tensors.push((format!("adam_m.{n}"), self.adam_m[i].detach().to_device(Device::Cpu)));
-            tensors.push((format!("adam_v.{n}"), self.adam_v[i].detach().to_device(Device::Cpu)));
+            tensors.push((
+                format!("adam_m.{n}"),
+                self.adam_m[i].detach().to_device(Device::Cpu),
+            ));
+            tensors.push((
+                format!("adam_v.{n}"),
+                self.adam_v[i].detach().to_device(Device::Cpu),
+            ));
         }
         write_safetensors(&dir.join("state.safetensors"), &tensors)?;
         let state = StateFile {
@@ -559,8 +599,10 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
             history: self.history.clone(),
         };
         let path = dir.join("state.toml");
-        let text = toml::to_string_pretty(&state)
-            .map_err(|e| CfmError::Toml { path: path.clone(), message: e.to_string() })?;
+        let text = toml::to_string_pretty(&state).map_err(|e| CfmError::Toml {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
         let tmp = dir.join("state.toml.tmp");
         std::fs::write(&tmp, text).map_err(|e| CfmError::io(&tmp, e))?;
         std::fs::rename(&tmp, &path).map_err(|e| CfmError::io(&path, e))
@@ -672,7 +714,11 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
             .map(|g| g.square().sum(Kind::Double).double_value(&[]))
             .sum();
         let norm = sq.sqrt();
-        let clip = if norm > o.grad_clip { o.grad_clip / (norm + 1e-6) } else { 1.0 };
+        let clip = if norm > o.grad_clip {
+            o.grad_clip / (norm + 1e-6)
+        } else {
+            1.0
+        };
         let k = (step + 1) as f64;
         let bc1 = 1.0 - o.beta1.powf(k);
         let bc2 = 1.0 - o.beta2.powf(k);
@@ -703,7 +749,7 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
             return None;
         }
         let n = self.val.len().min(VAL_MAX);
-        let mut rng = ChaCha8Rng::seed_from_u64(self.opts.seed ^ 0x7a1_1d);
+        let mut rng = ChaCha8Rng::seed_from_u64(self.opts.seed ^ 0x0007_a11d);
         let card = self.ema.card();
         let (mut sum, mut count) = (0.0, 0usize);
         let bs = self.opts.batch_size.max(64);
@@ -729,8 +775,11 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
     /// Records a history point: the mean training loss since the previous record and the
     /// validation loss now. Returns it.
     pub fn record(&mut self) -> LossRecord {
-        let train_loss =
-            if self.loss_count > 0 { self.loss_sum / self.loss_count as f64 } else { f64::NAN };
+        let train_loss = if self.loss_count > 0 {
+            self.loss_sum / self.loss_count as f64
+        } else {
+            f64::NAN
+        };
         let rec = LossRecord {
             step: self.step,
             train_loss,
@@ -746,7 +795,11 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
 
     /// Mean training loss since the last [`Self::record`] (NaN before the first step).
     pub fn running_loss(&self) -> f64 {
-        if self.loss_count > 0 { self.loss_sum / self.loss_count as f64 } else { f64::NAN }
+        if self.loss_count > 0 {
+            self.loss_sum / self.loss_count as f64
+        } else {
+            f64::NAN
+        }
     }
 }
 
@@ -758,7 +811,9 @@ pub fn evaluate_loss<S: TrainingSample>(
     seed: u64,
 ) -> Result<f64, CfmError> {
     if data.is_empty() {
-        return Err(CfmError::EmptyData { split: "evaluation" });
+        return Err(CfmError::EmptyData {
+            split: "evaluation",
+        });
     }
     let sampler = time.sampler()?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -767,7 +822,16 @@ pub fn evaluate_loss<S: TrainingSample>(
     let (mut sum, mut count) = (0.0, 0usize);
     for start in (0..data.len()).step_by(256) {
         let idx: Vec<usize> = (start..(start + 256).min(data.len())).collect();
-        let b = build_batch(data, &idx, &card.net, &card.normalisation, &sampler, false, &mut rng, model.device());
+        let b = build_batch(
+            data,
+            &idx,
+            &card.net,
+            &card.normalisation,
+            &sampler,
+            false,
+            &mut rng,
+            model.device(),
+        );
         sum += batch_loss(model, &b).double_value(&[]) * idx.len() as f64;
         count += idx.len();
     }

@@ -1,0 +1,133 @@
+//! Latency of one Human2Nav planning call (BEV, K samples, guidance, selection) with and
+//! without guidance, on one libtorch thread by default.
+//!
+//! The model is the shipped one (`models/human2nav-cfm`, or `$H2N_MODEL`); without it, a
+//! freshly initialised model of the default architecture (same cost per network call, but
+//! guidance may stop after a different number of iterations than with trained weights). The
+//! scenes are the held-out episodes at `out/data/episodes.json` when present, else synthetic
+//! ones; the robot is `robots/diablo/robot.toml` (or `$H2N_ROBOT`).
+//!
+//! Run: `cargo bench -p human2nav-flow --bench planning` (threads: `H2N_THREADS`, default 1).
+//! `human2nav plan --bench <calls>` reports p50/p95 and the time split on the same setup.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use human2nav_core::human2nav::Human2NavSettings;
+use human2nav_core::{AgentState, Observation, Planner, Pose2, Twist2};
+use human2nav_data::{Episode, EpisodeSuite, ScenarioClass};
+use human2nav_flow::planner::{DEFAULT_MODEL_DIR, RobotPlanner, load_profile};
+use human2nav_flow::{CfmModel, NetConfig, Normalisation};
+use std::hint::black_box;
+use std::path::{Path, PathBuf};
+use tch::Device;
+
+fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn env_path(var: &str, default: &str) -> PathBuf {
+    std::env::var_os(var).map_or_else(|| workspace().join(default), PathBuf::from)
+}
+
+/// The robot at the episode start facing the goal, at rest; the pedestrians present at t = 0.
+fn observation(ep: &Episode) -> Observation {
+    let s = ep.start;
+    let theta = (ep.goal[1] - s.y).atan2(ep.goal[0] - s.x);
+    let agents = ep
+        .agents
+        .iter()
+        .filter(|a| a.start_step == 0 && a.positions.len() >= 2)
+        .map(|a| {
+            let (p, q) = (a.positions[0], a.positions[1]);
+            AgentState {
+                id: a.id,
+                position: p,
+                velocity: [(q[0] - p[0]) / ep.dt, (q[1] - p[1]) / ep.dt],
+                radius: a.radius,
+                history: Vec::new(),
+            }
+        })
+        .filter(|a| (a.position[0] - s.x).hypot(a.position[1] - s.y) <= 10.0)
+        .collect();
+    Observation {
+        time: 0.0,
+        ego: Pose2::new(s.x, s.y, theta),
+        ego_velocity: Twist2::ZERO,
+        goal: ep.goal,
+        agents,
+    }
+}
+
+fn scenes() -> Vec<Observation> {
+    let path = workspace().join("out/data/episodes.json");
+    let episodes: Vec<Episode> = match EpisodeSuite::load(&path) {
+        Ok(suite) => {
+            let n = suite.episodes.len();
+            suite
+                .episodes
+                .into_iter()
+                .step_by((n / 20).max(1))
+                .take(20)
+                .collect()
+        }
+        Err(_) => ScenarioClass::ALL
+            .iter()
+            .flat_map(|c| human2nav_data::synthetic::episodes(*c, 5, 1))
+            .collect(),
+    };
+    episodes.iter().map(observation).collect()
+}
+
+fn model_dir() -> PathBuf {
+    let dir = env_path("H2N_MODEL", DEFAULT_MODEL_DIR);
+    if dir.join("model.toml").is_file() {
+        return dir;
+    }
+    eprintln!(
+        "no model at {}: benchmarking a fresh default-architecture model",
+        dir.display()
+    );
+    tch::manual_seed(0);
+    let norm = Normalisation {
+        position_scale: 2.2,
+        velocity_std: [1.4, 1.1, 1.1],
+        goal_scale: 5.5,
+        speed_scale: 1.3,
+    };
+    let model = CfmModel::new(&NetConfig::default(), &norm, Device::Cpu).expect("default config");
+    let tmp = std::env::temp_dir().join(format!("h2n-planning-bench-{}", std::process::id()));
+    model.save(&tmp).expect("saving the fresh model");
+    tmp
+}
+
+fn bench_planning(c: &mut Criterion) {
+    let threads = std::env::var("H2N_THREADS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1);
+    tch::set_num_threads(threads);
+    let robot = env_path("H2N_ROBOT", "robots/diablo/robot.toml");
+    let profile = load_profile(&robot).expect("robot profile");
+    let dir = model_dir();
+    let obs = scenes();
+    let mut group = c.benchmark_group("plan");
+    group.sample_size(30);
+    for guided in [false, true] {
+        let mut settings = Human2NavSettings::default();
+        settings.guidance.enabled = guided;
+        let model = CfmModel::load(&dir, Device::Cpu).expect("model");
+        let mut rp = RobotPlanner::new(profile.clone(), model, settings).expect("planner");
+        let mut i = 0usize;
+        let name = if guided { "guided" } else { "unguided" };
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                rp.planner.reset();
+                i = (i + 1) % obs.len();
+                black_box(rp.planner.plan(black_box(&obs[i])).expect("plan"))
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_planning);
+criterion_main!(benches);

@@ -2,6 +2,7 @@
 
 mod bench;
 mod data;
+mod plan;
 mod plugin;
 mod robot;
 mod train;
@@ -29,6 +30,9 @@ enum Command {
     Plugin(plugin::PluginCommand),
     /// Train the conditional flow-matching model (checkpoints, resume, model card, evaluation).
     Train(train::TrainArgs),
+    /// Plan one step with Human2Nav and draw it (Fig. 4 style); `--bench` latency, `--eval`
+    /// guided vs unguided on held-out windows.
+    Plan(plan::PlanArgs),
     /// Run the closed-loop benchmark and write results.csv, report.md and the figures.
     Bench(bench::BenchArgs),
 }
@@ -40,6 +44,7 @@ fn main() -> ExitCode {
         Command::Data(cmd) => data::run(cmd),
         Command::Plugin(cmd) => plugin::run(cmd),
         Command::Train(args) => train::run(args),
+        Command::Plan(args) => plan::run(args),
         Command::Bench(args) => bench::run(args),
     };
     match result {

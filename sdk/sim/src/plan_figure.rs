@@ -81,7 +81,10 @@ impl StepOptions {
             );
         }
         if !self.ego_speed.is_finite() {
-            return bad("ego_speed", format!("must be finite, got {}", self.ego_speed));
+            return bad(
+                "ego_speed",
+                format!("must be finite, got {}", self.ego_speed),
+            );
         }
         Ok(())
     }
@@ -215,8 +218,8 @@ pub fn plan_numbers(fig: &PlanFigure<'_>) -> PlanFigureNumbers {
     let mask = tfs::feasibility_mask(&plan.poses, plan.dt, fig.limits, v0);
     let waypoints = mask.len().saturating_sub(1);
     let feasible = mask.iter().skip(1).filter(|f| **f).count();
-    let tfs_before = before_guidance(fig)
-        .map(|poses| tfs::tfs_plan(poses, plan.dt, fig.limits, v0));
+    let tfs_before =
+        before_guidance(fig).map(|poses| tfs::tfs_plan(poses, plan.dt, fig.limits, v0));
     PlanFigureNumbers {
         tfs: tfs::tfs_plan(&plan.poses, plan.dt, fig.limits, v0),
         tfs_before,
@@ -302,12 +305,30 @@ fn view(fig: &PlanFigure<'_>) -> ([f64; 2], f64) {
         y1 = y1.max(p[1]);
     }
     let half = (0.5 * (x1 - x0).max(y1 - y0) + 1.5).max(4.0);
-    // Room in the top-left corner for the inset: shift the window so the robot sits in the
-    // lower-right part when the content is small.
-    ([0.5 * (x0 + x1), 0.5 * (y0 + y1)], half)
+    let centre = [0.5 * (x0 + x1), 0.5 * (y0 + y1)];
+    // The BEV inset covers about the top-left INSET_SHARE of the window. When content would
+    // hide under it, widen the window and push the content to the bottom-right instead.
+    let side = 2.0 * half;
+    let covered = |p: &[f64; 2]| {
+        p[0] < centre[0] - half + INSET_SHARE * side && p[1] > centre[1] + half - INSET_SHARE * side
+    };
+    let agents = obs.agents.iter().map(|a| a.position);
+    if pts.iter().copied().chain(agents).any(|p| covered(&p)) {
+        let wide = side / (1.0 - INSET_SHARE);
+        let (right, bottom) = (centre[0] + half, centre[1] - half);
+        return ([right - 0.5 * wide, bottom + 0.5 * wide], 0.5 * wide);
+    }
+    (centre, half)
 }
 
-fn arrow(from: (f64, f64), to: (f64, f64), head: f64) -> (Vec<(f64, f64)>, Vec<(f64, f64)>) {
+/// Share of the plot window's width and height the BEV inset covers.
+const INSET_SHARE: f64 = 0.3;
+
+/// A polyline and a filled triangle.
+type ArrowShape = (Vec<(f64, f64)>, Vec<(f64, f64)>);
+
+/// An arrow from `from` to `to`: its shaft and its head (empty for a zero-length arrow).
+fn arrow(from: (f64, f64), to: (f64, f64), head: f64) -> ArrowShape {
     let (dx, dy) = (to.0 - from.0, to.1 - from.1);
     let len = dx.hypot(dy);
     if len < 1e-9 {
@@ -393,8 +414,8 @@ fn draw(root: &Area<'_>, fig: &PlanFigure<'_>, numbers: &PlanFigureNumbers) -> R
         .y_desc("y (m)")
         .x_labels(12)
         .y_labels(12)
-        .light_line_style(RGBColor(238, 238, 238))
-        .bold_line_style(RGBColor(215, 215, 215))
+        .light_line_style(WHITE)
+        .bold_line_style(RGBColor(222, 222, 222))
         .label_style(("sans-serif", 14))
         .draw()
         .map_err(|x| e(&x))?;
@@ -506,17 +527,10 @@ fn draw(root: &Area<'_>, fig: &PlanFigure<'_>, numbers: &PlanFigureNumbers) -> R
             .map_err(|x| e(&x))?;
     }
     chart
-        .draw_series(
-            fig.plan
-                .poses
-                .iter()
-                .zip(&mask)
-                .skip(1)
-                .map(|(p, ok)| {
-                    let col = if *ok { FEASIBLE } else { INFEASIBLE };
-                    Circle::new((p.x, p.y), 3, col.filled())
-                }),
-        )
+        .draw_series(fig.plan.poses.iter().zip(&mask).skip(1).map(|(p, ok)| {
+            let col = if *ok { FEASIBLE } else { INFEASIBLE };
+            Circle::new((p.x, p.y), 3, col.filled())
+        }))
         .map_err(|x| e(&x))?;
     chart
         .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
@@ -527,9 +541,7 @@ fn draw(root: &Area<'_>, fig: &PlanFigure<'_>, numbers: &PlanFigureNumbers) -> R
         .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
         .map_err(|x| e(&x))?
         .label("plan: infeasible segment")
-        .legend(|(x, y)| {
-            PathElement::new(vec![(x, y), (x + 18, y)], INFEASIBLE.stroke_width(4))
-        });
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], INFEASIBLE.stroke_width(4)));
 
     // Robot, start and goal.
     let ego = obs.ego;
@@ -565,7 +577,10 @@ fn draw(root: &Area<'_>, fig: &PlanFigure<'_>, numbers: &PlanFigureNumbers) -> R
     }
     if inside(obs.goal) {
         chart
-            .draw_series(std::iter::once(Polygon::new(star(obs.goal, r), GOAL.filled())))
+            .draw_series(std::iter::once(Polygon::new(
+                star(obs.goal, r),
+                GOAL.filled(),
+            )))
             .map_err(|x| e(&x))?
             .label("goal")
             .legend(|(x, y)| Polygon::new(star_px(x + 8, y), GOAL.filled()));
@@ -604,8 +619,11 @@ fn draw(root: &Area<'_>, fig: &PlanFigure<'_>, numbers: &PlanFigureNumbers) -> R
 
     // The BEV inset in the top-left corner of the plotting area.
     let (px, py) = chart.plotting_area().get_base_pixel();
-    let size = 250;
-    let inset = root.clone().shrink((px + 6, py + 6), (size, size + 22));
+    let (pw, ph) = chart.plotting_area().dim_in_pixel();
+    let size = (INSET_SHARE * f64::from(pw.min(ph))) as u32 - 12;
+    let inset = root
+        .clone()
+        .shrink((px + 6, py + 6), (size, size.saturating_sub(22) + 22));
     draw_bev_inset(&inset, fig).map_err(|x| e(&x))?;
     Ok(())
 }
@@ -671,14 +689,11 @@ fn draw_bev_inset<'b>(
     ))?;
     let nf = n as f64;
     // x = column (left of the ego is column 0), y = nf − row (row 0 is farthest ahead).
-    let grid = grid.apply_coord_spec(Cartesian2d::<
-        plotters::coord::types::RangedCoordf64,
-        plotters::coord::types::RangedCoordf64,
-    >::new(
-        0.0..nf,
-        0.0..nf,
-        (0..w as i32, 0..(h as i32 - 22)),
-    ));
+    let grid = ChartBuilder::on(&grid)
+        .margin(1)
+        .build_cartesian_2d(0.0..nf, 0.0..nf)?
+        .plotting_area()
+        .clone();
     let plane = n * n;
     for row in 0..n {
         for col in 0..n {
@@ -689,7 +704,10 @@ fn draw_bev_inset<'b>(
                 RGBColor(240, 240, 240)
             };
             let (x, y) = (col as f64, nf - row as f64);
-            grid.draw(&Rectangle::new([(x, y - 1.0), (x + 1.0, y)], colour.filled()))?;
+            grid.draw(&Rectangle::new(
+                [(x, y - 1.0), (x + 1.0, y)],
+                colour.filled(),
+            ))?;
         }
     }
     // Ego-frame point → inset coordinates.
@@ -717,7 +735,11 @@ fn draw_bev_inset<'b>(
     let (ex, ey) = to_grid([0.0, 0.0]);
     let s = (0.35 / spec.resolution).max(0.8);
     grid.draw(&Polygon::new(
-        vec![(ex, ey + s), (ex - 0.7 * s, ey - 0.7 * s), (ex + 0.7 * s, ey - 0.7 * s)],
+        vec![
+            (ex, ey + s),
+            (ex - 0.7 * s, ey - 0.7 * s),
+            (ex + 0.7 * s, ey - 0.7 * s),
+        ],
         EGO_RED.filled(),
     ))?;
     // Colour wheel of the velocity hue, bottom-right corner of the inset.
@@ -820,7 +842,10 @@ mod tests {
         let eps = load_episodes(&suite).unwrap();
         assert_eq!(eps.len(), 2);
         assert_eq!(select_episode(&eps, 1, None).unwrap().id, "test/1");
-        assert_eq!(select_episode(&eps, 0, Some("test/1")).unwrap().id, "test/1");
+        assert_eq!(
+            select_episode(&eps, 0, Some("test/1")).unwrap().id,
+            "test/1"
+        );
         assert!(select_episode(&eps, 5, None).is_err());
         assert!(select_episode(&eps, 0, Some("nope")).is_err());
         let bad = dir.join("bad.json");

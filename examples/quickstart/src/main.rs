@@ -1,0 +1,108 @@
+//! Quickstart: plan one step for a robot in a synthetic crowd, print the plan, draw it.
+//!
+//! ```sh
+//! eval "$(sdk/dev.sh env)"
+//! cargo run --release -p human2nav-quickstart                               # diablo, guided
+//! cargo run --release -p human2nav-quickstart -- robots/ackermann/robot.toml
+//! cargo run --release -p human2nav-quickstart -- robots/go2/robot.toml --no-guidance
+//! ```
+//!
+//! The picture goes to `out/quickstart/<robot>.png`. See README.md for what to try next.
+
+use anyhow::{Context, bail};
+use human2nav_core::Planner;
+use human2nav_core::tfs::feasibility_mask;
+use human2nav_data::ScenarioClass;
+use human2nav_data::paths::find_workspace_root;
+use human2nav_flow::planner::{PlannerConfig, RobotPlanner};
+use human2nav_sim::plan_figure::{PlanFigure, StepOptions, draw_plan_figure, observation_at};
+use std::path::PathBuf;
+
+fn main() -> anyhow::Result<()> {
+    // Arguments: an optional robot profile and an optional `--no-guidance`.
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let no_guidance = args.iter().any(|a| a == "--no-guidance");
+    let robot_arg = args.iter().find(|a| !a.starts_with("--"));
+
+    // Paths in the SDK are relative to the workspace root (the folder with the top Cargo.toml).
+    let cwd = std::env::current_dir()?;
+    let root = find_workspace_root(&cwd)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../.."));
+    let robot = robot_arg.map_or_else(|| root.join("robots/diablo/robot.toml"), PathBuf::from);
+
+    // 1. The planner settings (K samples, guidance, selection) and the model folder.
+    let mut config = PlannerConfig::load(&root.join("sdk/configs/planner.toml"))?;
+    config.human2nav.guidance.enabled = !no_guidance;
+    human2nav_flow::tch::set_num_threads(1);
+    let model_dir = config.model_dir(&root);
+    if !model_dir.join("model.toml").is_file() {
+        bail!(
+            "no trained model at {}; train one with `human2nav train --config sdk/configs/train.toml`",
+            model_dir.display()
+        );
+    }
+
+    // 2. The robot (limits, footprint, Φ with any plugin terms) + the flow model = a planner.
+    let mut robot = RobotPlanner::load(&robot, &model_dir, config.human2nav)
+        .with_context(|| format!("building the planner for {}", robot.display()))?;
+    let limits = *robot.limits();
+    println!(
+        "robot `{}`: v_max {} m/s, a_max {} m/s², ω_max {} rad/s, κ_max {:?} 1/m, lateral {} m/s",
+        robot.profile.name,
+        limits.v_max,
+        limits.a_max,
+        limits.omega_max,
+        limits.kappa_max,
+        limits.lateral_speed_max
+    );
+
+    // 3. A synthetic crossing crowd (no dataset needed) and what the robot sees at t = 0:
+    //    itself at the start facing the goal, at rest, and the pedestrians within 10 m.
+    let episode = human2nav_data::synthetic::episodes(ScenarioClass::CrossFlow, 1, 7)
+        .into_iter()
+        .next()
+        .context("the synthetic generator produced no episode")?;
+    let obs = observation_at(&episode, &StepOptions::default())?;
+    println!(
+        "scene `{}`: {} pedestrians around, goal {:.1} m ahead",
+        episode.id,
+        obs.agents.len(),
+        episode.goal_distance()
+    );
+
+    // 4. One planning call: K samples from the flow model, guided into the robot's limits,
+    //    the best one by feasibility, goal progress and clearance, in the world frame.
+    let plan = robot.planner.plan(&obs)?;
+
+    // 5. What came out: poses every 0.4 s, with the feasibility of each waypoint, then TFS
+    //    (share of feasible waypoints) and Φ (the soft constraint cost) before/after guidance.
+    let ok = feasibility_mask(&plan.poses, plan.dt, &limits, obs.ego_velocity);
+    println!("  t [s]   x [m]   y [m]  θ [rad]  feasible");
+    for (k, p) in plan.poses.iter().enumerate().step_by(4) {
+        let t = plan.t0 + k as f64 * plan.dt;
+        println!("{t:7.1} {:7.2} {:7.2} {:8.2}  {}", p.x, p.y, p.theta, ok[k]);
+    }
+    let fig = PlanFigure {
+        robot: &robot.profile.name,
+        label: &episode.id,
+        guidance: !no_guidance,
+        observation: &obs,
+        start: Some(episode.start),
+        plan: &plan,
+        limits: &limits,
+        footprint_radius: robot.profile.footprint_radius,
+        bev: robot.bev,
+    };
+    let png = root.join(format!(
+        "out/quickstart/{}{}.png",
+        robot.profile.name,
+        if no_guidance { "-noguide" } else { "" }
+    ));
+    let numbers = draw_plan_figure(&png, &fig)?;
+    println!(
+        "TFS {:.3} ({} of {} waypoints feasible); Φ before guidance {:?}, after {:?}",
+        numbers.tfs, numbers.feasible, numbers.waypoints, plan.info.phi_before, plan.info.phi_after
+    );
+    println!("picture: {}", png.display());
+    Ok(())
+}

@@ -1,0 +1,503 @@
+//! `human2nav plan`: one Human2Nav planning step on an episode, drawn like the paper's Fig. 4;
+//! with `--bench`, the latency of a planning call; with `--eval`, guided vs unguided plans on
+//! many held-out windows per robot.
+//!
+//! A *window* is one planning step set up from one episode by
+//! `human2nav_sim::plan_figure::observation_at`: the robot at the episode's start pose (facing
+//! the goal), moving at `--speed`, the replayed crowd at `--time`.
+
+use anyhow::{Context, bail};
+use clap::Args;
+use human2nav_core::human2nav::{Human2Nav, Human2NavSettings};
+use human2nav_core::{Observation, Planner};
+use human2nav_data::ScenarioClass;
+use human2nav_data::paths::find_workspace_root;
+use human2nav_flow::CfmModel;
+use human2nav_flow::planner::{
+    BevOrigin, FlowCallStats, GuidanceComparison, GuidanceSummary, LatencyStats, PlannerConfig,
+    RobotPlanner, TimedModel, bev_spec, compare_guidance, load_model, load_profile,
+    measure_latency, robot_model, robot_phi,
+};
+use human2nav_sim::episode::{Episode, ScenarioTitle};
+use human2nav_sim::plan_figure::{
+    PlanFigure, StepOptions, draw_plan_figure, load_episodes, observation_at, select_episode,
+};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::{Arc, Mutex};
+
+/// Arguments of `human2nav plan`.
+#[derive(Debug, Args)]
+pub struct PlanArgs {
+    /// Robot profile(s) (`robot.toml`). Planning and `--bench` use the first; `--eval` runs
+    /// every one.
+    #[arg(long, required = true)]
+    pub robot: Vec<PathBuf>,
+    /// Episode file: a suite from `human2nav data episodes` or one episode (JSON). Without it,
+    /// synthetic episodes (one per scenario class, `--synthetic-seed`) are used.
+    #[arg(long)]
+    pub episode: Option<PathBuf>,
+    /// Index of the episode in the file.
+    #[arg(long, default_value_t = 0)]
+    pub index: usize,
+    /// Identifier of the episode in the file (overrides `--index`).
+    #[arg(long)]
+    pub id: Option<String>,
+    /// Episode time of the crowd (s).
+    #[arg(long, default_value_t = 0.0)]
+    pub time: f64,
+    /// The robot's forward speed at the planning instant (m/s; an episode starts at rest).
+    #[arg(long, default_value_t = 0.0)]
+    pub speed: f64,
+    /// Planner configuration [default: sdk/configs/planner.toml under the workspace root,
+    /// built-in defaults when absent].
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Model folder (overrides the configuration's `model`).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Turn feasibility guidance off (the ablation).
+    #[arg(long)]
+    pub no_guidance: bool,
+    /// Seed of the planner's source noise (overrides the configuration).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Number of sampled candidates `K` (overrides the configuration).
+    #[arg(long)]
+    pub samples: Option<usize>,
+    /// libtorch threads (overrides the configuration).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Output PNG [default: out/plan/<robot>-<episode index>.png under the workspace root].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Measure planning latency: this many timed calls, guided and unguided, over the first
+    /// windows of the episode file (p50/p95 and where the time goes).
+    #[arg(long, value_name = "CALLS")]
+    pub bench: Option<usize>,
+    /// Compare guided and unguided plans on `--windows` windows per robot and print a table.
+    #[arg(long)]
+    pub eval: bool,
+    /// Windows per robot for `--eval`, spread evenly over the episode file.
+    #[arg(long, default_value_t = 50)]
+    pub windows: usize,
+    /// Seed of the synthetic episodes used without `--episode`.
+    #[arg(long, default_value_t = 1)]
+    pub synthetic_seed: u64,
+}
+
+/// Runs `human2nav plan`.
+pub fn run(args: PlanArgs) -> anyhow::Result<ExitCode> {
+    let cwd = std::env::current_dir().context("reading the current directory")?;
+    let workspace = find_workspace_root(&cwd).unwrap_or(cwd);
+    let mut cfg = match &args.config {
+        Some(p) => PlannerConfig::load(p)?,
+        None => {
+            let p = workspace.join("sdk/configs/planner.toml");
+            if p.is_file() {
+                PlannerConfig::load(&p)?
+            } else {
+                PlannerConfig::default()
+            }
+        }
+    };
+    if let Some(s) = args.seed {
+        cfg.human2nav.seed = s;
+    }
+    if let Some(k) = args.samples {
+        cfg.human2nav.samples = k;
+    }
+    if let Some(t) = args.threads {
+        cfg.threads = t;
+    }
+    if args.no_guidance {
+        cfg.human2nav.guidance.enabled = false;
+    }
+    cfg.validate()?;
+    let model_dir = args
+        .model
+        .clone()
+        .unwrap_or_else(|| cfg.model_dir(&workspace));
+    if !model_dir.exists() {
+        bail!(
+            "no model at {} (train one with `human2nav train`, or pass --model <folder>)",
+            model_dir.display()
+        );
+    }
+    human2nav_flow::tch::set_num_threads(i32::try_from(cfg.threads).unwrap_or(1));
+
+    let episodes = match &args.episode {
+        Some(p) => load_episodes(p)?,
+        None => ScenarioClass::ALL
+            .iter()
+            .flat_map(|c| human2nav_data::synthetic::episodes(*c, 1, args.synthetic_seed))
+            .collect(),
+    };
+    if episodes.is_empty() {
+        bail!("no episodes to plan on");
+    }
+    let step = StepOptions {
+        time: args.time,
+        ego_speed: args.speed,
+        ..StepOptions::default()
+    };
+
+    if args.eval {
+        return eval(&args, &cfg, &model_dir, &episodes, &step);
+    }
+    if let Some(calls) = args.bench {
+        return bench(&args, &cfg, &model_dir, &episodes, &step, calls);
+    }
+    plan_one(&args, &cfg, &model_dir, &workspace, &episodes, &step)
+}
+
+fn plan_one(
+    args: &PlanArgs,
+    cfg: &PlannerConfig,
+    model_dir: &Path,
+    workspace: &Path,
+    episodes: &[Episode],
+    step: &StepOptions,
+) -> anyhow::Result<ExitCode> {
+    let robot_path = &args.robot[0];
+    let mut rp = RobotPlanner::load(robot_path, model_dir, cfg.human2nav)?;
+    let ep = select_episode(episodes, args.index, args.id.as_deref())?;
+    let obs = observation_at(ep, step)?;
+    let plan = rp.planner.plan(&obs)?;
+    let guidance = cfg.human2nav.guidance.enabled;
+
+    println!(
+        "robot {} ({}), footprint {:.2} m; model {}",
+        rp.profile.name,
+        rp.profile.embodiment.kind_name(),
+        rp.profile.footprint_radius,
+        model_dir.display()
+    );
+    println!("BEV {}", describe_bev(&rp));
+    println!(
+        "episode {} ({}, {} data), t = {:.1} s, {} pedestrians observed, goal {:.1} m away",
+        ep.id,
+        ep.scenario.title(),
+        ep.source,
+        obs.time,
+        obs.agents.len(),
+        (ep.goal[0] - obs.ego.x).hypot(ep.goal[1] - obs.ego.y)
+    );
+    let fig = PlanFigure {
+        robot: &rp.profile.name,
+        label: &ep.id,
+        guidance,
+        observation: &obs,
+        start: Some(ep.start),
+        plan: &plan,
+        limits: rp.limits(),
+        footprint_radius: rp.profile.footprint_radius,
+        bev: rp.bev,
+    };
+    let out = args.out.clone().unwrap_or_else(|| {
+        workspace.join(format!(
+            "out/plan/{}-{}{}.png",
+            rp.profile.name,
+            args.id.as_deref().map_or(args.index.to_string(), sanitize),
+            if guidance { "" } else { "-noguide" }
+        ))
+    });
+    let numbers = draw_plan_figure(&out, &fig)?;
+    println!(
+        "plan: {} poses at {} s, guidance {}, {}",
+        plan.poses.len(),
+        plan.dt,
+        if guidance { "on" } else { "off" },
+        match plan.info.selected {
+            Some(i) if i < plan.info.candidates.len() =>
+                format!("sample {} of {}", i, plan.info.candidates.len()),
+            Some(_) => "kept the previous plan".into(),
+            None => "no selection".into(),
+        }
+    );
+    if plan.info.fallback {
+        println!("FALLBACK (stop in place): {}", plan.info.notes.join("; "));
+    }
+    println!(
+        "TFS {:.3} ({} of {} waypoints feasible){}; Φ {} → {}",
+        numbers.tfs,
+        numbers.feasible,
+        numbers.waypoints,
+        numbers
+            .tfs_before
+            .map_or(String::new(), |t| format!(", before guidance {t:.3}")),
+        fmt_opt(plan.info.phi_before),
+        fmt_opt(plan.info.phi_after)
+    );
+    let mask =
+        human2nav_core::tfs::feasibility_mask(&plan.poses, plan.dt, rp.limits(), obs.ego_velocity);
+    println!("   t [s]    x [m]    y [m]  θ [rad]  v [m/s]  feasible");
+    for (k, p) in plan.poses.iter().enumerate() {
+        if k % 4 != 0 && k + 1 != plan.poses.len() {
+            continue;
+        }
+        let v = if k == 0 {
+            obs.ego_velocity.vx
+        } else {
+            let q = plan.poses[k - 1];
+            (p.x - q.x).hypot(p.y - q.y) / plan.dt
+        };
+        println!(
+            "{:8.1} {:8.3} {:8.3} {:8.3} {:8.3}  {}",
+            plan.t0 + k as f64 * plan.dt,
+            p.x,
+            p.y,
+            p.theta,
+            v,
+            if k == 0 {
+                "(now)"
+            } else if mask.get(k).copied().unwrap_or(false) {
+                "yes"
+            } else {
+                "NO"
+            }
+        );
+    }
+    println!("figure: {}", out.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+fn describe_bev(rp: &RobotPlanner) -> String {
+    format!(
+        "{}×{} cells of {} m ({})",
+        rp.bev.cells,
+        rp.bev.cells,
+        rp.bev.resolution,
+        match rp.bev_origin {
+            BevOrigin::Card => "from the model card",
+            BevOrigin::Default =>
+                "cell size not recorded in the model card: the data pipeline's default",
+        }
+    )
+}
+
+fn sanitize(s: &str) -> String {
+    s.chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect()
+}
+
+fn fmt_opt(v: Option<f64>) -> String {
+    v.map_or_else(|| "–".into(), |x| format!("{x:.4}"))
+}
+
+/// `n` indices spread evenly over `0..len` (all of them when `n ≥ len`).
+fn spread(len: usize, n: usize) -> Vec<usize> {
+    if n >= len {
+        return (0..len).collect();
+    }
+    (0..n).map(|i| i * len / n).collect()
+}
+
+fn windows(
+    episodes: &[Episode],
+    n: usize,
+    step: &StepOptions,
+) -> anyhow::Result<Vec<(String, Observation)>> {
+    spread(episodes.len(), n)
+        .into_iter()
+        .map(|i| {
+            let ep = &episodes[i];
+            Ok((ep.id.clone(), observation_at(ep, step)?))
+        })
+        .collect()
+}
+
+fn bar(len: usize, what: &str) -> ProgressBar {
+    ProgressBar::new(len as u64).with_style(
+        ProgressStyle::with_template(&format!(
+            "{{elapsed_precise}} [{{bar:40}}] {{pos}}/{{len}} {what}, ETA {{eta}}"
+        ))
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    )
+}
+
+fn eval(
+    args: &PlanArgs,
+    cfg: &PlannerConfig,
+    model_dir: &Path,
+    episodes: &[Episode],
+    step: &StepOptions,
+) -> anyhow::Result<ExitCode> {
+    let wins = windows(episodes, args.windows, step)?;
+    let mut guided_settings = cfg.human2nav;
+    guided_settings.guidance.enabled = true;
+    let mut unguided_settings = cfg.human2nav;
+    unguided_settings.guidance.enabled = false;
+    println!(
+        "held-out windows: {} of {} episodes ({}), t = {:.1} s, robot speed {:.2} m/s, K = {}, seed {}",
+        wins.len(),
+        episodes.len(),
+        args.episode
+            .as_ref()
+            .map_or("synthetic".to_string(), |p| p.display().to_string()),
+        step.time,
+        step.ego_speed,
+        cfg.human2nav.samples,
+        cfg.human2nav.seed
+    );
+    let mut rows = Vec::new();
+    for robot in &args.robot {
+        let mut g = RobotPlanner::load(robot, model_dir, guided_settings)?;
+        let mut u = RobotPlanner::load(robot, model_dir, unguided_settings)?;
+        let limits = *g.limits();
+        let pb = bar(wins.len(), &format!("windows ({})", g.profile.name));
+        let mut results: Vec<GuidanceComparison> = Vec::with_capacity(wins.len());
+        for (id, obs) in &wins {
+            let r = compare_guidance(&mut g.planner, &mut u.planner, obs, &limits)
+                .with_context(|| format!("planning window {id} for {}", g.profile.name))?;
+            results.push(r);
+            pb.inc(1);
+        }
+        pb.finish_and_clear();
+        rows.push((g.profile.name.clone(), GuidanceSummary::of(&results)));
+    }
+    println!();
+    println!(
+        "| robot | windows | TFS unguided | TFS guided | all-feasible unguided | all-feasible guided | displacement plan (m) | displacement sample (m) | Φ unguided plan | Φ before | Φ after | fallbacks |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for (name, s) in &rows {
+        println!(
+            "| {name} | {} | {:.3} | {:.3} | {:.2} | {:.2} | {:.3} | {:.3} | {:.4} | {:.4} | {:.4} | {} |",
+            s.windows,
+            s.tfs_unguided,
+            s.tfs_guided,
+            s.all_feasible_unguided,
+            s.all_feasible_guided,
+            s.plan_displacement,
+            s.sample_displacement,
+            s.phi_unguided,
+            s.phi_before,
+            s.phi_after,
+            s.fallbacks
+        );
+    }
+    println!();
+    println!(
+        "TFS: mean plan TFS (pose 0 = robot at rest/--speed); all-feasible: share of windows with TFS = 1; \
+         displacement plan: mean distance between the guided and the unguided plan at equal times; \
+         displacement sample: guided plan vs the same sample before guidance; \
+         Φ before/after: the guided plan's sample before and after guidance."
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+type TimedPlanner = Human2Nav<TimedModel<CfmModel>>;
+
+fn timed_planner(
+    robot: &Path,
+    model_dir: &Path,
+    settings: Human2NavSettings,
+) -> anyhow::Result<(TimedPlanner, Arc<Mutex<FlowCallStats>>)> {
+    let profile = load_profile(robot)?;
+    let model = load_model(model_dir)?;
+    let (bev, _) = bev_spec(model.card());
+    let timed = TimedModel::new(model);
+    let stats = timed.stats();
+    let phi = robot_phi(&profile)?;
+    let planner = Human2Nav::new(timed, robot_model(&profile, phi), bev, settings)?;
+    Ok((planner, stats))
+}
+
+fn bench(
+    args: &PlanArgs,
+    cfg: &PlannerConfig,
+    model_dir: &Path,
+    episodes: &[Episode],
+    step: &StepOptions,
+    calls: usize,
+) -> anyhow::Result<ExitCode> {
+    let wins: Vec<Observation> = windows(episodes, 20, step)?
+        .into_iter()
+        .map(|(_, o)| o)
+        .collect();
+    let robot = &args.robot[0];
+    println!(
+        "planning latency: {} ({} windows), model {}, {} libtorch thread(s), K = {}, N = {}, M ≤ {}",
+        robot.display(),
+        wins.len(),
+        model_dir.display(),
+        cfg.threads,
+        cfg.human2nav.samples,
+        cfg.human2nav.guidance.steps_n,
+        cfg.human2nav.guidance.iterations_m
+    );
+    println!(
+        "| mode | calls | p50 (ms) | p95 (ms) | mean (ms) | max (ms) | velocity calls | velocity (ms) | VJP calls | VJP (ms) | rest (ms) |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    for guided in [false, true] {
+        let mut settings = cfg.human2nav;
+        settings.guidance.enabled = guided;
+        let (mut planner, stats) = timed_planner(robot, model_dir, settings)?;
+        let warmup = 5.min(calls);
+        let pb = bar(
+            calls,
+            if guided {
+                "guided calls"
+            } else {
+                "unguided calls"
+            },
+        );
+        // Warm-up calls are timed by the wrapper too: measure them separately and subtract.
+        measure_latency(&mut planner, &wins, warmup, 0, || ())?;
+        let before = *stats
+            .lock()
+            .map_err(|_| anyhow::anyhow!("stats lock poisoned"))?;
+        let lat: LatencyStats = measure_latency(&mut planner, &wins, 0, calls, || pb.inc(1))?;
+        pb.finish_and_clear();
+        let after = *stats
+            .lock()
+            .map_err(|_| anyhow::anyhow!("stats lock poisoned"))?;
+        let n = lat.calls.max(1) as f64;
+        let vel_calls = (after.velocity_calls - before.velocity_calls) as f64 / n;
+        let vel_ms = (after.velocity_s - before.velocity_s) * 1e3 / n;
+        let vjp_calls = (after.vjp_calls - before.vjp_calls) as f64 / n;
+        let vjp_ms = (after.vjp_s - before.vjp_s) * 1e3 / n;
+        println!(
+            "| {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.1} | {:.2} | {:.1} | {:.2} | {:.2} |",
+            if guided { "guided" } else { "unguided" },
+            lat.calls,
+            lat.p50_ms,
+            lat.p95_ms,
+            lat.mean_ms,
+            lat.max_ms,
+            vel_calls,
+            vel_ms,
+            vjp_calls,
+            vjp_ms,
+            lat.mean_ms - vel_ms - vjp_ms
+        );
+    }
+    println!(
+        "per call: velocity/VJP = flow-network calls (batch K, condition encoding included in the first), \
+         rest = everything else (BEV, sampling arithmetic, Φ, adjoint, selection)"
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spread_covers_the_list_evenly() {
+        assert_eq!(spread(10, 3), vec![0, 3, 6]);
+        assert_eq!(spread(4, 10), vec![0, 1, 2, 3]);
+        assert_eq!(spread(200, 4), vec![0, 50, 100, 150]);
+        assert!(spread(0, 5).is_empty());
+    }
+
+    #[test]
+    fn file_names_are_sanitized() {
+        assert_eq!(sanitize("eth/eth#12"), "eth_eth_12");
+    }
+}

@@ -4,6 +4,9 @@
 //! synthetic suite, and the `human2nav bench --quick` command itself. Run after
 //! `cargo build --workspace` (as `sdk/dev.sh test` does), which builds the plugin and the CLI.
 
+// Helpers outside #[test] functions unwrap too (clippy.toml only allows it inside tests).
+#![allow(clippy::unwrap_used)]
+
 use human2nav_integration_tests::{target_profile_dir, workspace_root};
 use human2nav_plugin::PluginHost;
 use human2nav_sim::config::{BenchConfig, build_suites, builtin_method, load_robots};

@@ -367,7 +367,10 @@ pub fn build_suites(cfg: &BenchConfig, quick: bool) -> Result<Vec<Suite>, SimErr
 
 /// The robots of the configuration (built-in embodiments), in order.
 pub fn load_robots(cfg: &BenchConfig) -> Result<Vec<RobotSetup>, SimError> {
-    cfg.robots.iter().map(|p| RobotSetup::load(&cfg.resolve(p))).collect()
+    cfg.robots
+        .iter()
+        .map(|p| RobotSetup::load(&cfg.resolve(p)))
+        .collect()
 }
 
 /// Builds the methods whose kind the simulator knows without libtorch:
@@ -391,7 +394,11 @@ pub fn builtin_method(
             .map_err(|e| SimError::setting(section(), "config", e.to_string())),
         "plugin" => {
             let Some(library) = &m.library else {
-                return Err(SimError::setting(section(), "library", "a plugin method names its library"));
+                return Err(SimError::setting(
+                    section(),
+                    "library",
+                    "a plugin method names its library",
+                ));
             };
             let library = cfg.resolve(library);
             let factory = m.plugin.clone().unwrap_or_else(|| m.name.clone());
@@ -409,7 +416,11 @@ pub fn builtin_method(
                 return Err(SimError::setting(
                     section(),
                     "plugin",
-                    format!("{} has no factory `{factory}` (it has: {})", lib.path().display(), known.join(", ")),
+                    format!(
+                        "{} has no factory `{factory}` (it has: {})",
+                        lib.path().display(),
+                        known.join(", ")
+                    ),
                 ));
             }
             let host = Arc::clone(host);

@@ -48,7 +48,16 @@ pub fn run(
 ) -> Result<BenchOutcome, SimError> {
     std::fs::create_dir_all(out_dir).map_err(|e| SimError::io(out_dir, e))?;
     let started = Instant::now();
-    let bench = || run_bench(plan.suites, plan.robots, plan.methods, plan.sim, plan.seed, progress);
+    let bench = || {
+        run_bench(
+            plan.suites,
+            plan.robots,
+            plan.methods,
+            plan.sim,
+            plan.seed,
+            progress,
+        )
+    };
     let rows = match plan.threads {
         None => bench()?,
         Some(n) => rayon::ThreadPoolBuilder::new()

@@ -276,6 +276,8 @@ pub struct GuidanceWorkspace {
     grad_u: Vec<f64>,
     mu: Vec<f64>,
     cot: Vec<f64>,
+    /// `S_xᵀ·μ_{i+1}` per waypoint during the backward pass.
+    back: Vec<f64>,
     fout: Vec<f64>,
     vjp: Vec<f64>,
     /// Final samples with the current pose prepended, `K·(T + 1)·3`, and Φ's gradient there.
@@ -312,7 +314,13 @@ impl GuidanceWorkspace {
         self.ws.resize(steps * m, 0.0);
         self.u.resize(steps * m, 0.0);
         self.grad_u.resize(steps * m, 0.0);
-        for b in [&mut self.mu, &mut self.cot, &mut self.fout, &mut self.vjp] {
+        for b in [
+            &mut self.mu,
+            &mut self.cot,
+            &mut self.back,
+            &mut self.fout,
+            &mut self.vjp,
+        ] {
             b.resize(m, 0.0);
         }
         let e = samples * (horizon + 1) * 3;
@@ -644,13 +652,14 @@ fn backward(
         // Cotangent S_wᵀ·μ_{i+1}: the control gradient and the input of the VJP.
         for j in 0..m / 3 {
             let r = 3 * j..3 * j + 3;
-            let (_, sw) = euler_step_jacobians(
+            let (sx, sw) = euler_step_jacobians(
                 Pose2::from_slice(&x[r.clone()]),
                 Twist2::from_slice(&w[r.clone()]),
                 dt,
             );
             let mu = [ws.mu[3 * j], ws.mu[3 * j + 1], ws.mu[3 * j + 2]];
             let c = transpose_apply(&sw, mu);
+            ws.back[r.clone()].copy_from_slice(&transpose_apply(&sx, mu));
             // With the metric, the control moves along S_w⁻¹·μ·Δt² (Gauss-Newton through the
             // step) so that the realised change of the pose is the preconditioned direction.
             let step_dir = match metric.and_then(|_| solve3(&sw, mu)) {
@@ -674,16 +683,9 @@ fn backward(
         // μ_i = clip(S_xᵀ·μ_{i+1} + vjp).
         for j in 0..m / 3 {
             let r = 3 * j..3 * j + 3;
-            let (sx, _) = euler_step_jacobians(
-                Pose2::from_slice(&x[r.clone()]),
-                Twist2::from_slice(&w[r.clone()]),
-                dt,
-            );
-            let mu = [ws.mu[3 * j], ws.mu[3 * j + 1], ws.mu[3 * j + 2]];
-            let back = transpose_apply(&sx, mu);
             let out = &mut ws.mu[r.clone()];
             for d in 0..3 {
-                out[d] = back[d] + ws.vjp[3 * j + d];
+                out[d] = ws.back[3 * j + d] + ws.vjp[3 * j + d];
             }
             clip3(out, clip_inner);
         }

@@ -116,6 +116,10 @@ struct EvalSection {
     max_windows: usize,
     /// Seed of the subsample and of the source noise. Default 0.
     seed: u64,
+    /// Data config used to rebuild the test scenes for the other agents' true futures
+    /// (proximity metric). When the datasets are unavailable, the neighbours stored in the
+    /// cache are extrapolated at constant velocity instead (noted in the card).
+    data_config: PathBuf,
 }
 
 impl Default for EvalSection {
@@ -126,6 +130,7 @@ impl Default for EvalSection {
             radius: 0.3,
             max_windows: 2000,
             seed: 0,
+            data_config: PathBuf::from("sdk/configs/data.toml"),
         }
     }
 }
@@ -265,7 +270,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
     let mut model = CfmModel::load(&model_dir, device)
         .with_context(|| format!("loading the exported model from {}", model_dir.display()))?;
     if !(args.eval_only && args.bench) {
-        let info = run_evaluation(&cfg, &cache, &model)?;
+        let info = run_evaluation(&cfg, &cache, &model, &root)?;
         model.card_mut().evaluation = Some(info);
     }
     if args.bench {
@@ -531,9 +536,52 @@ fn export<S: human2nav_flow::train::TrainingSample>(
     Ok(())
 }
 
-/// Test windows: a seeded subsample of the test split. The cache stores the other agents
-/// only at the planning instant, so their future positions for the proximity metric are
-/// extrapolated at constant velocity from their current position and velocity.
+/// Test windows with the other agents' true futures: the test scenes are rebuilt from the
+/// datasets with the data config and the cache's tuple options, and must reproduce the cache's
+/// test tuples exactly (same count).
+fn true_future_windows(
+    cfg: &TrainConfig,
+    cache: &TupleCache,
+    root: &Path,
+) -> anyhow::Result<Vec<EvalWindow>> {
+    use human2nav_data::config::DataConfig;
+    use human2nav_data::pipeline::{Locations, discover, load_source};
+    use human2nav_data::resample::resample;
+    let path = resolve(root, &cfg.eval.data_config);
+    let dcfg = DataConfig::load(&path)?;
+    let loc = Locations::resolve(&dcfg, &path);
+    if !loc.data_root.is_dir() {
+        bail!("datasets not found at {}", loc.data_root.display());
+    }
+    let m = cache.manifest();
+    let (sources, _) = discover(&loc.data_root, &dcfg);
+    let mut windows = Vec::new();
+    for i in m.scenes_in(Split::Test) {
+        let name = &m.scenes[i as usize].name;
+        let src = sources.iter().find(|s| &s.name == name).with_context(|| {
+            format!(
+                "test scene {name} not found under {}",
+                loc.data_root.display()
+            )
+        })?;
+        let scene = resample(&load_source(src, &dcfg)?, &dcfg.resample);
+        windows.extend(human2nav_flow::eval::scene_windows(
+            &scene, i, &m.bev, &m.tuples,
+        )?);
+    }
+    let expected = m.counts.get(&Split::Test).copied().unwrap_or(0);
+    if windows.len() != expected {
+        bail!(
+            "rebuilt {} test windows, the cache has {expected}",
+            windows.len()
+        );
+    }
+    human2nav_flow::eval::subsample(&mut windows, cfg.eval.max_windows, cfg.eval.seed);
+    Ok(windows)
+}
+
+/// Test windows from the cache alone: the cache stores the other agents only at the planning
+/// instant, so their future positions are extrapolated at constant velocity.
 fn test_windows(cfg: &TrainConfig, cache: &TupleCache) -> anyhow::Result<Vec<EvalWindow>> {
     let mut compact: Vec<CompactTuple> = cache.load_compact(Split::Test)?;
     human2nav_flow::eval::subsample(&mut compact, cfg.eval.max_windows, cfg.eval.seed);
@@ -576,8 +624,25 @@ fn run_evaluation(
     cfg: &TrainConfig,
     cache: &TupleCache,
     model: &CfmModel,
+    root: &Path,
 ) -> anyhow::Result<EvaluationInfo> {
-    let windows = test_windows(cfg, cache)?;
+    let (windows, neighbours) = match true_future_windows(cfg, cache, root) {
+        Ok(w) => (
+            w,
+            "other agents' true future positions, from the test scenes rebuilt with the data \
+             config (windows identical to the cache's test tuples)",
+        ),
+        Err(e) => {
+            eprintln!(
+                "note: true neighbour futures unavailable ({e:#}); extrapolating the cache's"
+            );
+            (
+                test_windows(cfg, cache)?,
+                "other agents' future positions extrapolated at constant velocity from their \
+                 state at the planning instant (the tuple cache stores neighbours only then)",
+            )
+        }
+    };
     if windows.is_empty() {
         bail!("the test split of {} is empty", cache.dir().display());
     }
@@ -618,9 +683,7 @@ fn run_evaluation(
         proximity_model: m.proximity_model,
         proximity_truth: m.proximity_truth,
         proximity_note: format!(
-            "other agents' future positions extrapolated at constant velocity from their state at the \
-             planning instant (the tuple cache stores neighbours only at that instant); constant-velocity \
-             ego baseline: {:.4}",
+            "{neighbours}; constant-velocity ego prediction within the radius: {:.4}",
             m.proximity_cv
         ),
     };

@@ -50,6 +50,10 @@ pub enum CfmError {
     #[error("data set `{split}` is empty")]
     EmptyData { split: &'static str },
 
+    /// Evaluation windows could not be rebuilt from a scene.
+    #[error("evaluation windows of scene `{scene}`: {reason}")]
+    EvalData { scene: String, reason: String },
+
     /// Training diverged.
     #[error("training loss became non-finite at step {step}")]
     Diverged { step: u64 },

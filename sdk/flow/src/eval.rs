@@ -11,11 +11,17 @@
 //!   its position is closer than `r` to that agent's position at the same time. Reported as the
 //!   fraction of sampled trajectories (model) and of windows (ground truth) that do.
 
+use crate::error::CfmError;
 use crate::sampler::sample;
+use human2nav_core::bev::BevSpec;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use human2nav_core::se2::Pose2;
+use human2nav_data::resample::Scene;
+use human2nav_data::track::AgentClass;
+use human2nav_data::tuples::{TupleOptions, scene_tuples};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use std::collections::BTreeSet;
 
 /// One held-out window.
 #[derive(Clone, Debug, PartialEq)]
@@ -110,6 +116,97 @@ pub fn comes_close(traj: &[f64], others: &[Vec<Option<[f64; 2]>>], radius: f64) 
     })
 }
 
+/// The evaluation windows of one scene, with the other agents' true future positions.
+///
+/// The windows are exactly the tuples [`scene_tuples`] builds for the scene (same BEV, goal,
+/// velocity and future, so they match the cache's tuples); this function walks the ego tracks
+/// in the same order to recover each window's ego track and step, checks that the recovered
+/// future equals the tuple's, and adds every other agent's position in the ego frame at each
+/// of the `T` future steps (`None` where the agent is not present).
+pub fn scene_windows(
+    scene: &Scene,
+    scene_index: u16,
+    spec: &BevSpec,
+    opts: &TupleOptions,
+) -> Result<Vec<EvalWindow>, CfmError> {
+    let (tuples, _) = scene_tuples(scene, scene_index, spec, opts);
+    let h = opts.horizon;
+    let mut keys = Vec::with_capacity(tuples.len());
+    for (e, ego) in scene.tracks.iter().enumerate() {
+        if ego.class != AgentClass::Pedestrian || ego.len() < h + 1 {
+            continue;
+        }
+        let mut k = 0;
+        while k + h < ego.len() {
+            let (p0, pe) = (ego.positions[k], ego.positions[k + h]);
+            if (pe[0] - p0[0]).hypot(pe[1] - p0[1]) >= opts.min_future_displacement {
+                keys.push((e, k));
+            }
+            k += opts.stride;
+        }
+    }
+    let mismatch = |reason: String| CfmError::EvalData {
+        scene: scene.name.clone(),
+        reason,
+    };
+    if keys.len() != tuples.len() {
+        return Err(mismatch(format!(
+            "{} windows recovered, {} tuples built",
+            keys.len(),
+            tuples.len()
+        )));
+    }
+    let index = scene.index();
+    let mut out = Vec::with_capacity(tuples.len());
+    for (&(e, k), tup) in keys.iter().zip(&tuples) {
+        let ego = &scene.tracks[e];
+        let pose = ego.pose(k);
+        let last = pose.between(ego.pose(k + h));
+        let f = tup.future[h - 1];
+        if (last.x - f[0] as f64).abs() > 1e-4 || (last.y - f[1] as f64).abs() > 1e-4 {
+            return Err(mismatch(format!(
+                "window of track {} at step {k} does not match",
+                ego.id
+            )));
+        }
+        let step = ego.start + k as i64;
+        let mut others_idx = BTreeSet::new();
+        for j in 1..=h as i64 {
+            others_idx.extend(
+                index
+                    .at(step + j)
+                    .iter()
+                    .map(|&i| i as usize)
+                    .filter(|&i| i != e),
+            );
+        }
+        let others = others_idx
+            .into_iter()
+            .map(|i| {
+                let t = &scene.tracks[i];
+                (1..=h as i64)
+                    .map(|j| t.local(step + j).map(|l| pose.inverse_act(t.positions[l])))
+                    .collect()
+            })
+            .collect();
+        let dense = tup.to_tuple(spec);
+        out.push(EvalWindow {
+            cond: FlowCondition {
+                bev: dense.bev,
+                goal: [tup.goal[0] as f64, tup.goal[1] as f64],
+                velocity: [tup.velocity[0] as f64, tup.velocity[1] as f64],
+            },
+            future: tup
+                .future
+                .iter()
+                .map(|p| Pose2::new(p[0] as f64, p[1] as f64, p[2] as f64))
+                .collect(),
+            others,
+        });
+    }
+    Ok(out)
+}
+
 /// Keeps a seeded random subset of at most `n` items (order shuffled).
 pub fn subsample<T>(items: &mut Vec<T>, n: usize, seed: u64) {
     use rand::seq::SliceRandom;
@@ -181,6 +278,46 @@ pub fn evaluate<M: FlowModel + ?Sized>(
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+
+    #[test]
+    fn scene_windows_match_tuples_and_carry_true_neighbour_futures() {
+        let scene = human2nav_data::synthetic::scenes(1, 4).remove(0);
+        let spec = BevSpec::default();
+        let opts = TupleOptions::default();
+        let (tuples, _) = scene_tuples(&scene, 0, &spec, &opts);
+        let windows = scene_windows(&scene, 0, &spec, &opts).unwrap();
+        assert_eq!(windows.len(), tuples.len());
+        assert!(!windows.is_empty());
+        for (w, t) in windows.iter().zip(&tuples) {
+            assert_relative_eq!(w.future[5].x, t.future[5][0] as f64, epsilon = 1e-6);
+            assert_relative_eq!(w.cond.goal[1], t.goal[1] as f64, epsilon = 1e-6);
+        }
+        // A crowd scene: windows see other agents, and an agent observed now at the position the
+        // tuple stores is found again at the first future step close to where its velocity
+        // takes it.
+        let with_others = windows.iter().filter(|w| !w.others.is_empty()).count();
+        assert!(with_others > windows.len() / 2);
+        let (w, t) = windows
+            .iter()
+            .zip(&tuples)
+            .find(|(_, t)| !t.agents.is_empty())
+            .unwrap();
+        let a = t.agents[0];
+        let expect = [
+            a[0] as f64 + 0.1 * a[2] as f64,
+            a[1] as f64 + 0.1 * a[3] as f64,
+        ];
+        let nearest = w
+            .others
+            .iter()
+            .filter_map(|o| o[0])
+            .map(|p| (p[0] - expect[0]).hypot(p[1] - expect[1]))
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            nearest < 0.05,
+            "nearest future neighbour {nearest} m from the extrapolation"
+        );
+    }
 
     #[test]
     fn errors_of_a_shifted_line() {

@@ -769,3 +769,55 @@ mod tests {
         assert_relative_eq!(mean_displacement(&a, &[]), 0.0);
     }
 }
+
+#[cfg(test)]
+mod diag_tmp {
+    use super::*;
+    use human2nav_core::guidance::{self, GuidanceSettings, GuidanceWorkspace};
+    use human2nav_core::constraint::ConstraintContext;
+    use human2nav_core::{AgentState, Twist2};
+    use rand::SeedableRng;
+
+    #[test]
+    #[ignore]
+    fn diag() {
+        let dir = PathBuf::from(std::env::var("H2N_DIAG_MODEL").unwrap());
+        let robot = PathBuf::from(std::env::var("H2N_DIAG_ROBOT").unwrap());
+        let profile = load_profile(&robot).unwrap();
+        let model = load_model(&dir).unwrap();
+        let (bev, _) = bev_spec(model.card());
+        let phi = robot_phi(&profile).unwrap();
+        let suite = human2nav_data::EpisodeSuite::load(Path::new("../../out/data/episodes.json")).unwrap();
+        let ep = &suite.episodes[0];
+        let s = ep.start;
+        let theta = (ep.goal[1] - s.y).atan2(ep.goal[0] - s.x);
+        let ego = Pose2::new(s.x, s.y, theta);
+        let agents: Vec<AgentState> = vec![];
+        let mut raster = vec![0f32; bev.len()];
+        human2nav_core::bev::rasterize(bev, ego, &agents, &mut raster);
+        let g = ego.inverse_act(ep.goal);
+        let cond = FlowCondition { bev: raster, goal: g, velocity: [0.0, 0.0] };
+        let k = 16;
+        let t = model.horizon();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+        let x0 = crate::cfm::sample_source(k, t, model.source_std(), &mut rng);
+        let ctx = ConstraintContext { dt: 0.1, limits: &profile.limits, initial_velocity: Twist2::ZERO, agents: &agents };
+        let mut ws = GuidanceWorkspace::new();
+        let lr: f64 = std::env::var("H2N_LR").ok().and_then(|s| s.parse().ok()).unwrap_or(GuidanceSettings::default().learning_rate);
+        let m: usize = std::env::var("H2N_M").ok().and_then(|s| s.parse().ok()).unwrap_or(8);
+        let settings = GuidanceSettings { learning_rate: lr, iterations_m: m, ..GuidanceSettings::default() };
+        eprintln!("{settings:?}");
+        let r = guidance::sample_guided(&model, &cond, &x0, &phi, &ctx, &settings, &mut ws).unwrap();
+        eprintln!("iterations {}", r.iterations_run);
+        for i in 0..k {
+            let gp: Vec<Pose2> = std::iter::once(Pose2::IDENTITY).chain(r.guided_poses(i)).collect();
+            let up: Vec<Pose2> = std::iter::once(Pose2::IDENTITY).chain(r.unguided_poses(i)).collect();
+            let tg = tfs::tfs_plan(&gp, 0.1, &profile.limits, Twist2::ZERO);
+            let tu = tfs::tfs_plan(&up, 0.1, &profile.limits, Twist2::ZERO);
+            let v = tfs::plan_violations(&up, 0.1, &profile.limits, Twist2::ZERO);
+            let cnt = |f: &dyn Fn(&tfs::Violations) -> bool| v.iter().filter(|x| f(x)).count();
+            eprintln!("{i:2} phi {:9.4} -> {:9.4}  tfs {tu:.2} -> {tg:.2}  viol speed {} acc {} yaw {} lat {} kappa {} rev {}", r.phi_before[i], r.phi_after[i],
+                cnt(&|x| x.speed), cnt(&|x| x.acceleration), cnt(&|x| x.yaw_rate), cnt(&|x| x.lateral), cnt(&|x| x.curvature), cnt(&|x| x.reverse));
+        }
+    }
+}

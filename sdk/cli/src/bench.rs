@@ -2,15 +2,22 @@
 //!
 //! Method kinds: `straight` and `plugin` (ORCA ships as a plugin) are built by
 //! [`human2nav_sim::config::builtin_method`]; any other kind is an error in this build.
+//!
+//! Episodes: a `real` suite reads its episode file; when the file is missing but the datasets
+//! are present (per `--data-config`), the held-out episodes are mined first exactly as
+//! `human2nav data episodes` does and written there. Without the datasets the suite falls back
+//! to synthetic episodes (and the report says so).
 
 use anyhow::{Context, bail};
 use clap::Args;
+use human2nav_data::config::DataConfig;
+use human2nav_data::pipeline::{self, Locations, NoProgress};
 use human2nav_plugin::PluginHost;
-use human2nav_sim::MethodSpec;
 use human2nav_sim::config::{BenchConfig, build_suites, builtin_method, load_robots};
 use human2nav_sim::driver::{self, BenchPlan};
+use human2nav_sim::{MethodSpec, SuiteKind};
 use indicatif::{ProgressBar, ProgressStyle};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 
@@ -34,6 +41,10 @@ pub struct BenchArgs {
     /// Worker threads for the episodes [default: one per core].
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Data configuration used to mine the held-out episodes when a real suite's file is
+    /// missing and the datasets are present.
+    #[arg(long, default_value = "sdk/configs/data.toml")]
+    pub data_config: PathBuf,
 }
 
 /// Runs the benchmark; fails when a method misses SR = 1 on an empty-world suite.
@@ -64,6 +75,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
             ),
         }
     }
+    ensure_real_episodes(&cfg, &args.data_config)?;
     let suites = build_suites(&cfg, args.quick)?;
     for s in &suites {
         eprintln!("suite `{}`: {} episodes", s.name, s.episodes.len());
@@ -123,4 +135,40 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
         );
     }
     Ok(ExitCode::FAILURE)
+}
+
+/// Mines the held-out episodes of every `real` suite whose file is missing, when the datasets
+/// named by `data_config` are present (see the module docs).
+fn ensure_real_episodes(cfg: &BenchConfig, data_config: &Path) -> anyhow::Result<()> {
+    for s in cfg.suites.iter().filter(|s| s.kind == SuiteKind::Real) {
+        let Some(file) = s.episodes.as_deref().map(|p| cfg.resolve(p)) else {
+            continue;
+        };
+        if file.is_file() || !data_config.is_file() {
+            continue;
+        }
+        let dcfg = DataConfig::load(data_config)
+            .with_context(|| format!("loading {}", data_config.display()))?;
+        let loc = Locations::resolve(&dcfg, data_config);
+        if !loc.data_root.is_dir() {
+            eprintln!(
+                "suite `{}`: no datasets at {} (set HUMAN2NAV_DATA); using synthetic episodes",
+                s.name,
+                loc.data_root.display()
+            );
+            continue;
+        }
+        eprintln!(
+            "suite `{}`: mining held-out episodes from {} into {}",
+            s.name,
+            loc.data_root.display(),
+            file.display()
+        );
+        let report = pipeline::build_episodes(&dcfg, &loc, &NoProgress)?;
+        for n in &report.notes {
+            eprintln!("  note: {n}");
+        }
+        report.suite.save(&file)?;
+    }
+    Ok(())
 }

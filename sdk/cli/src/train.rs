@@ -507,6 +507,7 @@ fn export<S: human2nav_flow::train::TrainingSample>(
         predicting per-waypoint body velocities for 32 poses over 3.2 s. EMA weights."
             .into();
     card.training = Some(info);
+    card.bev = Some(m.bev);
     card.source.steps = cfg.eval.steps;
     let cx = Complexity::of(&card.net);
     let params = parameter_count(model.var_store());

@@ -29,6 +29,10 @@ pub struct ModelCard {
     pub normalisation: Normalisation,
     /// The source distribution samplers must draw from.
     pub source: SourceInfo,
+    /// The BEV raster the model was trained on (`cells = net.bev_cells`); planners must
+    /// rasterise with the same spec. Absent for untrained models.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bev: Option<human2nav_core::bev::BevSpec>,
     /// Size and cost.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub complexity: Option<ComplexityInfo>,

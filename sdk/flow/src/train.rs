@@ -837,3 +837,148 @@ pub fn evaluate_loss<S: TrainingSample>(
     }
     Ok(sum / count as f64)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    fn tiny_net() -> NetConfig {
+        NetConfig {
+            horizon: 8,
+            bev_cells: 8,
+            down_dims: vec![8, 16],
+            n_groups: 4,
+            bev_channels: [4, 8, 8],
+            time_embed_dim: 8,
+            bev_embed_dim: 8,
+            goal_embed_dim: 8,
+            ..NetConfig::default()
+        }
+    }
+
+    fn data(n: usize) -> Vec<Example> {
+        (0..n)
+            .map(|i| {
+                let turn = 0.05 * (i as f64 - n as f64 / 2.0);
+                let mut p = Pose2::IDENTITY;
+                let future = (0..8)
+                    .map(|_| {
+                        p = p.euler_step(Twist2::new(1.2, 0.0, turn * 10.0), 0.1);
+                        p
+                    })
+                    .collect();
+                let mut bev = vec![0.0; 3 * 64];
+                bev[i % 64] = 1.0;
+                Example {
+                    bev,
+                    goal: [5.0, 10.0 * turn],
+                    velocity: [1.2, 0.0],
+                    future,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn learning_rate_schedule() {
+        let o = TrainOptions {
+            steps: 1000,
+            warmup_steps: 100,
+            lr: 1e-3,
+            lr_min: 1e-5,
+            ..TrainOptions::default()
+        };
+        assert_relative_eq!(o.lr_at(0), 1e-5, epsilon = 1e-12);
+        assert_relative_eq!(o.lr_at(99), 1e-3, epsilon = 1e-12);
+        assert_relative_eq!(o.lr_at(100), 1e-3, epsilon = 1e-12);
+        // Half-way through the cosine: the mean of lr and lr_min.
+        assert_relative_eq!(o.lr_at(550), 0.5 * (1e-3 + 1e-5), epsilon = 1e-12);
+        assert_relative_eq!(o.lr_at(1000), 1e-5, epsilon = 1e-12);
+        assert_relative_eq!(o.lr_at(5000), 1e-5, epsilon = 1e-12);
+    }
+
+    #[test]
+    fn normalisation_estimate_matches_closed_forms() {
+        let d = data(10);
+        let n = Normalisation::estimate(&d, 0).unwrap();
+        assert_relative_eq!(n.speed_scale, 1.2, epsilon = 1e-12);
+        let g2: f64 = d
+            .iter()
+            .map(|e| e.goal[0].powi(2) + e.goal[1].powi(2))
+            .sum::<f64>()
+            / 10.0;
+        assert_relative_eq!(n.goal_scale, g2.sqrt(), epsilon = 1e-12);
+        assert!(Normalisation::estimate::<Example>(&[], 0).is_err());
+    }
+
+    /// Three steps, a checkpoint, a resume and three more steps give the same weights as six
+    /// uninterrupted steps (batch order and noise derive from (seed, step); AdamW moments and
+    /// EMA are checkpointed).
+    #[test]
+    fn resume_continues_exactly() {
+        let d = data(12);
+        let net = tiny_net();
+        let norm = Normalisation::estimate(&d, 0).unwrap();
+        let opts = TrainOptions {
+            batch_size: 5,
+            steps: 6,
+            warmup_steps: 2,
+            ..TrainOptions::default()
+        };
+        let mut straight = Trainer::new(&net, &norm, &opts, &d, &d[..4], Device::Cpu).unwrap();
+        for _ in 0..6 {
+            straight.train_step().unwrap();
+        }
+        let dir = std::env::temp_dir().join(format!("h2n-flow-resume-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut first = Trainer::new(&net, &norm, &opts, &d, &d[..4], Device::Cpu).unwrap();
+        for _ in 0..3 {
+            first.train_step().unwrap();
+        }
+        first.record();
+        first.save_state(&dir).unwrap();
+        let mut resumed = Trainer::resume(&dir, &opts, &d, &d[..4], Device::Cpu).unwrap();
+        assert_eq!(resumed.step(), 3);
+        assert_eq!(resumed.history().len(), 1);
+        for _ in 0..3 {
+            resumed.train_step().unwrap();
+        }
+        for (prefix, a, b) in [
+            (
+                "param",
+                straight.model().named_tensors(""),
+                resumed.model().named_tensors(""),
+            ),
+            (
+                "ema",
+                straight.ema_model().named_tensors(""),
+                resumed.ema_model().named_tensors(""),
+            ),
+        ] {
+            for ((na, ta), (nb, tb)) in a.iter().zip(&b) {
+                assert_eq!(na, nb);
+                let diff = (ta - tb).abs().max().double_value(&[]);
+                assert!(diff < 1e-6, "{prefix} {na} differs by {diff}");
+            }
+        }
+        // Options other than `steps` must match the checkpoint.
+        let other = TrainOptions {
+            lr: 5e-4,
+            ..opts.clone()
+        };
+        assert!(matches!(
+            Trainer::resume(&dir, &other, &d, &d[..4], Device::Cpu),
+            Err(CfmError::Option { field: "train", .. })
+        ));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn rejects_mismatched_examples() {
+        let mut d = data(3);
+        d[1].future.pop();
+        let err = check_examples(&tiny_net(), &d).unwrap_err();
+        assert!(matches!(err, CfmError::Example { index: 1, .. }), "{err}");
+    }
+}

@@ -116,7 +116,7 @@ pub fn run(
         command: plan.command.clone(),
         seed: plan.seed,
         quick: plan.quick,
-        sim: sim_table(plan.sim),
+        sim: sim_table(plan.sim, plan.suites),
         robots: plan
             .robots
             .iter()
@@ -172,7 +172,22 @@ pub fn run(
 }
 
 /// The settings table of the report.
-fn sim_table(sim: &SimConfig) -> Vec<(String, String)> {
+fn sim_table(sim: &SimConfig, suites: &[Suite]) -> Vec<(String, String)> {
+    let radii = suites
+        .iter()
+        .flat_map(|s| &s.episodes)
+        .flat_map(|e| &e.agents)
+        .map(|a| a.radius);
+    let (lo, hi) = radii.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), r| {
+        (lo.min(r), hi.max(r))
+    });
+    let pedestrian_radius = if lo > hi {
+        "no pedestrians".to_string()
+    } else if (hi - lo).abs() < 1e-12 {
+        format!("{lo} m (from the episodes)")
+    } else {
+        format!("{lo}–{hi} m (from the episodes)")
+    };
     vec![
         ("simulation step".into(), format!("{} s", sim.dt)),
         (
@@ -193,6 +208,7 @@ fn sim_table(sim: &SimConfig) -> Vec<(String, String)> {
             ),
         ),
         ("start heading".into(), format!("{:?}", sim.start_heading)),
+        ("pedestrian disc radius".into(), pedestrian_radius),
         (
             "collision".into(),
             "robot footprint disc overlaps a pedestrian disc (checked every step)".into(),

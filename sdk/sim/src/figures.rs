@@ -387,3 +387,137 @@ pub fn trajectory_snapshots(path: &Path, snapshots: &[Snapshot]) -> Result<(), S
     }
     root.present().map_err(|e| err(e.to_string()))
 }
+
+/// One point of the data-scaling curve (paper Fig. 5): the SR of a model trained on
+/// `fraction` of the training scenes, for one scenario class or (`None`) over all classes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScalingPoint {
+    pub fraction: f64,
+    pub scenario: Option<ScenarioClass>,
+    pub sr: f64,
+    /// Standard error of `sr` (drawn as shading around the all-class curve).
+    pub sr_se: f64,
+}
+
+/// The scaling points of one method on one suite from benchmark rows of several trainings,
+/// each given as `(fraction of the training scenes, rows)`: per class and over all classes.
+pub fn scaling_points(
+    runs: &[(f64, Vec<ResultRow>)],
+    suite: &str,
+    method: &str,
+) -> Vec<ScalingPoint> {
+    let mut out = Vec::new();
+    for (fraction, rows) in runs {
+        let pick = |c: Option<ScenarioClass>| {
+            summarize(rows.iter().filter(|r| {
+                r.suite == suite && r.method == method && c.is_none_or(|c| r.scenario == c)
+            }))
+        };
+        for c in ScenarioClass::ALL.into_iter().map(Some).chain([None]) {
+            let s = pick(c);
+            if s.n > 0 {
+                out.push(ScalingPoint {
+                    fraction: *fraction,
+                    scenario: c,
+                    sr: s.sr,
+                    sr_se: s.sr_se,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// Fig. 5: SR against the share of training data, one faint line per scenario class and the
+/// all-class curve in bold with ±1 standard error shading.
+pub fn sr_vs_training_data(
+    path: &Path,
+    points: &[ScalingPoint],
+    title: &str,
+) -> Result<(), SimError> {
+    let err = draw_err(path);
+    let root = BitMapBackend::new(path, (900, 560)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
+    let draw = || -> Result<(), String> {
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 22))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(50)
+            .build_cartesian_2d(0f64..105f64, 0f64..1.05)
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc("training data (% of the training scenes)")
+            .y_desc("SR")
+            .draw()
+            .map_err(|e| e.to_string())?;
+        let curve = |c: Option<ScenarioClass>| {
+            let mut v: Vec<ScalingPoint> =
+                points.iter().filter(|p| p.scenario == c).copied().collect();
+            v.sort_by(|a, b| a.fraction.total_cmp(&b.fraction));
+            v
+        };
+        for (i, c) in ScenarioClass::ALL.into_iter().enumerate() {
+            let v = curve(Some(c));
+            let col = colour(i);
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    v.iter()
+                        .map(|p| (100.0 * p.fraction, p.sr))
+                        .collect::<Vec<_>>(),
+                    col.mix(0.45).stroke_width(2),
+                )))
+                .map_err(|e| e.to_string())?
+                .label(c.title())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 14, y)], col.mix(0.45).stroke_width(2))
+                });
+        }
+        let all = curve(None);
+        if !all.is_empty() {
+            let mut band: Vec<(f64, f64)> = all
+                .iter()
+                .map(|p| (100.0 * p.fraction, (p.sr + p.sr_se).min(1.0)))
+                .collect();
+            band.extend(
+                all.iter()
+                    .rev()
+                    .map(|p| (100.0 * p.fraction, (p.sr - p.sr_se).max(0.0))),
+            );
+            let blue = RGBColor(31, 119, 180);
+            chart
+                .draw_series(std::iter::once(Polygon::new(band, blue.mix(0.15).filled())))
+                .map_err(|e| e.to_string())?;
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    all.iter()
+                        .map(|p| (100.0 * p.fraction, p.sr))
+                        .collect::<Vec<_>>(),
+                    BLACK.stroke_width(4),
+                )))
+                .map_err(|e| e.to_string())?
+                .label("all scenarios")
+                .legend(|(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 14, y)], BLACK.stroke_width(4))
+                });
+            chart
+                .draw_series(
+                    all.iter()
+                        .map(|p| Circle::new((100.0 * p.fraction, p.sr), 4, BLACK.filled())),
+                )
+                .map_err(|e| e.to_string())?;
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 14))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        Ok(())
+    };
+    draw().map_err(&err)?;
+    root.present().map_err(|e| err(e.to_string()))
+}

@@ -259,3 +259,39 @@ fn driver_writes_csv_report_and_figures() {
     assert_eq!(csv.lines().count(), res.rows.len() + 1);
     std::fs::remove_dir_all(&out).unwrap();
 }
+
+#[test]
+fn data_scaling_points_and_figure() {
+    use human2nav_sim::figures::{scaling_points, sr_vs_training_data};
+    use human2nav_sim::report::summarize;
+    let suites = [small_suite()];
+    let robots = [robot("go2")];
+    let sim = SimConfig::default();
+    // Three "trainings" stand in as three speeds of the straight baseline.
+    let runs: Vec<(f64, Vec<_>)> = [(0.1, 0.3), (0.5, 0.8), (1.0, 1.5)]
+        .into_iter()
+        .map(|(fraction, speed)| {
+            let table: toml::Table = toml::from_str(&format!("speed = {speed}")).unwrap();
+            let methods = [MethodSpec::straight("m", &table).unwrap()];
+            let rows =
+                run_bench(&suites, &robots, &methods, &sim, 1, &ProgressBar::hidden()).unwrap();
+            (fraction, rows)
+        })
+        .collect();
+    let points = scaling_points(&runs, "hand", "m");
+    assert_eq!(points.len(), 3 * 5);
+    for p in &points {
+        let rows = &runs.iter().find(|(f, _)| *f == p.fraction).unwrap().1;
+        let s = summarize(
+            rows.iter()
+                .filter(|r| p.scenario.is_none_or(|c| r.scenario == c)),
+        );
+        assert_relative_eq!(p.sr, s.sr);
+        assert_relative_eq!(p.sr_se, s.sr_se);
+    }
+    assert!(scaling_points(&runs, "hand", "other").is_empty());
+    let out = std::env::temp_dir().join(format!("h2n-fig5-{}.png", std::process::id()));
+    sr_vs_training_data(&out, &points, "SR vs training data").unwrap();
+    assert!(std::fs::read(&out).unwrap().starts_with(b"\x89PNG"));
+    std::fs::remove_file(&out).unwrap();
+}

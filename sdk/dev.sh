@@ -61,7 +61,12 @@ case "${1:-}" in
         shift
         setup
         cargo build --release --workspace
-        exec "$root/target/release/human2nav" robot check robots/*/robot.toml "$@"
+        bin="$root/target/release/human2nav"
+        "$bin" robot check robots/*/robot.toml
+        # One planning step of the shipped model on a synthetic crowd, drawn like Fig. 4.
+        "$bin" plan --robot robots/diablo/robot.toml --out out/demo/plan-diablo.png "$@"
+        echo "picture: out/demo/plan-diablo.png"
+        echo "full benchmark (long): target/release/human2nav bench --config sdk/configs/bench.toml"
         ;;
     test)
         setup

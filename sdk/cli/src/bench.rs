@@ -1,22 +1,27 @@
 //! `human2nav bench`: the closed-loop benchmark (suites × robots × methods) and its report.
 //!
 //! Method kinds: `straight` and `plugin` (ORCA ships as a plugin) are built by
-//! [`human2nav_sim::config::builtin_method`]; any other kind is an error in this build.
+//! [`human2nav_sim::config::builtin_method`]; `human2nav` (the reference planner with the
+//! shipped flow model, see [`human2nav_method`]) is built here because it needs libtorch.
 //!
 //! Episodes: a `real` suite reads its episode file; when the file is missing but the datasets
 //! are present (per `--data-config`), the held-out episodes are mined first exactly as
 //! `human2nav data episodes` does and written there. Without the datasets the suite falls back
 //! to synthetic episodes (and the report says so).
 
-use anyhow::{Context, bail};
+use anyhow::{Context, anyhow, bail};
 use clap::Args;
+use human2nav_core::human2nav::Human2NavSettings;
 use human2nav_data::config::DataConfig;
 use human2nav_data::pipeline::{self, Locations, NoProgress};
+use human2nav_flow::planner::{PlannerConfig, RobotPlanner, load_model};
 use human2nav_plugin::PluginHost;
+use human2nav_sim::config::MethodConfig;
 use human2nav_sim::config::{BenchConfig, build_suites, builtin_method, load_robots};
 use human2nav_sim::driver::{self, BenchPlan};
 use human2nav_sim::{MethodSpec, SuiteKind};
 use indicatif::{ProgressBar, ProgressStyle};
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -68,8 +73,9 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
     for m in &cfg.methods {
         match builtin_method(m, &cfg, &host)? {
             Some(spec) => methods.push(spec),
+            None if m.kind == "human2nav" => methods.push(human2nav_method(m, &cfg)?),
             None => bail!(
-                "method `{}`: unknown kind `{}` (this build knows `straight` and `plugin`)",
+                "method `{}`: unknown kind `{}` (this build knows `straight`, `plugin` and `human2nav`)",
                 m.name,
                 m.kind
             ),
@@ -171,4 +177,64 @@ fn ensure_real_episodes(cfg: &BenchConfig, data_config: &Path) -> anyhow::Result
         report.suite.save(&file)?;
     }
     Ok(())
+}
+
+/// A `human2nav` method: the reference planner with the model and settings of a planner
+/// configuration. Its `config` table takes `planner` (the planner TOML, relative to the
+/// workspace root; default `sdk/configs/planner.toml`) and `guidance` (bool; `false` is the
+/// "w/o guidance" ablation). Each episode gets a fresh planner (model loaded from disk, source
+/// noise seeded with the episode's seed) for the robot of that episode, with the robot's Φ
+/// including its plugin constraint terms; libtorch runs one thread per planner (the episodes
+/// already run in parallel).
+fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<MethodSpec> {
+    let field = |key: &str| format!("methods[{}].config.{key}", m.name);
+    for key in m.config.keys() {
+        if key != "planner" && key != "guidance" {
+            bail!(
+                "{}: unknown key (expected `planner` or `guidance`)",
+                field(key)
+            );
+        }
+    }
+    let planner_toml = match m.config.get("planner") {
+        Some(v) => cfg
+            .resolve(Path::new(v.as_str().ok_or_else(|| {
+                anyhow!("{}: must be a path", field("planner"))
+            })?)),
+        None => cfg.resolve(Path::new("sdk/configs/planner.toml")),
+    };
+    let mut planner_cfg = PlannerConfig::load(&planner_toml)?;
+    if let Some(v) = m.config.get("guidance") {
+        planner_cfg.human2nav.guidance.enabled = v
+            .as_bool()
+            .ok_or_else(|| anyhow!("{}: must be true or false", field("guidance")))?;
+    }
+    let model_dir = planner_cfg.model_dir(&cfg.base_dir);
+    // Fail now, with the folder named, rather than once per episode.
+    load_model(&model_dir).with_context(|| format!("method `{}`", m.name))?;
+    human2nav_flow::tch::set_num_threads(1);
+
+    let mut profiles = HashMap::new();
+    for path in &cfg.robots {
+        let path = cfg.resolve(path);
+        let profile = human2nav_flow::planner::load_profile(&path)?;
+        profiles.insert(profile.name.clone(), profile);
+    }
+    let settings = planner_cfg.human2nav;
+    Ok(MethodSpec::new(m.name.clone(), move |ctx| {
+        let profile = profiles
+            .get(&ctx.robot.name)
+            .cloned()
+            .ok_or_else(|| format!("no robot profile named `{}`", ctx.robot.name))?;
+        let model = load_model(&model_dir)?;
+        let planner = RobotPlanner::new(
+            profile,
+            model,
+            Human2NavSettings {
+                seed: ctx.seed,
+                ..settings
+            },
+        )?;
+        Ok(Box::new(planner.planner))
+    }))
 }

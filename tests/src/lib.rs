@@ -19,7 +19,10 @@ pub fn dataset_root(test: &str) -> Option<PathBuf> {
     if dir.is_dir() {
         Some(dir)
     } else {
-        eprintln!("skipping {test}: real datasets not found at {} (set HUMAN2NAV_DATA)", dir.display());
+        eprintln!(
+            "skipping {test}: real datasets not found at {} (set HUMAN2NAV_DATA)",
+            dir.display()
+        );
         None
     }
 }

@@ -11,7 +11,11 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 #[derive(Debug, Parser)]
-#[command(name = "human2nav", version, about = "Crowd-navigation planning from human trajectories with feasibility-guided flow matching")]
+#[command(
+    name = "human2nav",
+    version,
+    about = "Crowd-navigation planning from human trajectories with feasibility-guided flow matching"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

@@ -57,12 +57,17 @@ fn main() -> anyhow::Result<()> {
     );
 
     // 3. A synthetic crossing crowd (no dataset needed) and what the robot sees at t = 0:
-    //    itself at the start facing the goal, at rest, and the pedestrians within 10 m.
-    let episode = human2nav_data::synthetic::episodes(ScenarioClass::CrossFlow, 1, 7)
+    //    itself at the start facing the goal, at rest, and the pedestrians within 10 m. Of a
+    //    few generated scenes we take the busiest one.
+    let mut scenes = Vec::new();
+    for episode in human2nav_data::synthetic::episodes(ScenarioClass::CrossFlow, 6, 7) {
+        let obs = observation_at(&episode, &StepOptions::default())?;
+        scenes.push((episode, obs));
+    }
+    let (episode, obs) = scenes
         .into_iter()
-        .next()
+        .max_by_key(|(_, obs)| obs.agents.len())
         .context("the synthetic generator produced no episode")?;
-    let obs = observation_at(&episode, &StepOptions::default())?;
     println!(
         "scene `{}`: {} pedestrians around, goal {:.1} m ahead",
         episode.id,
@@ -99,9 +104,14 @@ fn main() -> anyhow::Result<()> {
         if no_guidance { "-noguide" } else { "" }
     ));
     let numbers = draw_plan_figure(&png, &fig)?;
+    let phi = |v: Option<f64>| v.map_or_else(|| "–".to_string(), |x| format!("{x:.3}"));
     println!(
-        "TFS {:.3} ({} of {} waypoints feasible); Φ before guidance {:?}, after {:?}",
-        numbers.tfs, numbers.feasible, numbers.waypoints, plan.info.phi_before, plan.info.phi_after
+        "TFS {:.3} ({} of {} waypoints feasible); Φ {} before guidance, {} after",
+        numbers.tfs,
+        numbers.feasible,
+        numbers.waypoints,
+        phi(plan.info.phi_before),
+        phi(plan.info.phi_after)
     );
     println!("picture: {}", png.display());
     Ok(())

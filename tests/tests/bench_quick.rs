@@ -168,7 +168,7 @@ fn cli_bench_quick_writes_the_report() {
         .args([
             "bench",
             "--config",
-            "sdk/configs/bench.toml",
+            "sdk/configs/bench_baselines.toml",
             "--quick",
             "--out",
         ])

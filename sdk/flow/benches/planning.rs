@@ -5,7 +5,8 @@
 //! freshly initialised model of the default architecture (same cost per network call, but
 //! guidance may stop after a different number of iterations than with trained weights). The
 //! scenes are the held-out episodes at `out/data/episodes.json` when present, else synthetic
-//! ones; the robot is `robots/diablo/robot.toml` (or `$H2N_ROBOT`).
+//! ones; the robot is `robots/diablo/robot.toml` (or `$H2N_ROBOT`); the planner settings are
+//! those of `sdk/configs/planner.toml`.
 //!
 //! Run: `cargo bench -p human2nav-flow --bench planning` (threads: `H2N_THREADS`, default 1).
 //! `human2nav plan --bench <calls>` reports p50/p95 and the time split on the same setup.
@@ -14,7 +15,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use human2nav_core::human2nav::Human2NavSettings;
 use human2nav_core::{AgentState, Observation, Planner, Pose2, Twist2};
 use human2nav_data::{Episode, EpisodeSuite, ScenarioClass};
-use human2nav_flow::planner::{DEFAULT_MODEL_DIR, RobotPlanner, load_profile};
+use human2nav_flow::planner::{DEFAULT_MODEL_DIR, PlannerConfig, RobotPlanner, load_profile};
 use human2nav_flow::{CfmModel, NetConfig, Normalisation};
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
@@ -109,10 +110,17 @@ fn bench_planning(c: &mut Criterion) {
     let profile = load_profile(&robot).expect("robot profile");
     let dir = model_dir();
     let obs = scenes();
+    // The shipped planner settings (sdk/configs/planner.toml), else the built-in defaults.
+    let base: Human2NavSettings =
+        PlannerConfig::load(&workspace().join("sdk/configs/planner.toml"))
+            .map(|c| c.human2nav)
+            .unwrap_or_default();
     let mut group = c.benchmark_group("plan");
-    group.sample_size(30);
+    group
+        .sample_size(20)
+        .measurement_time(std::time::Duration::from_secs(15));
     for guided in [false, true] {
-        let mut settings = Human2NavSettings::default();
+        let mut settings = base;
         settings.guidance.enabled = guided;
         let model = CfmModel::load(&dir, Device::Cpu).expect("model");
         let mut rp = RobotPlanner::new(profile.clone(), model, settings).expect("planner");

@@ -56,3 +56,31 @@ pub(crate) fn fields<'a>(
     }
     Ok(toks)
 }
+
+/// One row `frame id x y` of a four-column file (the sgan/Trajectron and TrajNet formats),
+/// `id_field` naming the id column in errors. Blank lines give `None`.
+pub(crate) fn frame_id_xy(
+    line: &str,
+    path: &Path,
+    ln: usize,
+    id_field: &str,
+) -> Result<Option<(i64, u64, f64, f64)>, DataError> {
+    if line.trim().is_empty() {
+        return Ok(None);
+    }
+    let toks = fields(line, 4, path, ln)?;
+    if toks.len() != 4 {
+        return Err(DataError::parse(
+            path,
+            ln,
+            format!("expected `frame id x y`, found {} columns", toks.len()),
+        ));
+    }
+    let frame = integer(toks[0], path, ln, "frame")?;
+    let id = integer(toks[1], path, ln, id_field)?;
+    let x = number(toks[2], path, ln, "x")?;
+    let y = number(toks[3], path, ln, "y")?;
+    let id = u64::try_from(id)
+        .map_err(|_| DataError::parse(path, ln, format!("negative {id_field}")))?;
+    Ok(Some((frame, id, x, y)))
+}

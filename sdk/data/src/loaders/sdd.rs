@@ -256,27 +256,11 @@ pub fn load_trajnet(path: &Path, name: &str) -> Result<RawScene, DataError> {
     let body = text::read(path)?;
     let mut rows = Vec::new();
     for (i, line) in body.lines().enumerate() {
-        let ln = i + 1;
-        if line.trim().is_empty() {
+        let Some((frame, id, x, y)) = text::frame_id_xy(line, path, i + 1, "agent_id")? else {
             continue;
-        }
-        let toks = text::fields(line, 4, path, ln)?;
-        if toks.len() != 4 {
-            return Err(DataError::parse(
-                path,
-                ln,
-                format!("expected `frame id x y`, found {} columns", toks.len()),
-            ));
-        }
-        let frame = text::integer(toks[0], path, ln, "frame")?;
-        let id = text::integer(toks[1], path, ln, "agent_id")?;
-        let x = text::number(toks[2], path, ln, "x")?;
-        let y = text::number(toks[3], path, ln, "y")?;
-        if id < 0 {
-            return Err(DataError::parse(path, ln, "negative agent id"));
-        }
+        };
         rows.push((
-            id as u64,
+            id,
             AgentClass::Pedestrian,
             Sample {
                 t: frame as f64 / FPS,

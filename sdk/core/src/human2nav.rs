@@ -7,12 +7,21 @@
 //!    to [`Human2NavSettings::goal_clip`], the range of goals seen in training) and the ego's
 //!    body velocity;
 //! 2. draws `K` source samples `x0 = exp(ξ0)`, `ξ0 ~ N(0, diag(σ²))` with `σ` from
-//!    [`FlowModel::source_std`], and integrates them in one batch with guidance
-//!    ([`guidance::sample_guided`]; with guidance off, the plain rollout);
-//! 3. scores every candidate (and the previous plan, shifted to the current time: the warm
+//!    [`FlowModel::source_std`], and integrates them in one batch ([`guidance::sample`]);
+//! 3. with guidance on: shortlists the [`Human2NavSettings::guided_samples`] best samples by
+//!    the selection score without its feasibility term, runs Algorithm 1 on them from their
+//!    source poses ([`guidance::sample_guided`]), and applies the exact last-step correction
+//!    ([`crate::projection`]) to them and to the warm-start candidate. Guiding a shortlist
+//!    instead of all `K` samples divides the cost of the `M` iterations (a forward and a
+//!    vector-Jacobian product through the network per integration step) by `K / guided_samples`;
+//!    `guided_samples = 0` guides all of them, as in the paper;
+//! 4. scores every candidate (and the previous plan, shifted to the current time: the warm
 //!    start of receding-horizon use) and keeps the lowest score (see [`SelectionWeights`]);
-//! 4. returns the plan in the world frame: the current pose followed by the `T` future poses at
+//! 5. returns the plan in the world frame: the current pose followed by the `T` future poses at
 //!    `dt` = [`Human2NavSettings::dt`].
+//!
+//! With guidance off (the "w/o guidance" ablation) step 3's guidance and correction are
+//! skipped and all `K` samples are scored as they come from the model.
 //!
 //! # Selection rule
 //! `score = w_feas·(1 − TFS) + w_goal·d_end/d_0 + w_clear·C + w_cons·D`, where TFS is the
@@ -34,6 +43,7 @@ use crate::flow::{FlowCondition, FlowModel};
 use crate::guidance::{self, GuidanceSettings, GuidanceWorkspace};
 use crate::limits::Limits;
 use crate::planner::{AgentState, Observation, Plan, PlanError, PlanInfo, Planner};
+use crate::projection::{self, ProjectionSettings};
 use crate::se2::{Pose2, Twist2};
 use crate::tfs;
 use rand::SeedableRng;
@@ -86,8 +96,14 @@ pub struct Human2NavSettings {
     pub seed: u64,
     /// Keep the previous plan as a candidate (warm start). Default true.
     pub warm_start: bool,
-    /// Algorithm 1's parameters; `guidance.enabled = false` is the "w/o guidance" ablation.
+    /// How many of the `K` samples Algorithm 1 runs on (0: all). Default 4: the best by the
+    /// selection score without its feasibility term.
+    pub guided_samples: usize,
+    /// Algorithm 1's parameters; `guidance.enabled = false` is the "w/o guidance" ablation
+    /// (it also turns the last-step correction off).
     pub guidance: GuidanceSettings,
+    /// The exact last-step correction applied after Algorithm 1 ([`crate::projection`]).
+    pub projection: ProjectionSettings,
     pub selection: SelectionWeights,
 }
 
@@ -99,7 +115,9 @@ impl Default for Human2NavSettings {
             goal_clip: 6.0,
             seed: 0,
             warm_start: true,
+            guided_samples: 4,
             guidance: GuidanceSettings::default(),
+            projection: ProjectionSettings::default(),
             selection: SelectionWeights::default(),
         }
     }
@@ -136,6 +154,9 @@ impl Human2NavSettings {
         if !(s.margin.is_finite() && s.margin > 0.0) {
             return bad("selection.margin", "must be finite and > 0");
         }
+        self.projection
+            .validate()
+            .map_err(|e| PlanError::InvalidSettings(format!("human2nav.projection: {e}")))?;
         self.guidance
             .validate()
             .map_err(|e| PlanError::InvalidSettings(format!("human2nav.guidance: {e}")))
@@ -270,34 +291,94 @@ impl<M: FlowModel> Human2Nav<M> {
             initial_velocity: obs.ego_velocity,
             agents: &agents,
         };
-        let result = guidance::sample_guided(
-            &self.model,
-            &cond,
-            &x0,
-            &self.robot.phi,
-            &ctx,
-            &self.settings.guidance,
-            &mut self.workspace,
-        )
-        .map_err(|e| format!("sampling failed: {e}"))?;
-
-        let mut candidates: Vec<Vec<Pose2>> = (0..k).map(|i| result.guided_poses(i)).collect();
+        let goal = cond.goal;
         let warm = if self.settings.warm_start {
             self.shifted_previous(obs, horizon)
         } else {
             None
         };
-        if let Some(prev) = &warm {
-            candidates.push(prev.clone());
-        }
         let previous_ego = warm.as_deref();
-        let goal = cond.goal;
+        let guidance = self.settings.guidance;
+        let steps = guidance.steps_n;
+        let flat = |x: &[f64], i: usize| -> Vec<Pose2> {
+            x[i * horizon * 3..(i + 1) * horizon * 3]
+                .chunks_exact(3)
+                .map(Pose2::from_slice)
+                .collect()
+        };
+
+        // Stage 1: the K samples of the flow model, without guidance.
+        let rollout = guidance::sample(&self.model, &cond, &x0, steps, &mut self.workspace)
+            .map_err(|e| format!("sampling failed: {e}"))?;
+        let unguided: Vec<Vec<Pose2>> = (0..k).map(|i| flat(&rollout, i)).collect();
+
+        // Stage 2 (guidance on): Algorithm 1 on the shortlist, then the last-step correction.
+        // `origin[c]` is the sample candidate `c` came from (`None`: the warm start).
+        let mut candidates: Vec<Vec<Pose2>>;
+        let mut origin: Vec<Option<usize>>;
+        let mut phi: Vec<(f64, f64)> = Vec::new();
+        let mut notes = Vec::new();
+        if guidance.enabled {
+            let shortlist =
+                self.shortlist(&unguided, goal, &agents, obs.ego_velocity, previous_ego);
+            let x0_short: Vec<f64> = shortlist
+                .iter()
+                .flat_map(|&i| x0[i * horizon * 3..(i + 1) * horizon * 3].iter().copied())
+                .collect();
+            let result = guidance::sample_guided(
+                &self.model,
+                &cond,
+                &x0_short,
+                &self.robot.phi,
+                &ctx,
+                &guidance,
+                &mut self.workspace,
+            )
+            .map_err(|e| format!("guidance failed: {e}"))?;
+            candidates = (0..shortlist.len())
+                .map(|j| result.guided_poses(j))
+                .collect();
+            origin = shortlist.iter().map(|&i| Some(i)).collect();
+            phi = result
+                .phi_before
+                .iter()
+                .copied()
+                .zip(result.phi_after.iter().copied())
+                .collect();
+            if let Some(prev) = &warm {
+                candidates.push(prev.clone());
+                origin.push(None);
+            }
+            if self.settings.projection.enabled {
+                for c in candidates.iter_mut() {
+                    match projection::project(
+                        c,
+                        dt,
+                        &self.robot.limits,
+                        obs.ego_velocity,
+                        &self.settings.projection,
+                    ) {
+                        Ok(p) => *c = p.poses,
+                        Err(e) => notes.push(format!("last-step correction skipped: {e}")),
+                    }
+                }
+            }
+        } else {
+            candidates = unguided.clone();
+            origin = (0..k).map(Some).collect();
+            if let Some(prev) = &warm {
+                candidates.push(prev.clone());
+                origin.push(None);
+            }
+        }
+
+        // Stage 3: selection.
         let mut best: Option<(usize, f64)> = None;
         for (i, c) in candidates.iter().enumerate() {
             if !c.iter().all(|p| p.is_finite()) {
                 continue;
             }
-            let s = self.score(c, goal, &agents, obs.ego_velocity, previous_ego);
+            let s = self.score(c, goal, &agents, obs.ego_velocity, previous_ego, true);
             if s.is_finite() && best.is_none_or(|(_, b)| s < b) {
                 best = Some((i, s));
             }
@@ -311,35 +392,68 @@ impl<M: FlowModel> Human2Nav<M> {
                 .chain(traj.iter().map(|p| obs.ego.compose(*p)))
                 .collect()
         };
-        let poses = to_world(&candidates[chosen]);
-        let unguided: Vec<Vec<Pose2>> = (0..k)
-            .map(|i| to_world(&result.unguided_poses(i)))
-            .collect();
-        let guided: Vec<Vec<Pose2>> = if self.settings.guidance.enabled {
-            candidates[..k].iter().map(|c| to_world(c)).collect()
+        let from_model = origin[chosen];
+        let (phi_before, phi_after) = match (from_model, phi.get(chosen)) {
+            (Some(_), Some(&(b, a))) => (Some(b), Some(a)),
+            _ => (None, None),
+        };
+        if from_model.is_none() {
+            notes.push("kept the previous plan".into());
+        }
+        let guided: Vec<Vec<Pose2>> = if guidance.enabled {
+            candidates
+                .iter()
+                .zip(&origin)
+                .filter(|(_, o)| o.is_some())
+                .map(|(c, _)| to_world(c))
+                .collect()
         } else {
             Vec::new()
         };
-        let from_model = chosen < k;
         let info = PlanInfo {
-            candidates: unguided,
+            candidates: unguided.iter().map(|c| to_world(c)).collect(),
             guided,
-            selected: Some(chosen),
-            phi_before: from_model.then(|| result.phi_before[chosen]),
-            phi_after: from_model.then(|| result.phi_after[chosen]),
+            selected: from_model,
+            phi_before,
+            phi_after,
             fallback: false,
-            notes: if from_model {
-                Vec::new()
-            } else {
-                vec!["kept the previous plan".into()]
-            },
+            notes,
         };
         Ok(Plan {
             t0: obs.time,
             dt,
-            poses,
+            poses: to_world(&candidates[chosen]),
             info,
         })
+    }
+
+    /// The samples Algorithm 1 runs on: the [`Human2NavSettings::guided_samples`] best by the
+    /// selection score without its feasibility term (guidance is what fixes feasibility), all
+    /// of them when that is 0 or at least `K`. Indices in sample order.
+    fn shortlist(
+        &self,
+        samples: &[Vec<Pose2>],
+        goal: [f64; 2],
+        agents: &[AgentState],
+        v0: Twist2,
+        previous: Option<&[Pose2]>,
+    ) -> Vec<usize> {
+        let g = self.settings.guided_samples;
+        if g == 0 || g >= samples.len() {
+            return (0..samples.len()).collect();
+        }
+        let mut scored: Vec<(f64, usize)> = samples
+            .iter()
+            .enumerate()
+            .map(|(i, c)| {
+                let s = self.score(c, goal, agents, v0, previous, false);
+                (if s.is_finite() { s } else { f64::INFINITY }, i)
+            })
+            .collect();
+        scored.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let mut keep: Vec<usize> = scored[..g].iter().map(|&(_, i)| i).collect();
+        keep.sort_unstable();
+        keep
     }
 
     /// The previous plan re-expressed in the current ego frame at the current time, `T` future
@@ -356,7 +470,8 @@ impl<M: FlowModel> Human2Nav<M> {
         out.iter().all(|p| p.is_finite()).then_some(out)
     }
 
-    /// The selection score of one ego-frame candidate (lower is better).
+    /// The selection score of one ego-frame candidate (lower is better); without
+    /// `with_feasibility` the TFS term is left out.
     fn score(
         &self,
         traj: &[Pose2],
@@ -364,13 +479,18 @@ impl<M: FlowModel> Human2Nav<M> {
         agents: &[AgentState],
         v0: Twist2,
         previous: Option<&[Pose2]>,
+        with_feasibility: bool,
     ) -> f64 {
         let w = &self.settings.selection;
         let dt = self.settings.dt;
-        let mut with_start = Vec::with_capacity(traj.len() + 1);
-        with_start.push(Pose2::IDENTITY);
-        with_start.extend_from_slice(traj);
-        let feas = tfs::tfs_plan(&with_start, dt, &self.robot.limits, v0);
+        let feas = if with_feasibility {
+            let mut with_start = Vec::with_capacity(traj.len() + 1);
+            with_start.push(Pose2::IDENTITY);
+            with_start.extend_from_slice(traj);
+            tfs::tfs_plan(&with_start, dt, &self.robot.limits, v0)
+        } else {
+            1.0
+        };
 
         let d0 = goal[0].hypot(goal[1]).max(1e-3);
         let end = traj.last().map_or([0.0, 0.0], |p| [p.x, p.y]);

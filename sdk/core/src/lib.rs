@@ -20,6 +20,7 @@ pub mod guidance;
 pub mod human2nav;
 pub mod limits;
 pub mod planner;
+pub mod projection;
 pub mod robot;
 pub mod se2;
 pub mod tfs;

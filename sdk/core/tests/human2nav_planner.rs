@@ -122,27 +122,30 @@ fn plan_starts_at_the_robot_and_is_in_the_world_frame() {
     assert!(plan.info.guided.is_empty());
 }
 
-#[test]
-fn guidance_makes_an_infeasible_human_trajectory_feasible() {
+/// TFS of the plans of the unguided planner and of `guided`, and Φ before/after Algorithm 1.
+fn tfs_pair(guided: &mut Human2Nav<HumanFuture>) -> (f64, f64, f64, f64, usize) {
     let obs = observation();
     let unguided = planner(false).plan(&obs).unwrap();
-    let guided = planner(true).plan(&obs).unwrap();
-    let tfs_u = tfs_plan(
-        &ego_frame(&unguided.poses, obs.ego),
-        0.1,
-        &limits(),
-        obs.ego_velocity,
-    );
-    let tfs_g = tfs_plan(
-        &ego_frame(&guided.poses, obs.ego),
-        0.1,
-        &limits(),
-        obs.ego_velocity,
-    );
-    let (before, after) = (
-        guided.info.phi_before.unwrap(),
-        guided.info.phi_after.unwrap(),
-    );
+    let plan = guided.plan(&obs).unwrap();
+    let tfs = |p: &[Pose2]| tfs_plan(&ego_frame(p, obs.ego), 0.1, &limits(), obs.ego_velocity);
+    (
+        tfs(&unguided.poses),
+        tfs(&plan.poses),
+        plan.info.phi_before.unwrap(),
+        plan.info.phi_after.unwrap(),
+        plan.info.guided.len(),
+    )
+}
+
+#[test]
+fn algorithm_1_alone_makes_an_infeasible_human_trajectory_feasible() {
+    let mut settings = Human2NavSettings {
+        guided_samples: 0,
+        ..Default::default()
+    };
+    settings.projection.enabled = false;
+    let mut p = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings).unwrap();
+    let (tfs_u, tfs_g, before, after, guided) = tfs_pair(&mut p);
     eprintln!("TFS unguided {tfs_u:.3}, guided {tfs_g:.3}; Φ {before:.4} → {after:.4}");
     assert!(
         tfs_u < 0.1,
@@ -150,7 +153,16 @@ fn guidance_makes_an_infeasible_human_trajectory_feasible() {
     );
     assert!(tfs_g >= 0.95, "guided TFS {tfs_g}");
     assert!(after < 0.1 * before, "Φ {before} → {after}");
-    assert_eq!(guided.info.guided.len(), 16);
+    assert_eq!(guided, 16, "guided_samples = 0 guides every sample");
+}
+
+#[test]
+fn the_default_pipeline_guides_a_shortlist_and_ends_feasible() {
+    let (tfs_u, tfs_g, before, after, guided) = tfs_pair(&mut planner(true));
+    assert!(tfs_u < 0.1, "unguided TFS {tfs_u}");
+    assert_eq!(tfs_g, 1.0, "Algorithm 1 + last-step correction");
+    assert!(after < before, "Φ {before} → {after}");
+    assert_eq!(guided, Human2NavSettings::default().guided_samples);
 }
 
 #[test]
@@ -174,8 +186,8 @@ fn warm_start_keeps_the_previous_plan_available() {
     next.ego = pose_at(&first, next.time);
     let second = p.plan(&next).unwrap();
     assert!(second.is_finite());
-    // 16 model candidates plus the shifted previous plan.
-    assert!(second.info.selected.unwrap() <= 16);
+    // `selected` names the source sample of the plan (`None`: the shifted previous plan).
+    assert!(second.info.selected.is_none_or(|i| i < 16));
 }
 
 #[test]

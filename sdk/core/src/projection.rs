@@ -1,0 +1,550 @@
+//! The exact last-step correction: the feasible plan closest to a guided sample.
+//!
+//! Algorithm 1 steers every integration step of the flow with a gradient step per iteration;
+//! on the trained model, whose samples jitter by a few centimetres between 0.1 s waypoints, `M`
+//! such steps leave lateral-slip and acceleration violations behind (see `sdk/configs/
+//! planner.toml` for the measured numbers). Since the last control `u_{N−1}` reaches the final
+//! poses directly (`x_N = x_{N−1}·exp(Δt·(f + u_{N−1}))`), any final plan is reachable through
+//! it, and the smallest such intervention that makes the plan feasible is the plan itself moved
+//! to the closest feasible one. This module solves that last step exactly instead of by
+//! gradient steps, for the robot's hard limits (the ones TFS measures); plugin constraint
+//! terms act through Algorithm 1 only.
+//!
+//! # The problem
+//!
+//! A plan is parameterised by its segment twists `ξ_k = (v_k, vy_k, ω_k)`, `k = 1 … T`, with
+//! exact reconstruction `p_k = p_{k−1}·exp(dt·ξ_k)` from the current pose `p_0 = I` (ego frame).
+//! Along such an arc the finite differences of [`crate::trajectory`] are exactly
+//! `(c_k·v_k, c_k·vy_k, ω_k)` with the chord factor `c_k = sin(ω_k·dt/2)/(ω_k·dt/2)`, which lies
+//! in `[c_min, 1]`, `c_min = c(ω_max)`, once the yaw rate is limited. The limits are imposed
+//! as linear constraints on `ξ` that hold for every `c_k` in that range (`s = 1 − margin`):
+//!
+//! * `0 ≤ σ·v_k ≤ s·v_lim` with `σ = +1` (forward, `v_lim = v_max`) unless the target
+//!   plan's mean speed is negative (`σ = −1`, `v_lim = v_reverse_max`): one gear per plan, so
+//!   noise around zero speed cannot make the plan stop and reverse;
+//! * `|vy_k| ≤ s·lateral_speed_max`, `|ω_k| ≤ s·ω_max`;
+//! * `|ω_k| ≤ s·κ_max·c_min·σ·v_k` when the robot has a curvature limit (the measured
+//!   curvature divides by `sqrt((c_k·v_k)² + ε_κ²) ≥ c_min·|v_k|`);
+//! * `|v_k − v_{k−1}| ≤ s·a_max·dt − (1 − c_min)·v_lim`, with `v_0` the robot's current speed:
+//!   the measured change `c_k·v_k − c_{k−1}·v_{k−1}` differs from `v_k − v_{k−1}` by at most
+//!   `(1 − c_min)·v_lim` (2.5 % of diablo's `a_max·dt`).
+//!
+//! The objective is the distance to the target poses `p̂` (the guided sample):
+//! `Σ_k ‖xy_k(ξ) − x̂y_k‖² + w_θ·wrap(θ_k(ξ) − θ̂_k)² + ρ·dt²·‖ξ_k − ξ_k⁰‖²`, with `w_θ` =
+//! [`ProjectionSettings::heading_weight`] and `ρ` = [`ProjectionSettings::effort`] (a small
+//! trust region). It is minimised by Gauss-Newton: linearise the poses around the current
+//! twists (`J = ∂p/∂ξ`, lower block-triangular, from [`crate::se2::euler_step_jacobians`]),
+//! solve the convex QP in the change of the twists with Clarabel, repeat
+//! [`ProjectionSettings::iterations`] times. The constraints do not depend on the
+//! linearisation, so every iterate is feasible; the iterations only bring the plan closer to
+//! the target.
+//!
+//! A plan that already satisfies every limit (TFS = 1) is returned unchanged, bit for bit.
+
+use crate::limits::Limits;
+use crate::se2::{Pose2, Twist2, euler_step_jacobians, wrap_angle};
+use crate::tfs;
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{
+    DefaultSettingsBuilder, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus,
+};
+use serde::{Deserialize, Serialize};
+
+/// Settings of the last-step correction (TOML table `[human2nav.projection]`, every field
+/// optional). Defaults: `enabled = true`, `iterations = 2`, `margin = 0.01`,
+/// `heading_weight = 0.1`, `effort = 0.01`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ProjectionSettings {
+    /// Apply the correction after Algorithm 1 (it is never applied without guidance).
+    pub enabled: bool,
+    /// Gauss-Newton iterations (≥ 1); each solves one QP.
+    pub iterations: usize,
+    /// Relative margin kept inside every limit, in `[0, 0.5)`.
+    pub margin: f64,
+    /// Weight `w_θ` of the heading error against the position error (m²/rad², ≥ 0).
+    pub heading_weight: f64,
+    /// Weight `ρ` of the change of the twists (≥ 0, a trust region for the linearisation).
+    pub effort: f64,
+}
+
+impl Default for ProjectionSettings {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            iterations: 2,
+            margin: 0.01,
+            heading_weight: 0.1,
+            effort: 0.01,
+        }
+    }
+}
+
+/// Why a plan could not be corrected.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum ProjectionError {
+    #[error("invalid projection setting `{field}`: {message}")]
+    InvalidSettings {
+        field: &'static str,
+        message: String,
+    },
+    #[error("the target plan has a non-finite pose")]
+    NonFinite,
+    #[error(
+        "no feasible plan from the current speed {speed:.3} m/s (the QP solver reports {status})"
+    )]
+    Infeasible { speed: f64, status: String },
+}
+
+impl ProjectionSettings {
+    /// Checks every field; the error names the first offending one.
+    pub fn validate(&self) -> Result<(), ProjectionError> {
+        let bad = |field, message: &str| {
+            Err(ProjectionError::InvalidSettings {
+                field,
+                message: message.to_string(),
+            })
+        };
+        if self.iterations == 0 {
+            return bad("iterations", "must be at least 1");
+        }
+        if !(self.margin.is_finite() && (0.0..0.5).contains(&self.margin)) {
+            return bad("margin", "must be in [0, 0.5)");
+        }
+        if !(self.heading_weight.is_finite() && self.heading_weight >= 0.0) {
+            return bad("heading_weight", "must be finite and ≥ 0");
+        }
+        if !(self.effort.is_finite() && self.effort >= 0.0) {
+            return bad("effort", "must be finite and ≥ 0");
+        }
+        Ok(())
+    }
+}
+
+/// The result of [`project`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Projected {
+    /// The `T` corrected future poses (ego frame, pose 0 = identity not included).
+    pub poses: Vec<Pose2>,
+    /// QPs solved (0 when the target was already feasible).
+    pub iterations: usize,
+    /// Mean distance (m) between the corrected and the target positions.
+    pub displacement: f64,
+}
+
+/// `sin(x)/x`, the chord factor of an arc turning by `2x`.
+fn sinc(x: f64) -> f64 {
+    if x.abs() < 1e-6 {
+        1.0 - x * x / 6.0
+    } else {
+        x.sin() / x
+    }
+}
+
+/// Poses of the twists `xi` (`[T, 3]`) from the identity.
+fn rollout(xi: &[f64], dt: f64) -> Vec<Pose2> {
+    let mut p = Pose2::IDENTITY;
+    xi.chunks_exact(3)
+        .map(|w| {
+            p = p.euler_step(Twist2::from_slice(w), dt);
+            p
+        })
+        .collect()
+}
+
+/// The closest plan to `target` (the `T` future poses in the ego frame, the robot at the
+/// identity moving with `initial_velocity`) that satisfies `limits` (see the module docs).
+pub fn project(
+    target: &[Pose2],
+    dt: f64,
+    limits: &Limits,
+    initial_velocity: Twist2,
+    settings: &ProjectionSettings,
+) -> Result<Projected, ProjectionError> {
+    settings.validate()?;
+    if !target.iter().all(|p| p.is_finite()) {
+        return Err(ProjectionError::NonFinite);
+    }
+    let with_start: Vec<Pose2> = std::iter::once(Pose2::IDENTITY)
+        .chain(target.iter().copied())
+        .collect();
+    if target.is_empty() || tfs::tfs_plan(&with_start, dt, limits, initial_velocity) >= 1.0 {
+        return Ok(Projected {
+            poses: target.to_vec(),
+            iterations: 0,
+            displacement: 0.0,
+        });
+    }
+    let t = target.len();
+    let mut xi: Vec<f64> = with_start
+        .windows(2)
+        .flat_map(|w| w[0].between(w[1]).log().scale(1.0 / dt).to_array())
+        .collect();
+    let gear = if xi.chunks_exact(3).map(|w| w[0]).sum::<f64>() < 0.0 {
+        -1.0
+    } else {
+        1.0
+    };
+    for _ in 0..settings.iterations {
+        let delta = solve_step(&xi, target, dt, limits, initial_velocity, gear, settings)?;
+        for (x, d) in xi.iter_mut().zip(&delta) {
+            *x += d;
+        }
+    }
+    let poses = rollout(&xi, dt);
+    if !poses.iter().all(|p| p.is_finite()) {
+        return Err(ProjectionError::NonFinite);
+    }
+    let displacement = poses
+        .iter()
+        .zip(target)
+        .map(|(a, b)| (a.x - b.x).hypot(a.y - b.y))
+        .sum::<f64>()
+        / t as f64;
+    Ok(Projected {
+        poses,
+        iterations: settings.iterations,
+        displacement,
+    })
+}
+
+/// One Gauss-Newton step: the change of the twists that minimises the linearised objective
+/// subject to the (linear) limits.
+fn solve_step(
+    xi: &[f64],
+    target: &[Pose2],
+    dt: f64,
+    limits: &Limits,
+    initial_velocity: Twist2,
+    gear: f64,
+    settings: &ProjectionSettings,
+) -> Result<Vec<f64>, ProjectionError> {
+    let t = target.len();
+    let n = 3 * t;
+    let poses = rollout(xi, dt);
+    // J[r][c] = ∂(pose coordinate r)/∂(twist coordinate c), block (k, j) zero for j > k.
+    let mut jac = vec![0.0; n * n];
+    let mut prev = Pose2::IDENTITY;
+    let mut sx_all = Vec::with_capacity(t);
+    let mut sw_all = Vec::with_capacity(t);
+    for (k, w) in xi.chunks_exact(3).enumerate() {
+        let (sx, sw) = euler_step_jacobians(prev, Twist2::from_slice(w), dt);
+        sx_all.push(sx);
+        sw_all.push(sw);
+        prev = poses[k];
+    }
+    for j in 0..t {
+        let mut g = sw_all[j];
+        for k in j..t {
+            if k > j {
+                let sx = &sx_all[k];
+                let mut next = [[0.0; 3]; 3];
+                for r in 0..3 {
+                    for c in 0..3 {
+                        next[r][c] = (0..3).map(|m| sx[r][m] * g[m][c]).sum();
+                    }
+                }
+                g = next;
+            }
+            for r in 0..3 {
+                for c in 0..3 {
+                    jac[(3 * k + r) * n + 3 * j + c] = g[r][c];
+                }
+            }
+        }
+    }
+    // Objective ½δᵀPδ + qᵀδ, scaled by 1/dt² so that P is of order one.
+    let w = [1.0, 1.0, settings.heading_weight];
+    let scale = 1.0 / (dt * dt);
+    let residual: Vec<f64> = poses
+        .iter()
+        .zip(target)
+        .flat_map(|(p, q)| [p.x - q.x, p.y - q.y, wrap_angle(p.theta - q.theta)])
+        .collect();
+    let mut p_upper: Vec<Vec<f64>> = vec![vec![0.0; n]; n];
+    let mut q = vec![0.0; n];
+    for a in 0..n {
+        // Block-triangular J: only rows of poses at or after the twist's segment are non-zero.
+        let first_row = 3 * (a / 3);
+        for b in a..n {
+            let first = first_row.max(3 * (b / 3));
+            let mut s = 0.0;
+            for r in first..n {
+                s += jac[r * n + a] * w[r % 3] * jac[r * n + b];
+            }
+            p_upper[a][b] = s * scale;
+        }
+        p_upper[a][a] += settings.effort;
+        q[a] = (first_row..n)
+            .map(|r| jac[r * n + a] * w[r % 3] * residual[r])
+            .sum::<f64>()
+            * scale;
+    }
+
+    // Constraints A·(ξ + δ) ≤ b, i.e. A·δ ≤ b − A·ξ.
+    let s = 1.0 - settings.margin;
+    let mut rows: Vec<Vec<(usize, f64)>> = Vec::new();
+    let mut rhs: Vec<f64> = Vec::new();
+    let mut push = |row: Vec<(usize, f64)>, bound: f64| {
+        let ax: f64 = row.iter().map(|(c, a)| a * xi[*c]).sum();
+        rows.push(row);
+        rhs.push(bound - ax);
+    };
+    let v_lim = if gear > 0.0 {
+        limits.v_max
+    } else {
+        limits.v_reverse_max
+    };
+    // The chord factor c_k lies in [c_min, 1] once |ω_k| ≤ ω_max; the bounds below hold for
+    // every c_k in that range, so they need no linearisation.
+    let c_min = sinc(0.5 * limits.omega_max * dt);
+    let da = (s * limits.a_max * dt - (1.0 - c_min) * v_lim).max(0.0);
+    for k in 0..t {
+        let (iv, ivy, iw) = (3 * k, 3 * k + 1, 3 * k + 2);
+        push(vec![(iv, gear)], s * v_lim);
+        push(vec![(iv, -gear)], 0.0);
+        push(vec![(ivy, 1.0)], s * limits.lateral_speed_max);
+        push(vec![(ivy, -1.0)], s * limits.lateral_speed_max);
+        push(vec![(iw, 1.0)], s * limits.omega_max);
+        push(vec![(iw, -1.0)], s * limits.omega_max);
+        if let Some(kappa) = limits.kappa_max {
+            let kv = s * kappa * c_min * gear;
+            push(vec![(iw, 1.0), (iv, -kv)], 0.0);
+            push(vec![(iw, -1.0), (iv, -kv)], 0.0);
+        }
+        if k == 0 {
+            push(vec![(iv, 1.0)], da + initial_velocity.vx);
+            push(vec![(iv, -1.0)], da - initial_velocity.vx);
+        } else {
+            let pv = 3 * (k - 1);
+            push(vec![(iv, 1.0), (pv, -1.0)], da);
+            push(vec![(iv, -1.0), (pv, 1.0)], da);
+        }
+    }
+
+    let p = csc_upper(&p_upper);
+    let a = csc_rows(&rows, n);
+    let cones = [NonnegativeConeT(rows.len())];
+    let qp_settings = DefaultSettingsBuilder::default()
+        .verbose(false)
+        .build()
+        .map_err(|e| ProjectionError::InvalidSettings {
+            field: "solver",
+            message: e.to_string(),
+        })?;
+    let infeasible = |status: String| ProjectionError::Infeasible {
+        speed: initial_velocity.vx,
+        status,
+    };
+    let mut solver = DefaultSolver::new(&p, &q, &a, &rhs, &cones, qp_settings)
+        .map_err(|e| infeasible(format!("a setup error: {e:?}")))?;
+    solver.solve();
+    match solver.solution.status {
+        SolverStatus::Solved | SolverStatus::AlmostSolved
+            if solver.solution.x.iter().all(|x| x.is_finite()) =>
+        {
+            Ok(solver.solution.x.clone())
+        }
+        status => Err(infeasible(format!("{status:?}"))),
+    }
+}
+
+/// The upper triangle of a dense symmetric matrix in compressed sparse columns.
+fn csc_upper(m: &[Vec<f64>]) -> CscMatrix<f64> {
+    let n = m.len();
+    let mut colptr = Vec::with_capacity(n + 1);
+    let mut rowval = Vec::new();
+    let mut nzval = Vec::new();
+    colptr.push(0);
+    for c in 0..n {
+        for (r, row) in m.iter().enumerate().take(c + 1) {
+            if row[c] != 0.0 {
+                rowval.push(r);
+                nzval.push(row[c]);
+            }
+        }
+        colptr.push(rowval.len());
+    }
+    CscMatrix::new(n, n, colptr, rowval, nzval)
+}
+
+/// A sparse matrix given by rows of `(column, value)` in compressed sparse columns.
+fn csc_rows(rows: &[Vec<(usize, f64)>], n: usize) -> CscMatrix<f64> {
+    let mut cols: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
+    for (r, row) in rows.iter().enumerate() {
+        for &(c, v) in row {
+            cols[c].push((r, v));
+        }
+    }
+    let mut colptr = Vec::with_capacity(n + 1);
+    let mut rowval = Vec::new();
+    let mut nzval = Vec::new();
+    colptr.push(0);
+    for col in &cols {
+        for &(r, v) in col {
+            rowval.push(r);
+            nzval.push(v);
+        }
+        colptr.push(rowval.len());
+    }
+    CscMatrix::new(rows.len(), n, colptr, rowval, nzval)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn diablo() -> Limits {
+        Limits {
+            v_max: 1.5,
+            v_reverse_max: 0.5,
+            a_max: 1.0,
+            omega_max: 2.0,
+            kappa_max: None,
+            lateral_speed_max: 0.05,
+        }
+    }
+
+    fn car() -> Limits {
+        Limits {
+            v_max: 1.5,
+            v_reverse_max: 0.8,
+            a_max: 1.0,
+            omega_max: 1.0,
+            kappa_max: Some(1.0 / 1.6),
+            lateral_speed_max: 0.05,
+        }
+    }
+
+    fn tfs_of(poses: &[Pose2], limits: &Limits, v0: Twist2) -> f64 {
+        let with_start: Vec<Pose2> = std::iter::once(Pose2::IDENTITY)
+            .chain(poses.iter().copied())
+            .collect();
+        tfs::tfs_plan(&with_start, 0.1, limits, v0)
+    }
+
+    /// A human-like sample: a smooth curve walked at 1.3 m/s with centimetre jitter on every
+    /// waypoint (what the trained model produces).
+    fn jittery(seed: u64, speed: f64, turn: f64, jitter: f64) -> Vec<Pose2> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let smooth = rollout(
+            &(0..32)
+                .flat_map(|_| [speed, 0.0, turn])
+                .collect::<Vec<f64>>(),
+            0.1,
+        );
+        smooth
+            .iter()
+            .map(|p| Pose2 {
+                x: p.x + rng.random_range(-jitter..jitter),
+                y: p.y + rng.random_range(-jitter..jitter),
+                theta: p.theta + rng.random_range(-3.0 * jitter..3.0 * jitter),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_feasible_plan_is_left_bit_identical() {
+        let plan = rollout(
+            &(0..32).flat_map(|_| [1.0, 0.0, 0.3]).collect::<Vec<f64>>(),
+            0.1,
+        );
+        let v0 = Twist2::new(1.0, 0.0, 0.3);
+        assert_eq!(tfs_of(&plan, &diablo(), v0), 1.0);
+        let out = project(&plan, 0.1, &diablo(), v0, &ProjectionSettings::default()).unwrap();
+        assert_eq!(out.poses, plan);
+        assert_eq!(out.iterations, 0);
+    }
+
+    #[test]
+    fn jittery_samples_become_feasible_and_stay_close() {
+        for (name, limits) in [("diablo", diablo()), ("car", car())] {
+            let mut worst = 0.0f64;
+            for seed in 0..20 {
+                let target = jittery(seed, 1.3, 0.2, 0.03);
+                let v0 = Twist2::new(1.3, 0.0, 0.2);
+                assert!(
+                    tfs_of(&target, &limits, v0) < 0.5,
+                    "{name}: the test sample is bad"
+                );
+                let out =
+                    project(&target, 0.1, &limits, v0, &ProjectionSettings::default()).unwrap();
+                assert_eq!(tfs_of(&out.poses, &limits, v0), 1.0, "{name} seed {seed}");
+                worst = worst.max(out.displacement);
+            }
+            // The jitter is ±3 cm per coordinate: the correction removes about that much.
+            eprintln!("{name}: worst mean displacement {worst:.4} m");
+            assert!(worst < 0.05, "{name}: displacement {worst}");
+        }
+    }
+
+    #[test]
+    fn over_speed_is_slowed_to_the_limit_not_below() {
+        let target = rollout(
+            &(0..32).flat_map(|_| [2.5, 0.0, 0.0]).collect::<Vec<f64>>(),
+            0.1,
+        );
+        let v0 = Twist2::new(1.5, 0.0, 0.0);
+        let out = project(&target, 0.1, &diablo(), v0, &ProjectionSettings::default()).unwrap();
+        assert_eq!(tfs_of(&out.poses, &diablo(), v0), 1.0);
+        let last = out.poses[31].between(out.poses[30]).log();
+        // Straight line at the limit minus the margin: 1.5·0.99 per second.
+        assert_relative_eq!(-last.vx / 0.1, 1.5 * 0.99, epsilon = 1e-3);
+        assert_relative_eq!(out.poses[31].y, 0.0, epsilon = 1e-6);
+    }
+
+    #[test]
+    fn reverse_plans_keep_their_gear() {
+        let target = jittery(3, -0.4, 0.0, 0.02)
+            .into_iter()
+            .collect::<Vec<Pose2>>();
+        let v0 = Twist2::new(-0.4, 0.0, 0.0);
+        let out = project(&target, 0.1, &diablo(), v0, &ProjectionSettings::default()).unwrap();
+        assert_eq!(tfs_of(&out.poses, &diablo(), v0), 1.0);
+        assert!(out.poses[31].x < -1.0, "end {:?}", out.poses[31]);
+    }
+
+    #[test]
+    fn errors_name_the_problem() {
+        let v0 = Twist2::new(0.0, 0.0, 0.0);
+        let bad = ProjectionSettings {
+            iterations: 0,
+            ..Default::default()
+        };
+        let plan = jittery(0, 1.0, 0.0, 0.03);
+        assert!(matches!(
+            project(&plan, 0.1, &diablo(), v0, &bad),
+            Err(ProjectionError::InvalidSettings {
+                field: "iterations",
+                ..
+            })
+        ));
+        let mut nan = plan.clone();
+        nan[3].x = f64::NAN;
+        assert_eq!(
+            project(&nan, 0.1, &diablo(), v0, &ProjectionSettings::default()),
+            Err(ProjectionError::NonFinite)
+        );
+        // Moving backwards faster than a_max·dt can undo while the plan drives forward.
+        let fast_reverse = Twist2::new(-3.0, 0.0, 0.0);
+        assert!(matches!(
+            project(
+                &plan,
+                0.1,
+                &diablo(),
+                fast_reverse,
+                &ProjectionSettings::default()
+            ),
+            Err(ProjectionError::Infeasible { .. })
+        ));
+    }
+
+    #[test]
+    fn sinc_is_continuous_at_zero() {
+        assert_relative_eq!(sinc(1e-7), 1.0, epsilon = 1e-12);
+        assert_relative_eq!(sinc(1e-5), (1e-5f64).sin() / 1e-5, epsilon = 1e-12);
+    }
+}

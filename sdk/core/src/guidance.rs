@@ -263,6 +263,8 @@ impl GuidanceResult {
 /// Reusable buffers of guidance. Create once (e.g. per planner) and pass to every call.
 #[derive(Clone, Debug, Default)]
 pub struct GuidanceWorkspace {
+    /// True when `xs`/`ws` hold a complete rollout with zero controls.
+    plain: bool,
     samples: usize,
     horizon: usize,
     steps: usize,
@@ -718,6 +720,7 @@ fn start(
             iteration: 0,
         });
     }
+    ws.plain = false;
     ws.prepare(k, t, steps_n);
     ws.xs[..x0.len()].copy_from_slice(x0);
     ws.u.fill(0.0);
@@ -735,6 +738,7 @@ pub fn sample(
 ) -> Result<Vec<f64>, GuidanceError> {
     start(model, x0, steps_n, ws)?;
     forward(model, cond, ws, 0)?;
+    ws.plain = true;
     Ok(ws.final_state().to_vec())
 }
 
@@ -783,7 +787,77 @@ pub fn sample_guided(
     settings.validate()?;
     start(model, x0, settings.steps_n, ws)?;
     forward(model, cond, ws, 0)?;
+    ws.plain = true;
+    optimise(model, cond, phi, ctx, settings, ws)
+}
+
+/// Algorithm 1 on the samples `keep` (ascending indices) of the rollout the previous
+/// [`sample`] or [`sample_guided`] call left in `ws`, without integrating them again: the same
+/// result as [`sample_guided`] on those samples' initial poses, `N` network calls cheaper. The
+/// returned trajectories are in the order of `keep`. `settings.steps_n` must be the `N` of that
+/// rollout.
+pub fn guide_subset(
+    model: &(impl FlowModel + ?Sized),
+    cond: &FlowCondition,
+    keep: &[usize],
+    phi: &Phi,
+    ctx: &ConstraintContext<'_>,
+    settings: &GuidanceSettings,
+    ws: &mut GuidanceWorkspace,
+) -> Result<GuidanceResult, GuidanceError> {
+    settings.validate()?;
+    if !ws.plain || ws.steps != settings.steps_n || ws.samples == 0 {
+        return Err(GuidanceError::Shape(format!(
+            "the workspace must hold an unguided rollout with N = {} (it holds {} samples with \
+             N = {}{})",
+            settings.steps_n,
+            ws.samples,
+            ws.steps,
+            if ws.plain {
+                ""
+            } else {
+                ", not a plain rollout"
+            }
+        )));
+    }
+    if keep.is_empty()
+        || keep.windows(2).any(|w| w[0] >= w[1])
+        || keep.last().is_some_and(|&i| i >= ws.samples)
+    {
+        return Err(GuidanceError::Shape(format!(
+            "sample indices {keep:?} must be ascending, distinct and below {}",
+            ws.samples
+        )));
+    }
+    // Compact every step's block to the kept samples. Destinations never pass their sources
+    // (indices ascend), so copying front to back is safe in place.
+    let per = ws.horizon * 3;
+    let (m_old, m_new) = (ws.size(), keep.len() * per);
+    for i in 0..=ws.steps {
+        for (j, &src) in keep.iter().enumerate() {
+            let (from, to) = (i * m_old + src * per, i * m_new + j * per);
+            ws.xs.copy_within(from..from + per, to);
+            if i < ws.steps {
+                ws.ws.copy_within(from..from + per, to);
+            }
+        }
+    }
+    ws.prepare(keep.len(), ws.horizon, ws.steps);
+    ws.u.fill(0.0);
+    optimise(model, cond, phi, ctx, settings, ws)
+}
+
+/// Algorithm 1 from the plain rollout held in `ws` (controls zero).
+fn optimise(
+    model: &(impl FlowModel + ?Sized),
+    cond: &FlowCondition,
+    phi: &Phi,
+    ctx: &ConstraintContext<'_>,
+    settings: &GuidanceSettings,
+    ws: &mut GuidanceWorkspace,
+) -> Result<GuidanceResult, GuidanceError> {
     terminal_cost(phi, ctx, ws, 0)?;
+
     let unguided = ws.final_state().to_vec();
     let phi_before = ws.phi.clone();
     let mut iterations_run = 0;
@@ -815,6 +889,7 @@ pub fn sample_guided(
             iterations_run = iteration;
         }
     }
+    ws.plain = iterations_run == 0;
     Ok(GuidanceResult {
         samples: ws.samples,
         horizon: ws.horizon,

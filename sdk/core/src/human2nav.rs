@@ -9,8 +9,8 @@
 //! 2. draws `K` source samples `x0 = exp(ξ0)`, `ξ0 ~ N(0, diag(σ²))` with `σ` from
 //!    [`FlowModel::source_std`], and integrates them in one batch ([`guidance::sample`]);
 //! 3. with guidance on: shortlists the [`Human2NavSettings::guided_samples`] best samples by
-//!    the selection score without its feasibility term, runs Algorithm 1 on them from their
-//!    source poses ([`guidance::sample_guided`]), and applies the exact last-step correction
+//!    the selection score without its feasibility term, runs Algorithm 1 on them, continuing
+//!    from their rollout ([`guidance::guide_subset`]), and applies the exact last-step correction
 //!    ([`crate::projection`]) to them and to the warm-start candidate. Guiding a shortlist
 //!    instead of all `K` samples divides the cost of the `M` iterations (a forward and a
 //!    vector-Jacobian product through the network per integration step) by `K / guided_samples`;
@@ -299,36 +299,37 @@ impl<M: FlowModel> Human2Nav<M> {
         };
         let previous_ego = warm.as_deref();
         let guidance = self.settings.guidance;
-        let steps = guidance.steps_n;
-        let flat = |x: &[f64], i: usize| -> Vec<Pose2> {
-            x[i * horizon * 3..(i + 1) * horizon * 3]
-                .chunks_exact(3)
-                .map(Pose2::from_slice)
-                .collect()
-        };
 
-        // Stage 1: the K samples of the flow model, without guidance.
-        let rollout = guidance::sample(&self.model, &cond, &x0, steps, &mut self.workspace)
-            .map_err(|e| format!("sampling failed: {e}"))?;
-        let unguided: Vec<Vec<Pose2>> = (0..k).map(|i| flat(&rollout, i)).collect();
+        // Stage 1: the K samples of the flow model, without guidance (Φ for diagnostics).
+        let plain = GuidanceSettings {
+            enabled: false,
+            ..guidance
+        };
+        let first = guidance::sample_guided(
+            &self.model,
+            &cond,
+            &x0,
+            &self.robot.phi,
+            &ctx,
+            &plain,
+            &mut self.workspace,
+        )
+        .map_err(|e| format!("sampling failed: {e}"))?;
+        let unguided: Vec<Vec<Pose2>> = (0..k).map(|i| first.unguided_poses(i)).collect();
 
         // Stage 2 (guidance on): Algorithm 1 on the shortlist, then the last-step correction.
         // `origin[c]` is the sample candidate `c` came from (`None`: the warm start).
         let mut candidates: Vec<Vec<Pose2>>;
         let mut origin: Vec<Option<usize>>;
-        let mut phi: Vec<(f64, f64)> = Vec::new();
+        let mut phi: Vec<(f64, f64)> = first.phi_before.iter().map(|&p| (p, p)).collect();
         let mut notes = Vec::new();
         if guidance.enabled {
             let shortlist =
                 self.shortlist(&unguided, goal, &agents, obs.ego_velocity, previous_ego);
-            let x0_short: Vec<f64> = shortlist
-                .iter()
-                .flat_map(|&i| x0[i * horizon * 3..(i + 1) * horizon * 3].iter().copied())
-                .collect();
-            let result = guidance::sample_guided(
+            let result = guidance::guide_subset(
                 &self.model,
                 &cond,
-                &x0_short,
+                &shortlist,
                 &self.robot.phi,
                 &ctx,
                 &guidance,

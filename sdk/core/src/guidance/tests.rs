@@ -602,3 +602,44 @@ fn shipped_config_holds_the_defaults() {
         GuidanceSettings::default()
     );
 }
+
+#[test]
+fn guiding_a_subset_of_a_rollout_equals_guiding_those_samples_alone() {
+    let l = limits(Some(1.0));
+    let c = ctx(&l, Twist2::new(0.5, 0.0, 0.0));
+    let phi = Phi::from_weights(&weights(), &l);
+    let t = 16;
+    let model = LinearField {
+        horizon: t,
+        a: [[-0.5, 0.0, 0.0], [0.0, -0.5, 0.0], [0.0, 0.0, -0.5]],
+        b: [1.5, 0.0, 0.4],
+    };
+    let settings = GuidanceSettings {
+        precondition: false,
+        learning_rate: 0.1,
+        ..Default::default()
+    };
+    let x0 = source(5, t, 0.3, 11);
+    let keep = [1, 3, 4];
+    let per = t * 3;
+    let x0_keep: Vec<f64> = keep
+        .iter()
+        .flat_map(|&i| x0[i * per..(i + 1) * per].iter().copied())
+        .collect();
+    let mut ws = GuidanceWorkspace::new();
+    let alone = sample_guided(&model, &cond(), &x0_keep, &phi, &c, &settings, &mut ws).unwrap();
+    assert!(alone.iterations_run > 0);
+
+    let mut ws = GuidanceWorkspace::new();
+    // A guided rollout is not a starting point.
+    sample_guided(&model, &cond(), &x0, &phi, &c, &settings, &mut ws).unwrap();
+    let err = guide_subset(&model, &cond(), &keep, &phi, &c, &settings, &mut ws).unwrap_err();
+    assert!(err.to_string().contains("plain rollout"), "{err}");
+
+    sample(&model, &cond(), &x0, settings.steps_n, &mut ws).unwrap();
+    for bad in [&[3, 1][..], &[1, 1], &[5], &[]] {
+        assert!(guide_subset(&model, &cond(), bad, &phi, &c, &settings, &mut ws).is_err());
+    }
+    let subset = guide_subset(&model, &cond(), &keep, &phi, &c, &settings, &mut ws).unwrap();
+    assert_eq!(subset, alone);
+}

@@ -1,0 +1,56 @@
+//! Cost of the exact last-step correction ([`human2nav_core::projection`]) on one plan of 32
+//! poses with centimetre jitter (what the trained flow model produces), for a differential
+//! drive and for a car with a curvature limit, with the default two Gauss-Newton iterations.
+//!
+//! Run: `cargo bench -p human2nav-core --bench projection`.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use human2nav_core::projection::{ProjectionSettings, project};
+use human2nav_core::{Limits, Pose2, Twist2};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::hint::black_box;
+
+/// 32 poses along an arc at 1.3 m/s turning at 0.2 rad/s, each coordinate jittered by ±3 cm
+/// (±0.09 rad in heading).
+fn jittery_plan() -> Vec<Pose2> {
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let mut p = Pose2::IDENTITY;
+    (0..32)
+        .map(|_| {
+            p = p.euler_step(Twist2::new(1.3, 0.0, 0.2), 0.1);
+            Pose2 {
+                x: p.x + rng.random_range(-0.03..0.03),
+                y: p.y + rng.random_range(-0.03..0.03),
+                theta: p.theta + rng.random_range(-0.09..0.09),
+            }
+        })
+        .collect()
+}
+
+fn bench_projection(c: &mut Criterion) {
+    let plan = jittery_plan();
+    let v0 = Twist2::new(1.3, 0.0, 0.2);
+    let settings = ProjectionSettings::default();
+    let diff_drive = Limits {
+        v_max: 1.5,
+        v_reverse_max: 0.5,
+        a_max: 1.0,
+        omega_max: 2.0,
+        kappa_max: None,
+        lateral_speed_max: 0.05,
+    };
+    let car = Limits {
+        omega_max: 1.0,
+        kappa_max: Some(1.0 / 1.6),
+        ..diff_drive
+    };
+    for (name, limits) in [("diff_drive", diff_drive), ("car", car)] {
+        c.bench_function(&format!("projection/{name}_t32"), |b| {
+            b.iter(|| project(black_box(&plan), 0.1, &limits, v0, &settings))
+        });
+    }
+}
+
+criterion_group!(benches, bench_projection);
+criterion_main!(benches);

@@ -1,5 +1,6 @@
 //! The `human2nav` command-line tool: glue between the SDK crates, nothing more.
 
+mod baseline;
 mod bench;
 mod data;
 mod plan;
@@ -39,6 +40,9 @@ enum Command {
     Plan(plan::PlanArgs),
     /// Run the closed-loop benchmark and write results.csv, report.md and the figures.
     Bench(bench::BenchArgs),
+    /// Train the learned baselines (SARL).
+    #[command(subcommand)]
+    Baseline(baseline::BaselineCommand),
 }
 
 fn main() -> ExitCode {
@@ -50,6 +54,7 @@ fn main() -> ExitCode {
         Command::Train(args) => train::run(args),
         Command::Plan(args) => plan::run(args),
         Command::Bench(args) => bench::run(args),
+        Command::Baseline(cmd) => baseline::run(cmd),
     };
     match result {
         Ok(code) => code,

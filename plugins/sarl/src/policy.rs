@@ -1,0 +1,87 @@
+//! SARL's one-step look-ahead action selection (CrowdNav `MultiHumanRL.predict`).
+//!
+//! For every action `a` of the [`ActionSpace`]: the robot is propagated by `Δt` with velocity
+//! `a`, every human by `Δt` at its observed (constant) velocity; the action's value is
+//! `R(s, a) + γ^{Δt·v_pref} · V(s')` with `R` the look-ahead reward
+//! ([`lookahead_reward`]) and `V` the value network on the propagated joint states. All
+//! actions are evaluated in one batched forward pass; the argmax wins (the first on ties).
+
+use crate::action::ActionSpace;
+use crate::env::{RewardConfig, lookahead_reward};
+use crate::error::SarlError;
+use crate::net::SarlNet;
+use crate::state::{HumanState, JOINT_DIM, RobotState, push_joint_states};
+
+/// The look-ahead's constants.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LookAhead {
+    /// Discount per unit of `Δt·v_pref` (CrowdNav 0.9).
+    pub gamma: f64,
+    /// Look-ahead step Δt (s).
+    pub time_step: f64,
+    /// The reward's constants.
+    pub reward: RewardConfig,
+}
+
+impl LookAhead {
+    /// The discount of one step, `γ^{Δt·v_pref}`.
+    pub fn gamma_bar(&self, v_pref: f64) -> f64 {
+        self.gamma.powf(self.time_step * v_pref)
+    }
+}
+
+/// What [`select_action`] decided.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Decision {
+    /// Index into the action space.
+    pub index: usize,
+    /// The chosen velocity (world frame, m/s).
+    pub velocity: [f64; 2],
+    /// `R + γ̄·V` of every action.
+    pub action_values: Vec<f64>,
+}
+
+/// The value of every action and the best one (see the module docs). `humans` must not be
+/// empty.
+pub fn select_action(
+    net: &SarlNet,
+    actions: &ActionSpace,
+    robot: &RobotState,
+    humans: &[HumanState],
+    la: &LookAhead,
+) -> Result<Decision, SarlError> {
+    if humans.is_empty() {
+        return Err(SarlError::config(
+            "humans",
+            "the look-ahead needs at least one human",
+        ));
+    }
+    let dt = la.time_step;
+    let next_humans: Vec<HumanState> = humans.iter().map(|h| h.propagate(dt)).collect();
+    let n = humans.len();
+    let mut flat = Vec::with_capacity(actions.len() * n * JOINT_DIM);
+    let mut rewards = Vec::with_capacity(actions.len());
+    for &a in &actions.actions {
+        let next = robot.propagate(a, dt);
+        rewards.push(lookahead_reward(&next, &next_humans, dt, &la.reward).0);
+        push_joint_states(&next, &next_humans, true, &mut flat);
+    }
+    let values = net.values(&flat, actions.len(), n)?;
+    let g = la.gamma_bar(robot.v_pref);
+    let action_values: Vec<f64> = rewards
+        .iter()
+        .zip(&values)
+        .map(|(r, v)| r + g * f64::from(*v))
+        .collect();
+    let mut index = 0;
+    for (i, v) in action_values.iter().enumerate() {
+        if *v > action_values[index] {
+            index = i;
+        }
+    }
+    Ok(Decision {
+        index,
+        velocity: actions.actions[index],
+        action_values,
+    })
+}

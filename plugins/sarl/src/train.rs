@@ -1034,8 +1034,9 @@ mod tests {
         let (first, last) = (log[0].loss, log[3].loss);
         assert!(first.is_finite() && last.is_finite());
         assert!(last < 0.8 * first, "imitation loss {first} → {last}");
-        // Every demonstration that did not time out contributed all its states.
-        assert_eq!(t.memory().len(), t.progress().demo_transitions);
+        // The demonstrations that did not time out, then the TD episodes, filled the memory.
+        assert!(t.progress().demo_transitions > 0);
+        assert!(t.memory().len() > t.progress().demo_transitions);
         // The TD stage ran and logged at every checkpoint.
         assert_eq!(t.progress().rl_episodes_done, 6);
         assert_eq!(t.progress().rl_log.len(), 2);

@@ -131,3 +131,48 @@ impl ModelCard {
         std::fs::write(path, text).map_err(|e| SarlError::io(path, e))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn card() -> ModelCard {
+        ModelCard {
+            format_version: 1,
+            name: "sarl".into(),
+            description: "test".into(),
+            weights: WEIGHTS_FILE.into(),
+            parameters: NetConfig::default().parameter_count(),
+            net: NetConfig::default(),
+            lookahead: LookAheadCard {
+                gamma: 0.9,
+                time_step: 0.25,
+                speed_samples: 5,
+                rotation_samples: 16,
+                v_pref: 1.0,
+            },
+            reward: RewardConfig::default(),
+            env: EnvConfig::default(),
+            training: TrainingCard::default(),
+            evaluation: EvalCard::default(),
+        }
+    }
+
+    #[test]
+    fn round_trip_and_checks() {
+        let dir = std::env::temp_dir().join(format!("sarl-card-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join(CARD_FILE);
+        let c = card();
+        c.save(&path).unwrap();
+        assert_eq!(ModelCard::load(&path).unwrap(), c);
+        let mut bad = card();
+        bad.lookahead.gamma = 1.5;
+        bad.save(&path).unwrap();
+        let err = ModelCard::load(&path).unwrap_err();
+        assert!(err.to_string().contains("gamma"), "{err}");
+        let err = ModelCard::load(&dir.join("missing.toml")).unwrap_err();
+        assert!(err.to_string().contains("missing.toml"), "{err}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

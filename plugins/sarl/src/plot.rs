@@ -20,19 +20,14 @@ pub fn training_curve(p: &Progress, path: &Path) -> Result<(), SarlError> {
     root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
     let panels = root.split_evenly((1, 3));
 
-    let log_range = |v: &[f64]| {
-        let pos: Vec<f64> = v
+    // Linear loss axes from 0 to a little above the largest value.
+    let top = |v: &[f64]| {
+        let hi = v
             .iter()
             .copied()
-            .filter(|x| x.is_finite() && *x > 0.0)
-            .collect();
-        let lo = pos.iter().copied().fold(f64::INFINITY, f64::min);
-        let hi = pos.iter().copied().fold(0.0, f64::max);
-        if pos.is_empty() {
-            (1e-4, 1.0)
-        } else {
-            (lo * 0.8, hi * 1.25)
-        }
+            .filter(|x| x.is_finite())
+            .fold(0.0, f64::max);
+        if hi > 0.0 { hi * 1.1 } else { 1.0 }
     };
 
     // Imitation loss.
@@ -42,19 +37,19 @@ pub fn training_curve(p: &Progress, path: &Path) -> Result<(), SarlError> {
         .filter(|l| l.loss.is_finite() && l.loss > 0.0)
         .map(|l| (l.step as f64, l.loss))
         .collect();
-    let (lo, hi) = log_range(&il.iter().map(|x| x.1).collect::<Vec<_>>());
+    let hi = top(&il.iter().map(|x| x.1).collect::<Vec<_>>());
     let max_epoch = il.iter().map(|x| x.0).fold(1.0, f64::max);
     let mut c = ChartBuilder::on(&panels[0])
         .caption("imitation (ORCA demonstrations)", ("sans-serif", 20))
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(64)
-        .build_cartesian_2d(0.0..max_epoch, (lo..hi).log_scale())
+        .build_cartesian_2d(0.0..max_epoch, 0.0..hi)
         .map_err(|e| err(e.to_string()))?;
     c.configure_mesh()
         .x_desc("epoch")
-        .y_desc("value MSE")
-        .y_label_formatter(&|v| format!("{v:.1e}"))
+        .y_desc("value MSE (epoch mean)")
+        .y_label_formatter(&|v| format!("{v:.3}"))
         .draw()
         .map_err(|e| err(e.to_string()))?;
     c.draw_series(LineSeries::new(il, BLUE.stroke_width(2)))
@@ -67,7 +62,7 @@ pub fn training_curve(p: &Progress, path: &Path) -> Result<(), SarlError> {
         .filter(|l| l.loss.is_finite() && l.loss > 0.0)
         .map(|l| (l.step as f64, l.loss))
         .collect();
-    let (lo, hi) = log_range(&rl.iter().map(|x| x.1).collect::<Vec<_>>());
+    let hi = top(&rl.iter().map(|x| x.1).collect::<Vec<_>>());
     let max_ep = p
         .rl_log
         .iter()
@@ -79,12 +74,12 @@ pub fn training_curve(p: &Progress, path: &Path) -> Result<(), SarlError> {
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(64)
-        .build_cartesian_2d(0.0..max_ep, (lo..hi).log_scale())
+        .build_cartesian_2d(0.0..max_ep, 0.0..hi)
         .map_err(|e| err(e.to_string()))?;
     c.configure_mesh()
         .x_desc("RL episode")
-        .y_desc("TD MSE (block mean)")
-        .y_label_formatter(&|v| format!("{v:.1e}"))
+        .y_desc("TD MSE (mean per checkpoint block)")
+        .y_label_formatter(&|v| format!("{v:.4}"))
         .draw()
         .map_err(|e| err(e.to_string()))?;
     c.draw_series(LineSeries::new(rl, BLUE.stroke_width(2)))
@@ -143,4 +138,44 @@ pub fn training_curve(p: &Progress, path: &Path) -> Result<(), SarlError> {
         .draw()
         .map_err(|e| err(e.to_string()))?;
     root.present().map_err(|e| err(e.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::train::{LogPoint, ValPoint};
+
+    #[test]
+    fn draws_a_png() {
+        let p = Progress {
+            il_log: (1..=5)
+                .map(|e| LogPoint {
+                    step: e,
+                    loss: 0.05 / e as f64,
+                    success_rate: 0.0,
+                })
+                .collect(),
+            rl_log: (1..=4)
+                .map(|k| LogPoint {
+                    step: 100 * k,
+                    loss: 0.01 / k as f64,
+                    success_rate: 0.2 * k as f64,
+                })
+                .collect(),
+            validation: (0..=4)
+                .map(|k| ValPoint {
+                    episode: 100 * k,
+                    success_rate: 0.2 * k as f64,
+                    collision_rate: 0.1,
+                    timeout_rate: 0.0,
+                })
+                .collect(),
+            ..Progress::default()
+        };
+        let path = std::env::temp_dir().join(format!("sarl-curve-{}.png", std::process::id()));
+        training_curve(&p, &path).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        assert!(bytes.starts_with(b"\x89PNG"));
+        let _ = std::fs::remove_file(&path);
+    }
 }

@@ -119,6 +119,57 @@ pub fn plan_reference(plan: &Plan, t: f64, lookahead: f64) -> Option<(Pose2, Twi
     Some((pose, pose.between(ahead).log().scale(1.0 / h)))
 }
 
+/// The feed-forward body twist of the built-in tracking controller for the control period
+/// `[t, t + h]`: the plan's segment twists `ξ_k = log(P_k⁻¹·P_{k+1})/dt`, placed at the segment
+/// midpoints `t0 + (k + ½)·dt`, and the robot's `current` twist, placed at `t0 − h/2` (the
+/// middle of the control period that produced it), interpolated linearly in time and read at
+/// the middle of the coming period, `t + h/2`. Held at the last segment to the end of the
+/// plan; zero after it, and for a plan with fewer than two poses or non-finite times.
+///
+/// A plan whose segment speeds change by at most `a_max·dt` (and whose first segment's mean is
+/// within `a_max·dt/2` of the current speed) thus gives a feed-forward that changes by less
+/// than `a_max·h` per control period, also across replanning, where the raw segment twists
+/// (what [`plan_reference`] differences) jump at every waypoint.
+pub fn plan_feedforward(plan: &Plan, t: f64, current: Twist2, h: f64) -> Twist2 {
+    let n = plan.poses.len();
+    let h = if h.is_finite() { h.max(0.0) } else { 0.0 };
+    if n < 2 || !(plan.t0.is_finite() && plan.dt.is_finite() && plan.dt > 0.0 && t.is_finite()) {
+        return Twist2::ZERO;
+    }
+    let segments = n - 1;
+    if t >= plan.t0 + segments as f64 * plan.dt {
+        return Twist2::ZERO;
+    }
+    let twist = |k: usize| {
+        plan.poses[k]
+            .between(plan.poses[k + 1])
+            .log()
+            .scale(1.0 / plan.dt)
+    };
+    let lerp = |a: Twist2, b: Twist2, f: f64| {
+        let f = f.clamp(0.0, 1.0);
+        Twist2::new(
+            a.vx + (b.vx - a.vx) * f,
+            a.vy + (b.vy - a.vy) * f,
+            a.omega + (b.omega - a.omega) * f,
+        )
+    };
+    // Reading time in units of dt from t0; knot k at k + ½, the current twist at −h/(2·dt).
+    let tau = (t + 0.5 * h - plan.t0) / plan.dt;
+    let out = if tau < 0.5 {
+        let start = -0.5 * h / plan.dt;
+        lerp(current, twist(0), (tau - start) / (0.5 - start))
+    } else {
+        let k = (tau - 0.5).floor() as usize;
+        if k + 1 >= segments {
+            twist(segments - 1)
+        } else {
+            lerp(twist(k), twist(k + 1), tau - 0.5 - k as f64)
+        }
+    };
+    if out.is_finite() { out } else { Twist2::ZERO }
+}
+
 /// The plan's pose at time `t` (clamped to the plan), by geodesic interpolation (Eq. 4).
 pub fn plan_pose_at(plan: &Plan, t: f64) -> Option<Pose2> {
     let last = plan.poses.len().checked_sub(1)?;
@@ -145,8 +196,11 @@ pub fn plan_pose_at(plan: &Plan, t: f64) -> Option<Pose2> {
 /// * [`step`](Embodiment::step) integrates exactly on SE(2): `pose·exp(dt·cmd)` (Eq. 5), after
 ///   projecting the command onto the model.
 /// * [`track`](Embodiment::track) is a PD controller on the pose error `e = pose⁻¹·ref` in the
-///   robot frame, with the reference and feed-forward twist from [`plan_reference`] (look-ahead
-///   `h = gains.lookahead`). With the feed-forward twist rotated into the robot frame,
+///   robot frame, with the reference pose from [`plan_pose_at`] and the feed-forward twist from
+///   [`plan_feedforward`] with `h = gains.lookahead`, the control period (segment twists
+///   interpolated between segment midpoints from the current velocity, so that a plan within
+///   `a_max` asks for no step larger than `a_max·h`, also across replanning). With the
+///   feed-forward twist rotated into the robot frame,
 ///   `v_ff = R(e_θ)·(v_x,ref, v_y,ref)`:
 ///   - differential drive and Ackermann (Kanayama-style):
 ///     `v = v_ff,x + k_x·e_x`, `ω = ω_ref + k_y·v_x,ref·e_y + k_θ·sin e_θ`
@@ -154,10 +208,6 @@ pub fn plan_pose_at(plan: &Plan, t: f64) -> Option<Pose2> {
 ///   - omnidirectional: `(v_x, v_y) = v_ff + k_x·(e_x, e_y)`, `ω = ω_ref + k_θ·sin e_θ`;
 ///   - all: plus the derivative term `k_d·(ξ_ff − ξ)`, the error between the feed-forward twist
 ///     and the velocity executed last step (the time derivative of the pose error).
-///
-///   The feed-forward difference is exact for a control period equal to the look-ahead (default
-///   0.05 s); a longer look-ahead makes the robot lead the plan by about `a·h/(2·k_x)` while it
-///   accelerates.
 ///
 ///   Measured in `sdk/core/tests/embodiment_tracking.rs` (control period 0.05 s, empty world,
 ///   the three shipped robot profiles, 24 s S-curves from rest at 70 % of v_max and a_max with
@@ -253,12 +303,13 @@ impl Embodiment for BuiltinEmbodiment {
 
     fn track(&self, state: &RobotState, plan: &Plan, t: f64) -> Twist2 {
         let g = &self.gains;
-        let Some((reference, xi)) = plan_reference(plan, t, g.lookahead) else {
+        let Some(reference) = plan_pose_at(plan, t) else {
             return Twist2::ZERO;
         };
-        if !state.pose.is_finite() {
+        if !state.pose.is_finite() || !reference.is_finite() {
             return Twist2::ZERO;
         }
+        let xi = plan_feedforward(plan, t, self.project(state.velocity), g.lookahead);
         let e = state.pose.between(reference);
         let e_theta = wrap_angle(e.theta);
         let (s, c) = e_theta.sin_cos();

@@ -25,16 +25,21 @@
 //! * `|vy_k| ≤ s·lateral_speed_max`, `|ω_k| ≤ s·ω_max`;
 //! * `|ω_k| ≤ s·κ_max·c_min·σ·v_k` when the robot has a curvature limit (the measured
 //!   curvature divides by `sqrt((c_k·v_k)² + ε_κ²) ≥ c_min·|v_k|`);
-//! * `|v_k − v_{k−1}| ≤ s·a_max·dt − (1 − c_min)·v_lim`, with `v_0` the robot's current speed:
-//!   the measured change `c_k·v_k − c_{k−1}·v_{k−1}` differs from `v_k − v_{k−1}` by at most
-//!   `(1 − c_min)·v_lim` (2.5 % of diablo's `a_max·dt`).
+//! * `|v_k − v_{k−1}| ≤ s_a·a_max·dt − (1 − c_min)·v_lim` (`s_a = 1 − acceleration_margin`): the
+//!   measured change `c_k·v_k − c_{k−1}·v_{k−1}` differs from `v_k − v_{k−1}` by at most
+//!   `(1 − c_min)·v_lim` (2.5 % of diablo's `a_max·dt`); and `|v_1 − v_0| ≤ s_a·a_max·dt/2`
+//!   from the robot's current speed `v_0`: the first segment's speed is a mean over its step,
+//!   which a ramp from `v_0` at `a_max` reaches in half a step. Planned so, the tracking
+//!   controller's feed-forward ([`crate::embodiment::plan_feedforward`]) changes no faster than
+//!   `s_a·a_max` even at the 20 Hz control rate, and the margin is room for its feedback.
 //!
 //! The objective is the distance to the target poses `p̂` (the guided sample):
 //! `Σ_k ‖xy_k(ξ) − x̂y_k‖² + w_θ·wrap(θ_k(ξ) − θ̂_k)² + ρ·dt²·‖ξ_k − ξ_k⁰‖²`, with `w_θ` =
 //! [`ProjectionSettings::heading_weight`] and `ρ` = [`ProjectionSettings::effort`] (a small
-//! trust region). It is minimised by Gauss-Newton: linearise the poses around the current
-//! twists (`J = ∂p/∂ξ`, lower block-triangular, from [`crate::se2::euler_step_jacobians`]),
-//! solve the convex QP in the change of the twists with Clarabel, repeat
+//! trust region). It is minimised by Gauss-Newton: linearise the rollout around the current
+//! twists (`e_k = S_x·e_{k−1} + S_w·δξ_k` for the pose change `e_k`, the step Jacobians of
+//! [`crate::se2::euler_step_jacobians`]), solve the convex QP in `(δξ, e)` with Clarabel (the
+//! poses kept as variables make it sparse and banded: about 6·T variables), repeat
 //! [`ProjectionSettings::iterations`] times. The constraints do not depend on the
 //! linearisation, so every iterate is feasible; the iterations only bring the plan closer to
 //! the target.
@@ -46,13 +51,13 @@ use crate::se2::{Pose2, Twist2, euler_step_jacobians, wrap_angle};
 use crate::tfs;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
-    DefaultSettingsBuilder, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus,
+    DefaultSettingsBuilder, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus, ZeroConeT,
 };
 use serde::{Deserialize, Serialize};
 
 /// Settings of the last-step correction (TOML table `[human2nav.projection]`, every field
 /// optional). Defaults: `enabled = true`, `iterations = 2`, `margin = 0.01`,
-/// `heading_weight = 0.1`, `effort = 0.01`.
+/// `acceleration_margin = 0.1`, `heading_weight = 0.1`, `effort = 0.01`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ProjectionSettings {
@@ -62,6 +67,9 @@ pub struct ProjectionSettings {
     pub iterations: usize,
     /// Relative margin kept inside every limit, in `[0, 0.5)`.
     pub margin: f64,
+    /// Relative margin kept inside `a_max`, in `[0, 0.5)`: room for the tracking controller's
+    /// feedback on top of the planned acceleration.
+    pub acceleration_margin: f64,
     /// Weight `w_θ` of the heading error against the position error (m²/rad², ≥ 0).
     pub heading_weight: f64,
     /// Weight `ρ` of the change of the twists (≥ 0, a trust region for the linearisation).
@@ -74,6 +82,7 @@ impl Default for ProjectionSettings {
             enabled: true,
             iterations: 2,
             margin: 0.01,
+            acceleration_margin: 0.1,
             heading_weight: 0.1,
             effort: 0.01,
         }
@@ -110,6 +119,10 @@ impl ProjectionSettings {
         }
         if !(self.margin.is_finite() && (0.0..0.5).contains(&self.margin)) {
             return bad("margin", "must be in [0, 0.5)");
+        }
+        if !(self.acceleration_margin.is_finite() && (0.0..0.5).contains(&self.acceleration_margin))
+        {
+            return bad("acceleration_margin", "must be in [0, 0.5)");
         }
         if !(self.heading_weight.is_finite() && self.heading_weight >= 0.0) {
             return bad("heading_weight", "must be finite and ≥ 0");
@@ -222,63 +235,37 @@ fn solve_step(
     let t = target.len();
     let n = 3 * t;
     let poses = rollout(xi, dt);
-    // J[r][c] = ∂(pose coordinate r)/∂(twist coordinate c), block (k, j) zero for j > k.
-    let mut jac = vec![0.0; n * n];
+    // Variables z = [δξ_1 … δξ_T, e_1 … e_T]: the change of the twists and the (linearised)
+    // change of the poses it causes, tied by e_k = S_x·e_{k−1} + S_w·δξ_k, e_0 = 0. Keeping the
+    // poses as variables makes every matrix sparse and banded.
+    let e_col = |k: usize, r: usize| n + 3 * k + r;
+    let mut dynamics: Vec<Vec<(usize, f64)>> = Vec::with_capacity(n);
     let mut prev = Pose2::IDENTITY;
-    let mut sx_all = Vec::with_capacity(t);
-    let mut sw_all = Vec::with_capacity(t);
     for (k, w) in xi.chunks_exact(3).enumerate() {
         let (sx, sw) = euler_step_jacobians(prev, Twist2::from_slice(w), dt);
-        sx_all.push(sx);
-        sw_all.push(sw);
+        for r in 0..3 {
+            let mut row = vec![(e_col(k, r), 1.0)];
+            for c in 0..3 {
+                row.push((3 * k + c, -sw[r][c]));
+                if k > 0 {
+                    row.push((e_col(k - 1, c), -sx[r][c]));
+                }
+            }
+            dynamics.push(row);
+        }
         prev = poses[k];
     }
-    for j in 0..t {
-        let mut g = sw_all[j];
-        for k in j..t {
-            if k > j {
-                let sx = &sx_all[k];
-                let mut next = [[0.0; 3]; 3];
-                for r in 0..3 {
-                    for c in 0..3 {
-                        next[r][c] = (0..3).map(|m| sx[r][m] * g[m][c]).sum();
-                    }
-                }
-                g = next;
-            }
-            for r in 0..3 {
-                for c in 0..3 {
-                    jac[(3 * k + r) * n + 3 * j + c] = g[r][c];
-                }
-            }
-        }
-    }
-    // Objective ½δᵀPδ + qᵀδ, scaled by 1/dt² so that P is of order one.
+    // Objective ½zᵀPz + qᵀz, scaled by 1/dt² so that its entries are of order one.
     let w = [1.0, 1.0, settings.heading_weight];
     let scale = 1.0 / (dt * dt);
-    let residual: Vec<f64> = poses
-        .iter()
-        .zip(target)
-        .flat_map(|(p, q)| [p.x - q.x, p.y - q.y, wrap_angle(p.theta - q.theta)])
-        .collect();
-    let mut p_upper: Vec<Vec<f64>> = vec![vec![0.0; n]; n];
-    let mut q = vec![0.0; n];
-    for a in 0..n {
-        // Block-triangular J: only rows of poses at or after the twist's segment are non-zero.
-        let first_row = 3 * (a / 3);
-        for b in a..n {
-            let first = first_row.max(3 * (b / 3));
-            let mut s = 0.0;
-            for r in first..n {
-                s += jac[r * n + a] * w[r % 3] * jac[r * n + b];
-            }
-            p_upper[a][b] = s * scale;
+    let mut p_diag = vec![settings.effort; 2 * n];
+    let mut q = vec![0.0; 2 * n];
+    for (k, (p, g)) in poses.iter().zip(target).enumerate() {
+        let r = [p.x - g.x, p.y - g.y, wrap_angle(p.theta - g.theta)];
+        for d in 0..3 {
+            p_diag[e_col(k, d)] = w[d] * scale;
+            q[e_col(k, d)] = w[d] * r[d] * scale;
         }
-        p_upper[a][a] += settings.effort;
-        q[a] = (first_row..n)
-            .map(|r| jac[r * n + a] * w[r % 3] * residual[r])
-            .sum::<f64>()
-            * scale;
     }
 
     // Constraints A·(ξ + δ) ≤ b, i.e. A·δ ≤ b − A·ξ.
@@ -298,7 +285,10 @@ fn solve_step(
     // The chord factor c_k lies in [c_min, 1] once |ω_k| ≤ ω_max; the bounds below hold for
     // every c_k in that range, so they need no linearisation.
     let c_min = sinc(0.5 * limits.omega_max * dt);
-    let da = (s * limits.a_max * dt - (1.0 - c_min) * v_lim).max(0.0);
+    let s_a = 1.0 - settings.acceleration_margin;
+    let da = (s_a * limits.a_max * dt - (1.0 - c_min) * v_lim).max(0.0);
+    // From the current speed to the first segment's mean speed: half a step of ramp.
+    let da_first = 0.5 * s_a * limits.a_max * dt;
     for k in 0..t {
         let (iv, ivy, iw) = (3 * k, 3 * k + 1, 3 * k + 2);
         push(vec![(iv, gear)], s * v_lim);
@@ -313,8 +303,8 @@ fn solve_step(
             push(vec![(iw, -1.0), (iv, -kv)], 0.0);
         }
         if k == 0 {
-            push(vec![(iv, 1.0)], da + initial_velocity.vx);
-            push(vec![(iv, -1.0)], da - initial_velocity.vx);
+            push(vec![(iv, 1.0)], da_first + initial_velocity.vx);
+            push(vec![(iv, -1.0)], da_first - initial_velocity.vx);
         } else {
             let pv = 3 * (k - 1);
             push(vec![(iv, 1.0), (pv, -1.0)], da);
@@ -322,9 +312,20 @@ fn solve_step(
         }
     }
 
-    let p = csc_upper(&p_upper);
-    let a = csc_rows(&rows, n);
-    let cones = [NonnegativeConeT(rows.len())];
+    let inequalities = rows.len();
+    let mut all_rows = dynamics;
+    all_rows.append(&mut rows);
+    let mut b = vec![0.0; n];
+    b.append(&mut rhs);
+    let p = CscMatrix::new(
+        2 * n,
+        2 * n,
+        (0..=2 * n).collect(),
+        (0..2 * n).collect(),
+        p_diag,
+    );
+    let a = csc_rows(&all_rows, 2 * n);
+    let cones = [ZeroConeT(n), NonnegativeConeT(inequalities)];
     let qp_settings = DefaultSettingsBuilder::default()
         .verbose(false)
         .build()
@@ -336,36 +337,17 @@ fn solve_step(
         speed: initial_velocity.vx,
         status,
     };
-    let mut solver = DefaultSolver::new(&p, &q, &a, &rhs, &cones, qp_settings)
+    let mut solver = DefaultSolver::new(&p, &q, &a, &b, &cones, qp_settings)
         .map_err(|e| infeasible(format!("a setup error: {e:?}")))?;
     solver.solve();
     match solver.solution.status {
         SolverStatus::Solved | SolverStatus::AlmostSolved
             if solver.solution.x.iter().all(|x| x.is_finite()) =>
         {
-            Ok(solver.solution.x.clone())
+            Ok(solver.solution.x[..n].to_vec())
         }
         status => Err(infeasible(format!("{status:?}"))),
     }
-}
-
-/// The upper triangle of a dense symmetric matrix in compressed sparse columns.
-fn csc_upper(m: &[Vec<f64>]) -> CscMatrix<f64> {
-    let n = m.len();
-    let mut colptr = Vec::with_capacity(n + 1);
-    let mut rowval = Vec::new();
-    let mut nzval = Vec::new();
-    colptr.push(0);
-    for c in 0..n {
-        for (r, row) in m.iter().enumerate().take(c + 1) {
-            if row[c] != 0.0 {
-                rowval.push(r);
-                nzval.push(row[c]);
-            }
-        }
-        colptr.push(rowval.len());
-    }
-    CscMatrix::new(n, n, colptr, rowval, nzval)
 }
 
 /// A sparse matrix given by rows of `(column, value)` in compressed sparse columns.

@@ -397,3 +397,52 @@ fn stop_in_place_plan_brings_every_robot_to_rest() {
         );
     }
 }
+
+/// Receding-horizon use as in the simulator: every 0.1 s a new plan starts at the robot's pose
+/// and accelerates from its current speed at 90 % of `a_max` (the first segment half a step of
+/// ramp, as the planner's last-step correction plans it). The controller's commands before
+/// saturation, at the 20 Hz control rate, must then change no faster than `a_max` (executed
+/// TFS 1): the feed-forward interpolates between segment midpoints from the current velocity.
+#[test]
+fn replanned_accelerating_plans_give_commands_within_a_max() {
+    use human2nav_core::tfs::tfs_executed;
+    for kind in [
+        EmbodimentKind::DifferentialDrive,
+        EmbodimentKind::Omnidirectional,
+        EmbodimentKind::Ackermann,
+    ] {
+        let l = limits(Some(0.5));
+        let e = BuiltinEmbodiment::new(kind, l, ControllerGains::default());
+        let mut state = at_rest();
+        let mut raw = Vec::new();
+        let mut plan = plan_of(vec![Pose2::IDENTITY], PLAN_DT);
+        for k in 0..60 {
+            let t = k as f64 * DT;
+            if k % 2 == 0 {
+                // Mean segment speeds of a ramp at 0.9·a_max from the current speed, capped.
+                let a = 0.9 * l.a_max;
+                let mut pose = state.pose;
+                let mut poses = vec![pose];
+                for j in 0..32 {
+                    let v = (state.velocity.vx + a * (j as f64 + 0.5) * PLAN_DT).min(0.9 * l.v_max);
+                    pose = pose.euler_step(Twist2::new(v, 0.0, 0.0), PLAN_DT);
+                    poses.push(pose);
+                }
+                plan = Plan {
+                    t0: t,
+                    ..plan_of(poses, PLAN_DT)
+                };
+            }
+            let cmd = e.track(&state, &plan, t);
+            raw.push(cmd);
+            state = e.step(&state, e.saturate(&state, cmd, DT), DT);
+        }
+        assert!(
+            state.velocity.vx > 1.2,
+            "{kind:?}: reached {:?}",
+            state.velocity
+        );
+        let tfs = tfs_executed(&raw, DT, &l);
+        assert_eq!(tfs, 1.0, "{kind:?}: executed TFS {tfs}");
+    }
+}

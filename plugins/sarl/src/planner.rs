@@ -6,8 +6,8 @@
 //!   trained with `v_pref = 1 m/s` and a 0.3 m robot; a robot with another `v_max` or footprint
 //!   gets its own values in the state (CrowdNav's convention), which lies outside the training
 //!   distribution — that is the baseline as published, not tuned for our robots.
-//! * With no agent in view the network still needs one row: a static dummy human 10 m behind
-//!   the robot (opposite the goal) stands in, so the robot drives at its goal.
+//! * With no agent in view the look-ahead uses the closed-form empty-world value instead of the
+//!   network (see [`crate::policy`]): the robot drives at its goal.
 //! * The action is chosen by the one-step look-ahead of [`crate::policy`] over the 81 holonomic
 //!   actions of [`ActionSpace::crowdnav`] with the card's Δt and γ.
 //! * Holonomic → embodiment conversion (ORCA's, reused from `human2nav-orca`): the chosen
@@ -242,28 +242,11 @@ impl SarlPlanner {
             })
             .collect();
         agents.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let mut humans: Vec<HumanState> = agents
+        let humans: Vec<HumanState> = agents
             .into_iter()
             .take(self.config.max_humans)
             .map(|(_, h)| h)
             .collect();
-        if humans.is_empty() {
-            let dx = robot.gx - robot.px;
-            let dy = robot.gy - robot.py;
-            let d = dx.hypot(dy);
-            let (ux, uy) = if d > 0.0 {
-                (dx / d, dy / d)
-            } else {
-                (1.0, 0.0)
-            };
-            humans.push(HumanState {
-                px: robot.px - 10.0 * ux,
-                py: robot.py - 10.0 * uy,
-                vx: 0.0,
-                vy: 0.0,
-                radius: 0.3,
-            });
-        }
         (robot, humans)
     }
 

@@ -5,6 +5,12 @@
 //! `R(s, a) + γ^{Δt·v_pref} · V(s')` with `R` the look-ahead reward
 //! ([`lookahead_reward`]) and `V` the value network on the propagated joint states. All
 //! actions are evaluated in one batched forward pass; the argmax wins (the first on ties).
+//!
+//! With no human at all the network has nothing to attend to (it was trained with five), and
+//! the value of a state is known in closed form instead: the discounted success reward after
+//! the time the robot needs to cover the remaining distance at `v_pref`,
+//! `V₀(s) = γ̄^{max(0, d_g − r)/(Δt·v_pref)}·R_goal` ([`empty_world_value`]). The look-ahead then
+//! uses `V₀` in place of the network, which picks the action that closes on the goal fastest.
 
 use crate::action::ActionSpace;
 use crate::env::{RewardConfig, lookahead_reward};
@@ -41,8 +47,14 @@ pub struct Decision {
     pub action_values: Vec<f64>,
 }
 
-/// The value of every action and the best one (see the module docs). `humans` must not be
-/// empty.
+/// The closed-form value of a state without humans (see the module docs).
+pub fn empty_world_value(robot: &RobotState, la: &LookAhead) -> f64 {
+    let steps = (robot.goal_distance() - robot.radius).max(0.0) / (la.time_step * robot.v_pref);
+    la.gamma_bar(robot.v_pref).powf(steps) * la.reward.success_reward
+}
+
+/// The value of every action and the best one (see the module docs; with no humans the
+/// closed-form empty-world value replaces the network).
 pub fn select_action(
     net: &SarlNet,
     actions: &ActionSpace,
@@ -50,12 +62,6 @@ pub fn select_action(
     humans: &[HumanState],
     la: &LookAhead,
 ) -> Result<Decision, SarlError> {
-    if humans.is_empty() {
-        return Err(SarlError::config(
-            "humans",
-            "the look-ahead needs at least one human",
-        ));
-    }
     let dt = la.time_step;
     let next_humans: Vec<HumanState> = humans.iter().map(|h| h.propagate(dt)).collect();
     let n = humans.len();
@@ -66,7 +72,15 @@ pub fn select_action(
         rewards.push(lookahead_reward(&next, &next_humans, dt, &la.reward).0);
         push_joint_states(&next, &next_humans, true, &mut flat);
     }
-    let values = net.values(&flat, actions.len(), n)?;
+    let values: Vec<f32> = if n == 0 {
+        actions
+            .actions
+            .iter()
+            .map(|&a| empty_world_value(&robot.propagate(a, dt), la) as f32)
+            .collect()
+    } else {
+        net.values(&flat, actions.len(), n)?
+    };
     let g = la.gamma_bar(robot.v_pref);
     let action_values: Vec<f64> = rewards
         .iter()

@@ -8,7 +8,7 @@ use approx::assert_relative_eq;
 use human2nav_sarl::action::ActionSpace;
 use human2nav_sarl::env::{RewardConfig, lookahead_reward};
 use human2nav_sarl::net::{NetConfig, SarlNet};
-use human2nav_sarl::policy::{LookAhead, select_action};
+use human2nav_sarl::policy::{LookAhead, empty_world_value, select_action};
 use human2nav_sarl::state::{HumanState, JOINT_DIM, RobotState, push_joint_states, rotate};
 use proptest::prelude::*;
 use std::f64::consts::{E, PI};
@@ -277,4 +277,43 @@ fn look_ahead_values_are_reward_plus_discounted_value() {
         &la.reward,
     );
     assert_eq!((r, done), (-0.25, true));
+}
+
+#[test]
+fn without_humans_the_closed_form_value_drives_at_the_goal() {
+    let net = net();
+    let la = LookAhead {
+        gamma: 0.9,
+        time_step: 0.25,
+        reward: RewardConfig::default(),
+    };
+    // Goal 3 m to the north-east (heading π/4, one of the 16 headings).
+    let robot = RobotState {
+        px: 1.0,
+        py: 1.0,
+        vx: 0.0,
+        vy: 0.0,
+        radius: 0.3,
+        gx: 1.0 + 3.0 * std::f64::consts::FRAC_1_SQRT_2,
+        gy: 1.0 + 3.0 * std::f64::consts::FRAC_1_SQRT_2,
+        v_pref: 1.2,
+        theta: 0.0,
+    };
+    let g = la.gamma_bar(1.2);
+    // V₀ = γ̄^{(d − r)/(Δt·v_pref)}.
+    assert_relative_eq!(
+        empty_world_value(&robot, &la),
+        g.powf((3.0 - 0.3) / (0.25 * 1.2)),
+        max_relative = 1e-12
+    );
+    let actions = ActionSpace::crowdnav(1.2);
+    let d = select_action(&net, &actions, &robot, &[], &la).unwrap();
+    let ne = 1 + 5 * 2 + 4;
+    assert_eq!(d.index, ne, "{:?}", d.velocity);
+    // After one step at 1.2 m/s the goal is 2.7 m away: value 0 + γ̄·γ̄^{(2.7 − 0.3)/0.3}.
+    assert_relative_eq!(
+        d.action_values[ne],
+        g * g.powf((2.7 - 0.3) / 0.3),
+        max_relative = 1e-6
+    );
 }

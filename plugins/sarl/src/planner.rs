@@ -6,8 +6,9 @@
 //!   trained with `v_pref = 1 m/s` and a 0.3 m robot; a robot with another `v_max` or footprint
 //!   gets its own values in the state (CrowdNav's convention), which lies outside the training
 //!   distribution — that is the baseline as published, not tuned for our robots.
-//! * With no agent in view the look-ahead uses the closed-form empty-world value instead of the
-//!   network (see [`crate::policy`]): the robot drives at its goal.
+//! * With no agent in view the network has nothing to attend to; the look-ahead's value is then
+//!   known in closed form and so is its best velocity: straight at the goal at
+//!   `min(v_pref, d/Δt)` (see [`crate::policy::empty_world_velocity`]).
 //! * The action is chosen by the one-step look-ahead of [`crate::policy`] over the 81 holonomic
 //!   actions of [`ActionSpace::crowdnav`] with the card's Δt and γ.
 //! * Holonomic → embodiment conversion (ORCA's, reused from `human2nav-orca`): the chosen
@@ -21,7 +22,7 @@ use crate::action::ActionSpace;
 use crate::card::{CARD_FILE, ModelCard, WEIGHTS_FILE};
 use crate::error::SarlError;
 use crate::net::SarlNet;
-use crate::policy::{LookAhead, select_action};
+use crate::policy::{LookAhead, empty_world_velocity, select_action};
 use crate::state::{HumanState, RobotState};
 use human2nav_core::{Observation, Plan, PlanError, Planner};
 use human2nav_orca::lp::Vec2;
@@ -253,6 +254,9 @@ impl SarlPlanner {
     /// The velocity SARL chooses (world frame).
     pub fn velocity(&self, obs: &Observation) -> Result<[f64; 2], SarlError> {
         let (robot, humans) = self.states(obs);
+        if humans.is_empty() {
+            return Ok(empty_world_velocity(&robot, &self.model.lookahead()));
+        }
         let d = select_action(
             &self.model.net,
             &self.actions,

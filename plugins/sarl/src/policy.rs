@@ -9,8 +9,13 @@
 //! With no human at all the network has nothing to attend to (it was trained with five), and
 //! the value of a state is known in closed form instead: the discounted success reward after
 //! the time the robot needs to cover the remaining distance at `v_pref`,
-//! `V₀(s) = γ̄^{max(0, d_g − r)/(Δt·v_pref)}·R_goal` ([`empty_world_value`]). The look-ahead then
-//! uses `V₀` in place of the network, which picks the action that closes on the goal fastest.
+//! `V₀(s) = γ̄^{max(0, d_g − r)/(Δt·v_pref)}·R_goal` ([`empty_world_value`]). [`select_action`]
+//! then uses `V₀` in place of the network, which picks the action that closes on the goal
+//! fastest. Because `V₀` depends on the goal distance alone, the maximiser of `R + γ̄·V₀` over
+//! *all* velocities `|v| ≤ v_pref` is also known: straight at the goal at
+//! `min(v_pref, d_g/Δt)` ([`empty_world_velocity`]); the planner uses it, so a robot alone is
+//! not steered along the nearest of 16 headings (a car-like robot would circle a goal it
+//! cannot turn into).
 
 use crate::action::ActionSpace;
 use crate::env::{RewardConfig, lookahead_reward};
@@ -51,6 +56,18 @@ pub struct Decision {
 pub fn empty_world_value(robot: &RobotState, la: &LookAhead) -> f64 {
     let steps = (robot.goal_distance() - robot.radius).max(0.0) / (la.time_step * robot.v_pref);
     la.gamma_bar(robot.v_pref).powf(steps) * la.reward.success_reward
+}
+
+/// The best velocity of any magnitude up to `v_pref` without humans (see the module docs).
+pub fn empty_world_velocity(robot: &RobotState, la: &LookAhead) -> [f64; 2] {
+    let dx = robot.gx - robot.px;
+    let dy = robot.gy - robot.py;
+    let d = dx.hypot(dy);
+    if d <= 0.0 {
+        return [0.0, 0.0];
+    }
+    let speed = robot.v_pref.min(d / la.time_step);
+    [dx / d * speed, dy / d * speed]
 }
 
 /// The value of every action and the best one (see the module docs; with no humans the

@@ -97,11 +97,16 @@ fn an_empty_scene_drives_at_the_goal() {
     obs.agents.clear();
     let (_, humans) = p.states(&obs);
     assert!(humans.is_empty());
-    // The goal is due north (8 m): the closed-form empty-world value picks full speed north.
+    // The goal is due north (8 m): the closed-form empty-world optimum is full speed north.
     let v = p.velocity(&obs).unwrap();
     assert_relative_eq!(v[0], 0.0, epsilon = 1e-12);
     assert_relative_eq!(v[1], 1.0, epsilon = 1e-12);
     assert!(p.plan(&obs).unwrap().is_finite());
+    // Off the 16 headings and within one step of the goal: straight at it, landing on it.
+    obs.goal = [1.1, -1.85];
+    let v = p.velocity(&obs).unwrap();
+    assert_relative_eq!(v[0], 0.1 / 0.25, epsilon = 1e-12);
+    assert_relative_eq!(v[1], 0.15 / 0.25, epsilon = 1e-12);
 }
 
 #[test]

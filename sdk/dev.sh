@@ -66,7 +66,10 @@ case "${1:-}" in
         # One planning step of the shipped model on a synthetic crowd, drawn like Fig. 4.
         "$bin" plan --robot robots/diablo/robot.toml --out out/demo/plan-diablo.png "$@"
         echo "picture: out/demo/plan-diablo.png"
-        echo "full benchmark (long): target/release/human2nav bench --config sdk/configs/bench.toml"
+        # The closed-loop benchmark, a few episodes per scenario class: real held-out crowds
+        # when ../shared/data (or $HUMAN2NAV_DATA) is there, else the synthetic crowd.
+        "$bin" bench --config sdk/configs/bench.toml --quick --out out/bench-quick
+        echo "report: out/bench-quick/report.md; every episode: target/release/human2nav bench --config sdk/configs/bench.toml"
         ;;
     test)
         setup

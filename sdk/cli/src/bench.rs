@@ -145,7 +145,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
 
 /// Mines the held-out episodes of every `real` suite whose file is missing, when the datasets
 /// named by `data_config` are present (see the module docs).
-fn ensure_real_episodes(cfg: &BenchConfig, data_config: &Path) -> anyhow::Result<()> {
+pub(crate) fn ensure_real_episodes(cfg: &BenchConfig, data_config: &Path) -> anyhow::Result<()> {
     for s in cfg.suites.iter().filter(|s| s.kind == SuiteKind::Real) {
         let Some(file) = s.episodes.as_deref().map(|p| cfg.resolve(p)) else {
             continue;
@@ -186,7 +186,7 @@ fn ensure_real_episodes(cfg: &BenchConfig, data_config: &Path) -> anyhow::Result
 /// noise seeded with the episode's seed) for the robot of that episode, with the robot's Φ
 /// including its plugin constraint terms; libtorch runs one thread per planner (the episodes
 /// already run in parallel).
-fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<MethodSpec> {
+pub(crate) fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<MethodSpec> {
     let field = |key: &str| format!("methods[{}].config.{key}", m.name);
     for key in m.config.keys() {
         if key != "planner" && key != "guidance" {

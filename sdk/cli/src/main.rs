@@ -6,6 +6,7 @@ mod data;
 mod plan;
 mod plugin;
 mod robot;
+mod scaling;
 mod train;
 
 use clap::{Parser, Subcommand};
@@ -43,6 +44,9 @@ enum Command {
     /// Train the learned baselines (SARL).
     #[command(subcommand)]
     Baseline(baseline::BaselineCommand),
+    /// SR against the amount of training data (Fig. 5): retrain on fractions of the training
+    /// scenes and run Human2Nav closed loop with each model.
+    Scaling(scaling::ScalingArgs),
 }
 
 fn main() -> ExitCode {
@@ -55,6 +59,7 @@ fn main() -> ExitCode {
         Command::Plan(args) => plan::run(args),
         Command::Bench(args) => bench::run(args),
         Command::Baseline(cmd) => baseline::run(cmd),
+        Command::Scaling(args) => scaling::run(args),
     };
     match result {
         Ok(code) => code,

@@ -48,12 +48,12 @@ pub struct TrainArgs {
 /// Where the data comes from.
 #[derive(Debug, Deserialize)]
 #[serde(default, deny_unknown_fields)]
-struct DataSection {
+pub(crate) struct DataSection {
     /// Tuple cache directory (from `human2nav data build`); relative paths start at the
     /// workspace root.
-    cache: PathBuf,
+    pub(crate) cache: PathBuf,
     /// Fraction of the training scenes to use (seeded choice). Default 1.
-    train_fraction: f64,
+    pub(crate) train_fraction: f64,
 }
 
 impl Default for DataSection {
@@ -68,23 +68,23 @@ impl Default for DataSection {
 /// Run bookkeeping.
 #[derive(Debug, Deserialize)]
 #[serde(default, deny_unknown_fields)]
-struct RunSection {
+pub(crate) struct RunSection {
     /// Model name in the card.
-    name: String,
+    pub(crate) name: String,
     /// Checkpoints and logs. Default `out/train/<name>`.
     out_dir: Option<PathBuf>,
     /// Where the exported model goes. Default `models/<name>`.
     model_dir: Option<PathBuf>,
     /// Torch intra-op threads. Default 2.
-    threads: usize,
+    pub(crate) threads: usize,
     /// `auto` (CUDA when available), `cpu` or `cuda`.
-    device: String,
+    pub(crate) device: String,
     /// Steps between validation points. Default 250.
     validate_every: u64,
     /// Steps between checkpoints. Default 1000.
     checkpoint_every: u64,
     /// Stop (and checkpoint) after this many minutes of this invocation; 0 = no limit.
-    max_minutes: f64,
+    pub(crate) max_minutes: f64,
 }
 
 impl Default for RunSection {
@@ -138,16 +138,16 @@ impl Default for EvalSection {
 /// The whole `train.toml`.
 #[derive(Debug, Default, Deserialize)]
 #[serde(default, deny_unknown_fields)]
-struct TrainConfig {
-    data: DataSection,
-    net: NetConfig,
-    train: TrainOptions,
-    run: RunSection,
+pub(crate) struct TrainConfig {
+    pub(crate) data: DataSection,
+    pub(crate) net: NetConfig,
+    pub(crate) train: TrainOptions,
+    pub(crate) run: RunSection,
     eval: EvalSection,
 }
 
 impl TrainConfig {
-    fn validate(&self) -> anyhow::Result<()> {
+    pub(crate) fn validate(&self) -> anyhow::Result<()> {
         self.net.validate()?;
         self.train.validate()?;
         let f = self.data.train_fraction;
@@ -305,7 +305,8 @@ fn scene_names(cache: &TupleCache, split: Split) -> String {
     names.join(", ")
 }
 
-fn train(
+/// Trains (or resumes from `out_dir/checkpoint`) and exports the EMA model with its card.
+pub(crate) fn train(
     cfg: &TrainConfig,
     cache: &TupleCache,
     out_dir: &Path,

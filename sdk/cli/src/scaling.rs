@@ -1,0 +1,871 @@
+//! `human2nav scaling --config sdk/configs/scaling.toml [--out DIR] [--quick]`: the human-data
+//! curve of the paper's Fig. 5. For each fraction of the training scenes (a seeded choice; the
+//! subsets are nested because every fraction keeps a prefix of the same shuffled scene list)
+//! the flow model is retrained with the settings of the train config, then Human2Nav with
+//! guidance (the planner config with its `model` replaced) runs closed loop on one benchmark
+//! suite, and the success rates per fraction go into `scaling.csv`, `report.md` and
+//! `fig5_sr_vs_training_data.png`.
+//!
+//! Output layout under `--out` (default `out/scaling`, or `out/scaling-quick` with `--quick`):
+//!
+//! * `models/frac-<pct>/`: the exported model of each fraction (card, weights, loss curve) and
+//!   `scaling_stamp.toml`, written last; a fraction whose stamp matches the current settings
+//!   is not retrained (the command is resumable);
+//! * `train/frac-<pct>/checkpoint/`: the training checkpoints (an interrupted training resumes
+//!   from there);
+//! * `frac-<pct>/planner.toml` and `frac-<pct>/results.csv`: the planner used and one row per
+//!   episode × robot;
+//! * `scaling.csv` (one row per fraction), `report.md`, `fig5_sr_vs_training_data.png`.
+
+use crate::bench::{ensure_real_episodes, human2nav_method};
+use crate::train::{TrainConfig, train};
+use anyhow::{Context, bail};
+use clap::Args;
+use human2nav_data::cache::TupleCache;
+use human2nav_data::tuples::Split;
+use human2nav_flow::card::ModelCard;
+use human2nav_flow::model::{CARD_FILE, WEIGHTS_FILE};
+use human2nav_flow::train::TrainOptions;
+use human2nav_flow::{NetConfig, tch};
+use human2nav_sim::config::{BenchConfig, MethodConfig, build_suites, load_robots};
+use human2nav_sim::episode::{ScenarioClass, ScenarioTitle};
+use human2nav_sim::figures::{scaling_points, sr_vs_training_data};
+use human2nav_sim::report::{results_csv, summarize};
+use human2nav_sim::{ResultRow, RobotSetup, Suite, SuiteKind, run_bench};
+use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
+use serde::{Deserialize, Serialize};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+/// Name of the method in the results (Human2Nav with guidance).
+const METHOD: &str = "human2nav";
+
+/// File in a model folder recording the settings it was trained with.
+const STAMP_FILE: &str = "scaling_stamp.toml";
+
+/// Arguments of `human2nav scaling`.
+#[derive(Debug, Args)]
+pub struct ScalingArgs {
+    /// Scaling configuration (TOML); relative paths inside it resolve against the workspace
+    /// root.
+    #[arg(long, default_value = "sdk/configs/scaling.toml")]
+    config: PathBuf,
+    /// Output directory [default: out/scaling, or out/scaling-quick with --quick, under the
+    /// workspace root].
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Short check: `quick_steps` training steps per model and the suite's `quick_per_class`
+    /// episodes per scenario class.
+    #[arg(long)]
+    quick: bool,
+    /// Torch threads for training [default: the train config's `run.threads`]. The episodes
+    /// run on one worker per core (`RAYON_NUM_THREADS` overrides).
+    #[arg(long)]
+    threads: Option<usize>,
+}
+
+/// The whole `scaling.toml`.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+struct ScalingConfig {
+    /// Training configuration (network, optimiser, tuple cache). Default
+    /// `sdk/configs/train.toml`.
+    train: PathBuf,
+    /// Benchmark configuration whose suite, robots, simulation settings and seed are used.
+    /// Default `sdk/configs/bench.toml`.
+    bench: PathBuf,
+    /// Planner configuration; its `model` is replaced by each fraction's model. Default
+    /// `sdk/configs/planner.toml`.
+    planner: PathBuf,
+    /// Data configuration used to mine the held-out episodes when the suite's episode file is
+    /// missing and the datasets are present. Default `sdk/configs/data.toml`.
+    data: PathBuf,
+    /// The benchmark suite measured. Default `real`.
+    suite: String,
+    /// Shares of the training scenes, each in (0, 1]. Default `[0.1, 0.25, 0.5, 1.0]`.
+    fractions: Vec<f64>,
+    /// Training steps per model. Default: the train config's `train.steps`.
+    steps: Option<u64>,
+    /// Training steps per model with `--quick`. Default 50.
+    quick_steps: u64,
+    /// Episodes per scenario class. Default: the suite's `per_class` (`quick_per_class` with
+    /// `--quick`).
+    per_class: Option<usize>,
+    /// Robot names (a subset of the bench config's robots). Default: all of them.
+    robots: Vec<String>,
+    /// Seed of the scene choice and of training (`train.seed`). Default: the train config's.
+    seed: Option<u64>,
+}
+
+impl Default for ScalingConfig {
+    fn default() -> Self {
+        Self {
+            train: PathBuf::from("sdk/configs/train.toml"),
+            bench: PathBuf::from("sdk/configs/bench.toml"),
+            planner: PathBuf::from("sdk/configs/planner.toml"),
+            data: PathBuf::from("sdk/configs/data.toml"),
+            suite: "real".into(),
+            fractions: vec![0.1, 0.25, 0.5, 1.0],
+            steps: None,
+            quick_steps: 50,
+            per_class: None,
+            robots: Vec::new(),
+            seed: None,
+        }
+    }
+}
+
+/// The folder name of a fraction: `frac-<percent, three digits>`.
+fn fraction_name(f: f64) -> String {
+    format!("frac-{:03}", (100.0 * f).round() as u64)
+}
+
+impl ScalingConfig {
+    /// Checks every field; the error names the first offending one.
+    fn validate(&self) -> anyhow::Result<()> {
+        if self.fractions.is_empty() {
+            bail!("fractions: list at least one share of the training scenes");
+        }
+        for (i, &f) in self.fractions.iter().enumerate() {
+            if !(f.is_finite() && f > 0.0 && f <= 1.0) {
+                bail!("fractions[{i}]: must lie in (0, 1], got {f}");
+            }
+            let name = fraction_name(f);
+            if self.fractions[..i]
+                .iter()
+                .any(|&g| fraction_name(g) == name)
+            {
+                bail!("fractions[{i}]: {f} repeats a fraction (same whole percent)");
+            }
+        }
+        if self.steps == Some(0) {
+            bail!("steps: must be at least 1");
+        }
+        if self.quick_steps == 0 {
+            bail!("quick_steps: must be at least 1");
+        }
+        if self.per_class == Some(0) {
+            bail!("per_class: must be at least 1");
+        }
+        if self.suite.is_empty() {
+            bail!("suite: must name a suite of the bench config");
+        }
+        Ok(())
+    }
+}
+
+/// What a model folder was trained with; a folder whose stamp equals the current one is
+/// complete and reused.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Stamp {
+    fraction: f64,
+    /// The tuple cache trained on.
+    cache: String,
+    net: NetConfig,
+    train: TrainOptions,
+}
+
+/// The parts of a training checkpoint's `state.toml` that decide whether it can be resumed.
+#[derive(Debug, Deserialize)]
+struct CheckpointHead {
+    step: u64,
+    net: NetConfig,
+    options: TrainOptions,
+}
+
+/// Whether a checkpoint in `ckpt` must be discarded: it is ahead of the requested steps or
+/// was trained with other settings (a resume would fail or export the wrong model).
+fn stale_checkpoint(ckpt: &Path, net: &NetConfig, opts: &TrainOptions) -> Option<String> {
+    let path = ckpt.join("state.toml");
+    let text = std::fs::read_to_string(&path).ok()?;
+    let head: CheckpointHead = match toml::from_str(&text) {
+        Ok(h) => h,
+        Err(e) => return Some(format!("{} is unreadable ({e})", path.display())),
+    };
+    let mut same = head.options.clone();
+    same.steps = opts.steps;
+    if head.step > opts.steps {
+        Some(format!(
+            "{} is at step {}, beyond the requested {}",
+            path.display(),
+            head.step,
+            opts.steps
+        ))
+    } else if same != *opts || head.net != *net {
+        Some(format!("{} has other settings", path.display()))
+    } else {
+        None
+    }
+}
+
+/// One fraction's training and measurement.
+#[derive(Debug)]
+struct FractionResult {
+    fraction: f64,
+    name: String,
+    scenes: Vec<String>,
+    train_tuples: usize,
+    /// Optimiser steps of the exported model (from its card).
+    steps: u64,
+    final_val_loss: f64,
+    /// Accumulated training time from the model card (over resumes).
+    training_time_s: f64,
+    /// `false` when the model folder was complete and reused.
+    trained: bool,
+    /// Wall time of this invocation's training stage (loading, training, export).
+    train_stage_s: f64,
+    bench_stage_s: f64,
+    rows: Vec<ResultRow>,
+}
+
+fn resolve(root: &Path, p: &Path) -> PathBuf {
+    if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        root.join(p)
+    }
+}
+
+fn device_of(name: &str) -> anyhow::Result<tch::Device> {
+    Ok(match name {
+        "cpu" => tch::Device::Cpu,
+        "cuda" => {
+            if !tch::Cuda::is_available() {
+                bail!("run.device = \"cuda\" but CUDA is not available");
+            }
+            tch::Device::Cuda(0)
+        }
+        _ => tch::Device::cuda_if_available(),
+    })
+}
+
+/// A line above the bars; printed directly when they are hidden (no terminal, e.g. a log
+/// file), where `MultiProgress::println` prints nothing.
+fn say(multi: &MultiProgress, line: String) {
+    if multi.is_hidden() || multi.println(&line).is_err() {
+        eprintln!("{line}");
+    }
+}
+
+fn stage_style() -> ProgressStyle {
+    ProgressStyle::with_template("{elapsed_precise} [{bar:30}] stage {pos}/{len}  ETA {eta}  {msg}")
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> ")
+}
+
+/// Runs `human2nav scaling`.
+pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
+    let started = Instant::now();
+    let text = std::fs::read_to_string(&args.config)
+        .with_context(|| format!("reading {}", args.config.display()))?;
+    let cfg: ScalingConfig =
+        toml::from_str(&text).with_context(|| format!("parsing {}", args.config.display()))?;
+    cfg.validate()
+        .with_context(|| format!("in {}", args.config.display()))?;
+    if args.threads == Some(0) {
+        bail!("--threads must be at least 1");
+    }
+    let cwd = std::env::current_dir().unwrap_or_else(|_| PathBuf::from("."));
+    let config_dir = args
+        .config
+        .parent()
+        .map(|d| cwd.join(d))
+        .unwrap_or_else(|| cwd.clone());
+    let root = human2nav_data::paths::find_workspace_root(&config_dir)
+        .or_else(|| human2nav_data::paths::find_workspace_root(&cwd))
+        .unwrap_or_else(|| cwd.clone());
+    let out = match &args.out {
+        Some(p) => p.clone(),
+        None => root.join(if args.quick {
+            "out/scaling-quick"
+        } else {
+            "out/scaling"
+        }),
+    };
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+
+    // Training settings.
+    let train_path = resolve(&root, &cfg.train);
+    let train_text = std::fs::read_to_string(&train_path)
+        .with_context(|| format!("reading {}", train_path.display()))?;
+    let mut tcfg: TrainConfig =
+        toml::from_str(&train_text).with_context(|| format!("parsing {}", train_path.display()))?;
+    tcfg.train.steps = if args.quick {
+        cfg.quick_steps
+    } else {
+        cfg.steps.unwrap_or(tcfg.train.steps)
+    };
+    if let Some(seed) = cfg.seed {
+        tcfg.train.seed = seed;
+    }
+    if let Some(t) = args.threads {
+        tcfg.run.threads = t;
+    }
+    // This command is the long run: no per-invocation cap (interrupting it is safe, the
+    // training resumes from its checkpoint).
+    tcfg.run.max_minutes = 0.0;
+    tcfg.validate()
+        .with_context(|| format!("in {}", train_path.display()))?;
+    let device = device_of(&tcfg.run.device)?;
+    let cache_dir = resolve(&root, &tcfg.data.cache);
+    let cache = TupleCache::open(&cache_dir).with_context(|| {
+        format!(
+            "opening the tuple cache {} (build it with `human2nav data build`)",
+            cache_dir.display()
+        )
+    })?;
+    let manifest = cache.manifest();
+    if manifest.horizon != tcfg.net.horizon || manifest.bev.cells != tcfg.net.bev_cells {
+        bail!(
+            "the cache {} has horizon {} and {}×{} rasters; {} has net.horizon = {} and net.bev_cells = {}",
+            cache_dir.display(),
+            manifest.horizon,
+            manifest.bev.cells,
+            manifest.bev.cells,
+            train_path.display(),
+            tcfg.net.horizon,
+            tcfg.net.bev_cells
+        );
+    }
+
+    // Benchmark settings: one suite, the chosen robots, Human2Nav with guidance only.
+    let bench_path = resolve(&root, &cfg.bench);
+    let mut bcfg = BenchConfig::load(&bench_path)
+        .with_context(|| format!("loading {}", bench_path.display()))?;
+    let Some(suite_cfg) = bcfg.suites.iter().find(|s| s.name == cfg.suite).cloned() else {
+        bail!(
+            "suite: `{}` is not a suite of {} (it has: {})",
+            cfg.suite,
+            bench_path.display(),
+            bcfg.suites
+                .iter()
+                .map(|s| s.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    };
+    if suite_cfg.kind == SuiteKind::Empty {
+        bail!(
+            "suite: `{}` is an empty-world suite; measure a suite with pedestrians",
+            cfg.suite
+        );
+    }
+    let mut suite_cfg = suite_cfg;
+    if let Some(n) = cfg.per_class {
+        suite_cfg.per_class = n;
+        suite_cfg.quick_per_class = n;
+    }
+    bcfg.suites = vec![suite_cfg];
+    ensure_real_episodes(&bcfg, &resolve(&root, &cfg.data))?;
+    let suites = build_suites(&bcfg, args.quick)?;
+    let suite: &Suite = suites.first().context("the bench config built no suite")?;
+    let all_robots = load_robots(&bcfg)?;
+    let robots: Vec<RobotSetup> = if cfg.robots.is_empty() {
+        all_robots
+    } else {
+        let mut picked = Vec::new();
+        for (i, name) in cfg.robots.iter().enumerate() {
+            let Some(r) = all_robots.iter().find(|r| &r.name == name) else {
+                bail!(
+                    "robots[{i}]: no robot named `{name}` in {} (it has: {})",
+                    bench_path.display(),
+                    all_robots
+                        .iter()
+                        .map(|r| r.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+            };
+            picked.push(r.clone());
+        }
+        picked
+    };
+    let planner_path = resolve(&root, &cfg.planner);
+    let planner_text = std::fs::read_to_string(&planner_path)
+        .with_context(|| format!("reading {}", planner_path.display()))?;
+    let planner_table: toml::Table = toml::from_str(&planner_text)
+        .with_context(|| format!("parsing {}", planner_path.display()))?;
+
+    let per_class = suite
+        .episodes
+        .iter()
+        .filter(|e| e.scenario == ScenarioClass::ALL[0])
+        .count();
+    eprintln!(
+        "suite `{}` ({}): {} episodes ({per_class} per class) × {} robot(s); {} fractions × {} training steps",
+        suite.name,
+        suite.kind.as_str(),
+        suite.episodes.len(),
+        robots.len(),
+        cfg.fractions.len(),
+        tcfg.train.steps
+    );
+    if let Some(note) = &suite.note {
+        eprintln!("  {note}");
+    }
+
+    let multi = MultiProgress::new();
+    let stages = multi.add(ProgressBar::new(2 * cfg.fractions.len() as u64));
+    stages.set_style(stage_style());
+    let mut results = Vec::new();
+    for &fraction in &cfg.fractions {
+        let name = fraction_name(fraction);
+        let model_dir = out.join("models").join(&name);
+        let run_dir = out.join("train").join(&name);
+        let scenes: Vec<String> = cache
+            .pick_scenes(Split::Train, fraction, tcfg.train.seed)?
+            .into_iter()
+            .map(|i| manifest.scenes[i as usize].name.clone())
+            .collect();
+
+        // Training stage.
+        stages.set_message(format!("training {name} ({} scenes)", scenes.len()));
+        let stamp = Stamp {
+            fraction,
+            cache: cache_dir.display().to_string(),
+            net: tcfg.net.clone(),
+            train: tcfg.train.clone(),
+        };
+        let stamp_path = model_dir.join(STAMP_FILE);
+        let complete = model_dir.join(CARD_FILE).is_file()
+            && model_dir.join(WEIGHTS_FILE).is_file()
+            && std::fs::read_to_string(&stamp_path)
+                .ok()
+                .and_then(|t| toml::from_str::<Stamp>(&t).ok())
+                .is_some_and(|s| s == stamp);
+        let t0 = Instant::now();
+        if complete {
+            say(
+                &multi,
+                format!("{name}: model {} is complete, reused", model_dir.display()),
+            );
+        } else {
+            let ckpt = run_dir.join("checkpoint");
+            let stale = stale_checkpoint(&ckpt, &tcfg.net, &tcfg.train);
+            if let Some(why) = &stale {
+                say(&multi, format!("{name}: training afresh: {why}"));
+            }
+            let _ = std::fs::remove_file(&stamp_path);
+            // A fresh parse of the train config (every other setting kept) with this
+            // fraction's overrides.
+            let mut fcfg: TrainConfig = toml::from_str(&train_text)
+                .with_context(|| format!("parsing {}", train_path.display()))?;
+            fcfg.net = tcfg.net.clone();
+            fcfg.train = tcfg.train.clone();
+            fcfg.data.train_fraction = fraction;
+            fcfg.run.threads = tcfg.run.threads;
+            fcfg.run.max_minutes = 0.0;
+            fcfg.run.name = format!("{}-{name}", tcfg.run.name);
+            say(
+                &multi,
+                format!(
+                    "{name}: training {} steps on {} of {} training scenes into {}",
+                    fcfg.train.steps,
+                    scenes.len(),
+                    manifest.scenes_in(Split::Train).len(),
+                    model_dir.display()
+                ),
+            );
+            tch::set_num_threads(fcfg.run.threads as i32);
+            multi
+                .suspend(|| train(&fcfg, &cache, &run_dir, &model_dir, device, stale.is_some()))
+                .with_context(|| format!("training {name}"))?;
+            let stamp_text = toml::to_string(&stamp).context("serialising the stamp")?;
+            std::fs::write(&stamp_path, stamp_text)
+                .with_context(|| format!("writing {}", stamp_path.display()))?;
+        }
+        let train_stage_s = t0.elapsed().as_secs_f64();
+        let card = ModelCard::load(&model_dir.join(CARD_FILE))?;
+        let info = card.training.as_ref();
+        stages.inc(1);
+
+        // Closed-loop stage.
+        stages.set_message(format!(
+            "closed loop {name} ({} episode runs)",
+            suite.episodes.len() * robots.len()
+        ));
+        let t1 = Instant::now();
+        let planner_dir = out.join(&name);
+        std::fs::create_dir_all(&planner_dir)
+            .with_context(|| format!("creating {}", planner_dir.display()))?;
+        let mut table = planner_table.clone();
+        table.insert(
+            "model".into(),
+            toml::Value::String(model_dir.display().to_string()),
+        );
+        let fraction_planner = planner_dir.join("planner.toml");
+        std::fs::write(
+            &fraction_planner,
+            format!(
+                "# {} with the model trained on {:.0} % of the training scenes.\n{}",
+                planner_path.display(),
+                100.0 * fraction,
+                toml::to_string(&table).context("serialising the planner config")?
+            ),
+        )
+        .with_context(|| format!("writing {}", fraction_planner.display()))?;
+        let mut method_table = toml::Table::new();
+        method_table.insert(
+            "planner".into(),
+            toml::Value::String(fraction_planner.display().to_string()),
+        );
+        method_table.insert("guidance".into(), toml::Value::Boolean(true));
+        let method = human2nav_method(
+            &MethodConfig {
+                name: METHOD.into(),
+                kind: "human2nav".into(),
+                library: None,
+                plugin: None,
+                config: method_table,
+            },
+            &bcfg,
+        )?;
+        let bar = multi.add(ProgressBar::new(0));
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{elapsed_precise} [{bar:30}] {pos}/{len} episode runs  ETA {eta}",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+        );
+        let rows = run_bench(
+            std::slice::from_ref(suite),
+            &robots,
+            std::slice::from_ref(&method),
+            &bcfg.sim,
+            bcfg.seed,
+            &bar,
+        )?;
+        bar.finish_and_clear();
+        multi.remove(&bar);
+        let csv = planner_dir.join("results.csv");
+        std::fs::write(&csv, results_csv(&rows))
+            .with_context(|| format!("writing {}", csv.display()))?;
+        let bench_stage_s = t1.elapsed().as_secs_f64();
+        let s = summarize(&rows);
+        say(
+            &multi,
+            format!(
+                "{name}: SR {:.3} ± {:.3} over {} episode runs ({:.0} s training stage, {:.0} s closed loop)",
+                s.sr, s.sr_se, s.n, train_stage_s, bench_stage_s
+            ),
+        );
+        stages.inc(1);
+        results.push(FractionResult {
+            fraction,
+            name,
+            scenes,
+            train_tuples: info.map(|i| i.train_tuples).unwrap_or(0),
+            steps: info.map(|i| i.steps).unwrap_or(0),
+            final_val_loss: info.map(|i| i.final_val_loss).unwrap_or(f64::NAN),
+            training_time_s: info.map(|i| i.wall_time_s).unwrap_or(f64::NAN),
+            trained: !complete,
+            train_stage_s,
+            bench_stage_s,
+            rows,
+        });
+    }
+    stages.finish_and_clear();
+
+    let runs: Vec<(f64, Vec<ResultRow>)> = results
+        .iter()
+        .map(|r| (r.fraction, r.rows.clone()))
+        .collect();
+    let points = scaling_points(&runs, &suite.name, METHOD);
+    let png = out.join("fig5_sr_vs_training_data.png");
+    sr_vs_training_data(
+        &png,
+        &points,
+        &format!(
+            "Human2Nav (guided): SR against training data, suite `{}`",
+            suite.name
+        ),
+    )?;
+    let csv = out.join("scaling.csv");
+    std::fs::write(&csv, scaling_csv(&results))
+        .with_context(|| format!("writing {}", csv.display()))?;
+    let command = format!(
+        "human2nav scaling --config {}{}{}{}",
+        args.config.display(),
+        args.out
+            .as_ref()
+            .map(|p| format!(" --out {}", p.display()))
+            .unwrap_or_default(),
+        if args.quick { " --quick" } else { "" },
+        args.threads
+            .map(|t| format!(" --threads {t}"))
+            .unwrap_or_default()
+    );
+    let settings = vec![
+        ("command".to_string(), format!("`{command}`")),
+        ("train config".into(), format!("`{}`", train_path.display())),
+        (
+            "tuple cache".into(),
+            format!(
+                "`{}` ({} data, {} training scenes)",
+                cache_dir.display(),
+                manifest.source,
+                manifest.scenes_in(Split::Train).len()
+            ),
+        ),
+        (
+            "training".into(),
+            format!(
+                "{} steps of batch {} per model, seed {} (scene choice and training), {} torch thread(s), device {device:?}",
+                tcfg.train.steps, tcfg.train.batch_size, tcfg.train.seed, tcfg.run.threads
+            ),
+        ),
+        ("bench config".into(), format!("`{}`", bench_path.display())),
+        (
+            "suite".into(),
+            format!(
+                "`{}` ({}), {} episodes, {per_class} per scenario class{}",
+                suite.name,
+                suite.kind.as_str(),
+                suite.episodes.len(),
+                suite
+                    .note
+                    .as_ref()
+                    .map(|n| format!(": {n}"))
+                    .unwrap_or_default()
+            ),
+        ),
+        (
+            "robots".into(),
+            robots
+                .iter()
+                .map(|r| format!("`{}`", r.name))
+                .collect::<Vec<_>>()
+                .join(", "),
+        ),
+        (
+            "method".into(),
+            format!(
+                "Human2Nav with guidance: `{}` with `model` replaced per fraction",
+                planner_path.display()
+            ),
+        ),
+        (
+            "episode seed".into(),
+            format!(
+                "{} (the bench config's; identical draws for every fraction)",
+                bcfg.seed
+            ),
+        ),
+        (
+            "simulation".into(),
+            format!(
+                "step {} s, replanning {} Hz, goal tolerance {} m, budget max(episode budget, {} × empty-world time + {} s)",
+                bcfg.sim.dt,
+                bcfg.sim.replan_hz,
+                bcfg.sim.goal_tolerance,
+                bcfg.sim.budget_factor,
+                bcfg.sim.budget_margin
+            ),
+        ),
+    ];
+    let report = out.join("report.md");
+    std::fs::write(
+        &report,
+        report_markdown(
+            &results,
+            &settings,
+            &robots,
+            args.quick,
+            started.elapsed().as_secs_f64(),
+        ),
+    )
+    .with_context(|| format!("writing {}", report.display()))?;
+    println!(
+        "{} fractions in {:.1} s",
+        results.len(),
+        started.elapsed().as_secs_f64()
+    );
+    println!("report:  {}", report.display());
+    println!("results: {}", csv.display());
+    println!("figure:  {}", png.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `scaling.csv`: one row per fraction (SR overall and per scenario class, over every robot).
+fn scaling_csv(results: &[FractionResult]) -> String {
+    let mut out = String::from(
+        "fraction,train_scenes,train_tuples,steps,final_val_loss,episode_runs,sr,sr_se,\
+         sr_co_flow,sr_cross_flow,sr_counter_flow,sr_multidirection_flow,tfs,collision_rate,\
+         timeout_rate,model,training_time_s,train_stage_s,bench_stage_s\n",
+    );
+    for r in results {
+        let s = summarize(&r.rows);
+        let class_sr: Vec<String> = ScenarioClass::ALL
+            .iter()
+            .map(|&c| {
+                let cs = summarize(r.rows.iter().filter(|x| x.scenario == c));
+                if cs.n > 0 {
+                    format!("{:.6}", cs.sr)
+                } else {
+                    String::new()
+                }
+            })
+            .collect();
+        let _ = writeln!(
+            out,
+            "{},{},{},{},{:.6},{},{:.6},{:.6},{},{:.6},{:.6},{:.6},{},{:.1},{:.1},{:.1}",
+            r.fraction,
+            r.scenes.len(),
+            r.train_tuples,
+            r.steps,
+            r.final_val_loss,
+            s.n,
+            s.sr,
+            s.sr_se,
+            class_sr.join(","),
+            s.tfs,
+            s.collision_rate,
+            s.timeout_rate,
+            if r.trained { "trained" } else { "reused" },
+            r.training_time_s,
+            r.train_stage_s,
+            r.bench_stage_s
+        );
+    }
+    out
+}
+
+fn pct(v: f64) -> String {
+    format!("{:.1}", 100.0 * v)
+}
+
+/// `report.md`: settings, the SR table per fraction (overall with its standard error, per
+/// scenario class, per robot), the training record and the wall time of every stage.
+fn report_markdown(
+    results: &[FractionResult],
+    settings: &[(String, String)],
+    robots: &[RobotSetup],
+    quick: bool,
+    wall_s: f64,
+) -> String {
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "# Success rate against the amount of human training data (paper Fig. 5)\n"
+    );
+    let _ = writeln!(
+        md,
+        "The flow model is retrained on each share of the training scenes (a seeded choice; the \
+         smaller subsets are contained in the larger ones) and Human2Nav with guidance runs closed \
+         loop on the same episodes. SR = success rate (goal reached within the time budget without \
+         collision), in %; ± is the standard error sqrt(SR(1 − SR)/n).{}\n",
+        if quick {
+            " **Quick mode**: short trainings and a few episodes per class; the numbers only show \
+             that the pipeline works."
+        } else {
+            ""
+        }
+    );
+    let _ = writeln!(
+        md,
+        "Total wall time: {wall_s:.1} s. Figure: [fig5_sr_vs_training_data.png](fig5_sr_vs_training_data.png); \
+         one row per fraction in [scaling.csv](scaling.csv); per-episode rows in `frac-<pct>/results.csv`.\n"
+    );
+    let _ = writeln!(md, "## Settings\n\n| setting | value |\n|---|---|");
+    for (k, v) in settings {
+        let _ = writeln!(md, "| {k} | {} |", v.replace('|', "\\|"));
+    }
+
+    let _ = writeln!(md, "\n## SR per fraction of the training scenes\n");
+    let mut header = String::from("| training data | scenes | tuples | n | SR (%) |");
+    let mut rule = String::from("|---|---|---|---|---|");
+    for c in ScenarioClass::ALL {
+        let _ = write!(header, " {} (%) |", c.title());
+        rule.push_str("---|");
+    }
+    header.push_str(" TFS | collision (%) | timeout (%) |");
+    rule.push_str("---|---|---|");
+    let _ = writeln!(md, "{header}\n{rule}");
+    for r in results {
+        let s = summarize(&r.rows);
+        let mut line = format!(
+            "| {:.0} % | {} | {} | {} | {} ± {} |",
+            100.0 * r.fraction,
+            r.scenes.len(),
+            r.train_tuples,
+            s.n,
+            pct(s.sr),
+            pct(s.sr_se)
+        );
+        for c in ScenarioClass::ALL {
+            let cs = summarize(r.rows.iter().filter(|x| x.scenario == c));
+            if cs.n > 0 {
+                let _ = write!(line, " {} |", pct(cs.sr));
+            } else {
+                line.push_str(" – |");
+            }
+        }
+        let _ = write!(
+            line,
+            " {:.3} | {} | {} |",
+            s.tfs,
+            pct(s.collision_rate),
+            pct(s.timeout_rate)
+        );
+        let _ = writeln!(md, "{line}");
+    }
+
+    if robots.len() > 1 {
+        let _ = writeln!(md, "\n## SR per robot (%)\n");
+        let mut header = String::from("| training data |");
+        let mut rule = String::from("|---|");
+        for r in robots {
+            let _ = write!(header, " {} |", r.name);
+            rule.push_str("---|");
+        }
+        let _ = writeln!(md, "{header}\n{rule}");
+        for r in results {
+            let mut line = format!("| {:.0} % |", 100.0 * r.fraction);
+            for robot in robots {
+                let s = summarize(r.rows.iter().filter(|x| x.robot == robot.name));
+                let _ = write!(line, " {} ± {} |", pct(s.sr), pct(s.sr_se));
+            }
+            let _ = writeln!(md, "{line}");
+        }
+    }
+
+    let _ = writeln!(md, "\n## Models and wall time per stage\n");
+    let _ = writeln!(
+        md,
+        "| training data | model | steps | final val loss | training time (card, s) | training stage (s) | closed-loop stage (s) |\n\
+         |---|---|---|---|---|---|---|"
+    );
+    for r in results {
+        let _ = writeln!(
+            md,
+            "| {:.0} % | `models/{}` ({}) | {} | {:.4} | {:.1} | {:.1} | {:.1} |",
+            100.0 * r.fraction,
+            r.name,
+            if r.trained {
+                "trained now"
+            } else {
+                "complete, reused"
+            },
+            r.steps,
+            r.final_val_loss,
+            r.training_time_s,
+            r.train_stage_s,
+            r.bench_stage_s
+        );
+    }
+    let _ = writeln!(md, "\nTraining scenes per fraction:\n");
+    for r in results {
+        let _ = writeln!(
+            md,
+            "- {:.0} % ({} scenes): {}",
+            100.0 * r.fraction,
+            r.scenes.len(),
+            r.scenes.join(", ")
+        );
+    }
+    md
+}

@@ -1,0 +1,208 @@
+//! `human2nav scaling` end to end on a tiny self-contained setup: a synthetic tuple cache (built
+//! with `human2nav data build` from a data config whose dataset folder does not exist), a tiny
+//! network trained for a few steps on two fractions of the training scenes, one synthetic
+//! episode per scenario class (the suite's episode file is absent) and one robot. Checks the
+//! CSV, the report and the figure, then that a second run reuses the complete models.
+
+#![allow(clippy::unwrap_used)] // test helpers; a failed fixture should panic
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn workspace_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn human2nav(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_human2nav"))
+        .current_dir(workspace_root())
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// TOML string literal of a path.
+fn lit(p: &Path) -> String {
+    format!("{:?}", p.display().to_string())
+}
+
+/// Writes the data, train, bench, planner and scaling configs into `dir`; returns the scaling
+/// config's path.
+fn write_configs(dir: &Path) -> PathBuf {
+    let root = workspace_root().canonicalize().unwrap();
+    let cache = dir.join("cache");
+    std::fs::write(
+        dir.join("data.toml"),
+        format!(
+            "[paths]\ndata_root = {}\ncache_dir = {}\nepisodes = {}\n\
+             [sources]\nsynthetic_scenes = 10\nseed = 3\n\
+             [bev]\ncells = 16\n\
+             [tuples]\nhorizon = 8\n",
+            lit(&dir.join("no-datasets")),
+            lit(&cache),
+            lit(&dir.join("episodes.json")),
+        ),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("train.toml"),
+        format!(
+            "[data]\ncache = {}\n\
+             [net]\nhorizon = 8\nbev_cells = 16\ndown_dims = [8, 16]\nn_groups = 4\n\
+             bev_channels = [4, 8, 8]\ntime_embed_dim = 8\nbev_embed_dim = 8\ngoal_embed_dim = 8\n\
+             [train]\nbatch_size = 16\nsteps = 1000\nwarmup_steps = 1\n\
+             [run]\nname = \"tiny\"\nthreads = 1\ndevice = \"cpu\"\nvalidate_every = 2\n\
+             checkpoint_every = 2\nmax_minutes = 0.01\n",
+            lit(&cache)
+        ),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("bench.toml"),
+        format!(
+            "seed = 5\nrobots = [{}]\n\
+             [[methods]]\nname = \"straight\"\nkind = \"straight\"\n\
+             [[suites]]\nname = \"real\"\nkind = \"real\"\nepisodes = {}\nper_class = 50\n\
+             quick_per_class = 3\n",
+            lit(&root.join("robots/diablo/robot.toml")),
+            lit(&dir.join("episodes.json")),
+        ),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("planner.toml"),
+        "model = \"replaced\"\n[human2nav]\nsamples = 4\nguided_samples = 2\n\
+         [human2nav.guidance]\nsteps_n = 3\niterations_m = 1\n",
+    )
+    .unwrap();
+    let scaling = dir.join("scaling.toml");
+    std::fs::write(
+        &scaling,
+        format!(
+            "train = {}\nbench = {}\nplanner = {}\ndata = {}\n\
+             fractions = [0.5, 1.0]\nsteps = 4\nper_class = 1\nrobots = [\"diablo\"]\nseed = 2\n",
+            lit(&dir.join("train.toml")),
+            lit(&dir.join("bench.toml")),
+            lit(&dir.join("planner.toml")),
+            lit(&dir.join("data.toml")),
+        ),
+    )
+    .unwrap();
+    scaling
+}
+
+/// The data rows of `scaling.csv` as field lists, with the header's column index of `name`.
+fn csv_rows(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let csv = std::fs::read_to_string(path).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<String> = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .map(str::to_string)
+        .collect();
+    let rows = lines
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    (header, rows)
+}
+
+fn column(header: &[String], name: &str) -> usize {
+    header.iter().position(|h| h == name).unwrap()
+}
+
+#[test]
+fn two_fractions_end_to_end_then_resumed() {
+    let dir = std::env::temp_dir().join(format!("h2n-scaling-cli-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let scaling = write_configs(&dir);
+
+    let out = human2nav(&[
+        "data",
+        "build",
+        "--config",
+        dir.join("data.toml").to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+
+    let out_dir = dir.join("out");
+    let run = || {
+        human2nav(&[
+            "scaling",
+            "--config",
+            scaling.to_str().unwrap(),
+            "--out",
+            out_dir.to_str().unwrap(),
+            "--threads",
+            "1",
+        ])
+    };
+    let out = run();
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert!(out.status.success(), "{stderr}");
+    assert!(stdout.contains("2 fractions in"), "{stdout}");
+    assert!(
+        stderr.contains("frac-050: training 4 steps on 4 of 8"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("frac-100: training 4 steps on 8 of 8"),
+        "{stderr}"
+    );
+
+    let (header, rows) = csv_rows(&out_dir.join("scaling.csv"));
+    assert_eq!(rows.len(), 2, "one row per fraction");
+    let (f, sr, n, scenes, steps, model) = (
+        column(&header, "fraction"),
+        column(&header, "sr"),
+        column(&header, "episode_runs"),
+        column(&header, "train_scenes"),
+        column(&header, "steps"),
+        column(&header, "model"),
+    );
+    for (row, (fraction, n_scenes)) in rows.iter().zip([(0.5, "4"), (1.0, "8")]) {
+        assert_eq!(row.len(), header.len());
+        assert_eq!(row[f].parse::<f64>().unwrap(), fraction);
+        let v: f64 = row[sr].parse().unwrap();
+        assert!((0.0..=1.0).contains(&v), "SR {v}");
+        assert_eq!(row[n], "4", "one episode per class on one robot");
+        assert_eq!(row[scenes], n_scenes);
+        // run.max_minutes of the train config is ignored: every model gets its 4 steps.
+        assert_eq!(row[steps], "4");
+        assert_eq!(row[model], "trained");
+    }
+    let png = std::fs::metadata(out_dir.join("fig5_sr_vs_training_data.png")).unwrap();
+    assert!(png.len() > 1000, "figure of {} bytes", png.len());
+    let report = std::fs::read_to_string(out_dir.join("report.md")).unwrap();
+    assert!(report.contains("| 50 % | 4 |"), "{report}");
+    assert!(report.contains("| 100 % | 8 |"), "{report}");
+    for frac in ["frac-050", "frac-100"] {
+        assert!(
+            out_dir
+                .join("models")
+                .join(frac)
+                .join("model.toml")
+                .is_file()
+        );
+        let results = std::fs::read_to_string(out_dir.join(frac).join("results.csv")).unwrap();
+        assert_eq!(results.lines().count(), 5, "{results}");
+    }
+
+    // A second run reuses both models and measures the same episodes the same way.
+    let out = run();
+    let stderr = text(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("frac-050: model"), "{stderr}");
+    assert!(!stderr.contains("training 4 steps"), "{stderr}");
+    let (_, again) = csv_rows(&out_dir.join("scaling.csv"));
+    for (a, b) in rows.iter().zip(&again) {
+        assert_eq!(b[model], "reused");
+        assert_eq!(a[sr], b[sr], "deterministic given the seeds");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

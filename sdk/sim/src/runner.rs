@@ -315,7 +315,8 @@ pub fn run_episode(
     let replay = CrowdReplay::new(episode);
     let dt = cfg.dt;
     let budget = cfg.budget_for(episode, &robot.limits);
-    let max_steps = (budget / dt - 1e-9).ceil().max(0.0) as usize;
+    // The last step checked is the last one at or before the budget (so duration ≤ budget).
+    let max_steps = (budget / dt + 1e-9).floor().max(0.0) as usize;
     let replan_every = cfg.replan_every();
     let emb = robot.embodiment.as_ref();
 

@@ -56,8 +56,8 @@ pub struct ScalingArgs {
     /// workspace root].
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Short check: `quick_steps` training steps per model and the suite's `quick_per_class`
-    /// episodes per scenario class.
+    /// Short check: `quick_steps` training steps per model, the suite's `quick_per_class`
+    /// episodes per scenario class and the `quick_robots`.
     #[arg(long)]
     quick: bool,
     /// Torch threads for training [default: the train config's `run.threads`]. The episodes
@@ -90,11 +90,13 @@ struct ScalingConfig {
     steps: Option<u64>,
     /// Training steps per model with `--quick`. Default 50.
     quick_steps: u64,
-    /// Episodes per scenario class. Default: the suite's `per_class` (`quick_per_class` with
-    /// `--quick`).
+    /// Episodes per scenario class (at most; the report notes classes with fewer). Default: the
+    /// suite's `per_class`; `--quick` always takes the suite's `quick_per_class`.
     per_class: Option<usize>,
     /// Robot names (a subset of the bench config's robots). Default: all of them.
     robots: Vec<String>,
+    /// Robot names with `--quick`. Default: `robots`.
+    quick_robots: Vec<String>,
     /// Seed of the scene choice and of training (`train.seed`). Default: the train config's.
     seed: Option<u64>,
 }
@@ -112,6 +114,7 @@ impl Default for ScalingConfig {
             quick_steps: 50,
             per_class: None,
             robots: Vec::new(),
+            quick_robots: Vec::new(),
             seed: None,
         }
     }
@@ -356,21 +359,30 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
     let mut suite_cfg = suite_cfg;
     if let Some(n) = cfg.per_class {
         suite_cfg.per_class = n;
-        suite_cfg.quick_per_class = n;
     }
+    let per_class = if args.quick {
+        suite_cfg.quick_per_class
+    } else {
+        suite_cfg.per_class
+    };
     bcfg.suites = vec![suite_cfg];
     ensure_real_episodes(&bcfg, &resolve(&root, &cfg.data))?;
     let suites = build_suites(&bcfg, args.quick)?;
     let suite: &Suite = suites.first().context("the bench config built no suite")?;
     let all_robots = load_robots(&bcfg)?;
-    let robots: Vec<RobotSetup> = if cfg.robots.is_empty() {
+    let (robots_key, robot_names) = if args.quick && !cfg.quick_robots.is_empty() {
+        ("quick_robots", &cfg.quick_robots)
+    } else {
+        ("robots", &cfg.robots)
+    };
+    let robots: Vec<RobotSetup> = if robot_names.is_empty() {
         all_robots
     } else {
         let mut picked = Vec::new();
-        for (i, name) in cfg.robots.iter().enumerate() {
+        for (i, name) in robot_names.iter().enumerate() {
             let Some(r) = all_robots.iter().find(|r| &r.name == name) else {
                 bail!(
-                    "robots[{i}]: no robot named `{name}` in {} (it has: {})",
+                    "{robots_key}[{i}]: no robot named `{name}` in {} (it has: {})",
                     bench_path.display(),
                     all_robots
                         .iter()
@@ -389,13 +401,8 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
     let planner_table: toml::Table = toml::from_str(&planner_text)
         .with_context(|| format!("parsing {}", planner_path.display()))?;
 
-    let per_class = suite
-        .episodes
-        .iter()
-        .filter(|e| e.scenario == ScenarioClass::ALL[0])
-        .count();
     eprintln!(
-        "suite `{}` ({}): {} episodes ({per_class} per class) × {} robot(s); {} fractions × {} training steps",
+        "suite `{}` ({}): {} episodes (up to {per_class} per class) × {} robot(s); {} fractions × {} training steps",
         suite.name,
         suite.kind.as_str(),
         suite.episodes.len(),
@@ -622,7 +629,7 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
         (
             "suite".into(),
             format!(
-                "`{}` ({}), {} episodes, {per_class} per scenario class{}",
+                "`{}` ({}), {} episodes, up to {per_class} per scenario class{}",
                 suite.name,
                 suite.kind.as_str(),
                 suite.episodes.len(),

@@ -14,7 +14,10 @@
 //! * `train/frac-<pct>/checkpoint/`: the training checkpoints (an interrupted training resumes
 //!   from there);
 //! * `frac-<pct>/planner.toml` and `frac-<pct>/results.csv`: the planner used and one row per
-//!   episode × robot;
+//!   episode × robot; `frac-<pct>/closed_loop.toml`: the same rows with what they were measured
+//!   with (model, planner, episodes, robots, simulation settings, seed), reused by a later run
+//!   with equal settings, so an interrupted run repeats neither finished trainings nor finished
+//!   closed loops;
 //! * `scaling.csv` (one row per fraction), `report.md`, `fig5_sr_vs_training_data.png`.
 
 use crate::bench::{ensure_real_episodes, human2nav_method};
@@ -31,7 +34,7 @@ use human2nav_sim::config::{BenchConfig, MethodConfig, build_suites, load_robots
 use human2nav_sim::episode::{ScenarioClass, ScenarioTitle};
 use human2nav_sim::figures::{scaling_points, sr_vs_training_data};
 use human2nav_sim::report::{results_csv, summarize};
-use human2nav_sim::{ResultRow, RobotSetup, Suite, SuiteKind, run_bench};
+use human2nav_sim::{ResultRow, RobotSetup, SimConfig, Suite, SuiteKind, run_bench};
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
@@ -44,6 +47,9 @@ const METHOD: &str = "human2nav";
 
 /// File in a model folder recording the settings it was trained with.
 const STAMP_FILE: &str = "scaling_stamp.toml";
+
+/// File in a fraction's folder with its closed-loop rows and what they were measured with.
+const CLOSED_LOOP_FILE: &str = "closed_loop.toml";
 
 /// Arguments of `human2nav scaling`.
 #[derive(Debug, Args)]
@@ -171,6 +177,38 @@ struct Stamp {
     train: TrainOptions,
 }
 
+/// What a fraction's closed-loop rows were measured with; rows stored with an equal stamp are
+/// reused instead of running the episodes again.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ClosedLoopStamp {
+    model: Stamp,
+    /// The planner configuration with this fraction's model.
+    planner: toml::Table,
+    suite: String,
+    /// Episode ids, in order.
+    episodes: Vec<String>,
+    /// Each robot's name, footprint and limits.
+    robots: Vec<String>,
+    sim: SimConfig,
+    seed: u64,
+}
+
+/// Contents of [`CLOSED_LOOP_FILE`].
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ClosedLoopFile {
+    stamp: ClosedLoopStamp,
+    rows: Vec<ResultRow>,
+}
+
+/// The stored rows of `path` when they were measured with `stamp`.
+fn stored_rows(path: &Path, stamp: &ClosedLoopStamp) -> Option<Vec<ResultRow>> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let file: ClosedLoopFile = toml::from_str(&text).ok()?;
+    (file.stamp == *stamp).then_some(file.rows)
+}
+
 /// The parts of a training checkpoint's `state.toml` that decide whether it can be resumed.
 #[derive(Debug, Deserialize)]
 struct CheckpointHead {
@@ -221,6 +259,8 @@ struct FractionResult {
     /// Wall time of this invocation's training stage (loading, training, export).
     train_stage_s: f64,
     bench_stage_s: f64,
+    /// `false` when the stored closed-loop rows matched and were reused.
+    measured: bool,
     rows: Vec<ResultRow>,
 }
 
@@ -456,6 +496,7 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
                 say(&multi, format!("{name}: training afresh: {why}"));
             }
             let _ = std::fs::remove_file(&stamp_path);
+            let _ = std::fs::remove_file(out.join(&name).join(CLOSED_LOOP_FILE));
             // A fresh parse of the train config (every other setting kept) with this
             // fraction's overrides.
             let mut fcfg: TrainConfig = toml::from_str(&train_text)
@@ -514,40 +555,47 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
             ),
         )
         .with_context(|| format!("writing {}", fraction_planner.display()))?;
-        let mut method_table = toml::Table::new();
-        method_table.insert(
-            "planner".into(),
-            toml::Value::String(fraction_planner.display().to_string()),
-        );
-        method_table.insert("guidance".into(), toml::Value::Boolean(true));
-        let method = human2nav_method(
-            &MethodConfig {
-                name: METHOD.into(),
-                kind: "human2nav".into(),
-                library: None,
-                plugin: None,
-                config: method_table,
-            },
-            &bcfg,
-        )?;
-        let bar = multi.add(ProgressBar::new(0));
-        bar.set_style(
-            ProgressStyle::with_template(
-                "{elapsed_precise} [{bar:30}] {pos}/{len} episode runs  ETA {eta}",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
-        );
-        let rows = run_bench(
-            std::slice::from_ref(suite),
-            &robots,
-            std::slice::from_ref(&method),
-            &bcfg.sim,
-            bcfg.seed,
-            &bar,
-        )?;
-        bar.finish_and_clear();
-        multi.remove(&bar);
+        let cl_stamp = ClosedLoopStamp {
+            model: stamp.clone(),
+            planner: table.clone(),
+            suite: suite.name.clone(),
+            episodes: suite.episodes.iter().map(|e| e.id.clone()).collect(),
+            robots: robots
+                .iter()
+                .map(|r| {
+                    format!(
+                        "{} (footprint {} m, {:?})",
+                        r.name, r.footprint_radius, r.limits
+                    )
+                })
+                .collect(),
+            sim: bcfg.sim.clone(),
+            seed: bcfg.seed,
+        };
+        let cl_path = planner_dir.join(CLOSED_LOOP_FILE);
+        let (rows, measured) = match stored_rows(&cl_path, &cl_stamp) {
+            Some(rows) => {
+                say(
+                    &multi,
+                    format!(
+                        "{name}: closed-loop results in {} match these settings, reused",
+                        cl_path.display()
+                    ),
+                );
+                (rows, false)
+            }
+            None => {
+                let rows = closed_loop(&fraction_planner, &bcfg, suite, &robots, &multi)?;
+                let file = ClosedLoopFile {
+                    stamp: cl_stamp,
+                    rows,
+                };
+                let text = toml::to_string(&file).context("serialising the closed-loop rows")?;
+                std::fs::write(&cl_path, text)
+                    .with_context(|| format!("writing {}", cl_path.display()))?;
+                (file.rows, true)
+            }
+        };
         let csv = planner_dir.join("results.csv");
         std::fs::write(&csv, results_csv(&rows))
             .with_context(|| format!("writing {}", csv.display()))?;
@@ -570,6 +618,7 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
             final_val_loss: info.map(|i| i.final_val_loss).unwrap_or(f64::NAN),
             training_time_s: info.map(|i| i.wall_time_s).unwrap_or(f64::NAN),
             trained: !complete,
+            measured,
             train_stage_s,
             bench_stage_s,
             rows,
@@ -697,12 +746,58 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// Runs Human2Nav with guidance (the planner config at `planner`) on every episode of `suite`
+/// for every robot, in parallel; rows in job order.
+fn closed_loop(
+    planner: &Path,
+    bcfg: &BenchConfig,
+    suite: &Suite,
+    robots: &[RobotSetup],
+    multi: &MultiProgress,
+) -> anyhow::Result<Vec<ResultRow>> {
+    let mut method_table = toml::Table::new();
+    method_table.insert(
+        "planner".into(),
+        toml::Value::String(planner.display().to_string()),
+    );
+    method_table.insert("guidance".into(), toml::Value::Boolean(true));
+    let method = human2nav_method(
+        &MethodConfig {
+            name: METHOD.into(),
+            kind: "human2nav".into(),
+            library: None,
+            plugin: None,
+            config: method_table,
+        },
+        bcfg,
+    )?;
+    let bar = multi.add(ProgressBar::new(0));
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:30}] {pos}/{len} episode runs  ETA {eta}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    let rows = run_bench(
+        std::slice::from_ref(suite),
+        robots,
+        std::slice::from_ref(&method),
+        &bcfg.sim,
+        bcfg.seed,
+        &bar,
+    );
+    bar.finish_and_clear();
+    multi.remove(&bar);
+    Ok(rows?)
+}
+
 /// `scaling.csv`: one row per fraction (SR overall and per scenario class, over every robot).
 fn scaling_csv(results: &[FractionResult]) -> String {
     let mut out = String::from(
         "fraction,train_scenes,train_tuples,steps,final_val_loss,episode_runs,sr,sr_se,\
          sr_co_flow,sr_cross_flow,sr_counter_flow,sr_multidirection_flow,tfs,collision_rate,\
-         timeout_rate,model,training_time_s,train_stage_s,bench_stage_s\n",
+         timeout_rate,model,closed_loop,training_time_s,train_stage_s,bench_stage_s\n",
     );
     for r in results {
         let s = summarize(&r.rows);
@@ -719,7 +814,7 @@ fn scaling_csv(results: &[FractionResult]) -> String {
             .collect();
         let _ = writeln!(
             out,
-            "{},{},{},{},{:.6},{},{:.6},{:.6},{},{:.6},{:.6},{:.6},{},{:.1},{:.1},{:.1}",
+            "{},{},{},{},{:.6},{},{:.6},{:.6},{},{:.6},{:.6},{:.6},{},{},{:.1},{:.1},{:.1}",
             r.fraction,
             r.scenes.len(),
             r.train_tuples,
@@ -733,6 +828,7 @@ fn scaling_csv(results: &[FractionResult]) -> String {
             s.collision_rate,
             s.timeout_rate,
             if r.trained { "trained" } else { "reused" },
+            if r.measured { "measured" } else { "reused" },
             r.training_time_s,
             r.train_stage_s,
             r.bench_stage_s
@@ -849,7 +945,7 @@ fn report_markdown(
     for r in results {
         let _ = writeln!(
             md,
-            "| {:.0} % | `models/{}` ({}) | {} | {:.4} | {:.1} | {:.1} | {:.1} |",
+            "| {:.0} % | `models/{}` ({}) | {} | {:.4} | {:.1} | {:.1} | {:.1}{} |",
             100.0 * r.fraction,
             r.name,
             if r.trained {
@@ -861,7 +957,12 @@ fn report_markdown(
             r.final_val_loss,
             r.training_time_s,
             r.train_stage_s,
-            r.bench_stage_s
+            r.bench_stage_s,
+            if r.measured {
+                ""
+            } else {
+                " (stored rows reused)"
+            }
         );
     }
     let _ = writeln!(md, "\nTraining scenes per fraction:\n");

@@ -2,7 +2,8 @@
 //! with `human2nav data build` from a data config whose dataset folder does not exist), a tiny
 //! network trained for a few steps on two fractions of the training scenes, one synthetic
 //! episode per scenario class (the suite's episode file is absent) and one robot. Checks the
-//! CSV, the report and the figure, then that a second run reuses the complete models.
+//! CSV, the report and the figure, then that a second run reuses the complete models and the
+//! stored closed-loop rows, and a third without the stored rows measures the same SR.
 
 #![allow(clippy::unwrap_used)] // test helpers; a failed fixture should panic
 
@@ -193,7 +194,10 @@ fn two_fractions_end_to_end_then_resumed() {
         assert_eq!(results.lines().count(), 5, "{results}");
     }
 
-    // A second run reuses both models and measures the same episodes the same way.
+    let closed_loop = column(&header, "closed_loop");
+    assert!(rows.iter().all(|r| r[closed_loop] == "measured"));
+
+    // A second run reuses both models and their stored closed-loop rows.
     let out = run();
     let stderr = text(&out.stderr);
     assert!(out.status.success(), "{stderr}");
@@ -202,7 +206,22 @@ fn two_fractions_end_to_end_then_resumed() {
     let (_, again) = csv_rows(&out_dir.join("scaling.csv"));
     for (a, b) in rows.iter().zip(&again) {
         assert_eq!(b[model], "reused");
-        assert_eq!(a[sr], b[sr], "deterministic given the seeds");
+        assert_eq!(b[closed_loop], "reused");
+        assert_eq!(a[sr], b[sr]);
+    }
+
+    // Without the stored rows the episodes run again on the reused models, with the same
+    // outcome (deterministic given the seeds).
+    for frac in ["frac-050", "frac-100"] {
+        std::fs::remove_file(out_dir.join(frac).join("closed_loop.toml")).unwrap();
+    }
+    let out = run();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let (_, third) = csv_rows(&out_dir.join("scaling.csv"));
+    for (a, c) in rows.iter().zip(&third) {
+        assert_eq!(c[model], "reused");
+        assert_eq!(c[closed_loop], "measured");
+        assert_eq!(a[sr], c[sr], "deterministic given the seeds");
     }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -28,6 +28,7 @@ use human2nav_data::cache::TupleCache;
 use human2nav_data::tuples::Split;
 use human2nav_flow::card::ModelCard;
 use human2nav_flow::model::{CARD_FILE, WEIGHTS_FILE};
+use human2nav_flow::planner::{PlannerConfig, load_profile};
 use human2nav_flow::train::TrainOptions;
 use human2nav_flow::{NetConfig, tch};
 use human2nav_sim::config::{BenchConfig, MethodConfig, build_suites, load_robots};
@@ -320,8 +321,10 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
     let root = human2nav_data::paths::find_workspace_root(&config_dir)
         .or_else(|| human2nav_data::paths::find_workspace_root(&cwd))
         .unwrap_or_else(|| cwd.clone());
+    // Absolute, so the model folders written into the planner configs do not depend on the
+    // directory their paths are later resolved against.
     let out = match &args.out {
-        Some(p) => p.clone(),
+        Some(p) => cwd.join(p),
         None => root.join(if args.quick {
             "out/scaling-quick"
         } else {
@@ -440,6 +443,12 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("reading {}", planner_path.display()))?;
     let planner_table: toml::Table = toml::from_str(&planner_text)
         .with_context(|| format!("parsing {}", planner_path.display()))?;
+    // Fail now rather than after the first training: the planner settings and every robot
+    // profile the Human2Nav method loads.
+    PlannerConfig::from_toml_str(&planner_text, &planner_path)?;
+    for p in &bcfg.robots {
+        load_profile(&bcfg.resolve(p))?;
+    }
 
     eprintln!(
         "suite `{}` ({}): {} episodes (up to {per_class} per class) × {} robot(s); {} fractions × {} training steps",

@@ -272,11 +272,10 @@ impl SarlPlanner {
     pub fn from_init(init: &PluginInit<'_>) -> Result<Self, InitError> {
         let mut cfg: SarlConfig = init.config()?;
         if let Some(robot) = init.robot() {
-            let written: toml::Table = toml::from_str(init.config_str()).unwrap_or_default();
-            if !written.contains_key("radius") {
+            if !init.sets("radius") {
                 cfg.radius = robot.footprint_radius;
             }
-            if !written.contains_key("max_speed") {
+            if !init.sets("max_speed") {
                 cfg.max_speed = robot.limits.v_max;
             }
         }

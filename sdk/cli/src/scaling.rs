@@ -21,10 +21,9 @@
 //! * `scaling.csv` (one row per fraction), `report.md`, `fig5_sr_vs_training_data.png`.
 
 use crate::bench::{ensure_real_episodes, human2nav_method};
-use crate::train::{TrainConfig, train};
+use crate::train::{self, TrainConfig};
 use anyhow::{Context, bail};
 use clap::Args;
-use human2nav_data::cache::TupleCache;
 use human2nav_data::tuples::Split;
 use human2nav_flow::card::ModelCard;
 use human2nav_flow::model::{CARD_FILE, WEIGHTS_FILE};
@@ -357,25 +356,8 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("in {}", train_path.display()))?;
     let device = device_of(&tcfg.run.device)?;
     let cache_dir = resolve(&root, &tcfg.data.cache);
-    let cache = TupleCache::open(&cache_dir).with_context(|| {
-        format!(
-            "opening the tuple cache {} (build it with `human2nav data build`)",
-            cache_dir.display()
-        )
-    })?;
+    let cache = train::open_cache(&cache_dir, &tcfg, &train_path)?;
     let manifest = cache.manifest();
-    if manifest.horizon != tcfg.net.horizon || manifest.bev.cells != tcfg.net.bev_cells {
-        bail!(
-            "the cache {} has horizon {} and {}×{} rasters; {} has net.horizon = {} and net.bev_cells = {}",
-            cache_dir.display(),
-            manifest.horizon,
-            manifest.bev.cells,
-            manifest.bev.cells,
-            train_path.display(),
-            tcfg.net.horizon,
-            tcfg.net.bev_cells
-        );
-    }
 
     // Benchmark settings: one suite, the chosen robots, Human2Nav with guidance only.
     let bench_path = resolve(&root, &cfg.bench);
@@ -528,7 +510,9 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
             );
             tch::set_num_threads(fcfg.run.threads as i32);
             multi
-                .suspend(|| train(&fcfg, &cache, &run_dir, &model_dir, device, stale.is_some()))
+                .suspend(|| {
+                    train::train(&fcfg, &cache, &run_dir, &model_dir, device, stale.is_some())
+                })
                 .with_context(|| format!("training {name}"))?;
             let stamp_text = toml::to_string(&stamp).context("serialising the stamp")?;
             std::fs::write(&stamp_path, stamp_text)

@@ -246,23 +246,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
     };
     eprintln!("device {device:?}, {} torch threads", cfg.run.threads);
 
-    let cache = TupleCache::open(&cache_dir).with_context(|| {
-        format!(
-            "opening the tuple cache {} (build it with `human2nav data build`)",
-            cache_dir.display()
-        )
-    })?;
-    let manifest = cache.manifest();
-    if manifest.horizon != cfg.net.horizon || manifest.bev.cells != cfg.net.bev_cells {
-        bail!(
-            "the cache has horizon {} and {}×{} rasters; net.horizon = {} and net.bev_cells = {}",
-            manifest.horizon,
-            manifest.bev.cells,
-            manifest.bev.cells,
-            cfg.net.horizon,
-            cfg.net.bev_cells
-        );
-    }
+    let cache = open_cache(&cache_dir, &cfg, &args.config)?;
 
     if !args.eval_only {
         train(&cfg, &cache, &out_dir, &model_dir, device, args.fresh)?;
@@ -704,4 +688,33 @@ fn run_evaluation(
         m.proximity_cv
     );
     Ok(info)
+}
+
+/// Opens the tuple cache at `cache_dir` and checks that its horizon and raster size match the
+/// network of `cfg` (read from `config_path`, named in the error).
+pub(crate) fn open_cache(
+    cache_dir: &Path,
+    cfg: &TrainConfig,
+    config_path: &Path,
+) -> anyhow::Result<TupleCache> {
+    let cache = TupleCache::open(cache_dir).with_context(|| {
+        format!(
+            "opening the tuple cache {} (build it with `human2nav data build`)",
+            cache_dir.display()
+        )
+    })?;
+    let manifest = cache.manifest();
+    if manifest.horizon != cfg.net.horizon || manifest.bev.cells != cfg.net.bev_cells {
+        bail!(
+            "the cache {} has horizon {} and {}×{} rasters; {} has net.horizon = {} and net.bev_cells = {}",
+            cache_dir.display(),
+            manifest.horizon,
+            manifest.bev.cells,
+            manifest.bev.cells,
+            config_path.display(),
+            cfg.net.horizon,
+            cfg.net.bev_cells
+        );
+    }
+    Ok(cache)
 }

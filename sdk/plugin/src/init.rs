@@ -97,6 +97,13 @@ impl<'a> PluginInit<'a> {
         self.robot.as_ref()
     }
 
+    /// True when the configuration as written sets the top-level key `key` (false for an
+    /// unparsable configuration, which [`PluginInit::config`] reports). For robot-dependent
+    /// defaults: take the robot's value unless the configuration names the key.
+    pub fn sets(&self, key: &str) -> bool {
+        toml::from_str::<toml::Table>(self.config).is_ok_and(|t| t.contains_key(key))
+    }
+
     /// The robot the instance serves, or [`InitError::NeedsRobot`].
     pub fn require_robot(&self) -> Result<&RobotContext, InitError> {
         self.robot.as_ref().ok_or(InitError::NeedsRobot)

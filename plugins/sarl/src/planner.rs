@@ -173,6 +173,11 @@ impl SarlPlanner {
     /// A planner from validated settings and a loaded model.
     pub fn new(config: SarlConfig, model: SarlModel) -> Result<Self, SarlError> {
         config.validate()?;
+        // One libtorch intra-op thread (process-wide): the value network is tiny and the
+        // benchmark already runs episodes in parallel, and with several threads the BLAS
+        // reductions may split differently under load, which changed chosen actions between
+        // two runs with the same seed.
+        tch::set_num_threads(1);
         let la = &model.card.lookahead;
         let actions =
             ActionSpace::holonomic(config.max_speed, la.speed_samples, la.rotation_samples);

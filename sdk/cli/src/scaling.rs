@@ -272,19 +272,6 @@ fn resolve(root: &Path, p: &Path) -> PathBuf {
     }
 }
 
-fn device_of(name: &str) -> anyhow::Result<tch::Device> {
-    Ok(match name {
-        "cpu" => tch::Device::Cpu,
-        "cuda" => {
-            if !tch::Cuda::is_available() {
-                bail!("run.device = \"cuda\" but CUDA is not available");
-            }
-            tch::Device::Cuda(0)
-        }
-        _ => tch::Device::cuda_if_available(),
-    })
-}
-
 /// A line above the bars; printed directly when they are hidden (no terminal, e.g. a log
 /// file), where `MultiProgress::println` prints nothing.
 fn say(multi: &MultiProgress, line: String) {
@@ -354,7 +341,7 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
     tcfg.run.max_minutes = 0.0;
     tcfg.validate()
         .with_context(|| format!("in {}", train_path.display()))?;
-    let device = device_of(&tcfg.run.device)?;
+    let device = train::device_of(&tcfg.run.device)?;
     let cache_dir = resolve(&root, &tcfg.data.cache);
     let cache = train::open_cache(&cache_dir, &tcfg, &train_path)?;
     let manifest = cache.manifest();

@@ -234,16 +234,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
     let cache_dir = resolve(&root, &cfg.data.cache);
 
     tch::set_num_threads(cfg.run.threads as i32);
-    let device = match cfg.run.device.as_str() {
-        "cpu" => tch::Device::Cpu,
-        "cuda" => {
-            if !tch::Cuda::is_available() {
-                bail!("run.device = \"cuda\" but CUDA is not available");
-            }
-            tch::Device::Cuda(0)
-        }
-        _ => tch::Device::cuda_if_available(),
-    };
+    let device = device_of(&cfg.run.device)?;
     eprintln!("device {device:?}, {} torch threads", cfg.run.threads);
 
     let cache = open_cache(&cache_dir, &cfg, &args.config)?;
@@ -688,6 +679,21 @@ fn run_evaluation(
         m.proximity_cv
     );
     Ok(info)
+}
+
+/// The libtorch device of `run.device`: `cpu`, `cuda` (an error without CUDA), else CUDA when
+/// available.
+pub(crate) fn device_of(name: &str) -> anyhow::Result<tch::Device> {
+    Ok(match name {
+        "cpu" => tch::Device::Cpu,
+        "cuda" => {
+            if !tch::Cuda::is_available() {
+                bail!("run.device = \"cuda\" but CUDA is not available");
+            }
+            tch::Device::Cuda(0)
+        }
+        _ => tch::Device::cuda_if_available(),
+    })
 }
 
 /// Opens the tuple cache at `cache_dir` and checks that its horizon and raster size match the

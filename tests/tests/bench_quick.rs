@@ -12,7 +12,7 @@ use human2nav_plugin::PluginHost;
 use human2nav_sim::config::{BenchConfig, build_suites, builtin_method, load_robots};
 use human2nav_sim::driver::{self, BenchOutcome, BenchPlan};
 use human2nav_sim::report::CSV_HEADER;
-use human2nav_sim::{MethodSpec, ProgressBar, SuiteKind};
+use human2nav_sim::{MethodSpec, ProgressBar, RobotSetup, Suite, SuiteKind};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -20,9 +20,44 @@ fn scratch(name: &str) -> PathBuf {
     std::env::temp_dir().join(format!("h2n-{name}-{}", std::process::id()))
 }
 
-/// Runs a shipped config in quick mode with the methods this crate can build (methods that
-/// need libtorch are left out with a note).
-fn quick(config: &str, out: &Path) -> (BenchConfig, Vec<String>, BenchOutcome) {
+/// A shipped config in quick mode: its robots, the methods this crate can build (methods that
+/// need libtorch are left out with a note) and its suites.
+struct Quick {
+    config: String,
+    cfg: BenchConfig,
+    robots: Vec<RobotSetup>,
+    methods: Vec<MethodSpec>,
+    suites: Vec<Suite>,
+}
+
+impl Quick {
+    fn names(&self) -> Vec<String> {
+        self.methods.iter().map(|m| m.name.clone()).collect()
+    }
+
+    /// One benchmark run into `out`.
+    fn run(&self, out: &Path) -> BenchOutcome {
+        let plan = BenchPlan {
+            suites: &self.suites,
+            robots: &self.robots,
+            methods: &self.methods,
+            sim: &self.cfg.sim,
+            seed: self.cfg.seed,
+            quick: true,
+            snapshot_method: Some("orca"),
+            command: format!("quick test of {}", self.config),
+            threads: None,
+        };
+        let res = driver::run(&plan, out, &ProgressBar::hidden()).unwrap();
+        let expected: usize = self.suites.iter().map(|s| s.episodes.len()).sum::<usize>()
+            * self.robots.len()
+            * self.methods.len();
+        assert_eq!(res.rows.len(), expected);
+        res
+    }
+}
+
+fn quick(config: &str) -> Quick {
     let cfg = BenchConfig::load(&workspace_root().join(config)).unwrap();
     let robots = load_robots(&cfg).unwrap();
     let host = Arc::new(PluginHost::new());
@@ -39,28 +74,18 @@ fn quick(config: &str, out: &Path) -> (BenchConfig, Vec<String>, BenchOutcome) {
             ),
         }
     }
-    let names: Vec<String> = methods.iter().map(|m| m.name.clone()).collect();
     assert!(
-        names.iter().any(|n| n == "orca"),
+        methods.iter().any(|m| m.name == "orca"),
         "{config} must benchmark ORCA"
     );
     let suites = build_suites(&cfg, true).unwrap();
-    let plan = BenchPlan {
-        suites: &suites,
-        robots: &robots,
-        methods: &methods,
-        sim: &cfg.sim,
-        seed: cfg.seed,
-        quick: true,
-        snapshot_method: Some("orca"),
-        command: format!("quick test of {config}"),
-        threads: None,
-    };
-    let res = driver::run(&plan, out, &ProgressBar::hidden()).unwrap();
-    let expected: usize =
-        suites.iter().map(|s| s.episodes.len()).sum::<usize>() * robots.len() * methods.len();
-    assert_eq!(res.rows.len(), expected);
-    (cfg, names, res)
+    Quick {
+        config: config.to_string(),
+        cfg,
+        robots,
+        methods,
+        suites,
+    }
 }
 
 fn check_outputs(res: &BenchOutcome, methods: &[String]) {
@@ -118,15 +143,18 @@ fn check_outputs(res: &BenchOutcome, methods: &[String]) {
 #[test]
 fn quick_bench_with_the_shipped_config_is_sane_and_deterministic() {
     let (a_dir, b_dir) = (scratch("bench-a"), scratch("bench-b"));
-    let (cfg, methods, a) = quick("sdk/configs/bench.toml", &a_dir);
-    check_outputs(&a, &methods);
-    let real = cfg.suites.iter().any(|s| s.kind == SuiteKind::Real);
+    // The suites are built once: `cli_bench_quick_writes_the_report` may mine the real
+    // episodes file while this test runs, which would change what a second `build_suites` reads.
+    let q = quick("sdk/configs/bench.toml");
+    let a = q.run(&a_dir);
+    check_outputs(&a, &q.names());
+    let real = q.suites.iter().any(|s| s.kind == SuiteKind::Real);
     eprintln!(
-        "bench.toml quick: {} rows, real suite configured: {real}",
+        "bench.toml quick: {} rows, real episodes: {real}",
         a.rows.len()
     );
     // Deterministic: a second run writes the same results.csv byte for byte.
-    let (_, _, b) = quick("sdk/configs/bench.toml", &b_dir);
+    let b = q.run(&b_dir);
     let (ca, cb) = (
         std::fs::read(&a.results_csv).unwrap(),
         std::fs::read(&b.results_csv).unwrap(),
@@ -142,8 +170,9 @@ fn quick_bench_with_the_shipped_config_is_sane_and_deterministic() {
 #[test]
 fn quick_bench_on_the_synthetic_suite() {
     let dir = scratch("bench-synthetic");
-    let (_, methods, res) = quick("sdk/configs/bench_synthetic.toml", &dir);
-    check_outputs(&res, &methods);
+    let q = quick("sdk/configs/bench_synthetic.toml");
+    let res = q.run(&dir);
+    check_outputs(&res, &q.names());
     assert!(
         res.rows
             .iter()

@@ -269,7 +269,9 @@ impl EpisodeSuite {
         }
     }
 
-    /// Writes the suite as pretty JSON, creating parent directories.
+    /// Writes the suite as JSON, creating parent directories. The file appears whole or not at
+    /// all (written beside it, then renamed), so a benchmark reading it concurrently never sees
+    /// half a suite.
     pub fn save(&self, path: &Path) -> Result<(), DataError> {
         if let Some(dir) = path.parent() {
             std::fs::create_dir_all(dir).map_err(|e| DataError::io(dir, e))?;
@@ -278,7 +280,11 @@ impl EpisodeSuite {
             path: path.to_path_buf(),
             source: e,
         })?;
-        std::fs::write(path, body).map_err(|e| DataError::io(path, e))
+        let mut tmp = path.as_os_str().to_owned();
+        tmp.push(format!(".{}.tmp", std::process::id()));
+        let tmp = std::path::PathBuf::from(tmp);
+        std::fs::write(&tmp, body).map_err(|e| DataError::io(&tmp, e))?;
+        std::fs::rename(&tmp, path).map_err(|e| DataError::io(path, e))
     }
 
     /// Reads a suite and checks its version, counts and every number.

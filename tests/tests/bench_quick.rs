@@ -47,6 +47,7 @@ impl Quick {
             snapshot_method: Some("orca"),
             command: format!("quick test of {}", self.config),
             threads: None,
+            failures: 1,
         };
         let res = driver::run(&plan, out, &ProgressBar::hidden()).unwrap();
         let expected: usize = self.suites.iter().map(|s| s.episodes.len()).sum::<usize>()
@@ -129,7 +130,17 @@ fn check_outputs(res: &BenchOutcome, methods: &[String]) {
             "report lacks method {m}"
         );
     }
-    assert_eq!(res.figures.len(), 3);
+    // Fig. 4, 6, 7 and one failure figure per method that failed on the primary suite.
+    let primary = &res.rows[0].suite;
+    let failing = methods
+        .iter()
+        .filter(|m| {
+            res.rows
+                .iter()
+                .any(|r| &r.suite == primary && &r.method == *m && !r.metrics.success)
+        })
+        .count();
+    assert_eq!(res.figures.len(), 3 + failing);
     for f in &res.figures {
         let bytes = std::fs::read(f).unwrap();
         assert!(

@@ -26,6 +26,8 @@ pub struct BenchPlan<'a> {
     pub command: String,
     /// Worker threads (`None`: rayon's default, one per core).
     pub threads: Option<usize>,
+    /// Failed runs drawn per method (see [`failure_figures`]; 0: none).
+    pub failures: usize,
 }
 
 /// What a run produced.
@@ -108,6 +110,10 @@ pub fn run(
                     .into(),
             ));
             figure_paths.push(f4);
+        }
+        for (file, caption) in failure_figures(plan, &rows, primary, out_dir)? {
+            figure_list.push((file.clone(), caption));
+            figure_paths.push(out_dir.join(file));
         }
     }
 
@@ -214,6 +220,95 @@ fn sim_table(sim: &SimConfig, suites: &[Suite]) -> Vec<(String, String)> {
             "robot footprint disc overlaps a pedestrian disc (checked every step)".into(),
         ),
     ]
+}
+
+/// Up to `plan.failures` failed runs (collision or timeout) of each method on `suite`, drawn
+/// four to a figure at their closest approach: `failures_<method>_<k>.png`. The failures shown
+/// first are those the most other methods succeeded on (same episode and robot), which are the
+/// ones that tell a method's weaknesses from a hard episode. Runs are deterministic, so each is
+/// simply run again. Returns each figure's file name and caption.
+fn failure_figures(
+    plan: &BenchPlan<'_>,
+    rows: &[ResultRow],
+    suite: &Suite,
+    out_dir: &Path,
+) -> Result<Vec<(String, String)>, SimError> {
+    let mut figures = Vec::new();
+    if plan.failures == 0 {
+        return Ok(figures);
+    }
+    let in_suite: Vec<&ResultRow> = rows.iter().filter(|r| r.suite == suite.name).collect();
+    for method in plan.methods {
+        let mut failed: Vec<(usize, &ResultRow)> = in_suite
+            .iter()
+            .filter(|r| r.method == method.name && !r.metrics.success)
+            .map(|r| {
+                let others = in_suite
+                    .iter()
+                    .filter(|o| {
+                        o.method != r.method
+                            && o.episode == r.episode
+                            && o.robot == r.robot
+                            && o.metrics.success
+                    })
+                    .count();
+                (others, *r)
+            })
+            .collect();
+        // Stable: among equals, the suite's episode order.
+        failed.sort_by_key(|f| std::cmp::Reverse(f.0));
+        failed.truncate(plan.failures);
+        let mut snaps = Vec::new();
+        let mut names = Vec::new();
+        for (others, row) in &failed {
+            let (Some(episode), Some(robot)) = (
+                suite.episodes.iter().find(|e| e.id == row.episode),
+                plan.robots.iter().find(|r| r.name == row.robot),
+            ) else {
+                continue;
+            };
+            let (run, _) = run_one(suite, episode, robot, method, plan.sim, plan.seed)?;
+            names.push(format!(
+                "`{}` on {} ({}; {others} other method(s) succeeded)",
+                episode.id,
+                robot.name,
+                run.outcome.as_str()
+            ));
+            snaps.push(Snapshot {
+                episode: episode.clone(),
+                run,
+                robot: robot.name.clone(),
+                method: method.name.clone(),
+                footprint_radius: robot.footprint_radius,
+            });
+        }
+        for (k, (chunk, names)) in snaps.chunks(4).zip(names.chunks(4)).enumerate() {
+            let file = format!("failures_{}_{}.png", file_safe(&method.name), k + 1);
+            figures::trajectory_snapshots(&out_dir.join(&file), chunk)?;
+            figures.push((
+                file,
+                format!(
+                    "failed runs of `{}` at their closest approach, panels left to right, top to bottom: {}",
+                    method.name,
+                    names.join("; ")
+                ),
+            ));
+        }
+    }
+    Ok(figures)
+}
+
+/// `name` with every character that is not ASCII alphanumeric, `-` or `_` replaced by `_`.
+fn file_safe(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
 }
 
 /// The first episode of each class of `suite`, run by the snapshot method on the first robot.

@@ -33,4 +33,4 @@ pub use error::SimError;
 /// dependency; `ProgressBar::hidden()` for silence).
 pub use indicatif::ProgressBar;
 pub use metrics::EpisodeMetrics;
-pub use runner::{EpisodeRun, Outcome, RobotSetup, SimConfig, run_episode};
+pub use runner::{Contact, EpisodeRun, Outcome, RobotSetup, SimConfig, run_episode};

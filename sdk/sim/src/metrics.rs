@@ -19,7 +19,7 @@
 //!   `v_n = (p_{n+1} − p_n)/dt` and `v_{−1} = 0` (the robot starts at rest); 0 when the episode
 //!   is too short for one value.
 
-use crate::runner::{EpisodeRun, Outcome};
+use crate::runner::{Contact, EpisodeRun, Outcome};
 use human2nav_core::Limits;
 use human2nav_core::tfs;
 use serde::{Deserialize, Serialize};
@@ -61,6 +61,8 @@ pub struct EpisodeMetrics {
     pub fallbacks: usize,
     /// Planner errors, panics and rejected plans.
     pub planner_errors: usize,
+    /// How the collision happened (collisions only).
+    pub contact: Option<Contact>,
 }
 
 impl EpisodeMetrics {
@@ -95,6 +97,7 @@ impl EpisodeMetrics {
             plans: run.plans.len(),
             fallbacks: run.plans.iter().filter(|p| p.fallback).count(),
             planner_errors: run.planner_errors.len(),
+            contact: run.contact,
         }
     }
 }

@@ -1,15 +1,17 @@
 //! `results.csv` and `report.md`: one row per episode × method × robot, and the tables of the
 //! paper's Fig. 6 (SR per scenario and method) and Fig. 7 (TFS and SR per robot and method),
-//! the other metrics, and the empty-world sanity check.
+//! the other metrics, how the collisions happened, and the empty-world sanity check.
 
 use crate::bench::{ResultRow, SuiteKind};
 use crate::episode::{ScenarioClass, ScenarioTitle};
+use crate::runner::Contact;
 use std::fmt::Write as _;
 
 /// The header of `results.csv`.
 pub const CSV_HEADER: &str = "suite,suite_kind,scenario,episode,scene,robot,method,seed,agents,density,outcome,\
 success,collision,timeout,tfs,tfs_plan,tfs_executed,path_length,time_to_goal,duration,budget,min_clearance,\
-time_within_0_45,time_within_1_2,mean_jerk,plans,fallbacks,planner_errors";
+time_within_0_45,time_within_1_2,mean_jerk,plans,fallbacks,planner_errors,contact_robot_closing,\
+contact_pedestrian_closing,contact_pedestrian_age";
 
 fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n', '\r']) {
@@ -67,6 +69,9 @@ pub fn results_csv(rows: &[ResultRow]) -> String {
             m.plans.to_string(),
             m.fallbacks.to_string(),
             m.planner_errors.to_string(),
+            opt(m.contact.map(|c| c.robot_closing)),
+            opt(m.contact.map(|c| c.pedestrian_closing)),
+            opt(m.contact.map(|c| c.pedestrian_age)),
         ];
         out.push_str(&fields.join(","));
         out.push('\n');
@@ -320,6 +325,7 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
                 pct(s.fallback_rate)
             );
         }
+        collision_table(&mut md, &in_suite, &ctx.methods);
         let _ = writeln!(md);
     }
 
@@ -364,6 +370,63 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
         }
     }
     md
+}
+
+/// A pedestrian whose track began less than this long before the contact (s) appeared next to
+/// the robot: the history the planners see is 0.8 s long.
+pub const APPEARED_WITHIN: f64 = 1.0;
+/// A robot moving toward the pedestrian at no more than this (m/s) was walked into.
+pub const WALKED_INTO_BELOW: f64 = 0.1;
+
+/// How the collisions of each method happened (see [`crate::Contact`]): each collision counts
+/// in the first class that applies.
+fn collision_table(md: &mut String, rows: &[&ResultRow], methods: &[String]) {
+    let _ = writeln!(
+        md,
+        "\n### How the collisions happened, all robots\n\n\
+         Each collision counts once, in the first class that applies: the pedestrian's track began \
+         less than {APPEARED_WITHIN} s before the contact (it appeared next to the robot); the robot \
+         was closing at most {WALKED_INTO_BELOW} m/s (standing, sidestepping or backing off: the \
+         non-reactive pedestrian walked into it); else the robot drove into the pedestrian. Closing \
+         speeds are along the line between the centres at the contact.\n"
+    );
+    let _ = writeln!(
+        md,
+        "| method | collisions | appeared | walked into the robot | robot drove in | mean robot closing (m/s) | mean pedestrian closing (m/s) |\n\
+         |---|---|---|---|---|---|---|"
+    );
+    for m in methods {
+        let contacts: Vec<Contact> = rows
+            .iter()
+            .filter(|r| &r.method == m && r.metrics.collision)
+            .filter_map(|r| r.metrics.contact)
+            .collect();
+        let n = contacts.len();
+        let appeared = contacts
+            .iter()
+            .filter(|c| c.pedestrian_age < APPEARED_WITHIN)
+            .count();
+        let walked_into = contacts
+            .iter()
+            .filter(|c| c.pedestrian_age >= APPEARED_WITHIN && c.robot_closing <= WALKED_INTO_BELOW)
+            .count();
+        let share = |k: usize| {
+            if n == 0 {
+                "–".to_string()
+            } else {
+                format!("{k} ({:.0} %)", 100.0 * k as f64 / n as f64)
+            }
+        };
+        let _ = writeln!(
+            md,
+            "| {m} | {n} | {} | {} | {} | {} | {} |",
+            share(appeared),
+            share(walked_into),
+            share(n - appeared - walked_into),
+            opt2(mean(contacts.iter().map(|c| c.robot_closing))),
+            opt2(mean(contacts.iter().map(|c| c.pedestrian_closing)))
+        );
+    }
 }
 
 fn cell_sr(s: &Summary) -> String {

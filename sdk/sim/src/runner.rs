@@ -301,8 +301,52 @@ pub struct EpisodeRun {
     pub plans: Vec<PlanSample>,
     /// Planner failures (errors, panics, non-finite plans), in order, as messages.
     pub planner_errors: Vec<String>,
-    /// Pedestrian id of the collision, when there was one.
-    pub collided_with: Option<u64>,
+    /// How the collision happened, when there was one.
+    pub contact: Option<Contact>,
+}
+
+/// The first overlap of an episode that ended in a collision: who moved into whom. The replay
+/// is non-reactive, so a pedestrian can walk into a robot that stands still, or a track can
+/// begin on top of the robot (a person the dataset's tracker first saw there).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Contact {
+    /// The pedestrian's id.
+    pub pedestrian: u64,
+    /// The robot's velocity toward the pedestrian at contact (m/s; negative: moving away).
+    pub robot_closing: f64,
+    /// The pedestrian's velocity toward the robot at contact (m/s; negative: moving away).
+    pub pedestrian_closing: f64,
+    /// How long the pedestrian's track had existed at contact (s).
+    pub pedestrian_age: f64,
+}
+
+impl Contact {
+    /// The contact between the robot in `state` and pedestrian `id` at time `t`.
+    fn at(replay: &CrowdReplay<'_>, t: f64, state: &RobotState, id: u64) -> Option<Self> {
+        let episode = replay.episode();
+        let track = episode.agents.iter().find(|a| a.id == id)?;
+        let ped = replay.sample(track, t)?;
+        let (dx, dy) = (
+            ped.position[0] - state.pose.x,
+            ped.position[1] - state.pose.y,
+        );
+        let d = dx.hypot(dy);
+        // Coincident centres: no direction, count every motion as closing.
+        let (nx, ny) = if d > 1e-12 {
+            (dx / d, dy / d)
+        } else {
+            (0.0, 0.0)
+        };
+        let (c, s) = (state.pose.theta.cos(), state.pose.theta.sin());
+        let v = state.velocity;
+        let (vx, vy) = (c * v.vx - s * v.vy, s * v.vx + c * v.vy);
+        Some(Self {
+            pedestrian: id,
+            robot_closing: vx * nx + vy * ny,
+            pedestrian_closing: -(ped.velocity[0] * nx + ped.velocity[1] * ny),
+            pedestrian_age: t - track.start_step as f64 * episode.dt,
+        })
+    }
 }
 
 /// Runs one episode closed loop.
@@ -335,7 +379,7 @@ pub fn run_episode(
         clearance: Vec::with_capacity(max_steps + 1),
         plans: Vec::new(),
         planner_errors: Vec::new(),
-        collided_with: None,
+        contact: None,
     };
     planner.reset();
     let mut plan: Option<Plan> = None;
@@ -349,7 +393,7 @@ pub fn run_episode(
         run.clearance.push(clearance);
         if clearance < 0.0 {
             run.outcome = Outcome::Collision;
-            run.collided_with = nearest;
+            run.contact = nearest.and_then(|id| Contact::at(&replay, t, &state, id));
             break;
         }
         let to_goal = (episode.goal[0] - state.pose.x).hypot(episode.goal[1] - state.pose.y);

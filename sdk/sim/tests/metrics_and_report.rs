@@ -56,7 +56,7 @@ fn run_with(
         clearance,
         plans,
         planner_errors: vec![],
-        collided_with: None,
+        contact: None,
     }
 }
 
@@ -224,6 +224,7 @@ fn driver_writes_csv_report_and_figures() {
         snapshot_method: Some("slow"),
         command: "test".into(),
         threads: Some(2),
+        failures: 2,
     };
     let out = std::env::temp_dir().join(format!("h2n-sim-driver-{}", std::process::id()));
     let res = driver::run(&plan, &out, &ProgressBar::hidden()).unwrap();
@@ -240,13 +241,53 @@ fn driver_writes_csv_report_and_figures() {
         "Empty-world sanity",
         "| straight | 100.0",
         "pass",
+        "How the collisions happened",
     ] {
         assert!(
             report.contains(needle),
             "report lacks `{needle}`:\n{report}"
         );
     }
-    assert_eq!(res.figures.len(), 3);
+    // Every collision is classified: its three classes add up to the method's collisions.
+    let hand: Vec<_> = res.rows.iter().filter(|r| r.suite == "hand").collect();
+    for m in ["straight", "slow"] {
+        let n = hand
+            .iter()
+            .filter(|r| r.method == m && r.metrics.collision)
+            .count();
+        assert!(
+            hand.iter()
+                .filter(|r| r.method == m && r.metrics.collision)
+                .all(|r| r.metrics.contact.is_some())
+        );
+        let section = &report[report.find("How the collisions happened").unwrap()..];
+        let line = section
+            .lines()
+            .find(|l| l.starts_with(&format!("| {m} | {n} |")))
+            .unwrap_or_else(|| panic!("no collision row for {m} with {n}:\n{report}"));
+        let counts: usize = line
+            .split('|')
+            .skip(3)
+            .take(3)
+            .map(|c| {
+                c.trim()
+                    .split(' ')
+                    .next()
+                    .unwrap()
+                    .parse::<usize>()
+                    .unwrap_or(0)
+            })
+            .sum();
+        assert_eq!(counts, n, "{line}");
+    }
+    // Fig. 4, 6, 7, and one failure figure per method that failed somewhere in the suite.
+    let failing = ["straight", "slow"]
+        .iter()
+        .filter(|m| hand.iter().any(|r| &r.method == *m && !r.metrics.success))
+        .count();
+    assert!(failing > 0, "the hand suite should make a method fail");
+    assert_eq!(res.figures.len(), 3 + failing);
+    assert!(report.contains("failures_straight_1.png") || report.contains("failures_slow_1.png"));
     for f in &res.figures {
         let bytes = std::fs::read(f).unwrap();
         assert!(

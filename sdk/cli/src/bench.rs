@@ -50,6 +50,40 @@ pub struct BenchArgs {
     /// missing and the datasets are present.
     #[arg(long, default_value = "sdk/configs/data.toml")]
     pub data_config: PathBuf,
+    /// Failed runs to draw per method (`failures_<method>_<k>.png`, four per figure; those the
+    /// most other methods succeeded on first).
+    #[arg(long, default_value_t = 4)]
+    pub failures: usize,
+    /// Run only these methods of the configuration (names, comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    pub methods: Vec<String>,
+    /// Run only these robots of the configuration (names, comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    pub robots: Vec<String>,
+}
+
+/// Keeps the items named in `only` (all when it is empty); an unknown name is an error that
+/// lists the known ones.
+fn select<T>(
+    items: Vec<T>,
+    only: &[String],
+    what: &str,
+    name: impl Fn(&T) -> &str,
+) -> anyhow::Result<Vec<T>> {
+    if only.is_empty() {
+        return Ok(items);
+    }
+    let known: Vec<&str> = items.iter().map(&name).collect();
+    if let Some(bad) = only.iter().find(|o| !known.contains(&o.as_str())) {
+        bail!(
+            "--{what}s: no {what} `{bad}` in the configuration (it has {})",
+            known.join(", ")
+        );
+    }
+    Ok(items
+        .into_iter()
+        .filter(|i| only.iter().any(|o| o == name(i)))
+        .collect())
 }
 
 /// Runs the benchmark; fails when a method misses SR = 1 on an empty-world suite.
@@ -67,10 +101,11 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
             "out/bench"
         }),
     };
-    let robots = load_robots(&cfg)?;
+    let robots = select(load_robots(&cfg)?, &args.robots, "robot", |r| &r.name)?;
     let host = Arc::new(PluginHost::new());
     let mut methods: Vec<MethodSpec> = Vec::new();
-    for m in &cfg.methods {
+    let configured = select(cfg.methods.clone(), &args.methods, "method", |m| &m.name)?;
+    for m in &configured {
         match builtin_method(m, &cfg, &host)? {
             Some(spec) => methods.push(spec),
             None if m.kind == "human2nav" => methods.push(human2nav_method(m, &cfg)?),
@@ -90,13 +125,22 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
         }
     }
 
+    let list = |flag: &str, names: &[String]| {
+        if names.is_empty() {
+            String::new()
+        } else {
+            format!(" --{flag} {}", names.join(","))
+        }
+    };
     let command = format!(
-        "human2nav bench --config {}{}{}",
+        "human2nav bench --config {}{}{}{}{}",
         args.config.display(),
         if args.quick { " --quick" } else { "" },
         args.seed
             .map(|s| format!(" --seed {s}"))
-            .unwrap_or_default()
+            .unwrap_or_default(),
+        list("methods", &args.methods),
+        list("robots", &args.robots)
     );
     let plan = BenchPlan {
         suites: &suites,
@@ -108,6 +152,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
         snapshot_method: cfg.snapshot_method(),
         command,
         threads: args.threads,
+        failures: args.failures,
     };
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template(

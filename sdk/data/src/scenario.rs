@@ -21,8 +21,12 @@
 //! `max_goal_time` = 10 s), and the time budget is `budget_factor · distance / reference_speed`
 //! (2.5 · 5 m / 1 m/s = 12.5 s): a robot driving straight at 1 m/s needs 40 % of it in an empty
 //! world. The episode is kept when the whole budget lies inside the recording, no other agent
-//! is within `min_start_clearance` (1 m) of the start, and the density is within
-//! `[min_density, max_density]` (1–15). The exported agents are every other track present
+//! comes within `min_start_clearance` (1.5 m) of the start during the first `start_window`
+//! (1.5 s), and the density is within `[min_density, max_density]` (1–15). The start rule
+//! keeps out episodes no method can pass: the pedestrians are replayed non-reactively, so one
+//! who walks through the start point (often the ego's companion in a group) would hit a robot
+//! that has not yet had time to accelerate away; 1.5 m is the contact distance of the largest
+//! shipped footprint (0.90 m) with a pedestrian (0.30 m), plus 0.30 m. The exported agents are every other track present
 //! during the budget that comes within `export_radius` (10 m) of the start→goal segment,
 //! replayed non-reactively; the ego itself is removed (the robot replaces it).
 
@@ -350,8 +354,12 @@ pub struct MiningOptions {
     pub density_radius: f64,
     /// Exported agents come within this distance of the start→goal segment, metres. Default 10.
     pub export_radius: f64,
-    /// No agent may be closer than this to the start at the first step, metres. Default 1.
+    /// No agent may come closer than this to the start during `start_window`, metres.
+    /// Default 1.5.
     pub min_start_clearance: f64,
+    /// How long after the start `min_start_clearance` holds, seconds (0: the first step only).
+    /// Default 1.5.
+    pub start_window: f64,
     pub min_density: usize,
     pub max_density: usize,
     /// Episodes per class to select. Default 50.
@@ -372,7 +380,8 @@ impl Default for MiningOptions {
             reference_speed: 1.0,
             density_radius: 3.0,
             export_radius: 10.0,
-            min_start_clearance: 1.0,
+            min_start_clearance: 1.5,
+            start_window: 1.5,
             min_density: 1,
             max_density: 15,
             per_class: 50,
@@ -402,11 +411,13 @@ impl MiningOptions {
         if !(self.budget_factor.is_finite() && self.budget_factor >= 1.0) {
             return Err(DataError::option("episodes.budget_factor", "must be >= 1"));
         }
-        if !(self.min_start_clearance.is_finite() && self.min_start_clearance >= 0.0) {
-            return Err(DataError::option(
-                "episodes.min_start_clearance",
-                "must be finite and >= 0",
-            ));
+        for (v, f) in [
+            (self.min_start_clearance, "episodes.min_start_clearance"),
+            (self.start_window, "episodes.start_window"),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(DataError::option(f, "must be finite and >= 0"));
+            }
         }
         if self.min_density > self.max_density {
             return Err(DataError::option(
@@ -520,12 +531,15 @@ pub fn try_episode(
     if s0 + steps > last {
         return Err(Reject::OutsideRecording);
     }
-    let blocked = index.at(s0).iter().any(|&j| {
-        let j = j as usize;
-        j != ego
-            && scene.tracks[j]
-                .local(s0)
-                .is_some_and(|k| dist(scene.tracks[j].positions[k], p0) < opts.min_start_clearance)
+    let window = (opts.start_window / dt + 1e-9).floor() as i64;
+    let blocked = (s0..=s0 + window).any(|step| {
+        index.at(step).iter().any(|&j| {
+            let j = j as usize;
+            j != ego
+                && scene.tracks[j].local(step).is_some_and(|k| {
+                    dist(scene.tracks[j].positions[k], p0) < opts.min_start_clearance
+                })
+        })
     });
     if blocked {
         return Err(Reject::StartBlocked);
@@ -722,6 +736,63 @@ mod tests {
             let json = serde_json::to_string(&c).unwrap();
             assert_eq!(json, format!("\"{}\"", c.name()));
         }
+    }
+
+    /// A straight track from `from` at `velocity` (m/s), 0.1 s steps, from global step 0.
+    fn straight_track(id: u64, from: [f64; 2], velocity: [f64; 2], steps: usize) -> Track {
+        let positions: Vec<[f64; 2]> = (0..steps)
+            .map(|k| {
+                let t = 0.1 * k as f64;
+                [from[0] + velocity[0] * t, from[1] + velocity[1] * t]
+            })
+            .collect();
+        Track {
+            id,
+            source_id: id,
+            class: AgentClass::Pedestrian,
+            start: 0,
+            velocities: vec![velocity; steps],
+            headings: vec![velocity[1].atan2(velocity[0]); steps],
+            positions,
+        }
+    }
+
+    /// The ego walks +x at 1 m/s from the origin; one other pedestrian walks −y at `speed`
+    /// from `(x, y)`.
+    fn crossing_scene(other_from: [f64; 2], speed: f64) -> Scene {
+        Scene {
+            name: "hand".into(),
+            dataset: "test".into(),
+            format: "test".into(),
+            dt: 0.1,
+            tracks: vec![
+                straight_track(0, [0.0, 0.0], [1.0, 0.0], 200),
+                straight_track(1, other_from, [0.0, -speed], 200),
+            ],
+            stats: crate::resample::ResampleStats::default(),
+            dropped: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn a_pedestrian_reaching_the_start_within_the_window_blocks_it() {
+        let opts = MiningOptions::default();
+        assert_eq!((opts.min_start_clearance, opts.start_window), (1.5, 1.5));
+        // 3 m away at the start, but 3 − 1.2·1.5 = 1.2 m < 1.5 m from it at 1.5 s.
+        let scene = crossing_scene([0.0, 3.0], 1.2);
+        let r = try_episode(&scene, &scene.index(), 0, 0, &opts);
+        assert!(matches!(r, Err(Reject::StartBlocked)), "{r:?}");
+        // The same with the first step only checked: kept.
+        let first_step = MiningOptions {
+            start_window: 0.0,
+            ..opts.clone()
+        };
+        assert!(try_episode(&scene, &scene.index(), 0, 0, &first_step).is_ok());
+        // Crossing the ego's path 2 m ahead: never within 1.5 m of the start point.
+        let scene = crossing_scene([2.0, 4.0], 1.0);
+        let (ep, _) = try_episode(&scene, &scene.index(), 0, 0, &opts).unwrap();
+        assert_eq!(ep.scenario, ScenarioClass::CrossFlow);
+        assert_eq!(ep.agents.len(), 1);
     }
 
     #[test]

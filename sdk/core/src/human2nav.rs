@@ -11,7 +11,8 @@
 //! 3. with guidance on: shortlists the [`Human2NavSettings::guided_samples`] best samples by
 //!    the selection score without its feasibility term, runs Algorithm 1 on them, continuing
 //!    from their rollout ([`guidance::guide_subset`]), and applies the exact last-step correction
-//!    ([`crate::projection`]) to them and to the warm-start candidate. Guiding a shortlist
+//!    ([`crate::projection`]) to them, to their slowed copies, to the stop candidate and to the
+//!    warm-start candidate (see "Selection rule"). Guiding a shortlist
 //!    instead of all `K` samples divides the cost of the `M` iterations (a forward and a
 //!    vector-Jacobian product through the network per integration step) by `K / guided_samples`;
 //!    `guided_samples = 0` guides all of them, as in the paper;
@@ -28,8 +29,16 @@
 //! trajectory feasibility score of the candidate ([`crate::tfs`]), `d_end/d_0` the remaining
 //! distance to the (clipped) goal relative to the current one, `C` the mean over waypoints of
 //! `max(0, margin − gap)²/margin²` with `gap` the distance between the robot's footprint and each
-//! agent's disc, agents predicted at constant velocity, plus [`COLLISION_PENALTY`] per predicted
-//! overlap, and `D` the mean distance (m) to the previous plan at the same times (0 without one).
+//! agent's disc, agents predicted at constant velocity, where the first waypoint with a
+//! predicted overlap and every one after it count [`COLLISION_PENALTY`] instead (a collision ends
+//! the plan: the earlier, the worse), and `D` the mean distance (m) to the previous plan at the
+//! same times (0 without one).
+//!
+//! Besides the guided samples, the selection sees each of them at
+//! [`Human2NavSettings::slowdown`] of its speed along the same path and a "stop" candidate, all
+//! through the last-step correction: the model proposes where people walk, not when to wait
+//! for one to pass, and in the benchmark's counter- and co-flows the robot otherwise drove into
+//! pedestrians it had predicted.
 //!
 //! # Safe fallback
 //! A planner never returns a non-finite number. If the flow model or guidance fails, or every
@@ -99,8 +108,13 @@ pub struct Human2NavSettings {
     /// How many of the `K` samples Algorithm 1 runs on (0: all). Default 4: the best by the
     /// selection score without its feasibility term.
     pub guided_samples: usize,
+    /// Each guided candidate is also offered at this fraction of its speed along the same path
+    /// (in `(0, 1]`; 1: no slowed copies). Default 0.5.
+    pub slowdown: f64,
+    /// Also offer "stop": brake to a standstill as hard as the limits allow. Default true.
+    pub stop_candidate: bool,
     /// Algorithm 1's parameters; `guidance.enabled = false` is the "w/o guidance" ablation
-    /// (it also turns the last-step correction off).
+    /// (it also turns the last-step correction, the slowed copies and the stop candidate off).
     pub guidance: GuidanceSettings,
     /// The exact last-step correction applied after Algorithm 1 ([`crate::projection`]).
     pub projection: ProjectionSettings,
@@ -116,6 +130,8 @@ impl Default for Human2NavSettings {
             seed: 0,
             warm_start: true,
             guided_samples: 4,
+            slowdown: 0.5,
+            stop_candidate: true,
             guidance: GuidanceSettings::default(),
             projection: ProjectionSettings::default(),
             selection: SelectionWeights::default(),
@@ -139,6 +155,9 @@ impl Human2NavSettings {
         }
         if !(self.goal_clip.is_finite() && self.goal_clip > 0.0) {
             return bad("goal_clip", "must be finite and > 0");
+        }
+        if !(self.slowdown > 0.0 && self.slowdown <= 1.0) {
+            return bad("slowdown", "must be in (0, 1]");
         }
         let s = &self.selection;
         for (name, v) in [
@@ -317,10 +336,10 @@ impl<M: FlowModel> Human2Nav<M> {
         .map_err(|e| format!("sampling failed: {e}"))?;
         let unguided: Vec<Vec<Pose2>> = (0..k).map(|i| first.unguided_poses(i)).collect();
 
-        // Stage 2 (guidance on): Algorithm 1 on the shortlist, then the last-step correction.
-        // `origin[c]` is the sample candidate `c` came from (`None`: the warm start).
+        // Stage 2 (guidance on): Algorithm 1 on the shortlist, its slowed copies and the stop
+        // candidate, then the last-step correction of all of them.
         let mut candidates: Vec<Vec<Pose2>>;
-        let mut origin: Vec<Option<usize>>;
+        let mut origin: Vec<Source>;
         let mut phi: Vec<(f64, f64)> = first.phi_before.iter().map(|&p| (p, p)).collect();
         let mut notes = Vec::new();
         if guidance.enabled {
@@ -339,16 +358,26 @@ impl<M: FlowModel> Human2Nav<M> {
             candidates = (0..shortlist.len())
                 .map(|j| result.guided_poses(j))
                 .collect();
-            origin = shortlist.iter().map(|&i| Some(i)).collect();
+            origin = shortlist.iter().map(|&i| Source::Sample(i)).collect();
             phi = result
                 .phi_before
                 .iter()
                 .copied()
                 .zip(result.phi_after.iter().copied())
                 .collect();
+            if self.settings.slowdown < 1.0 {
+                for (j, &i) in shortlist.iter().enumerate() {
+                    candidates.push(time_scaled(&candidates[j], self.settings.slowdown));
+                    origin.push(Source::Slowed(i));
+                }
+            }
+            if self.settings.stop_candidate {
+                candidates.push(vec![Pose2::IDENTITY; horizon]);
+                origin.push(Source::Stop);
+            }
             if let Some(prev) = &warm {
                 candidates.push(prev.clone());
-                origin.push(None);
+                origin.push(Source::Previous);
             }
             if self.settings.projection.enabled {
                 for c in candidates.iter_mut() {
@@ -366,10 +395,10 @@ impl<M: FlowModel> Human2Nav<M> {
             }
         } else {
             candidates = unguided.clone();
-            origin = (0..k).map(Some).collect();
+            origin = (0..k).map(Source::Sample).collect();
             if let Some(prev) = &warm {
                 candidates.push(prev.clone());
-                origin.push(None);
+                origin.push(Source::Previous);
             }
         }
 
@@ -393,19 +422,32 @@ impl<M: FlowModel> Human2Nav<M> {
                 .chain(traj.iter().map(|p| obs.ego.compose(*p)))
                 .collect()
         };
-        let from_model = origin[chosen];
-        let (phi_before, phi_after) = match (from_model, phi.get(chosen)) {
-            (Some(_), Some(&(b, a))) => (Some(b), Some(a)),
-            _ => (None, None),
+        // Φ before and after Algorithm 1 of the sample whose path is kept (`phi` is in the
+        // order of the first candidates: the shortlist, or every sample without guidance).
+        let sample_pos = |i: usize| {
+            origin
+                .iter()
+                .position(|o| *o == Source::Sample(i))
+                .and_then(|j| phi.get(j))
         };
-        if from_model.is_none() {
-            notes.push("kept the previous plan".into());
+        let (phi_before, phi_after) = match origin[chosen].sample().and_then(sample_pos) {
+            Some(&(b, a)) => (Some(b), Some(a)),
+            None => (None, None),
+        };
+        match origin[chosen] {
+            Source::Sample(_) => {}
+            Source::Slowed(i) => notes.push(format!(
+                "sample {i} at {} % of its speed",
+                100.0 * self.settings.slowdown
+            )),
+            Source::Stop => notes.push("braking to a stop".into()),
+            Source::Previous => notes.push("kept the previous plan".into()),
         }
         let guided: Vec<Vec<Pose2>> = if guidance.enabled {
             candidates
                 .iter()
                 .zip(&origin)
-                .filter(|(_, o)| o.is_some())
+                .filter(|(_, o)| matches!(o, Source::Sample(_)))
                 .map(|(c, _)| to_world(c))
                 .collect()
         } else {
@@ -414,7 +456,7 @@ impl<M: FlowModel> Human2Nav<M> {
         let info = PlanInfo {
             candidates: unguided.iter().map(|c| to_world(c)).collect(),
             guided,
-            selected: from_model,
+            selected: origin[chosen].sample(),
             phi_before,
             phi_after,
             fallback: false,
@@ -497,18 +539,27 @@ impl<M: FlowModel> Human2Nav<M> {
         let end = traj.last().map_or([0.0, 0.0], |p| [p.x, p.y]);
         let progress = (end[0] - goal[0]).hypot(end[1] - goal[1]) / d0;
 
+        // A predicted overlap ends the plan: it and every later waypoint cost the penalty, so
+        // a plan that would run through a pedestrian is no better than one that stops in them,
+        // and a later contact is better than an earlier one.
         let mut clearance = 0.0;
         for (j, p) in traj.iter().enumerate() {
             let t = (j + 1) as f64 * dt;
+            let mut hit = false;
             for a in agents {
                 let ax = a.position[0] + a.velocity[0] * t;
                 let ay = a.position[1] + a.velocity[1] * t;
                 let gap = (p.x - ax).hypot(p.y - ay) - self.robot.footprint_radius - a.radius;
                 if gap < 0.0 {
-                    clearance += COLLISION_PENALTY;
+                    hit = true;
+                    break;
                 } else if gap < w.margin {
                     clearance += ((w.margin - gap) / w.margin).powi(2);
                 }
+            }
+            if hit {
+                clearance += COLLISION_PENALTY * (traj.len() - j) as f64;
+                break;
             }
         }
         clearance /= traj.len().max(1) as f64;
@@ -527,6 +578,56 @@ impl<M: FlowModel> Human2Nav<M> {
             + w.clearance * clearance
             + w.consistency * consistency
     }
+}
+
+/// Where a candidate of the selection came from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Source {
+    /// A sample of the flow model (guided when guidance is on), by sample index.
+    Sample(usize),
+    /// That sample's guided path at [`Human2NavSettings::slowdown`] of its speed.
+    Slowed(usize),
+    /// Braking to a standstill.
+    Stop,
+    /// The previous plan, shifted to now (the warm start).
+    Previous,
+}
+
+impl Source {
+    /// The model sample whose path the candidate follows.
+    fn sample(self) -> Option<usize> {
+        match self {
+            Source::Sample(i) | Source::Slowed(i) => Some(i),
+            Source::Stop | Source::Previous => None,
+        }
+    }
+}
+
+/// An ego-frame trajectory (poses at `dt, 2·dt, …` after the identity at time 0) followed at
+/// `scale` times its speed along the same path: pose `j` is the original's pose at time
+/// `scale·(j + 1)·dt`, interpolated along the geodesic between the poses around it. The path
+/// and its curvature are kept; speeds scale by `scale` and accelerations by `scale²` (bar
+/// the first step from the current velocity, which the last-step correction takes care of).
+pub fn time_scaled(traj: &[Pose2], scale: f64) -> Vec<Pose2> {
+    (1..=traj.len())
+        .map(|j| {
+            let s = scale * j as f64; // in units of dt; the identity sits at 0
+            let i = s.floor() as usize;
+            let f = s - i as f64;
+            let at = |k: usize| {
+                if k == 0 {
+                    Pose2::IDENTITY
+                } else {
+                    traj[(k - 1).min(traj.len() - 1)]
+                }
+            };
+            if i >= traj.len() {
+                at(traj.len())
+            } else {
+                at(i).interpolate(at(i + 1), f)
+            }
+        })
+        .collect()
 }
 
 /// The plan's pose at absolute time `t` (geodesic interpolation between waypoints, held at the

@@ -255,3 +255,96 @@ fn invalid_settings_name_the_field() {
     let err = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings).unwrap_err();
     assert!(err.to_string().contains("samples"), "{err}");
 }
+
+#[test]
+fn time_scaling_keeps_the_path_and_scales_the_speed() {
+    use human2nav_core::human2nav::time_scaled;
+    // 1 m/s straight ahead, then a quarter turn at the end.
+    let mut traj: Vec<Pose2> = (1..=10)
+        .map(|k| Pose2::new(0.1 * k as f64, 0.0, 0.0))
+        .collect();
+    traj.push(Pose2::new(1.1, 0.0, 0.5));
+    assert_eq!(time_scaled(&traj, 1.0), traj);
+    let half = time_scaled(&traj, 0.5);
+    assert_eq!(half.len(), traj.len());
+    for (j, p) in half.iter().take(10).enumerate() {
+        assert_relative_eq!(p.x, 0.05 * (j + 1) as f64, epsilon = 1e-12);
+        assert_relative_eq!(p.y, 0.0, epsilon = 1e-12);
+    }
+    // Half the time covers half the path: the turn at the end is not reached.
+    assert_relative_eq!(half[10].x, 0.55, epsilon = 1e-12);
+    assert!(
+        time_scaled(&traj, 0.0)
+            .iter()
+            .all(|p| *p == Pose2::IDENTITY)
+    );
+}
+
+/// The robot drives along +x at 0.8 m/s toward a pedestrian standing 1.3 m ahead (contact at
+/// 0.6 m between centres); braking at a_max stops it after 0.32 m.
+fn blocked() -> Observation {
+    Observation {
+        time: 0.0,
+        ego: Pose2::IDENTITY,
+        ego_velocity: Twist2::new(0.8, 0.0, 0.0),
+        goal: [8.0, 0.0],
+        agents: vec![AgentState {
+            id: 1,
+            position: [1.3, 0.0],
+            velocity: [0.0, 0.0],
+            radius: 0.3,
+            history: vec![],
+        }],
+    }
+}
+
+/// The smallest predicted gap between the plan's footprint and the pedestrian of `obs`.
+fn predicted_gap(plan: &[Pose2], obs: &Observation) -> f64 {
+    let a = &obs.agents[0];
+    plan.iter()
+        .enumerate()
+        .map(|(j, p)| {
+            let t = j as f64 * 0.1;
+            let (ax, ay) = (
+                a.position[0] + a.velocity[0] * t,
+                a.position[1] + a.velocity[1] * t,
+            );
+            (p.x - ax).hypot(p.y - ay) - robot().footprint_radius - a.radius
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+#[test]
+fn a_pedestrian_in_the_way_makes_the_planner_stop_instead_of_driving_into_them() {
+    let obs = blocked();
+    // Without the slowed copies and the stop candidate every candidate drives straight at
+    // the model's pace (corrected to v_max): through the pedestrian.
+    let mut only_samples = Human2NavSettings {
+        slowdown: 1.0,
+        stop_candidate: false,
+        warm_start: false,
+        ..Default::default()
+    };
+    only_samples.guidance.enabled = true;
+    let through = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), only_samples)
+        .unwrap()
+        .plan(&obs)
+        .unwrap();
+    let gap_through = predicted_gap(&through.poses, &obs);
+    assert!(gap_through < 0.0, "gap {gap_through}");
+    // With them (the default), the planner brakes in front of the pedestrian.
+    let stops = planner(true).plan(&obs).unwrap();
+    let gap = predicted_gap(&stops.poses, &obs);
+    assert!(gap > 0.0, "gap {gap}; notes {:?}", stops.info.notes);
+    assert!(
+        stops.info.notes.iter().any(|n| n == "braking to a stop"),
+        "{:?}",
+        stops.info.notes
+    );
+    assert_eq!(stops.info.selected, None);
+    // Within the limits from the current velocity: the correction turned "stand here" into
+    // braking.
+    let ego = ego_frame(&stops.poses, obs.ego);
+    assert_eq!(tfs_plan(&ego, 0.1, &limits(), obs.ego_velocity), 1.0);
+    assert!(stops.poses[32].x > 0.25 && stops.poses[32].x < 0.6);
+}

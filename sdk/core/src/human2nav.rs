@@ -12,9 +12,9 @@
 //!    the selection score without its feasibility term, runs Algorithm 1 on them, continuing
 //!    from their rollout ([`guidance::guide_subset`]), and applies the exact last-step correction
 //!    ([`crate::projection`]) to them, to their slowed copies, to the stop candidate and to the
-//!    warm-start candidate (see "Selection rule"). Guiding a shortlist
-//!    instead of all `K` samples divides the cost of the `M` iterations (a forward and a
-//!    vector-Jacobian product through the network per integration step) by `K / guided_samples`;
+//!    warm-start candidate (see "Selection rule"). Guiding a shortlist instead of all `K`
+//!    samples divides the cost of the `M` iterations (a forward and a vector-Jacobian product
+//!    through the network per integration step) by `K / guided_samples`;
 //!    `guided_samples = 0` guides all of them, as in the paper;
 //! 4. scores every candidate (and the previous plan, shifted to the current time: the warm
 //!    start of receding-horizon use) and keeps the lowest score (see [`SelectionWeights`]);

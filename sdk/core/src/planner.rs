@@ -45,7 +45,8 @@ pub struct PlanInfo {
     pub candidates: Vec<Vec<Pose2>>,
     /// Candidate trajectories after guidance, world frame (empty when guidance is off).
     pub guided: Vec<Vec<Pose2>>,
-    /// Index of the selected candidate.
+    /// Index in `candidates` of the sample whose path the plan follows (`None` when the plan
+    /// follows none of them, e.g. a kept previous plan or braking to a stop).
     pub selected: Option<usize>,
     /// Φ of the selected trajectory before and after guidance.
     pub phi_before: Option<f64>,

@@ -63,6 +63,59 @@ pub struct EpisodeMetrics {
     pub planner_errors: usize,
     /// How the collision happened (collisions only).
     pub contact: Option<Contact>,
+    /// Executed commands (before saturation) outside each limit: what pulls `tfs_executed`
+    /// down.
+    pub executed_violations: LimitCounts,
+}
+
+/// How many commands broke each limit (a command can break several), out of `commands`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct LimitCounts {
+    pub commands: usize,
+    pub speed: usize,
+    pub reverse: usize,
+    pub acceleration: usize,
+    pub yaw_rate: usize,
+    pub curvature: usize,
+    pub lateral: usize,
+}
+
+impl LimitCounts {
+    /// The names of the limits, in the order of [`LimitCounts::per_limit`].
+    pub const NAMES: [&'static str; 6] = [
+        "speed",
+        "reverse",
+        "acceleration",
+        "yaw_rate",
+        "curvature",
+        "lateral",
+    ];
+
+    /// Counts the violations of each limit.
+    pub fn of(violations: &[tfs::Violations]) -> Self {
+        let n = |f: fn(&tfs::Violations) -> bool| violations.iter().filter(|v| f(v)).count();
+        Self {
+            commands: violations.len(),
+            speed: n(|v| v.speed),
+            reverse: n(|v| v.reverse),
+            acceleration: n(|v| v.acceleration),
+            yaw_rate: n(|v| v.yaw_rate),
+            curvature: n(|v| v.curvature),
+            lateral: n(|v| v.lateral),
+        }
+    }
+
+    /// The counts in the order of [`LimitCounts::NAMES`].
+    pub fn per_limit(&self) -> [usize; 6] {
+        [
+            self.speed,
+            self.reverse,
+            self.acceleration,
+            self.yaw_rate,
+            self.curvature,
+            self.lateral,
+        ]
+    }
 }
 
 impl EpisodeMetrics {
@@ -98,6 +151,11 @@ impl EpisodeMetrics {
             fallbacks: run.plans.iter().filter(|p| p.fallback).count(),
             planner_errors: run.planner_errors.len(),
             contact: run.contact,
+            executed_violations: LimitCounts::of(&tfs::command_violations(
+                &run.raw_commands,
+                run.dt,
+                limits,
+            )),
         }
     }
 }

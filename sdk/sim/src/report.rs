@@ -4,6 +4,7 @@
 
 use crate::bench::{ResultRow, SuiteKind};
 use crate::episode::{ScenarioClass, ScenarioTitle};
+use crate::metrics::LimitCounts;
 use crate::runner::Contact;
 use std::fmt::Write as _;
 
@@ -11,7 +12,8 @@ use std::fmt::Write as _;
 pub const CSV_HEADER: &str = "suite,suite_kind,scenario,episode,scene,robot,method,seed,agents,density,outcome,\
 success,collision,timeout,tfs,tfs_plan,tfs_executed,path_length,time_to_goal,duration,budget,min_clearance,\
 time_within_0_45,time_within_1_2,mean_jerk,plans,fallbacks,planner_errors,contact_robot_closing,\
-contact_pedestrian_closing,contact_pedestrian_age";
+contact_pedestrian_closing,contact_pedestrian_age,commands,exec_over_speed,exec_over_reverse,\
+exec_over_acceleration,exec_over_yaw_rate,exec_over_curvature,exec_over_lateral";
 
 fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n', '\r']) {
@@ -72,7 +74,16 @@ pub fn results_csv(rows: &[ResultRow]) -> String {
             opt(m.contact.map(|c| c.robot_closing)),
             opt(m.contact.map(|c| c.pedestrian_closing)),
             opt(m.contact.map(|c| c.pedestrian_age)),
-        ];
+            m.executed_violations.commands.to_string(),
+        ]
+        .into_iter()
+        .chain(
+            m.executed_violations
+                .per_limit()
+                .iter()
+                .map(|c| c.to_string()),
+        )
+        .collect::<Vec<String>>();
         out.push_str(&fields.join(","));
         out.push('\n');
     }
@@ -326,6 +337,7 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
             );
         }
         collision_table(&mut md, &in_suite, &ctx.methods);
+        violation_table(&mut md, &in_suite, &ctx.robot_names, &ctx.methods);
         let _ = writeln!(md);
     }
 
@@ -426,6 +438,48 @@ fn collision_table(md: &mut String, rows: &[&ResultRow], methods: &[String]) {
             opt2(mean(contacts.iter().map(|c| c.robot_closing))),
             opt2(mean(contacts.iter().map(|c| c.pedestrian_closing)))
         );
+    }
+}
+
+/// Per robot and method, the share of executed commands (before saturation) outside each
+/// limit: what pulls the executed TFS down.
+fn violation_table(md: &mut String, rows: &[&ResultRow], robots: &[String], methods: &[String]) {
+    let _ = writeln!(
+        md,
+        "\n### Executed commands outside each limit (% of commands, before saturation)\n\n\
+         A command can break several limits; the executed TFS is the share that breaks none.\n"
+    );
+    let _ = writeln!(
+        md,
+        "| robot | method | commands | {} |\n|---|---|---|{}",
+        LimitCounts::NAMES.join(" | "),
+        "---|".repeat(LimitCounts::NAMES.len())
+    );
+    for r in robots {
+        for m in methods {
+            let mut total = LimitCounts::default();
+            let mut per = [0usize; 6];
+            for row in rows.iter().filter(|x| &x.robot == r && &x.method == m) {
+                let v = &row.metrics.executed_violations;
+                total.commands += v.commands;
+                for (p, c) in per.iter_mut().zip(v.per_limit()) {
+                    *p += c;
+                }
+            }
+            if total.commands == 0 {
+                continue;
+            }
+            let cells: Vec<String> = per
+                .iter()
+                .map(|&c| format!("{:.1}", 100.0 * c as f64 / total.commands as f64))
+                .collect();
+            let _ = writeln!(
+                md,
+                "| {r} | {m} | {} | {} |",
+                total.commands,
+                cells.join(" | ")
+            );
+        }
     }
 }
 

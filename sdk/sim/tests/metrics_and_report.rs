@@ -100,6 +100,12 @@ fn tfs_pools_plan_waypoints_and_takes_the_minimum() {
     assert_relative_eq!(e, 3.0 / 4.0, epsilon = 1e-12);
     let m = EpisodeMetrics::compute(&run, &l);
     assert_relative_eq!(m.tfs, 0.75, epsilon = 1e-12);
+    // The one infeasible command breaks the yaw-rate limit (9 rad/s), and the curvature limit
+    // when the robot has one.
+    let v = m.executed_violations;
+    assert_eq!((v.commands, v.yaw_rate), (4, 1));
+    assert_eq!(v.speed + v.reverse + v.acceleration + v.lateral, 0);
+    assert_eq!(v.curvature, usize::from(l.kappa_max.is_some()));
     assert_eq!(m.fallbacks, 1);
     assert_eq!(m.plans, 2);
     assert!(m.min_clearance.is_none());
@@ -242,6 +248,7 @@ fn driver_writes_csv_report_and_figures() {
         "| straight | 100.0",
         "pass",
         "How the collisions happened",
+        "Executed commands outside each limit",
     ] {
         assert!(
             report.contains(needle),

@@ -22,6 +22,7 @@ use human2nav_sim::driver::{self, BenchPlan};
 use human2nav_sim::{MethodSpec, SuiteKind};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::HashMap;
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -51,9 +52,9 @@ pub struct BenchArgs {
     #[arg(long, default_value = "sdk/configs/data.toml")]
     pub data_config: PathBuf,
     /// Failed runs to draw per method (`failures_<method>_<k>.png`, four per figure; those the
-    /// most other methods succeeded on first).
-    #[arg(long, default_value_t = 4)]
-    pub failures: usize,
+    /// most other methods succeeded on first) [default: 4, or 1 with --quick].
+    #[arg(long)]
+    pub failures: Option<usize>,
     /// Run only these methods of the configuration (names, comma-separated).
     #[arg(long, value_delimiter = ',')]
     pub methods: Vec<String>,
@@ -152,7 +153,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
         snapshot_method: cfg.snapshot_method(),
         command,
         threads: args.threads,
-        failures: args.failures,
+        failures: args.failures.unwrap_or(if args.quick { 1 } else { 4 }),
     };
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template(
@@ -161,7 +162,15 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
         .unwrap_or_else(|_| ProgressStyle::default_bar())
         .progress_chars("=> "),
     );
-    let outcome = driver::run(&plan, &out, &bar)?;
+    let done = std::sync::atomic::AtomicBool::new(false);
+    let outcome = std::thread::scope(|scope| {
+        if !std::io::stderr().is_terminal() {
+            scope.spawn(|| log_progress(&bar, &done));
+        }
+        let outcome = driver::run(&plan, &out, &bar);
+        done.store(true, std::sync::atomic::Ordering::Relaxed);
+        outcome
+    })?;
 
     for f in host.failures() {
         eprintln!("warning: a plugin instance failed: {f:?}");
@@ -186,6 +195,38 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
         );
     }
     Ok(ExitCode::FAILURE)
+}
+
+/// Where stderr is not a terminal (a log file, CI), the progress bar draws nothing: print its
+/// position, elapsed time and ETA as a line once a minute instead, until `done`.
+fn log_progress(bar: &ProgressBar, done: &std::sync::atomic::AtomicBool) {
+    let tick = std::time::Duration::from_millis(500);
+    let mut waited = std::time::Duration::ZERO;
+    while !done.load(std::sync::atomic::Ordering::Relaxed) {
+        std::thread::sleep(tick);
+        waited += tick;
+        if waited.as_secs() < 60 {
+            continue;
+        }
+        waited = std::time::Duration::ZERO;
+        let Some(len) = bar.length().filter(|&n| n > 0) else {
+            continue;
+        };
+        let pos = bar.position();
+        if pos < len {
+            eprintln!(
+                "{pos}/{len} episode runs, {:.0} s elapsed, ETA {:.0} s",
+                bar.elapsed().as_secs_f64(),
+                bar.eta().as_secs_f64()
+            );
+        } else {
+            eprintln!(
+                "all {len} episode runs done; drawing the figures (the snapshots and failure \
+                 pictures run their episodes again)"
+            );
+            return;
+        }
+    }
 }
 
 /// Mines the held-out episodes of every `real` suite whose file is missing, when the datasets

@@ -2,12 +2,14 @@
 //! the figures and `report.md` in the output directory.
 
 use crate::bench::{MethodSpec, ResultRow, Suite, SuiteKind, run_bench, run_one};
+use crate::episode::Episode;
 use crate::episode::ScenarioClass;
 use crate::error::SimError;
 use crate::figures::{self, Snapshot};
 use crate::report::{self, ReportContext, summarize};
 use crate::runner::{RobotSetup, SimConfig};
 use indicatif::ProgressBar;
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -238,20 +240,20 @@ fn failure_figures(
         return Ok(figures);
     }
     let in_suite: Vec<&ResultRow> = rows.iter().filter(|r| r.suite == suite.name).collect();
+    // Successes per (episode, robot) over all methods: a failed run's own method adds none.
+    let mut successes: HashMap<(&str, &str), usize> = HashMap::new();
+    for r in in_suite.iter().filter(|r| r.metrics.success) {
+        *successes.entry((&r.episode, &r.robot)).or_default() += 1;
+    }
     for method in plan.methods {
         let mut failed: Vec<(usize, &ResultRow)> = in_suite
             .iter()
             .filter(|r| r.method == method.name && !r.metrics.success)
             .map(|r| {
-                let others = in_suite
-                    .iter()
-                    .filter(|o| {
-                        o.method != r.method
-                            && o.episode == r.episode
-                            && o.robot == r.robot
-                            && o.metrics.success
-                    })
-                    .count();
+                let others = successes
+                    .get(&(r.episode.as_str(), r.robot.as_str()))
+                    .copied()
+                    .unwrap_or(0);
                 (others, *r)
             })
             .collect();
@@ -267,20 +269,14 @@ fn failure_figures(
             ) else {
                 continue;
             };
-            let (run, _) = run_one(suite, episode, robot, method, plan.sim, plan.seed)?;
+            let snap = rerun(plan, suite, episode, robot, method)?;
             names.push(format!(
                 "`{}` on {} ({}; {others} other method(s) succeeded)",
                 episode.id,
                 robot.name,
-                run.outcome.as_str()
+                snap.run.outcome.as_str()
             ));
-            snaps.push(Snapshot {
-                episode: episode.clone(),
-                run,
-                robot: robot.name.clone(),
-                method: method.name.clone(),
-                footprint_radius: robot.footprint_radius,
-            });
+            snaps.push(snap);
         }
         for (k, (chunk, names)) in snaps.chunks(4).zip(names.chunks(4)).enumerate() {
             let file = format!("failures_{}_{}.png", file_safe(&method.name), k + 1);
@@ -296,6 +292,24 @@ fn failure_figures(
         }
     }
     Ok(figures)
+}
+
+/// Runs one episode again (runs are deterministic) and keeps it for drawing.
+fn rerun(
+    plan: &BenchPlan<'_>,
+    suite: &Suite,
+    episode: &Episode,
+    robot: &RobotSetup,
+    method: &MethodSpec,
+) -> Result<Snapshot, SimError> {
+    let (run, _) = run_one(suite, episode, robot, method, plan.sim, plan.seed)?;
+    Ok(Snapshot {
+        episode: episode.clone(),
+        run,
+        robot: robot.name.clone(),
+        method: method.name.clone(),
+        footprint_radius: robot.footprint_radius,
+    })
 }
 
 /// `name` with every character that is not ASCII alphanumeric, `-` or `_` replaced by `_`.
@@ -326,14 +340,7 @@ fn snapshots(plan: &BenchPlan<'_>, suite: &Suite) -> Result<Vec<Snapshot>, SimEr
     let mut out = Vec::new();
     for c in ScenarioClass::ALL {
         if let Some(ep) = suite.episodes.iter().find(|e| e.scenario == c) {
-            let (run, _) = run_one(suite, ep, robot, method, plan.sim, plan.seed)?;
-            out.push(Snapshot {
-                episode: ep.clone(),
-                run,
-                robot: robot.name.clone(),
-                method: method.name.clone(),
-                footprint_radius: robot.footprint_radius,
-            });
+            out.push(rerun(plan, suite, ep, robot, method)?);
         }
     }
     Ok(out)

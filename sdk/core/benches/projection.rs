@@ -1,6 +1,6 @@
 //! Cost of the exact last-step correction ([`human2nav_core::projection`]) on one plan of 32
 //! poses with centimetre jitter (what the trained flow model produces), for a differential
-//! drive and for a car with a curvature limit, with the default two Gauss-Newton iterations.
+//! drive and for a car with a curvature limit, with the default settings.
 //!
 //! Run: `cargo bench -p human2nav-core --bench projection`.
 

@@ -36,7 +36,7 @@
 //! track_speed_max = 1.4    # m/s, > 0 (required)
 //! ```
 
-use human2nav_core::embodiment::{Embodiment, RobotState};
+use human2nav_core::embodiment::{Embodiment, RobotState, bound_feedback};
 use human2nav_core::{ControllerGains, Limits, Plan, Pose2, Twist2};
 use human2nav_plugin::{InitError, PluginInit};
 use serde::Deserialize;
@@ -212,7 +212,15 @@ impl Embodiment for SkidSteer {
             + g.k_y * ff.vx * e.y
             + g.k_theta * sin
             + g.k_d * (ff.omega - state.velocity.omega);
-        Twist2::new(v, 0.0, omega)
+        // The feedback stays inside every limit the plan itself respects (the core's rule for
+        // the built-in controllers); a plan over a limit is still asked for, and counted.
+        bound_feedback(
+            Twist2::new(v, 0.0, omega),
+            Twist2::new(ff.vx, 0.0, ff.omega),
+            state.velocity,
+            &self.limits,
+            g.lookahead,
+        )
     }
 }
 

@@ -170,6 +170,39 @@ pub fn plan_feedforward(plan: &Plan, t: f64, current: Twist2, h: f64) -> Twist2 
     if out.is_finite() { out } else { Twist2::ZERO }
 }
 
+/// Keeps a tracking controller's feedback from taking a command past a limit that the plan's
+/// own feed-forward twist respects: the command `cmd` (feed-forward plus feedback) is clipped to
+///
+/// * `v_x ∈ [min(ff_x, −v_reverse_max), max(ff_x, v_max)]`, `|v_y| ≤ max(|ff_y|, lateral)`,
+///   `|ω| ≤ max(|ff_ω|, ω_max)`;
+/// * `|v_x − current_x| ≤ max(a_max·h, |ff_x − current_x|)` over the control period `h`;
+/// * with a curvature limit, `|ω| ≤ max(κ_max, |κ_ff|)·sqrt(v_x² + ε_κ²)` (the curvature as
+///   [`crate::tfs`] measures it, for the clipped `v_x`).
+///
+/// Each interval contains the feed-forward, so a plan that asks for more than a limit still
+/// gets it, and is still counted against it by the executed TFS; a feasible plan is followed
+/// with commands inside every limit, its feedback saturated the way the robot would saturate
+/// it anyway. `current` is the velocity executed last step; non-finite inputs leave `cmd` as is.
+pub fn bound_feedback(cmd: Twist2, ff: Twist2, current: Twist2, limits: &Limits, h: f64) -> Twist2 {
+    if !(cmd.is_finite() && ff.is_finite() && current.is_finite() && h.is_finite()) {
+        return cmd;
+    }
+    let l = limits;
+    let dv = (l.a_max * h.max(0.0)).max((ff.vx - current.vx).abs());
+    let vx = cmd
+        .vx
+        .clamp(ff.vx.min(-l.v_reverse_max), ff.vx.max(l.v_max))
+        .clamp(current.vx - dv, current.vx + dv);
+    let lateral = ff.vy.abs().max(l.lateral_speed_max);
+    let vy = cmd.vy.clamp(-lateral, lateral);
+    let mut yaw = ff.omega.abs().max(l.omega_max);
+    if let Some(kappa_max) = l.kappa_max {
+        let kappa_ff = crate::trajectory::curvature(ff.vx, ff.omega).abs();
+        yaw = yaw.min(kappa_max.max(kappa_ff) * vx.hypot(crate::trajectory::KAPPA_EPS));
+    }
+    Twist2::new(vx, vy, cmd.omega.clamp(-yaw, yaw))
+}
+
 /// The plan's pose at time `t` (clamped to the plan), by geodesic interpolation (Eq. 4).
 pub fn plan_pose_at(plan: &Plan, t: f64) -> Option<Pose2> {
     let last = plan.poses.len().checked_sub(1)?;
@@ -207,7 +240,9 @@ pub fn plan_pose_at(plan: &Plan, t: f64) -> Option<Pose2> {
 ///     (`k_y` in 1/m², `k_θ` in 1/s, so the heading is corrected even when `v_ref = 0`);
 ///   - omnidirectional: `(v_x, v_y) = v_ff + k_x·(e_x, e_y)`, `ω = ω_ref + k_θ·sin e_θ`;
 ///   - all: plus the derivative term `k_d·(ξ_ff − ξ)`, the error between the feed-forward twist
-///     and the velocity executed last step (the time derivative of the pose error).
+///     and the velocity executed last step (the time derivative of the pose error);
+///   - then [`bound_feedback`] with the plan's feed-forward twist (unrotated) and the control
+///     period `lookahead`: the feedback never takes the command past a limit the plan respects.
 ///
 ///   Measured in `sdk/core/tests/embodiment_tracking.rs` (control period 0.05 s, empty world,
 ///   the three shipped robot profiles, 24 s S-curves from rest at 70 % of v_max and a_max with
@@ -335,6 +370,12 @@ impl Embodiment for BuiltinEmbodiment {
         cmd.vx += g.k_d * (ff.vx - v.vx);
         cmd.vy += g.k_d * (ff.vy - v.vy);
         cmd.omega += g.k_d * (ff.omega - v.omega);
-        self.project(cmd)
+        bound_feedback(
+            self.project(cmd),
+            self.project(xi),
+            v,
+            &self.limits,
+            g.lookahead,
+        )
     }
 }

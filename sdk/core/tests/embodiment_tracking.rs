@@ -277,20 +277,31 @@ struct Tracking {
     max_heading_error: f64,
     /// Position error at the end of the transient (m).
     initial_position_error: f64,
+    /// Executed TFS of the controller's commands before saturation, over the whole run.
+    executed_tfs: f64,
 }
 
-fn run(e: &dyn Embodiment, plan: &Plan, start: RobotState, transient: f64) -> Tracking {
+fn run(
+    e: &dyn Embodiment,
+    limits: &Limits,
+    plan: &Plan,
+    start: RobotState,
+    transient: f64,
+) -> Tracking {
     let steps = (plan.duration() / DT).round() as usize;
     let mut state = start;
     let mut out = Tracking {
         max_position_error: 0.0,
         max_heading_error: 0.0,
         initial_position_error: 0.0,
+        executed_tfs: 0.0,
     };
+    let mut raw = Vec::with_capacity(steps);
     for k in 0..steps {
         let t = k as f64 * DT;
         let cmd = e.track(&state, plan, t);
         assert!(cmd.is_finite());
+        raw.push(cmd);
         let cmd = e.saturate(&state, cmd, DT);
         state = e.step(&state, cmd, DT);
         let target = plan_pose_at(plan, t + DT).unwrap();
@@ -304,13 +315,16 @@ fn run(e: &dyn Embodiment, plan: &Plan, start: RobotState, transient: f64) -> Tr
             out.max_heading_error = out.max_heading_error.max(head);
         }
     }
+    out.executed_tfs = human2nav_core::tfs::tfs_executed(&raw, DT, limits);
     out
 }
 
 /// Starting on the plan, the position error stays below 1 cm and the heading error below
 /// 0.01 rad throughout. Starting 0.3 m to the side, 0.1 m behind and 0.2 rad off, both are below
 /// 2 cm and 0.02 rad once a 5 s transient is over (a non-holonomic robot can only correct a
-/// lateral offset by turning while moving, and the plan starts from rest).
+/// lateral offset by turning while moving, and the plan starts from rest). In both runs every
+/// command the controller asks for is within the robot's limits (executed TFS 1): the plan is,
+/// and the feedback is bounded by what the plan leaves (`bound_feedback`).
 fn check_tracking(robot: &str) {
     let transient = 5.0;
     let p = profile(robot);
@@ -321,19 +335,21 @@ fn check_tracking(robot: &str) {
     };
     let plan = s_curve(kind, &p.limits, 24.0);
 
-    let on = run(e.as_ref(), &plan, RobotState::default(), 0.0);
+    let on = run(e.as_ref(), &p.limits, &plan, RobotState::default(), 0.0);
     eprintln!("{robot}: from the plan's start: {on:?}");
     assert!(on.max_position_error < 0.01, "{robot}: {on:?}");
     assert!(on.max_heading_error < 0.01, "{robot}: {on:?}");
+    assert_eq!(on.executed_tfs, 1.0, "{robot}: {on:?}");
 
     let start = RobotState {
         pose: Pose2::new(-0.1, 0.3, 0.2),
         velocity: Twist2::ZERO,
     };
-    let off = run(e.as_ref(), &plan, start, transient);
+    let off = run(e.as_ref(), &p.limits, &plan, start, transient);
     eprintln!("{robot}: from 0.32 m / 0.2 rad off, after {transient} s: {off:?}");
     assert!(off.max_position_error < 0.02, "{robot}: {off:?}");
     assert!(off.max_heading_error < 0.02, "{robot}: {off:?}");
+    assert_eq!(off.executed_tfs, 1.0, "{robot}: {off:?}");
 }
 
 #[test]
@@ -445,4 +461,38 @@ fn replanned_accelerating_plans_give_commands_within_a_max() {
         let tfs = tfs_executed(&raw, DT, &l);
         assert_eq!(tfs, 1.0, "{kind:?}: executed TFS {tfs}");
     }
+}
+
+/// `bound_feedback` clips the feedback at every limit the feed-forward respects, and lets a
+/// feed-forward that exceeds a limit through (so the executed TFS still counts it).
+#[test]
+fn feedback_is_bounded_by_the_limits_the_plan_respects() {
+    use human2nav_core::embodiment::bound_feedback;
+    use human2nav_core::tfs::{TFS_TOLERANCE, check};
+    let l = limits(Some(0.5));
+    let h = DT;
+    let current = Twist2::new(1.0, 0.1, 0.3);
+    // A feasible feed-forward and a large feedback in every direction.
+    let ff = Twist2::new(1.02, 0.1, 0.3);
+    for fb in [
+        Twist2::new(2.0, 1.0, 3.0),
+        Twist2::new(-2.0, -1.0, -3.0),
+        Twist2::new(0.3, -0.6, 0.9),
+    ] {
+        let cmd = Twist2::new(ff.vx + fb.vx, ff.vy + fb.vy, ff.omega + fb.omega);
+        let out = bound_feedback(cmd, ff, current, &l, h);
+        let a = (out.vx - current.vx) / h;
+        let v = check(out.vx, out.vy, out.omega, Some(a), &l, TFS_TOLERANCE);
+        assert!(v.feasible(), "{fb:?} -> {out:?}: {v:?}");
+    }
+    // A command inside every bound is left alone.
+    let inside = Twist2::new(1.01, 0.05, 0.2);
+    assert_eq!(bound_feedback(inside, ff, current, &l, h), inside);
+    // A feed-forward above v_max, a step faster than a_max and a turn sharper than κ_max
+    // passes through unchanged.
+    let over = Twist2::new(1.8, 0.0, 1.7);
+    assert_eq!(bound_feedback(over, over, current, &l, h), over);
+    // Non-finite input is not the bound's business.
+    let nan = Twist2::new(f64::NAN, 0.0, 0.0);
+    assert!(!bound_feedback(nan, ff, current, &l, h).is_finite());
 }

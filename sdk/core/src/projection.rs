@@ -21,13 +21,16 @@
 //!
 //! * `0 ≤ σ·v_k ≤ s·v_lim` with `σ = +1` (forward, `v_lim = v_max`) unless the target
 //!   plan's mean speed is negative (`σ = −1`, `v_lim = v_reverse_max`): one gear per plan, so
-//!   noise around zero speed cannot make the plan stop and reverse;
+//!   noise around zero speed cannot make the plan stop and reverse. A robot moving against
+//!   that gear brakes first: the segments before the first one that can reach zero speed under
+//!   the acceleration limit keep the robot's own direction (`σ = −σ` for them);
 //! * `|vy_k| ≤ s·lateral_speed_max`, `|ω_k| ≤ s·ω_max`;
 //! * `|ω_k| ≤ s·κ_max·c_min·σ·v_k` when the robot has a curvature limit (the measured
 //!   curvature divides by `sqrt((c_k·v_k)² + ε_κ²) ≥ c_min·|v_k|`);
-//! * `|v_k − v_{k−1}| ≤ s_a·a_max·dt − (1 − c_min)·v_lim` (`s_a = 1 − acceleration_margin`): the
-//!   measured change `c_k·v_k − c_{k−1}·v_{k−1}` differs from `v_k − v_{k−1}` by at most
-//!   `(1 − c_min)·v_lim` (2.5 % of diablo's `a_max·dt`); and `|v_1 − v_0| ≤ s_a·a_max·dt/2`
+//! * `|v_k − v_{k−1}| ≤ s_a·a_max·dt − (1 − c_min)·v_top` (`s_a = 1 − acceleration_margin`,
+//!   `v_top = max(v_max, v_reverse_max)`): the measured change `c_k·v_k − c_{k−1}·v_{k−1}`
+//!   differs from `v_k − v_{k−1}` by at most `(1 − c_min)·v_top` (2.5 % of diablo's
+//!   `a_max·dt`); and `|v_1 − v_0| ≤ s_a·a_max·dt/2`
 //!   from the robot's current speed `v_0`: the first segment's speed is a mean over its step,
 //!   which a ramp from `v_0` at `a_max` reaches in half a step. Planned so, the tracking
 //!   controller's feed-forward ([`crate::embodiment::plan_feedforward`]) changes no faster than
@@ -279,28 +282,41 @@ fn solve_step(
         rows.push(row);
         rhs.push(bound - ax);
     };
-    let v_lim = if gear > 0.0 {
-        limits.v_max
-    } else {
-        limits.v_reverse_max
+    let speed_limit = |dir: f64| {
+        if dir > 0.0 {
+            limits.v_max
+        } else {
+            limits.v_reverse_max
+        }
     };
     // The chord factor c_k lies in [c_min, 1] once |ω_k| ≤ ω_max; the bounds below hold for
     // every c_k in that range, so they need no linearisation.
     let c_min = sinc(0.5 * limits.omega_max * dt);
     let s_a = 1.0 - settings.acceleration_margin;
-    let da = (s_a * limits.a_max * dt - (1.0 - c_min) * v_lim).max(0.0);
+    let da =
+        (s_a * limits.a_max * dt - (1.0 - c_min) * limits.v_max.max(limits.v_reverse_max)).max(0.0);
     // From the current speed to the first segment's mean speed: half a step of ramp.
     let da_first = 0.5 * s_a * limits.a_max * dt;
+    // A robot moving against the plan's gear brakes first: the segments before the one that can
+    // reach zero speed keep the robot's direction, the later ones the plan's gear.
+    let braking = if gear * initial_velocity.vx < 0.0 && da > 0.0 {
+        1 + ((initial_velocity.vx.abs() - da_first) / da)
+            .ceil()
+            .max(0.0) as usize
+    } else {
+        0
+    };
     for k in 0..t {
         let (iv, ivy, iw) = (3 * k, 3 * k + 1, 3 * k + 2);
-        push(vec![(iv, gear)], s * v_lim);
-        push(vec![(iv, -gear)], 0.0);
+        let dir = if k + 1 < braking { -gear } else { gear };
+        push(vec![(iv, dir)], s * speed_limit(dir));
+        push(vec![(iv, -dir)], 0.0);
         push(vec![(ivy, 1.0)], s * limits.lateral_speed_max);
         push(vec![(ivy, -1.0)], s * limits.lateral_speed_max);
         push(vec![(iw, 1.0)], s * limits.omega_max);
         push(vec![(iw, -1.0)], s * limits.omega_max);
         if let Some(kappa) = limits.kappa_max {
-            let kv = s * kappa * c_min * gear;
+            let kv = s * kappa * c_min * dir;
             push(vec![(iw, 1.0), (iv, -kv)], 0.0);
             push(vec![(iw, -1.0), (iv, -kv)], 0.0);
         }
@@ -494,6 +510,31 @@ mod tests {
         let out = project(&target, 0.1, &diablo(), v0, &ProjectionSettings::default()).unwrap();
         assert_eq!(tfs_of(&out.poses, &diablo(), v0), 1.0);
         assert!(out.poses[31].x < -1.0, "end {:?}", out.poses[31]);
+    }
+
+    /// A robot backing up (or driving forward) while the plan goes the other way brakes first,
+    /// then follows the plan's gear; the car keeps its curvature limit through the stop.
+    #[test]
+    fn a_robot_moving_against_the_plan_brakes_then_follows_it() {
+        for (name, limits) in [("diablo", diablo()), ("car", car())] {
+            for (v_robot, v_plan) in [(-0.4, 1.0), (1.2, -0.5), (0.3, -0.4)] {
+                let target = jittery(5, v_plan, 0.1, 0.02);
+                let v0 = Twist2::new(v_robot, 0.0, 0.0);
+                let out = project(&target, 0.1, &limits, v0, &ProjectionSettings::default())
+                    .unwrap_or_else(|e| panic!("{name}, {v_robot} -> {v_plan}: {e}"));
+                assert_eq!(
+                    tfs_of(&out.poses, &limits, v0),
+                    1.0,
+                    "{name}, {v_robot} -> {v_plan}"
+                );
+                // It ends up travelling in the plan's direction.
+                let last = out.poses[30].between(out.poses[31]).log();
+                assert!(
+                    last.vx * v_plan > 0.0,
+                    "{name}, {v_robot} -> {v_plan}: {last:?}"
+                );
+            }
+        }
     }
 
     #[test]

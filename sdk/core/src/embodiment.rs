@@ -175,7 +175,9 @@ pub fn plan_feedforward(plan: &Plan, t: f64, current: Twist2, h: f64) -> Twist2 
 ///
 /// * `v_x ∈ [min(ff_x, −v_reverse_max), max(ff_x, v_max)]`, `|v_y| ≤ max(|ff_y|, lateral)`,
 ///   `|ω| ≤ max(|ff_ω|, ω_max)`;
-/// * `|v_x − current_x| ≤ max(a_max·h, |ff_x − current_x|)` over the control period `h`;
+/// * `|v_x − current_x| ≤ max(a_max·h, |ff_x − current_x|)` over the control period `h`, and
+///   `|v_y − current_y| ≤ sqrt((a_max·h)² − (v_x − current_x)²)` (the robot limits the change
+///   of `(v_x, v_y)` in norm; the executed TFS checks `v_x`'s);
 /// * with a curvature limit, `|ω| ≤ max(κ_max, |κ_ff|)·sqrt(v_x² + ε_κ²)` (the curvature as
 ///   [`crate::tfs`] measures it, for the clipped `v_x`).
 ///
@@ -193,8 +195,17 @@ pub fn bound_feedback(cmd: Twist2, ff: Twist2, current: Twist2, limits: &Limits,
         .vx
         .clamp(ff.vx.min(-l.v_reverse_max), ff.vx.max(l.v_max))
         .clamp(current.vx - dv, current.vx + dv);
+    // The robot limits the change of (v_x, v_y) in norm (`saturate`): v_y may change by what
+    // v_x leaves, so that the robot does not shorten v_x's step (v_x's changes are what the
+    // executed TFS checks).
     let lateral = ff.vy.abs().max(l.lateral_speed_max);
-    let vy = cmd.vy.clamp(-lateral, lateral);
+    let room = ((l.a_max * h.max(0.0)).powi(2) - (vx - current.vx).powi(2))
+        .max(0.0)
+        .sqrt();
+    let vy = cmd
+        .vy
+        .clamp(-lateral, lateral)
+        .clamp(current.vy - room, current.vy + room);
     let mut yaw = ff.omega.abs().max(l.omega_max);
     if let Some(kappa_max) = l.kappa_max {
         let kappa_ff = crate::trajectory::curvature(ff.vx, ff.omega).abs();

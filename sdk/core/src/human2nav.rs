@@ -38,7 +38,9 @@
 //! [`Human2NavSettings::slowdown`] of its speed along the same path and a "stop" candidate, all
 //! through the last-step correction: the model proposes where people walk, not when to wait
 //! for one to pass, and in the benchmark's counter- and co-flows the robot otherwise drove into
-//! pedestrians it had predicted.
+//! pedestrians it had predicted. Within [`Human2NavSettings::goal_approach`] of the goal it
+//! also sees "straight to the goal" ([`goal_approach`]): the model, trained on goals metres
+//! away, walks past one that close, and the robot circled it until its time ran out.
 //!
 //! # Safe fallback
 //! A planner never returns a non-finite number. If the flow model or guidance fails, or every
@@ -113,8 +115,12 @@ pub struct Human2NavSettings {
     pub slowdown: f64,
     /// Also offer "stop": brake to a standstill as hard as the limits allow. Default true.
     pub stop_candidate: bool,
+    /// Within this distance (m) of the goal, also offer "straight to the goal": along the line
+    /// to it at half of `v_max`, stopping there ([`goal_approach`]). The model's samples walk
+    /// past a goal that close (it was trained on goals metres away). 0: never. Default 1.
+    pub goal_approach: f64,
     /// Algorithm 1's parameters; `guidance.enabled = false` is the "w/o guidance" ablation
-    /// (it also turns the last-step correction, the slowed copies and the stop candidate off).
+    /// (it also turns the last-step correction and the slowed, stop and goal candidates off).
     pub guidance: GuidanceSettings,
     /// The exact last-step correction applied after Algorithm 1 ([`crate::projection`]).
     pub projection: ProjectionSettings,
@@ -132,6 +138,7 @@ impl Default for Human2NavSettings {
             guided_samples: 4,
             slowdown: 0.5,
             stop_candidate: true,
+            goal_approach: 1.0,
             guidance: GuidanceSettings::default(),
             projection: ProjectionSettings::default(),
             selection: SelectionWeights::default(),
@@ -158,6 +165,9 @@ impl Human2NavSettings {
         }
         if !(self.slowdown > 0.0 && self.slowdown <= 1.0) {
             return bad("slowdown", "must be in (0, 1]");
+        }
+        if !(self.goal_approach.is_finite() && self.goal_approach >= 0.0) {
+            return bad("goal_approach", "must be finite and ≥ 0");
         }
         let s = &self.selection;
         for (name, v) in [
@@ -375,6 +385,11 @@ impl<M: FlowModel> Human2Nav<M> {
                 candidates.push(vec![Pose2::IDENTITY; horizon]);
                 origin.push(Source::Stop);
             }
+            if goal[0].hypot(goal[1]) <= self.settings.goal_approach {
+                let speed = 0.5 * self.robot.limits.v_max;
+                candidates.push(goal_approach(goal, speed, dt, horizon));
+                origin.push(Source::Goal);
+            }
             if let Some(prev) = &warm {
                 candidates.push(prev.clone());
                 origin.push(Source::Previous);
@@ -441,6 +456,7 @@ impl<M: FlowModel> Human2Nav<M> {
                 100.0 * self.settings.slowdown
             )),
             Source::Stop => notes.push("braking to a stop".into()),
+            Source::Goal => notes.push("straight to the goal".into()),
             Source::Previous => notes.push("kept the previous plan".into()),
         }
         let guided: Vec<Vec<Pose2>> = if guidance.enabled {
@@ -589,6 +605,8 @@ enum Source {
     Slowed(usize),
     /// Braking to a standstill.
     Stop,
+    /// Straight to a nearby goal ([`goal_approach`]).
+    Goal,
     /// The previous plan, shifted to now (the warm start).
     Previous,
 }
@@ -598,7 +616,7 @@ impl Source {
     fn sample(self) -> Option<usize> {
         match self {
             Source::Sample(i) | Source::Slowed(i) => Some(i),
-            Source::Stop | Source::Previous => None,
+            Source::Stop | Source::Goal | Source::Previous => None,
         }
     }
 }
@@ -626,6 +644,25 @@ pub fn time_scaled(traj: &[Pose2], scale: f64) -> Vec<Pose2> {
             } else {
                 at(i).interpolate(at(i + 1), f)
             }
+        })
+        .collect()
+}
+
+/// "Straight to the goal" in the ego frame: `T` poses at `dt` along the line from the robot to
+/// `goal`, facing it, at `speed` until the goal and resting there. Not feasible as it stands
+/// (it turns to face the goal at once and starts at `speed`); the last-step correction makes
+/// it so.
+pub fn goal_approach(goal: [f64; 2], speed: f64, dt: f64, horizon: usize) -> Vec<Pose2> {
+    let d = goal[0].hypot(goal[1]);
+    let heading = goal[1].atan2(goal[0]);
+    (1..=horizon)
+        .map(|j| {
+            let f = if d > 0.0 {
+                (speed * j as f64 * dt / d).min(1.0)
+            } else {
+                1.0
+            };
+            Pose2::new(f * goal[0], f * goal[1], heading)
         })
         .collect()
 }

@@ -484,13 +484,19 @@ fn feedback_is_bounded_by_the_limits_the_plan_respects() {
         let a = (out.vx - current.vx) / h;
         let v = check(out.vx, out.vy, out.omega, Some(a), &l, TFS_TOLERANCE);
         assert!(v.feasible(), "{fb:?} -> {out:?}: {v:?}");
+        // ... and the robot would not have to shorten it (it limits the change in norm).
+        let step = (out.vx - current.vx).hypot(out.vy - current.vy);
+        assert!(
+            step <= l.a_max * h + 1e-12,
+            "{fb:?} -> {out:?}: step {step}"
+        );
     }
     // A command inside every bound is left alone.
-    let inside = Twist2::new(1.01, 0.05, 0.2);
+    let inside = Twist2::new(1.01, 0.07, 0.2);
     assert_eq!(bound_feedback(inside, ff, current, &l, h), inside);
     // A feed-forward above v_max, a step faster than a_max and a turn sharper than κ_max
     // passes through unchanged.
-    let over = Twist2::new(1.8, 0.0, 1.7);
+    let over = Twist2::new(1.8, 0.1, 1.7);
     assert_eq!(bound_feedback(over, over, current, &l, h), over);
     // Non-finite input is not the bound's business.
     let nan = Twist2::new(f64::NAN, 0.0, 0.0);

@@ -133,15 +133,19 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
             format!(" --{flag} {}", names.join(","))
         }
     };
+    // The options that shape the report (--out and --threads do not change its numbers).
     let command = format!(
-        "human2nav bench --config {}{}{}{}{}",
+        "human2nav bench --config {}{}{}{}{}{}",
         args.config.display(),
         if args.quick { " --quick" } else { "" },
         args.seed
             .map(|s| format!(" --seed {s}"))
             .unwrap_or_default(),
         list("methods", &args.methods),
-        list("robots", &args.robots)
+        list("robots", &args.robots),
+        args.failures
+            .map(|n| format!(" --failures {n}"))
+            .unwrap_or_default()
     );
     let plan = BenchPlan {
         suites: &suites,

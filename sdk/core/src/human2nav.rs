@@ -11,8 +11,8 @@
 //! 3. with guidance on: shortlists the [`Human2NavSettings::guided_samples`] best samples by
 //!    the selection score without its feasibility term, runs Algorithm 1 on them, continuing
 //!    from their rollout ([`guidance::guide_subset`]), and applies the exact last-step correction
-//!    ([`crate::projection`]) to them, to their slowed copies, to the stop candidate and to the
-//!    warm-start candidate (see "Selection rule"). Guiding a shortlist instead of all `K`
+//!    ([`crate::projection`]) to them, to their slowed copies, to the stop and goal candidates
+//!    and to the warm-start candidate (see "Selection rule"). Guiding a shortlist instead of all `K`
 //!    samples divides the cost of the `M` iterations (a forward and a vector-Jacobian product
 //!    through the network per integration step) by `K / guided_samples`;
 //!    `guided_samples = 0` guides all of them, as in the paper;

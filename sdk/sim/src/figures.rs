@@ -37,6 +37,9 @@ fn draw_err(file: &Path) -> impl Fn(String) -> SimError + '_ {
     }
 }
 
+/// Height of one legend line in the units of a `[0, 1]` bar chart's y axis.
+const LEGEND_ROOM_PER_SERIES: f64 = 0.075;
+
 /// One grouped bar chart: `groups` along x, one bar per series in each group, values in `[0, 1]`.
 fn grouped_bars(
     area: &Area<'_>,
@@ -47,19 +50,27 @@ fn grouped_bars(
     value: &dyn Fn(usize, usize) -> Option<f64>,
 ) -> Result<(), String> {
     let n = groups.len().max(1) as f64;
+    // Room above 1 for the legend (one line per series), so that it never hides a bar.
+    let top = 1.08 + LEGEND_ROOM_PER_SERIES * series.len() as f64;
     let mut chart = ChartBuilder::on(area)
         .caption(title, ("sans-serif", 22))
         .margin(12)
         .x_label_area_size(36)
         .y_label_area_size(50)
-        .build_cartesian_2d(0f64..n, 0f64..1.08)
+        .build_cartesian_2d(0f64..n, 0f64..top)
         .map_err(|e| e.to_string())?;
     chart
         .configure_mesh()
         .disable_x_mesh()
         .x_labels(0)
         .y_desc(y_desc)
-        .y_label_formatter(&|v| format!("{v:.1}"))
+        .y_label_formatter(&|v| {
+            if *v <= 1.0 + 1e-9 {
+                format!("{v:.1}")
+            } else {
+                String::new()
+            }
+        })
         .draw()
         .map_err(|e| e.to_string())?;
     let k = series.len().max(1) as f64;

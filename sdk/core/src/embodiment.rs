@@ -41,6 +41,7 @@ pub trait Embodiment: Send + Sync {
 
 use crate::limits::{ControllerGains, Limits};
 use crate::se2::wrap_angle;
+use crate::trajectory::{KAPPA_EPS, curvature};
 use serde::{Deserialize, Serialize};
 
 /// Below this remaining time (s) the reference twist of a plan is taken as zero.
@@ -190,7 +191,8 @@ pub fn bound_feedback(cmd: Twist2, ff: Twist2, current: Twist2, limits: &Limits,
         return cmd;
     }
     let l = limits;
-    let dv = (l.a_max * h.max(0.0)).max((ff.vx - current.vx).abs());
+    let step = l.a_max * h.max(0.0);
+    let dv = step.max((ff.vx - current.vx).abs());
     let vx = cmd
         .vx
         .clamp(ff.vx.min(-l.v_reverse_max), ff.vx.max(l.v_max))
@@ -199,17 +201,15 @@ pub fn bound_feedback(cmd: Twist2, ff: Twist2, current: Twist2, limits: &Limits,
     // v_x leaves, so that the robot does not shorten v_x's step (v_x's changes are what the
     // executed TFS checks).
     let lateral = ff.vy.abs().max(l.lateral_speed_max);
-    let room = ((l.a_max * h.max(0.0)).powi(2) - (vx - current.vx).powi(2))
-        .max(0.0)
-        .sqrt();
+    let room = (step * step - (vx - current.vx).powi(2)).max(0.0).sqrt();
     let vy = cmd
         .vy
         .clamp(-lateral, lateral)
         .clamp(current.vy - room, current.vy + room);
     let mut yaw = ff.omega.abs().max(l.omega_max);
     if let Some(kappa_max) = l.kappa_max {
-        let kappa_ff = crate::trajectory::curvature(ff.vx, ff.omega).abs();
-        yaw = yaw.min(kappa_max.max(kappa_ff) * vx.hypot(crate::trajectory::KAPPA_EPS));
+        let kappa_ff = curvature(ff.vx, ff.omega).abs();
+        yaw = yaw.min(kappa_max.max(kappa_ff) * vx.hypot(KAPPA_EPS));
     }
     Twist2::new(vx, vy, cmd.omega.clamp(-yaw, yaw))
 }

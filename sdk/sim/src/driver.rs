@@ -2,8 +2,7 @@
 //! the figures and `report.md` in the output directory.
 
 use crate::bench::{MethodSpec, ResultRow, Suite, SuiteKind, run_bench, run_one};
-use crate::episode::Episode;
-use crate::episode::ScenarioClass;
+use crate::episode::{Episode, ScenarioClass};
 use crate::error::SimError;
 use crate::figures::{self, Snapshot};
 use crate::report::{self, ReportContext, summarize};

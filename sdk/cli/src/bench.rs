@@ -326,5 +326,6 @@ pub(crate) fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::R
             },
         )?;
         Ok(Box::new(planner.planner))
-    }))
+    })
+    .with_replan_hz(m.replan_hz))
 }

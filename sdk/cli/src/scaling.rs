@@ -549,7 +549,7 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
                     )
                 })
                 .collect(),
-            sim: bcfg.sim.clone(),
+            sim: bcfg.sim.with_replan_hz(human2nav_replan_hz(&bcfg)),
             seed: bcfg.seed,
         };
         let cl_path = planner_dir.join(CLOSED_LOOP_FILE);
@@ -726,6 +726,15 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// The replanning rate of the bench config's first `human2nav` method (the guided one), which
+/// the scaling runs share.
+fn human2nav_replan_hz(bcfg: &BenchConfig) -> Option<f64> {
+    bcfg.methods
+        .iter()
+        .find(|m| m.kind == "human2nav")
+        .and_then(|m| m.replan_hz)
+}
+
 /// Runs Human2Nav with guidance (the planner config at `planner`) on every episode of `suite`
 /// for every robot, in parallel; rows in job order.
 fn closed_loop(
@@ -748,6 +757,7 @@ fn closed_loop(
             library: None,
             plugin: None,
             config: method_table,
+            replan_hz: human2nav_replan_hz(bcfg),
         },
         bcfg,
     )?;

@@ -43,16 +43,19 @@ pub struct PlannerContext<'a> {
 pub type PlannerFactory =
     dyn Fn(&PlannerContext<'_>) -> Result<Box<dyn Planner>, BoxError> + Send + Sync;
 
-/// A benchmarked method: a report name and a planner factory.
+/// A benchmarked method: a report name, a planner factory and, optionally, its own
+/// replanning rate.
 pub struct MethodSpec {
     pub name: String,
     make: Box<PlannerFactory>,
+    replan_hz: Option<f64>,
 }
 
 impl std::fmt::Debug for MethodSpec {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("MethodSpec")
             .field("name", &self.name)
+            .field("replan_hz", &self.replan_hz)
             .finish_non_exhaustive()
     }
 }
@@ -66,7 +69,21 @@ impl MethodSpec {
         Self {
             name: name.into(),
             make: Box::new(make),
+            replan_hz: None,
         }
+    }
+
+    /// This method replans at `replan_hz` instead of the simulation's rate (`None`: the
+    /// simulation's). The rate must give a whole number of steps per period
+    /// ([`SimConfig::validate`]); [`run_one`] fails otherwise.
+    pub fn with_replan_hz(mut self, replan_hz: Option<f64>) -> Self {
+        self.replan_hz = replan_hz;
+        self
+    }
+
+    /// The closed-loop settings this method runs with.
+    pub fn sim_config(&self, sim: &SimConfig) -> SimConfig {
+        sim.with_replan_hz(self.replan_hz)
     }
 
     /// Builds the planner for one episode.
@@ -173,6 +190,8 @@ pub fn run_one(
     seed: u64,
 ) -> Result<(EpisodeRun, ResultRow), SimError> {
     let seed = episode_seed(seed, &suite.name, &episode.id, &robot.name);
+    let sim = &method.sim_config(sim);
+    sim.validate()?;
     let ctx = PlannerContext {
         robot,
         sim,

@@ -15,6 +15,7 @@
 //! library = "target/{profile}/human2nav_orca"   # plugin library (kind = "plugin")
 //! plugin = "orca"                               # factory name in the library
 //! config = { time_horizon = 5.0 }               # passed to the method, kind-specific
+//! replan_hz = 5.0                               # optional: this method's replanning rate
 //!
 //! [[suites]]
 //! name = "real"
@@ -59,6 +60,10 @@ pub struct MethodConfig {
     /// Kind-specific settings.
     #[serde(default)]
     pub config: toml::Table,
+    /// This method's replanning rate (Hz) instead of `[sim] replan_hz`, under the same rule (a
+    /// whole number of simulation steps per period).
+    #[serde(default)]
+    pub replan_hz: Option<f64>,
 }
 
 /// One suite as configured.
@@ -175,6 +180,15 @@ impl BenchConfig {
                     format!("`{}` is empty or repeated", m.name),
                 ));
             }
+            self.sim
+                .with_replan_hz(m.replan_hz)
+                .validate()
+                .map_err(|e| match e {
+                    SimError::Setting { message, .. } => {
+                        SimError::setting(format!("methods[{}]", m.name), "replan_hz", message)
+                    }
+                    other => other,
+                })?;
             if m.kind == "plugin" && m.library.is_none() {
                 return Err(SimError::setting(
                     format!("methods[{i}]"),
@@ -381,8 +395,18 @@ pub fn load_robots(cfg: &BenchConfig) -> Result<Vec<RobotSetup>, SimError> {
 ///   footprint and the method's `config` as its TOML. The library is loaded once here, so a
 ///   missing build fails before any episode runs.
 ///
-/// Returns `Ok(None)` for any other kind (the caller resolves those, e.g. `human2nav`).
+/// Either replans at the method's `replan_hz` when it sets one. Returns `Ok(None)` for any
+/// other kind (the caller resolves those, e.g. `human2nav`).
 pub fn builtin_method(
+    m: &MethodConfig,
+    cfg: &BenchConfig,
+    host: &Arc<PluginHost>,
+) -> Result<Option<MethodSpec>, SimError> {
+    let spec = builtin_planner(m, cfg, host)?;
+    Ok(spec.map(|s| s.with_replan_hz(m.replan_hz)))
+}
+
+fn builtin_planner(
     m: &MethodConfig,
     cfg: &BenchConfig,
     host: &Arc<PluginHost>,

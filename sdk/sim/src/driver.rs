@@ -123,7 +123,7 @@ pub fn run(
         command: plan.command.clone(),
         seed: plan.seed,
         quick: plan.quick,
-        sim: sim_table(plan.sim, plan.suites),
+        sim: sim_table(plan.sim, plan.methods, plan.suites),
         robots: plan
             .robots
             .iter()
@@ -179,7 +179,7 @@ pub fn run(
 }
 
 /// The settings table of the report.
-fn sim_table(sim: &SimConfig, suites: &[Suite]) -> Vec<(String, String)> {
+fn sim_table(sim: &SimConfig, methods: &[MethodSpec], suites: &[Suite]) -> Vec<(String, String)> {
     let radii = suites
         .iter()
         .flat_map(|s| &s.episodes)
@@ -197,10 +197,7 @@ fn sim_table(sim: &SimConfig, suites: &[Suite]) -> Vec<(String, String)> {
     };
     vec![
         ("simulation step".into(), format!("{} s", sim.dt)),
-        (
-            "replanning rate".into(),
-            format!("{} Hz (every {} steps)", sim.replan_hz, sim.replan_every()),
-        ),
+        ("replanning rate".into(), replanning_rates(sim, methods)),
         ("goal tolerance".into(), format!("{} m", sim.goal_tolerance)),
         ("sensor range".into(), format!("{} m", sim.sensor_range)),
         (
@@ -221,6 +218,28 @@ fn sim_table(sim: &SimConfig, suites: &[Suite]) -> Vec<(String, String)> {
             "robot footprint disc overlaps a pedestrian disc (checked every step)".into(),
         ),
     ]
+}
+
+/// The simulation's replanning rate, then the methods that replan at another one.
+fn replanning_rates(sim: &SimConfig, methods: &[MethodSpec]) -> String {
+    let rate = |s: &SimConfig| format!("{} Hz (every {} steps)", s.replan_hz, s.replan_every());
+    let mut text = rate(sim);
+    let mut others: Vec<(String, Vec<&str>)> = Vec::new();
+    for m in methods {
+        let own = m.sim_config(sim);
+        if own.replan_every() == sim.replan_every() {
+            continue;
+        }
+        let r = rate(&own);
+        match others.iter_mut().find(|(o, _)| *o == r) {
+            Some((_, names)) => names.push(&m.name),
+            None => others.push((r, vec![&m.name])),
+        }
+    }
+    for (r, names) in others {
+        text.push_str(&format!("; {}: {r}", names.join(", ")));
+    }
+    text
 }
 
 /// Up to `plan.failures` failed runs (collision or timeout) of each method on `suite`, drawn

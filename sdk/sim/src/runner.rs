@@ -133,6 +133,15 @@ impl SimConfig {
         Ok(())
     }
 
+    /// These settings with another replanning rate (`None`: unchanged), for a method that
+    /// replans at its own rate.
+    pub fn with_replan_hz(&self, replan_hz: Option<f64>) -> SimConfig {
+        SimConfig {
+            replan_hz: replan_hz.unwrap_or(self.replan_hz),
+            ..self.clone()
+        }
+    }
+
     /// Simulation steps between two planner calls.
     pub fn replan_every(&self) -> usize {
         (1.0 / (self.replan_hz * self.dt)).round().max(1.0) as usize

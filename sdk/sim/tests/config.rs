@@ -77,6 +77,10 @@ fn validation_names_the_offending_setting() {
             ),
             "replan_hz",
         ),
+        (
+            format!("{BASE}replan_hz = 3.0\n[[suites]]\nname = \"s\"\nkind = \"synthetic\"\n"),
+            "methods[straight].replan_hz",
+        ),
         (format!("{BASE}\ncolour = \"red\"\n"), "colour"),
     ];
     for (i, (body, needle)) in cases.iter().enumerate() {

@@ -6,7 +6,7 @@ use approx::assert_relative_eq;
 use common::{episode, robot, robots, standing, walking};
 use human2nav_core::embodiment::RobotState;
 use human2nav_core::{Pose2, Twist2};
-use human2nav_sim::bench::{MethodSpec, Suite, SuiteKind, episode_seed, run_bench};
+use human2nav_sim::bench::{MethodSpec, ResultRow, Suite, SuiteKind, episode_seed, run_bench};
 use human2nav_sim::driver::{self, BenchPlan};
 use human2nav_sim::episode::ScenarioClass;
 use human2nav_sim::metrics::{EpisodeMetrics, mean_jerk, tfs_scores};
@@ -212,12 +212,51 @@ fn bench_is_deterministic_and_ordered() {
 }
 
 #[test]
+fn a_method_can_replan_at_its_own_rate() {
+    let suites = [empty_suite()];
+    let robots = robots();
+    let plain = MethodSpec::straight("every_2nd", &toml::Table::new()).unwrap();
+    let own = MethodSpec::straight("every_4th", &toml::Table::new())
+        .unwrap()
+        .with_replan_hz(Some(5.0));
+    let sim = SimConfig::default();
+    let rows = run_bench(
+        &suites,
+        &robots,
+        &[plain, own],
+        &sim,
+        7,
+        &ProgressBar::hidden(),
+    )
+    .unwrap();
+    let of = |m: &str| -> Vec<&ResultRow> { rows.iter().filter(|r| r.method == m).collect() };
+    for (a, b) in of("every_2nd").into_iter().zip(of("every_4th")) {
+        assert!(a.metrics.success && b.metrics.success);
+        // The planner is called at steps 0, k, 2k, ... before the step that reaches the goal.
+        let calls = |r: &ResultRow, k: usize| {
+            let steps = (r.metrics.duration / sim.dt).round() as usize;
+            steps.div_ceil(k)
+        };
+        assert_eq!(a.metrics.plans, calls(a, 2), "{a:?}");
+        assert_eq!(b.metrics.plans, calls(b, 4), "{b:?}");
+    }
+    // A rate that is not a whole number of steps fails before any episode runs.
+    let bad = MethodSpec::straight("every_3rd", &toml::Table::new())
+        .unwrap()
+        .with_replan_hz(Some(7.0));
+    let err = run_bench(&suites, &robots, &[bad], &sim, 7, &ProgressBar::hidden()).unwrap_err();
+    assert!(err.to_string().contains("replan_hz"), "{err}");
+}
+
+#[test]
 fn driver_writes_csv_report_and_figures() {
     let suites = [small_suite(), empty_suite()];
     let robots = [robot("diablo"), robot("ackermann")];
     let methods = [
         MethodSpec::straight("straight", &toml::Table::new()).unwrap(),
-        MethodSpec::straight("slow", &toml::toml! { speed = 0.5 }).unwrap(),
+        MethodSpec::straight("slow", &toml::toml! { speed = 0.5 })
+            .unwrap()
+            .with_replan_hz(Some(5.0)),
     ];
     let sim = SimConfig::default();
     let plan = BenchPlan {
@@ -249,6 +288,7 @@ fn driver_writes_csv_report_and_figures() {
         "pass",
         "How the collisions happened",
         "Executed commands outside each limit",
+        "| replanning rate | 10 Hz (every 2 steps); slow: 5 Hz (every 4 steps) |",
     ] {
         assert!(
             report.contains(needle),

@@ -387,12 +387,16 @@ fn draw_snapshot(area: &Area<'_>, snap: &Snapshot) -> Result<(), String> {
     Ok(())
 }
 
-/// Fig. 4: one trajectory snapshot per scenario class, 2 × 2 panels.
+/// Fig. 4: trajectory snapshots (one per scenario class there, failed runs elsewhere), in
+/// panels of 600 × 600 px, two per row.
 pub fn trajectory_snapshots(path: &Path, snapshots: &[Snapshot]) -> Result<(), SimError> {
     let err = draw_err(path);
-    let root = BitMapBackend::new(path, (1200, 1200)).into_drawing_area();
+    let cols = snapshots.len().clamp(1, 2);
+    let rows = snapshots.len().div_ceil(2).max(1);
+    let size = (600 * cols as u32, 600 * rows as u32);
+    let root = BitMapBackend::new(path, size).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
-    let panels = root.split_evenly((2, 2));
+    let panels = root.split_evenly((rows, cols));
     for (panel, snap) in panels.iter().zip(snapshots) {
         draw_snapshot(panel, snap).map_err(&err)?;
     }

@@ -342,6 +342,17 @@ fn driver_writes_csv_report_and_figures() {
             "{} is not a PNG",
             f.display()
         );
+        // Panels of 600 px, two per row: Fig. 4 has four, a failure figure two (failures: 2).
+        let size = |at: usize| {
+            u32::from_be_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]])
+        };
+        let name = f.file_name().unwrap().to_string_lossy();
+        if name.starts_with("fig4") {
+            assert_eq!((size(16), size(20)), (1200, 1200), "{name}");
+        } else if name.starts_with("failures_") {
+            assert_eq!(size(16), 1200, "{name}");
+            assert!(size(20) == 600 || size(20) == 1200, "{name}");
+        }
     }
     let csv = std::fs::read_to_string(&res.results_csv).unwrap();
     assert_eq!(csv.lines().count(), res.rows.len() + 1);

@@ -7,7 +7,4 @@ fn main() {
     if let Ok(dir) = std::env::var("DEP_TCH_LIBTORCH_LIB") {
         println!("cargo:rustc-link-arg=-Wl,-rpath,{dir}");
     }
-    // The SARL crate links the ORCA crate; both define the plugin entry symbol (unused in the
-    // binary): keep the first instead of failing.
-    println!("cargo:rustc-link-arg=-Wl,--allow-multiple-definition");
 }

@@ -1,19 +1,8 @@
-//! ORCA (optimal reciprocal collision avoidance, van den Berg et al. 2011) as a human2nav
-//! planner, with the semantics of the RVO2 library.
-//!
-//! * [`lp`]: RVO2's incremental 2-D linear programs, solved exactly.
-//! * [`orca`]: neighbour selection, ORCA half-planes and the new velocity of one agent.
-//! * [`planner`]: [`OrcaPlanner`], the [`human2nav_core::Planner`] that turns the ORCA velocity
-//!   into a plan the robot's tracking controller follows (the documented holonomic → embodiment
-//!   conversion).
-//!
-//! The crate builds both as a Rust library (tests and direct use) and as a `cdylib` plugin.
+//! The ORCA planner plugin: the algorithm of `human2nav-orca-core` (re-exported here, see its
+//! docs) behind the plugin entry point. The crate builds both as a `cdylib` (what the host
+//! loads) and as a Rust library (its tests and benches).
 
-pub mod lp;
-pub mod orca;
-pub mod planner;
-
-pub use planner::{OrcaConfig, OrcaError, OrcaPlanner};
+pub use human2nav_orca_core::{OrcaConfig, OrcaError, OrcaPlanner, lp, orca, planner};
 
 human2nav_plugin::export_plugin! {
     name: "orca",

@@ -7,7 +7,7 @@
 //!   ±`v_pref/2` added to both coordinates, and walks to the antipodal point; positions (and
 //!   goals) closer than the two radii plus the discomfort distance to any earlier agent (or its
 //!   goal) are redrawn.
-//! * Humans are driven by ORCA (RVO2 semantics, from `human2nav-orca`: neighbour distance
+//! * Humans are driven by ORCA (RVO2 semantics, from `human2nav-orca-core`: neighbour distance
 //!   10 m, 10 neighbours, time horizon 5 s, radius + 0.01 m, preferred velocity = the goal
 //!   vector clipped to unit length). By default the robot is **invisible** to them (CrowdNav's
 //!   default, so the robot alone must avoid collisions); [`EnvConfig::robot_visible`] makes
@@ -21,8 +21,8 @@
 //! distance 0.2 m, else 0. A timeout earns 0.
 
 use crate::state::{HumanState, RobotState};
-use human2nav_orca::lp::Vec2;
-use human2nav_orca::orca::{Neighbor, OrcaParams, compute_new_velocity};
+use human2nav_orca_core::lp::Vec2;
+use human2nav_orca_core::orca::{Neighbor, OrcaParams, compute_new_velocity};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 

@@ -11,7 +11,7 @@
 //!   `min(v_pref, d/Δt)` (see [`crate::policy::empty_world_velocity`]).
 //! * The action is chosen by the one-step look-ahead of [`crate::policy`] over the 81 holonomic
 //!   actions of [`ActionSpace::crowdnav`] with the card's Δt and γ.
-//! * Holonomic → embodiment conversion (ORCA's, reused from `human2nav-orca`): the chosen
+//! * Holonomic → embodiment conversion (ORCA's, reused from `human2nav-orca-core`): the chosen
 //!   velocity `v` becomes a constant-velocity plan `poses[k] = (p + k·plan_dt·v, atan2(v))` for
 //!   `k = 1..horizon−1`, `poses[0]` the current pose; below `min_heading_speed` (and for the
 //!   stop action) the plan keeps the current heading. The embodiment's tracking controller then
@@ -25,8 +25,8 @@ use crate::net::SarlNet;
 use crate::policy::{LookAhead, empty_world_velocity, select_action};
 use crate::state::{HumanState, RobotState};
 use human2nav_core::{Observation, Plan, PlanError, Planner};
-use human2nav_orca::lp::Vec2;
-use human2nav_orca::{OrcaConfig, OrcaPlanner};
+use human2nav_orca_core::lp::Vec2;
+use human2nav_orca_core::{OrcaConfig, OrcaPlanner};
 use human2nav_plugin::{InitError, PluginInit};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};

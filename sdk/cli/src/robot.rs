@@ -124,6 +124,9 @@ fn describe(p: &RobotProfile) -> String {
         "footprint   radius {:.4} m  [{}]",
         p.footprint_radius, p.footprint_source
     );
+    for shape in &p.footprint_shapes {
+        let _ = writeln!(s, "  collides  {shape}");
+    }
     let _ = writeln!(s, "limits");
     for e in p.limit_table() {
         let value = e.value.map_or("none".to_string(), |v| format!("{v:.4}"));

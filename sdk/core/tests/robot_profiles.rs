@@ -5,6 +5,7 @@
 
 use approx::assert_relative_eq;
 use human2nav_core::embodiment::EmbodimentKind;
+use human2nav_core::robot::footprint::FootprintShape;
 use human2nav_core::robot::{EmbodimentSpec, Origin, ProfileError, RobotProfile};
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -101,6 +102,13 @@ fn diablo_profile() {
     // Upright cylinder of radius 0.30 m at the origin.
     assert_relative_eq!(p.footprint_radius, 0.30, epsilon = 1e-12);
     assert_eq!(p.footprint_source.origin, Origin::Urdf);
+    assert_eq!(
+        p.footprint_shapes,
+        [FootprintShape::Disc {
+            center: [0.0, 0.0],
+            radius: 0.30
+        }]
+    );
     // Wheels: radius 0.09 m, 22 rad/s, centres at y = ±0.24 m.
     assert_eq!(p.wheel_joints.len(), 2);
     assert_relative_eq!(p.wheel_joints[0].radius, 0.09, epsilon = 1e-12);
@@ -141,6 +149,14 @@ fn go2_profile() {
     );
     // Axis-aligned 0.70 × 0.31 m box at the origin: the half diagonal.
     assert_relative_eq!(p.footprint_radius, 0.35f64.hypot(0.155), epsilon = 1e-12);
+    assert_eq!(
+        p.footprint_shapes,
+        [FootprintShape::Rect {
+            center: [0.0, 0.0],
+            half: [0.35, 0.155],
+            yaw: 0.0
+        }]
+    );
     assert_relative_eq!(p.limits.v_max, 2.0);
     assert_relative_eq!(p.limits.lateral_speed_max, 0.6);
     assert_eq!(p.limits.kappa_max, None);
@@ -162,6 +178,19 @@ fn ackermann_profile() {
         (0.325f64 + 0.49).hypot(0.3725),
         epsilon = 1e-12
     );
+    // The simulator checks the box itself; the disc covers it exactly.
+    let [shape] = p.footprint_shapes[..] else {
+        panic!("{:?}", p.footprint_shapes)
+    };
+    let FootprintShape::Rect { center, half, yaw } = shape else {
+        panic!("{shape:?}")
+    };
+    assert_relative_eq!(center[0], 0.325, epsilon = 1e-12);
+    assert_relative_eq!(center[1], 0.0, epsilon = 1e-12);
+    assert_relative_eq!(half[0], 0.49, epsilon = 1e-12);
+    assert_relative_eq!(half[1], 0.3725, epsilon = 1e-12);
+    assert_eq!(yaw, 0.0);
+    assert_relative_eq!(shape.reach(), p.footprint_radius, epsilon = 1e-12);
     // Wheel cap 9.09 rad/s × 0.165 m = 1.49985 m/s binds below robot.toml's 1.8 m/s.
     assert_relative_eq!(p.limits.v_max, 9.09 * 0.165, epsilon = 1e-12);
     assert_eq!(p.limit_sources.v_max.origin, Origin::Urdf);
@@ -472,6 +501,14 @@ fn footprint_override_applies_to_any_geometry() {
     let (_, result) = load_edited("go2", |t| format!("{t}\n[footprint]\nradius = 0.45\n"));
     let p = result.unwrap();
     assert_relative_eq!(p.footprint_radius, 0.45);
+    // The override is what collisions are checked with too.
+    assert_eq!(
+        p.footprint_shapes,
+        [FootprintShape::Disc {
+            center: [0.0, 0.0],
+            radius: 0.45
+        }]
+    );
     assert!(
         p.footprint_source.detail.contains("0.3828"),
         "{}",

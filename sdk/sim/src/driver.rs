@@ -130,9 +130,14 @@ pub fn run(
             .map(|r| {
                 let l = &r.limits;
                 format!(
-                    "`{}` ({}): footprint radius {:.2} m, v_max {:.2} m/s, a_max {:.2} m/s², ω_max {:.2} rad/s, {}",
+                    "`{}` ({}): collides as {}; planners' disc r {:.2} m; v_max {:.2} m/s, a_max {:.2} m/s², ω_max {:.2} rad/s, {}",
                     r.name,
                     r.embodiment.name(),
+                    r.footprint
+                        .iter()
+                        .map(|s| s.to_string())
+                        .collect::<Vec<_>>()
+                        .join(" + "),
                     r.footprint_radius,
                     l.v_max,
                     l.a_max,
@@ -215,7 +220,9 @@ fn sim_table(sim: &SimConfig, methods: &[MethodSpec], suites: &[Suite]) -> Vec<(
         ("pedestrian disc radius".into(), pedestrian_radius),
         (
             "collision".into(),
-            "robot footprint disc overlaps a pedestrian disc (checked every step)".into(),
+            "the robot's footprint (its URDF base collision seen from above; frame: base link) \
+             overlaps a pedestrian disc, checked every step"
+                .into(),
         ),
     ]
 }
@@ -327,6 +334,7 @@ fn rerun(
         robot: robot.name.clone(),
         method: method.name.clone(),
         footprint_radius: robot.footprint_radius,
+        footprint: robot.footprint.clone(),
     })
 }
 

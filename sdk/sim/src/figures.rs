@@ -8,6 +8,7 @@ use crate::replay::CrowdReplay;
 use crate::report::summarize;
 use crate::runner::EpisodeRun;
 use human2nav_core::Pose2;
+use human2nav_core::robot::footprint::FootprintShape;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
@@ -201,7 +202,10 @@ pub struct Snapshot {
     pub run: EpisodeRun,
     pub robot: String,
     pub method: String,
+    /// The planners' covering disc (drawn as an outline, and the heading arrow's scale).
     pub footprint_radius: f64,
+    /// The footprint collisions are checked with (drawn filled).
+    pub footprint: Vec<FootprintShape>,
 }
 
 impl Snapshot {
@@ -225,6 +229,24 @@ pub fn disc(c: [f64; 2], r: f64) -> Vec<(f64, f64)> {
         .map(|i| {
             let a = std::f64::consts::TAU * i as f64 / 24.0;
             (c[0] + r * a.cos(), c[1] + r * a.sin())
+        })
+        .collect()
+}
+
+/// The footprint's shapes placed at `pose`, as polygons in the world frame.
+pub fn footprint_polygons(shapes: &[FootprintShape], pose: Pose2) -> Vec<Vec<(f64, f64)>> {
+    let world = |p: [f64; 2]| {
+        let q = pose.act(p);
+        (q[0], q[1])
+    };
+    shapes
+        .iter()
+        .map(|s| match *s {
+            FootprintShape::Disc { center, radius } => {
+                let c = world(center);
+                disc([c.0, c.1], radius)
+            }
+            FootprintShape::Rect { .. } => s.corners().into_iter().map(world).collect(),
         })
         .collect()
 }
@@ -357,9 +379,18 @@ fn draw_snapshot(area: &Area<'_>, snap: &Snapshot) -> Result<(), String> {
     }
     let pose = run.states[n_t].pose;
     chart
-        .draw_series(std::iter::once(Polygon::new(
-            disc([pose.x, pose.y], snap.footprint_radius),
-            red.mix(0.8).filled(),
+        .draw_series(
+            footprint_polygons(&snap.footprint, pose)
+                .into_iter()
+                .map(|p| Polygon::new(p, red.mix(0.8).filled())),
+        )
+        .map_err(|e| e.to_string())?;
+    let mut outline = disc([pose.x, pose.y], snap.footprint_radius);
+    outline.push(outline[0]);
+    chart
+        .draw_series(std::iter::once(PathElement::new(
+            outline,
+            red.mix(0.5).stroke_width(1),
         )))
         .map_err(|e| e.to_string())?;
     let head = (

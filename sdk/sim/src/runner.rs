@@ -2,8 +2,11 @@
 //! the embodiment's tracking controller, commands saturated, the kinematic model stepped.
 //!
 //! Per simulation step `n` (time `t_n = n·dt`, default `dt` = 0.05 s):
-//! 1. the pedestrians are sampled at `t_n` ([`crate::replay`]); the clearance to each is
-//!    `‖p_robot − p_ped‖ − r_footprint − r_ped` (robot footprint disc against pedestrian disc);
+//! 1. the pedestrians are sampled at `t_n` ([`crate::replay`]); the clearance to each is the
+//!    distance from the robot's footprint (the URDF base collision's xy projection: a box is a
+//!    rectangle, a cylinder a disc; [`human2nav_core::robot::footprint`]) to the pedestrian's
+//!    disc. Planners get the coarser disc about the robot's reference point that covers the
+//!    footprint (`RobotSetup::footprint_radius`);
 //! 2. a negative clearance is a **collision** (the episode ends); a robot within
 //!    `goal_tolerance` of the goal is a **success**; reaching the time budget is a **timeout**;
 //! 3. every `replan_every = round(1 / (replan_hz·dt))` steps (default 10 Hz, every 2nd step)
@@ -27,6 +30,7 @@ use crate::episode::Episode;
 use crate::error::SimError;
 use crate::replay::CrowdReplay;
 use human2nav_core::embodiment::{Embodiment, RobotState};
+use human2nav_core::robot::footprint::{self, FootprintShape};
 use human2nav_core::{
     ControllerGains, Limits, Observation, Plan, PlanError, Planner, Pose2, Twist2,
 };
@@ -212,8 +216,12 @@ impl SimConfig {
 #[derive(Clone)]
 pub struct RobotSetup {
     pub name: String,
-    /// Radius of the footprint disc used for collisions (m).
+    /// Radius of the disc about the robot's reference point that covers its footprint (m):
+    /// what planners are told to keep clear with.
     pub footprint_radius: f64,
+    /// The footprint collisions are checked with (the URDF base collision's xy projection,
+    /// base-link frame).
+    pub footprint: Vec<FootprintShape>,
     pub limits: Limits,
     /// Gains of the tracking controller (passed on to plugin planners and embodiments).
     pub gains: ControllerGains,
@@ -238,6 +246,7 @@ impl RobotSetup {
         Ok(RobotSetup {
             name: profile.name.clone(),
             footprint_radius: profile.footprint_radius,
+            footprint: profile.footprint_shapes.clone(),
             limits: profile.limits,
             gains: profile.controller,
             embodiment: Arc::from(embodiment),
@@ -250,6 +259,7 @@ impl std::fmt::Debug for RobotSetup {
         f.debug_struct("RobotSetup")
             .field("name", &self.name)
             .field("footprint_radius", &self.footprint_radius)
+            .field("footprint", &self.footprint)
             .field("limits", &self.limits)
             .field("embodiment", &self.embodiment.name())
             .finish()
@@ -397,8 +407,7 @@ pub fn run_episode(
         let t = n as f64 * dt;
         run.end_time = t;
         // 1-2: clearance, collision, goal, budget.
-        let (clearance, nearest) =
-            nearest_clearance(&replay, t, state.pose, robot.footprint_radius);
+        let (clearance, nearest) = nearest_clearance(&replay, t, state.pose, &robot.footprint);
         run.clearance.push(clearance);
         if clearance < 0.0 {
             run.outcome = Outcome::Collision;
@@ -486,20 +495,22 @@ fn panic_message(p: &Box<dyn std::any::Any + Send>) -> String {
     }
 }
 
-/// The smallest clearance between the robot's footprint disc at `pose` and any pedestrian
+/// The smallest clearance between the robot's footprint at `pose` and any pedestrian's disc
 /// present at `t` (`+∞` when nobody is), and that pedestrian's id.
 pub fn nearest_clearance(
     replay: &CrowdReplay<'_>,
     t: f64,
     pose: Pose2,
-    footprint_radius: f64,
+    footprint: &[FootprintShape],
 ) -> (f64, Option<u64>) {
     let mut best = (f64::INFINITY, None);
+    let (sin, cos) = pose.theta.sin_cos();
     for tr in &replay.episode().agents {
         if let Some(s) = replay.sample(tr, t) {
-            let c = (s.position[0] - pose.x).hypot(s.position[1] - pose.y)
-                - footprint_radius
-                - s.radius;
+            // The pedestrian's centre in the robot's frame.
+            let (dx, dy) = (s.position[0] - pose.x, s.position[1] - pose.y);
+            let body = [cos * dx + sin * dy, -sin * dx + cos * dy];
+            let c = footprint::clearance(footprint, body, s.radius);
             if c < best.0 {
                 best = (c, Some(s.id));
             }

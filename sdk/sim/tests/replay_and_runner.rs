@@ -4,10 +4,10 @@ mod common;
 
 use approx::assert_relative_eq;
 use common::{episode, robot, robots, standing, walking};
-use human2nav_core::{Limits, Observation, Plan, PlanError, Planner};
+use human2nav_core::{Limits, Observation, Plan, PlanError, Planner, Pose2};
 use human2nav_sim::episode::{AgentTrack, ScenarioClass};
 use human2nav_sim::replay::CrowdReplay;
-use human2nav_sim::runner::StartHeading;
+use human2nav_sim::runner::{StartHeading, nearest_clearance};
 use human2nav_sim::straight::{StraightConfig, StraightPlanner};
 use human2nav_sim::{Outcome, SimConfig, run_episode};
 use std::f64::consts::PI;
@@ -239,6 +239,47 @@ fn clearance_to_a_pedestrian_beside_the_path() {
     // (≤ 7.5 cm of travel per step changes the distance by < 1 mm at 3 m).
     let min = run.clearance.iter().copied().fold(f64::INFINITY, f64::min);
     assert_relative_eq!(min, 3.0 - 0.3 - r.footprint_radius, epsilon = 1e-3);
+}
+
+#[test]
+fn collisions_use_the_urdf_footprint_not_the_planners_disc() {
+    // A pedestrian standing still at (x, y) in the robot's frame (robot at the origin facing +x).
+    let clearance = |name: &str, p: [f64; 2], theta: f64| {
+        let r = robot(name);
+        let ep = episode(
+            "at",
+            ScenarioClass::CrossFlow,
+            0.0,
+            vec![standing(1, p, 10)],
+        );
+        let replay = CrowdReplay::new(&ep);
+        nearest_clearance(&replay, 0.0, Pose2::new(0.0, 0.0, theta), &r.footprint).0
+    };
+    // go2: a 0.70 × 0.31 m box about the base link (planners' disc r = 0.383 m). 0.5 m to the
+    // side is clear of the box (0.5 − 0.155 − 0.3) though inside the disc; 0.5 m ahead is not.
+    assert_relative_eq!(clearance("go2", [0.0, 0.5], 0.0), 0.045, epsilon = 1e-9);
+    assert_relative_eq!(clearance("go2", [0.5, 0.0], 0.0), -0.15, epsilon = 1e-9);
+    // Turned by 90°, the same pedestrian ahead is beside the body.
+    assert_relative_eq!(
+        clearance("go2", [0.5, 0.0], std::f64::consts::FRAC_PI_2),
+        0.045,
+        epsilon = 1e-9
+    );
+    // ackermann: the 0.98 × 0.745 m body box lies 0.325 m ahead of the rear axle (disc r =
+    // 0.896 m about the axle). 0.7 m behind the axle is 0.535 m behind the bumper.
+    assert_relative_eq!(
+        clearance("ackermann", [-0.7, 0.0], 0.0),
+        0.235,
+        epsilon = 1e-9
+    );
+    assert!(0.7 - 0.3 - robot("ackermann").footprint_radius < 0.0);
+    // diablo: an upright cylinder about the base link, the same as its disc.
+    let d = robot("diablo");
+    assert_relative_eq!(
+        clearance("diablo", [0.0, 1.0], 0.0),
+        1.0 - 0.3 - d.footprint_radius,
+        epsilon = 1e-9
+    );
 }
 
 #[test]

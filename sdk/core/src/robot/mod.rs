@@ -61,6 +61,7 @@
 //! The base link's origin is the point the embodiment's kinematic model moves (for Ackermann the
 //! rear-axle centre, where `v_y = 0`).
 
+pub mod footprint;
 mod urdf;
 
 pub use crate::embodiment::EmbodimentKind;
@@ -253,9 +254,14 @@ pub struct RobotProfile {
     pub track_width: Option<f64>,
     /// Distance between steering and wheel axles (m), for Ackermann robots with steering joints.
     pub wheelbase: Option<f64>,
-    /// Radius of the collision disc (m).
+    /// Radius of the disc about the base-link origin that covers the footprint (m): the body
+    /// planners avoid pedestrians with.
     pub footprint_radius: f64,
     pub footprint_source: Provenance,
+    /// The footprint the simulator checks collisions with: the URDF base collision's xy
+    /// projection ([`footprint`]), or the disc of `footprint_radius` when `[footprint] radius`
+    /// overrides the URDF.
+    pub footprint_shapes: Vec<footprint::FootprintShape>,
     /// Effective limits after the URDF caps.
     pub limits: Limits,
     pub limit_sources: LimitProvenance,
@@ -577,6 +583,13 @@ impl RobotProfile {
                 (r, Provenance::urdf(format!("URDF {account}")))
             }
         };
+        let footprint_shapes = match footprint_override {
+            Some(radius) => vec![footprint::FootprintShape::Disc {
+                center: [0.0, 0.0],
+                radius,
+            }],
+            None => model.footprint_shapes(&base_link)?,
+        };
 
         let mut wheel_joints = Vec::with_capacity(e.wheel_joints.len());
         for (i, name) in e.wheel_joints.iter().enumerate() {
@@ -779,6 +792,7 @@ impl RobotProfile {
             wheelbase,
             footprint_radius,
             footprint_source,
+            footprint_shapes,
             limits,
             limit_sources,
             min_turning_radius: r_min,

@@ -5,6 +5,7 @@
 //! steering joints may sit anywhere below the base link (behind fixed joints, for instance).
 
 use super::ProfileError;
+use super::footprint::FootprintShape;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -236,6 +237,61 @@ impl UrdfModel {
             }
         }
         Ok((radius, account))
+    }
+
+    /// The xy projection of every `<collision>` of `base`, one shape each (see
+    /// [`super::footprint`]): an upright box is a rectangle, an upright cylinder or capsule and a
+    /// sphere a disc, and any tilted element the disc about its centre that covers its
+    /// projection. Call after [`Self::footprint_radius`], which reports bad geometry.
+    pub(crate) fn footprint_shapes(&self, base: &str) -> Result<Vec<FootprintShape>, ProfileError> {
+        let link = self
+            .link(base)
+            .ok_or_else(|| self.content_error(format!("link `{base}`"), "not found"))?;
+        let mut shapes = Vec::with_capacity(link.collision.len());
+        for (i, c) in link.collision.iter().enumerate() {
+            let iso = pose_to_isometry(&c.origin);
+            let center = [iso.translation.vector.x, iso.translation.vector.y];
+            let upright = (iso.rotation * Vector3::z()).z.abs() >= UPRIGHT_COS;
+            let disc = |radius: f64| FootprintShape::Disc { center, radius };
+            shapes.push(match &c.geometry {
+                Geometry::Box { size } => {
+                    let [a, b, h] = size.0.map(|s| 0.5 * s);
+                    if upright {
+                        let x_axis = iso.rotation * Vector3::x();
+                        FootprintShape::Rect {
+                            center,
+                            half: [a, b],
+                            yaw: x_axis.y.atan2(x_axis.x),
+                        }
+                    } else {
+                        let mut r: f64 = 0.0;
+                        for sx in [-a, a] {
+                            for sy in [-b, b] {
+                                for sz in [-h, h] {
+                                    let p = iso * Point3::new(sx, sy, sz);
+                                    r = r.max((p.x - center[0]).hypot(p.y - center[1]));
+                                }
+                            }
+                        }
+                        disc(r)
+                    }
+                }
+                Geometry::Cylinder { radius, length } if !upright => {
+                    disc(radius.hypot(0.5 * length))
+                }
+                Geometry::Capsule { radius, length } if !upright => disc(radius + 0.5 * length),
+                Geometry::Cylinder { radius, .. }
+                | Geometry::Capsule { radius, .. }
+                | Geometry::Sphere { radius } => disc(*radius),
+                Geometry::Mesh { filename, .. } => {
+                    return Err(self.content_error(
+                        format!("link `{base}` collision[{i}]"),
+                        format!("mesh `{filename}` has no analytic extent"),
+                    ));
+                }
+            });
+        }
+        Ok(shapes)
     }
 
     /// Measures a wheel joint: continuous or revolute, with a cylinder or sphere on its child.

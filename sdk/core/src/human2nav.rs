@@ -28,8 +28,9 @@
 //! `score = w_feas·(1 − TFS) + w_goal·d_end/d_0 + w_clear·C + w_cons·D`, where TFS is the
 //! trajectory feasibility score of the candidate ([`crate::tfs`]), `d_end/d_0` the remaining
 //! distance to the (clipped) goal relative to the current one, `C` the mean over waypoints of
-//! `max(0, margin − gap)²/margin²` with `gap` the distance between the robot's footprint and each
-//! agent's disc, agents predicted at constant velocity, where the first waypoint with a
+//! `max(0, margin − gap)²/margin²` with `gap` the distance between the robot's footprint (its
+//! shapes at the waypoint's pose, [`RobotModel::footprint`]) and each agent's disc, agents
+//! predicted at constant velocity, where the first waypoint with a
 //! predicted overlap and every one after it count [`COLLISION_PENALTY`] instead (a collision ends
 //! the plan: the earlier, the worse), and `D` the mean distance (m) to the previous plan at the
 //! same times (0 without one).
@@ -55,6 +56,7 @@ use crate::guidance::{self, GuidanceSettings, GuidanceWorkspace};
 use crate::limits::Limits;
 use crate::planner::{AgentState, Observation, Plan, PlanError, PlanInfo, Planner};
 use crate::projection::{self, ProjectionSettings};
+use crate::robot::footprint::{self, FootprintShape};
 use crate::se2::{Pose2, Twist2};
 use crate::tfs;
 use rand::SeedableRng;
@@ -197,10 +199,26 @@ impl Human2NavSettings {
 pub struct RobotModel {
     /// The robot's hard limits (TFS and selection).
     pub limits: Limits,
-    /// Footprint radius from the URDF (m).
+    /// Radius of the disc about the robot's reference point that covers its footprint (m).
     pub footprint_radius: f64,
+    /// The footprint the selection predicts contacts with, placed at each plan pose
+    /// ([`RobotProfile::footprint_shapes`](crate::robot::RobotProfile::footprint_shapes));
+    /// empty: the disc of `footprint_radius`.
+    pub footprint: Vec<FootprintShape>,
     /// Φ: the profile's built-in terms plus any plugin terms.
     pub phi: Phi,
+}
+
+impl RobotModel {
+    /// Clearance between the footprint at `pose` and a disc of `radius` at `p` (same frame).
+    fn clearance(&self, pose: &Pose2, p: [f64; 2], radius: f64) -> f64 {
+        if self.footprint.is_empty() {
+            return (p[0] - pose.x).hypot(p[1] - pose.y) - self.footprint_radius - radius;
+        }
+        let (s, c) = pose.theta.sin_cos();
+        let (dx, dy) = (p[0] - pose.x, p[1] - pose.y);
+        footprint::clearance(&self.footprint, [c * dx + s * dy, -s * dx + c * dy], radius)
+    }
 }
 
 /// The reference planner. Generic over the flow model so it runs with the libtorch network or
@@ -565,7 +583,7 @@ impl<M: FlowModel> Human2Nav<M> {
             for a in agents {
                 let ax = a.position[0] + a.velocity[0] * t;
                 let ay = a.position[1] + a.velocity[1] * t;
-                let gap = (p.x - ax).hypot(p.y - ay) - self.robot.footprint_radius - a.radius;
+                let gap = self.robot.clearance(p, [ax, ay], a.radius);
                 if gap < 0.0 {
                     hit = true;
                     break;

@@ -28,6 +28,7 @@ fn robot() -> RobotModel {
     RobotModel {
         limits,
         footprint_radius: 0.3,
+        footprint: Vec::new(),
         phi: Phi::from_weights(&GuidanceWeights::default(), &limits),
     }
 }

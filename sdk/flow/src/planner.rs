@@ -199,6 +199,7 @@ pub fn robot_model(profile: &RobotProfile, phi: Phi) -> RobotModel {
     RobotModel {
         limits: profile.limits,
         footprint_radius: profile.footprint_radius,
+        footprint: profile.footprint_shapes.clone(),
         phi,
     }
 }

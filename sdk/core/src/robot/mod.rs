@@ -45,7 +45,11 @@
 //!   (tilted ones the conservative `√(r² + (L/2)²)`, resp. `r + L/2`, plus the offset); a sphere
 //!   `radius + |xy offset|`. A mesh is rejected with an error naming the link, unless
 //!   `[footprint] radius` is given: that value then overrides the URDF for any geometry, and the
-//!   profile records which one was used.
+//!   profile records which one was used. Planners keep clear with this disc.
+//! * **Footprint shapes** ([`footprint`]): the same geometry one shape per element, what the
+//!   simulator checks collisions against (an upright box is a rectangle, an upright cylinder,
+//!   capsule or sphere a disc, a tilted element the disc about its centre covering it); with
+//!   `[footprint] radius`, that disc about the origin.
 //! * **Wheel joints** (`embodiment.wheel_joints`, continuous or revolute): the wheel radius `r` is
 //!   the child link's cylinder or sphere (collision first, then visual). Where a joint has a
 //!   positive `<limit velocity>` `ω_w`, the wheel's rim speed `ω_w·r` caps `v_max` and

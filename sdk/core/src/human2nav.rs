@@ -215,9 +215,7 @@ impl RobotModel {
         if self.footprint.is_empty() {
             return (p[0] - pose.x).hypot(p[1] - pose.y) - self.footprint_radius - radius;
         }
-        let (s, c) = pose.theta.sin_cos();
-        let (dx, dy) = (p[0] - pose.x, p[1] - pose.y);
-        footprint::clearance(&self.footprint, [c * dx + s * dy, -s * dx + c * dy], radius)
+        footprint::clearance_at(&self.footprint, *pose, p, radius)
     }
 }
 

@@ -504,13 +504,9 @@ pub fn nearest_clearance(
     footprint: &[FootprintShape],
 ) -> (f64, Option<u64>) {
     let mut best = (f64::INFINITY, None);
-    let (sin, cos) = pose.theta.sin_cos();
     for tr in &replay.episode().agents {
         if let Some(s) = replay.sample(tr, t) {
-            // The pedestrian's centre in the robot's frame.
-            let (dx, dy) = (s.position[0] - pose.x, s.position[1] - pose.y);
-            let body = [cos * dx + sin * dy, -sin * dx + cos * dy];
-            let c = footprint::clearance(footprint, body, s.radius);
+            let c = footprint::clearance_at(footprint, pose, s.position, s.radius);
             if c < best.0 {
                 best = (c, Some(s.id));
             }

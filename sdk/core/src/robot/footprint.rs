@@ -5,6 +5,7 @@
 //! every shape ([`super::RobotProfile::footprint_radius`]). A car whose base link is its rear
 //! axle is the case where the two differ most: its body box lies ahead of the origin.
 
+use crate::se2::Pose2;
 use serde::{Deserialize, Serialize};
 
 /// One convex piece of the footprint, in the base-link frame (m, rad).
@@ -110,6 +111,14 @@ pub fn clearance(shapes: &[FootprintShape], p: [f64; 2], radius: f64) -> f64 {
         .map(|s| s.signed_distance(p))
         .fold(f64::INFINITY, f64::min)
         - radius
+}
+
+/// [`clearance`] with the footprint placed at `pose` and the disc's centre `p` in the same
+/// frame as `pose`.
+pub fn clearance_at(shapes: &[FootprintShape], pose: Pose2, p: [f64; 2], radius: f64) -> f64 {
+    let (s, c) = pose.theta.sin_cos();
+    let (dx, dy) = (p[0] - pose.x, p[1] - pose.y);
+    clearance(shapes, [c * dx + s * dy, -s * dx + c * dy], radius)
 }
 
 #[cfg(test)]

@@ -199,24 +199,12 @@ impl Human2NavSettings {
 pub struct RobotModel {
     /// The robot's hard limits (TFS and selection).
     pub limits: Limits,
-    /// Radius of the disc about the robot's reference point that covers its footprint (m).
-    pub footprint_radius: f64,
     /// The footprint the selection predicts contacts with, placed at each plan pose
     /// ([`RobotProfile::footprint_shapes`](crate::robot::RobotProfile::footprint_shapes));
-    /// empty: the disc of `footprint_radius`.
+    /// at least one shape.
     pub footprint: Vec<FootprintShape>,
     /// Φ: the profile's built-in terms plus any plugin terms.
     pub phi: Phi,
-}
-
-impl RobotModel {
-    /// Clearance between the footprint at `pose` and a disc of `radius` at `p` (same frame).
-    fn clearance(&self, pose: &Pose2, p: [f64; 2], radius: f64) -> f64 {
-        if self.footprint.is_empty() {
-            return (p[0] - pose.x).hypot(p[1] - pose.y) - self.footprint_radius - radius;
-        }
-        footprint::clearance_at(&self.footprint, *pose, p, radius)
-    }
 }
 
 /// The reference planner. Generic over the flow model so it runs with the libtorch network or
@@ -253,6 +241,11 @@ impl<M: FlowModel> Human2Nav<M> {
         settings.validate()?;
         bev.validate()
             .map_err(|e| PlanError::InvalidSettings(format!("bev: {e}")))?;
+        if robot.footprint.is_empty() {
+            return Err(PlanError::InvalidSettings(
+                "the robot model has no footprint shape".into(),
+            ));
+        }
         if model.horizon() == 0 {
             return Err(PlanError::InvalidSettings(
                 "flow model has a horizon of 0 poses".into(),
@@ -581,7 +574,7 @@ impl<M: FlowModel> Human2Nav<M> {
             for a in agents {
                 let ax = a.position[0] + a.velocity[0] * t;
                 let ay = a.position[1] + a.velocity[1] * t;
-                let gap = self.robot.clearance(p, [ax, ay], a.radius);
+                let gap = footprint::clearance_at(&self.robot.footprint, *p, [ax, ay], a.radius);
                 if gap < 0.0 {
                     hit = true;
                     break;

@@ -9,6 +9,7 @@ use human2nav_core::constraint::Phi;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use human2nav_core::guidance::analytic::ConstantField;
 use human2nav_core::human2nav::{Human2Nav, Human2NavSettings, RobotModel, pose_at};
+use human2nav_core::robot::footprint::FootprintShape;
 use human2nav_core::tfs::tfs_plan;
 use human2nav_core::{AgentState, GuidanceWeights, Limits, Observation, Planner, Pose2, Twist2};
 
@@ -23,12 +24,17 @@ fn limits() -> Limits {
     }
 }
 
+/// The test robot's footprint: a disc about its reference point (m).
+const ROBOT_RADIUS: f64 = 0.3;
+
 fn robot() -> RobotModel {
     let limits = limits();
     RobotModel {
         limits,
-        footprint_radius: 0.3,
-        footprint: Vec::new(),
+        footprint: vec![FootprintShape::Disc {
+            center: [0.0, 0.0],
+            radius: ROBOT_RADIUS,
+        }],
         phi: Phi::from_weights(&GuidanceWeights::default(), &limits),
     }
 }
@@ -258,6 +264,22 @@ fn invalid_settings_name_the_field() {
 }
 
 #[test]
+fn a_robot_without_a_footprint_is_an_error() {
+    let robot = RobotModel {
+        footprint: Vec::new(),
+        ..robot()
+    };
+    let err = Human2Nav::new(
+        fast_straight(),
+        robot,
+        BevSpec::default(),
+        Human2NavSettings::default(),
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("footprint"), "{err}");
+}
+
+#[test]
 fn time_scaling_keeps_the_path_and_scales_the_speed() {
     use human2nav_core::human2nav::time_scaled;
     // 1 m/s straight ahead, then a quarter turn at the end.
@@ -310,7 +332,7 @@ fn predicted_gap(plan: &[Pose2], obs: &Observation) -> f64 {
                 a.position[0] + a.velocity[0] * t,
                 a.position[1] + a.velocity[1] * t,
             );
-            (p.x - ax).hypot(p.y - ay) - robot().footprint_radius - a.radius
+            (p.x - ax).hypot(p.y - ay) - ROBOT_RADIUS - a.radius
         })
         .fold(f64::INFINITY, f64::min)
 }

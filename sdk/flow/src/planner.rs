@@ -198,7 +198,6 @@ pub fn robot_phi(profile: &RobotProfile) -> Result<Phi, PlannerError> {
 pub fn robot_model(profile: &RobotProfile, phi: Phi) -> RobotModel {
     RobotModel {
         limits: profile.limits,
-        footprint_radius: profile.footprint_radius,
         footprint: profile.footprint_shapes.clone(),
         phi,
     }

@@ -6,6 +6,7 @@
 //!
 //! * [`episode`]: the episode types (from the data crate).
 //! * [`replay`]: pedestrians interpolated to the simulation step.
+//! * [`crowd`]: the crowd during a run, replayed or reactive (social force toward the robot).
 //! * [`runner`]: the closed loop, collision/goal/budget rules ([`runner::SimConfig`]).
 //! * [`metrics`]: per-episode metrics.
 //! * [`straight`]: the straight-to-goal sanity baseline.
@@ -16,6 +17,7 @@
 
 pub mod bench;
 pub mod config;
+pub mod crowd;
 pub mod driver;
 pub mod episode;
 pub mod error;
@@ -28,9 +30,12 @@ pub mod runner;
 pub mod straight;
 
 pub use bench::{MethodSpec, PlannerContext, ResultRow, Suite, SuiteKind, run_bench};
+pub use crowd::{CrowdModel, SocialForce};
 pub use error::SimError;
 /// The progress bar type the benchmark reports to (re-exported so callers need no direct
 /// dependency; `ProgressBar::hidden()` for silence).
 pub use indicatif::ProgressBar;
 pub use metrics::EpisodeMetrics;
-pub use runner::{Contact, EpisodeRun, Outcome, RobotSetup, SimConfig, run_episode};
+pub use runner::{
+    Contact, EpisodeRun, Outcome, RobotSetup, SimConfig, run_episode, run_episode_with,
+};

@@ -2,7 +2,9 @@
 //! the embodiment's tracking controller, commands saturated, the kinematic model stepped.
 //!
 //! Per simulation step `n` (time `t_n = n·dt`, default `dt` = 0.05 s):
-//! 1. the pedestrians are sampled at `t_n` ([`crate::replay`]); the clearance to each is the
+//! 1. the crowd is where it is at `t_n`: replayed as recorded ([`crate::replay`]), or, in a
+//!    reactive suite, recorded paths with a social-force response to the robot during the
+//!    previous step ([`crate::crowd`]); the clearance to each pedestrian is the
 //!    distance from the robot's footprint (the URDF base collision's xy projection: a box is a
 //!    rectangle, a cylinder a disc; [`human2nav_core::robot::footprint`]) to the pedestrian's
 //!    disc. Planners get the coarser disc about the robot's reference point that covers the
@@ -26,9 +28,10 @@
 //! heading is the episode's), so every robot can reach the goal of every episode in an empty
 //! world within its budget.
 
+use crate::crowd::{Crowd, CrowdModel};
 use crate::episode::Episode;
 use crate::error::SimError;
-use crate::replay::CrowdReplay;
+use crate::replay::PedestrianSample;
 use human2nav_core::embodiment::{Embodiment, RobotState};
 use human2nav_core::robot::footprint::{self, FootprintShape};
 use human2nav_core::{
@@ -322,6 +325,9 @@ pub struct EpisodeRun {
     pub planner_errors: Vec<String>,
     /// How the collision happened, when there was one.
     pub contact: Option<Contact>,
+    /// The simulated pedestrians at each `t_n` (`N + 1` lists) when the crowd was reactive;
+    /// `None` for a replayed crowd, whose pedestrians are the episode's recording.
+    pub crowd: Option<Vec<Vec<PedestrianSample>>>,
 }
 
 /// The first overlap of an episode that ended in a collision: who moved into whom. The replay
@@ -340,11 +346,10 @@ pub struct Contact {
 }
 
 impl Contact {
-    /// The contact between the robot in `state` and pedestrian `id` at time `t`.
-    fn at(replay: &CrowdReplay<'_>, t: f64, state: &RobotState, id: u64) -> Option<Self> {
-        let episode = replay.episode();
-        let track = episode.agents.iter().find(|a| a.id == id)?;
-        let ped = replay.sample(track, t)?;
+    /// The contact between the robot in `state` and pedestrian `id` of the crowd now.
+    fn at(crowd: &Crowd<'_>, state: &RobotState, id: u64) -> Option<Self> {
+        let ped = *crowd.get(id)?;
+        let age = crowd.age(id)?;
         let (dx, dy) = (
             ped.position[0] - state.pose.x,
             ped.position[1] - state.pose.y,
@@ -363,19 +368,31 @@ impl Contact {
             pedestrian: id,
             robot_closing: vx * nx + vy * ny,
             pedestrian_closing: -(ped.velocity[0] * nx + ped.velocity[1] * ny),
-            pedestrian_age: t - track.start_step as f64 * episode.dt,
+            pedestrian_age: age,
         })
     }
 }
 
-/// Runs one episode closed loop.
+/// Runs one episode closed loop with the recorded crowd replayed as it walked.
 pub fn run_episode(
     episode: &Episode,
     robot: &RobotSetup,
     planner: &mut dyn Planner,
     cfg: &SimConfig,
 ) -> EpisodeRun {
-    let replay = CrowdReplay::new(episode);
+    run_episode_with(episode, robot, planner, cfg, &CrowdModel::Replay)
+}
+
+/// Runs one episode closed loop with the crowd behaving as `model` says
+/// ([`crate::crowd`]).
+pub fn run_episode_with(
+    episode: &Episode,
+    robot: &RobotSetup,
+    planner: &mut dyn Planner,
+    cfg: &SimConfig,
+    model: &CrowdModel,
+) -> EpisodeRun {
+    let mut crowd = Crowd::new(episode, model);
     let dt = cfg.dt;
     let budget = cfg.budget_for(episode, &robot.limits);
     // The last step checked is the last one at or before the budget (so duration ≤ budget).
@@ -399,6 +416,9 @@ pub fn run_episode(
         plans: Vec::new(),
         planner_errors: Vec::new(),
         contact: None,
+        crowd: crowd
+            .is_reactive()
+            .then(|| Vec::with_capacity(max_steps + 1)),
     };
     planner.reset();
     let mut plan: Option<Plan> = None;
@@ -407,11 +427,14 @@ pub fn run_episode(
         let t = n as f64 * dt;
         run.end_time = t;
         // 1-2: clearance, collision, goal, budget.
-        let (clearance, nearest) = nearest_clearance(&replay, t, state.pose, &robot.footprint);
+        if let Some(states) = run.crowd.as_mut() {
+            states.push(crowd.present().to_vec());
+        }
+        let (clearance, nearest) = nearest_clearance(crowd.present(), state.pose, &robot.footprint);
         run.clearance.push(clearance);
         if clearance < 0.0 {
             run.outcome = Outcome::Collision;
-            run.contact = nearest.and_then(|id| Contact::at(&replay, t, &state, id));
+            run.contact = nearest.and_then(|id| Contact::at(&crowd, &state, id));
             break;
         }
         let to_goal = (episode.goal[0] - state.pose.x).hypot(episode.goal[1] - state.pose.y);
@@ -430,8 +453,7 @@ pub fn run_episode(
                 ego: state.pose,
                 ego_velocity: state.velocity,
                 goal: episode.goal,
-                agents: replay.observe(
-                    t,
+                agents: crowd.observe(
                     [state.pose.x, state.pose.y],
                     cfg.sensor_range,
                     cfg.history_len,
@@ -468,6 +490,8 @@ pub fn run_episode(
         let Some(current) = plan.as_ref() else { break };
         let raw = emb.track(&state, current, t);
         let cmd = emb.saturate(&state, raw, dt);
+        // The crowd moves over the step with the robot where it was at its start.
+        crowd.advance((n + 1) as f64 * dt, &robot.footprint, state.pose);
         state = emb.step(&state, cmd, dt);
         run.raw_commands.push(raw);
         run.commands.push(cmd);
@@ -495,21 +519,18 @@ fn panic_message(p: &Box<dyn std::any::Any + Send>) -> String {
     }
 }
 
-/// The smallest clearance between the robot's footprint at `pose` and any pedestrian's disc
-/// present at `t` (`+∞` when nobody is), and that pedestrian's id.
+/// The smallest clearance between the robot's footprint at `pose` and any of `pedestrians`'
+/// discs (`+∞` when there is nobody), and that pedestrian's id.
 pub fn nearest_clearance(
-    replay: &CrowdReplay<'_>,
-    t: f64,
+    pedestrians: &[PedestrianSample],
     pose: Pose2,
     footprint: &[FootprintShape],
 ) -> (f64, Option<u64>) {
     let mut best = (f64::INFINITY, None);
-    for tr in &replay.episode().agents {
-        if let Some(s) = replay.sample(tr, t) {
-            let c = footprint::clearance_at(footprint, pose, s.position, s.radius);
-            if c < best.0 {
-                best = (c, Some(s.id));
-            }
+    for s in pedestrians {
+        let c = footprint::clearance_at(footprint, pose, s.position, s.radius);
+        if c < best.0 {
+            best = (c, Some(s.id));
         }
     }
     best

@@ -252,8 +252,8 @@ fn collisions_use_the_urdf_footprint_not_the_planners_disc() {
             0.0,
             vec![standing(1, p, 10)],
         );
-        let replay = CrowdReplay::new(&ep);
-        nearest_clearance(&replay, 0.0, Pose2::new(0.0, 0.0, theta), &r.footprint).0
+        let present = CrowdReplay::new(&ep).at(0.0);
+        nearest_clearance(&present, Pose2::new(0.0, 0.0, theta), &r.footprint).0
     };
     // go2: a 0.70 × 0.31 m box about the base link (planners' disc r = 0.383 m). 0.5 m to the
     // side is clear of the box (0.5 − 0.155 − 0.3) though inside the disc; 0.5 m ahead is not.

@@ -79,7 +79,7 @@ fn quick(config: &str) -> Quick {
         methods.iter().any(|m| m.name == "orca"),
         "{config} must benchmark ORCA"
     );
-    let suites = build_suites(&cfg, true).unwrap();
+    let suites = build_suites(&cfg, true, Some("test")).unwrap();
     Quick {
         config: config.to_string(),
         cfg,

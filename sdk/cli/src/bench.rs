@@ -61,6 +61,10 @@ pub struct BenchArgs {
     /// Run only these robots of the configuration (names, comma-separated).
     #[arg(long, value_delimiter = ',')]
     pub robots: Vec<String>,
+    /// Run only these suites of the configuration (names, comma-separated). An `empty` suite
+    /// still takes its episodes from the configuration's first other suite.
+    #[arg(long, value_delimiter = ',')]
+    pub suites: Vec<String>,
 }
 
 /// Keeps the items named in `only` (all when it is empty); an unknown name is an error that
@@ -117,12 +121,29 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
             ),
         }
     }
-    ensure_real_episodes(&cfg, &args.data_config)?;
-    let suites = build_suites(&cfg, args.quick)?;
+    // Check the names before mining anything.
+    select(cfg.suites.clone(), &args.suites, "suite", |s| &s.name)?;
+    // A relative data config that is not there from the current directory is the workspace's.
+    let data_config = if args.data_config.is_relative() && !args.data_config.exists() {
+        cfg.base_dir.join(&args.data_config)
+    } else {
+        args.data_config.clone()
+    };
+    let fallback = ensure_real_episodes(&cfg, &data_config)?;
+    let suites = select(
+        build_suites(&cfg, args.quick, fallback.as_deref())?,
+        &args.suites,
+        "suite",
+        |s| &s.name,
+    )?;
     for s in &suites {
         eprintln!("suite `{}`: {} episodes", s.name, s.episodes.len());
-        if let Some(note) = &s.note {
-            eprintln!("  {note}");
+        match &s.note {
+            Some(note) if note.starts_with("Warning:") => {
+                eprintln!("  warning: {}", &note[8..].trim_start())
+            }
+            Some(note) => eprintln!("  {note}"),
+            None => {}
         }
     }
 
@@ -135,7 +156,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
     };
     // The options that shape the report (--out and --threads do not change its numbers).
     let command = format!(
-        "human2nav bench --config {}{}{}{}{}{}",
+        "human2nav bench --config {}{}{}{}{}{}{}",
         args.config.display(),
         if args.quick { " --quick" } else { "" },
         args.seed
@@ -143,6 +164,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
             .unwrap_or_default(),
         list("methods", &args.methods),
         list("robots", &args.robots),
+        list("suites", &args.suites),
         args.failures
             .map(|n| format!(" --failures {n}"))
             .unwrap_or_default()
@@ -184,6 +206,14 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
         outcome.rows.len(),
         outcome.wall_time
     );
+    for (m, runs, secs) in &outcome.times.per_method {
+        if *runs > 0 {
+            println!(
+                "  {m}: {runs} runs, {secs:.0} thread-s ({:.2} s per run)",
+                secs / *runs as f64
+            );
+        }
+    }
     println!("report:  {}", outcome.report_md.display());
     println!("results: {}", outcome.results_csv.display());
     for f in &outcome.figures {
@@ -234,24 +264,27 @@ fn log_progress(bar: &ProgressBar, done: &std::sync::atomic::AtomicBool) {
 }
 
 /// Mines the held-out episodes of every `real` suite whose file is missing, when the datasets
-/// named by `data_config` are present (see the module docs).
-pub(crate) fn ensure_real_episodes(cfg: &BenchConfig, data_config: &Path) -> anyhow::Result<()> {
+/// named by `data_config` are present (see the module docs). Returns why the missing files may
+/// fall back to synthetic episodes (the datasets are absent), or `None` when they may not.
+pub(crate) fn ensure_real_episodes(
+    cfg: &BenchConfig,
+    data_config: &Path,
+) -> anyhow::Result<Option<String>> {
+    let dcfg = DataConfig::load(data_config)
+        .with_context(|| format!("loading {}", data_config.display()))?;
+    let loc = Locations::resolve(&dcfg, data_config);
+    if !loc.data_root.is_dir() {
+        return Ok(Some(format!(
+            "no datasets at {} (set HUMAN2NAV_DATA or paths.data_root in {})",
+            loc.data_root.display(),
+            data_config.display()
+        )));
+    }
     for s in cfg.suites.iter().filter(|s| s.kind == SuiteKind::Real) {
         let Some(file) = s.episodes.as_deref().map(|p| cfg.resolve(p)) else {
             continue;
         };
-        if file.is_file() || !data_config.is_file() {
-            continue;
-        }
-        let dcfg = DataConfig::load(data_config)
-            .with_context(|| format!("loading {}", data_config.display()))?;
-        let loc = Locations::resolve(&dcfg, data_config);
-        if !loc.data_root.is_dir() {
-            eprintln!(
-                "suite `{}`: no datasets at {} (set HUMAN2NAV_DATA); using synthetic episodes",
-                s.name,
-                loc.data_root.display()
-            );
+        if file.is_file() {
             continue;
         }
         eprintln!(
@@ -266,7 +299,7 @@ pub(crate) fn ensure_real_episodes(cfg: &BenchConfig, data_config: &Path) -> any
         }
         report.suite.save(&file)?;
     }
-    Ok(())
+    Ok(None)
 }
 
 /// A `human2nav` method: the reference planner with the model and settings of a planner

@@ -378,8 +378,8 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
         suite_cfg.per_class
     };
     bcfg.suites = vec![suite_cfg];
-    ensure_real_episodes(&bcfg, &resolve(&root, &cfg.data))?;
-    let suites = build_suites(&bcfg, args.quick)?;
+    let fallback = ensure_real_episodes(&bcfg, &resolve(&root, &cfg.data))?;
+    let suites = build_suites(&bcfg, args.quick, fallback.as_deref())?;
     let suite: &Suite = suites.first().context("the bench config built no suite")?;
     let all_robots = load_robots(&bcfg)?;
     let (robots_key, robot_names) = if args.quick && !cfg.quick_robots.is_empty() {

@@ -10,10 +10,11 @@
 //! pool in a fixed shuffled order (for an even progress rate), and the rows come back in job
 //! order (suite, robot, method, episode), whatever the scheduling.
 
+use crate::crowd::CrowdModel;
 use crate::episode::{Episode, ScenarioClass};
 use crate::error::SimError;
 use crate::metrics::EpisodeMetrics;
-use crate::runner::{EpisodeRun, RobotSetup, SimConfig, run_episode};
+use crate::runner::{EpisodeRun, RobotSetup, SimConfig, run_episode_with};
 use crate::straight::{StraightConfig, StraightPlanner};
 use human2nav_core::Planner;
 use indicatif::ProgressBar;
@@ -132,7 +133,7 @@ impl SuiteKind {
     }
 }
 
-/// A named list of episodes.
+/// A named list of episodes, the crowd model they run with and the methods that run them.
 #[derive(Clone, Debug)]
 pub struct Suite {
     pub name: String,
@@ -140,6 +141,31 @@ pub struct Suite {
     pub episodes: Vec<Episode>,
     /// Anything the report should say about how the suite was obtained (a fallback, say).
     pub note: Option<String>,
+    /// How the pedestrians behave (replayed, or reactive to the robot).
+    pub crowd: CrowdModel,
+    /// The methods that run this suite (`None`: every method).
+    pub methods: Option<Vec<String>>,
+}
+
+impl Suite {
+    /// A suite of replayed episodes that every method runs.
+    pub fn new(name: impl Into<String>, kind: SuiteKind, episodes: Vec<Episode>) -> Self {
+        Self {
+            name: name.into(),
+            kind,
+            episodes,
+            note: None,
+            crowd: CrowdModel::Replay,
+            methods: None,
+        }
+    }
+
+    /// True when `method` runs this suite.
+    pub fn runs(&self, method: &str) -> bool {
+        self.methods
+            .as_ref()
+            .is_none_or(|m| m.iter().any(|x| x == method))
+    }
 }
 
 /// One result row: an episode × robot × method.
@@ -204,7 +230,7 @@ pub fn run_one(
         episode: episode.id.clone(),
         message: e.to_string(),
     })?;
-    let run = run_episode(episode, robot, planner.as_mut(), sim);
+    let run = run_episode_with(episode, robot, planner.as_mut(), sim, &suite.crowd);
     let metrics = EpisodeMetrics::compute(&run, &robot.limits);
     let row = ResultRow {
         suite: suite.name.clone(),
@@ -222,7 +248,8 @@ pub fn run_one(
     Ok((run, row))
 }
 
-/// Runs every suite × robot × method × episode in parallel; rows in job order.
+/// Runs every suite × robot × method × episode in parallel (a suite only with the methods it
+/// names); rows in job order.
 pub fn run_bench(
     suites: &[Suite],
     robots: &[RobotSetup],
@@ -231,12 +258,32 @@ pub fn run_bench(
     seed: u64,
     progress: &ProgressBar,
 ) -> Result<Vec<ResultRow>, SimError> {
+    run_bench_timed(suites, robots, methods, sim, seed, progress).map(|(rows, _)| rows)
+}
+
+/// Where a benchmark's time went: per method, the runs and the thread-seconds they took.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MethodTimes {
+    /// `(method, runs, seconds)` in method order.
+    pub per_method: Vec<(String, usize, f64)>,
+}
+
+/// [`run_bench`], also measuring the time each method's runs took (thread time: on `k` worker
+/// threads the wall time is about the sum over methods divided by `k`).
+pub fn run_bench_timed(
+    suites: &[Suite],
+    robots: &[RobotSetup],
+    methods: &[MethodSpec],
+    sim: &SimConfig,
+    seed: u64,
+    progress: &ProgressBar,
+) -> Result<(Vec<ResultRow>, MethodTimes), SimError> {
     let mut jobs = Vec::new();
     for s in suites {
         for r in robots {
-            for m in methods {
+            for (k, m) in methods.iter().enumerate().filter(|(_, m)| s.runs(&m.name)) {
                 for e in &s.episodes {
-                    jobs.push((s, r, m, e));
+                    jobs.push((s, r, k, m, e));
                 }
             }
         }
@@ -252,16 +299,25 @@ pub fn run_bench(
     // its ETA) swing by a factor of three. The rows are put back in job order.
     let mut order: Vec<usize> = (0..jobs.len()).collect();
     order.sort_by_key(|&i| mix64(i as u64 ^ 0x9e37_79b9_7f4a_7c15));
-    let mut done: Vec<(usize, ResultRow)> = order
+    let mut done: Vec<(usize, ResultRow, usize, f64)> = order
         .par_iter()
         .map(|&i| {
-            let (s, r, m, e) = jobs[i];
-            let out = run_one(s, e, r, m, sim, seed).map(|(_, row)| (i, row));
+            let (s, r, k, m, e) = jobs[i];
+            let started = std::time::Instant::now();
+            let out = run_one(s, e, r, m, sim, seed)
+                .map(|(_, row)| (i, row, k, started.elapsed().as_secs_f64()));
             progress.inc(1);
             out
         })
         .collect::<Result<_, SimError>>()?;
     progress.finish();
-    done.sort_by_key(|(i, _)| *i);
-    Ok(done.into_iter().map(|(_, row)| row).collect())
+    done.sort_by_key(|(i, ..)| *i);
+    let mut times = MethodTimes {
+        per_method: methods.iter().map(|m| (m.name.clone(), 0, 0.0)).collect(),
+    };
+    for (_, _, k, secs) in &done {
+        times.per_method[*k].1 += 1;
+        times.per_method[*k].2 += secs;
+    }
+    Ok((done.into_iter().map(|(_, row, ..)| row).collect(), times))
 }

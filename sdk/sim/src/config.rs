@@ -23,16 +23,22 @@
 //! episodes = "out/data/episodes.json"          # real only (`human2nav data episodes`)
 //! per_class = 50                                # episodes per scenario class
 //! quick_per_class = 3                           # with --quick
+//! crowd = "replay"                              # replay (default) | reactive
+//! social_force = { relaxation_time = 0.5 }      # reactive only: crowd::SocialForce overrides
+//! methods = ["human2nav", "orca"]               # optional: only these methods run the suite
 //! ```
 //!
 //! Relative paths are resolved against the workspace root (the nearest ancestor of the config
 //! file with a `[workspace]` manifest), like the data configuration's.
 //!
-//! A `real` suite whose episode file is missing becomes a `synthetic` suite of the same size
-//! (with a note in the report). An `empty` suite takes the episodes of the first other suite
-//! (or synthetic ones when there is none) and removes every pedestrian.
+//! A `real` suite whose episode file is missing is an error naming the file, unless the caller
+//! allows the synthetic fallback (the CLI does when the datasets are absent): the suite then
+//! becomes a `synthetic` suite of the same size, with a warning in its note. An `empty` suite
+//! takes the episodes of the first other suite (or synthetic ones when there is none) and
+//! removes every pedestrian.
 
 use crate::bench::{MethodSpec, Suite, SuiteKind};
+use crate::crowd::{CrowdModel, SocialForce};
 use crate::episode::{Episode, EpisodeSuite, ScenarioClass};
 use crate::error::SimError;
 use crate::runner::{RobotSetup, SimConfig};
@@ -85,6 +91,38 @@ pub struct SuiteConfig {
     /// Seed of the synthetic generator; default: the benchmark seed.
     #[serde(default)]
     pub seed: Option<u64>,
+    /// How the pedestrians behave. Default `replay`.
+    #[serde(default)]
+    pub crowd: CrowdMode,
+    /// Parameters of a `reactive` crowd (default [`SocialForce::default`]).
+    #[serde(default)]
+    pub social_force: Option<SocialForce>,
+    /// Only these methods run the suite (default: every method).
+    #[serde(default)]
+    pub methods: Option<Vec<String>>,
+}
+
+/// How the pedestrians of a suite behave.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CrowdMode {
+    /// Replayed exactly as recorded (the paper's protocol).
+    #[default]
+    Replay,
+    /// Recorded paths with a social-force response to the robot ([`crate::crowd`]).
+    Reactive,
+}
+
+impl SuiteConfig {
+    /// The crowd model of this suite.
+    pub fn crowd_model(&self) -> CrowdModel {
+        match self.crowd {
+            CrowdMode::Replay => CrowdModel::Replay,
+            CrowdMode::Reactive => {
+                CrowdModel::Reactive(self.social_force.clone().unwrap_or_default())
+            }
+        }
+    }
 }
 
 fn default_per_class() -> usize {
@@ -220,6 +258,47 @@ impl BenchConfig {
                     "episode counts must be ≥ 1",
                 ));
             }
+            match (&s.social_force, s.crowd) {
+                (Some(_), CrowdMode::Replay) => {
+                    return Err(SimError::setting(
+                        section,
+                        "social_force",
+                        "only a suite with crowd = \"reactive\" takes social-force parameters",
+                    ));
+                }
+                (Some(f), CrowdMode::Reactive) => {
+                    f.validate().map_err(|(field, message)| {
+                        SimError::setting(format!("suites[{i}].social_force"), field, message)
+                    })?;
+                }
+                (None, _) => {}
+            }
+            if let Some(methods) = &s.methods {
+                if methods.is_empty() {
+                    return Err(SimError::setting(
+                        section,
+                        "methods",
+                        "list at least one method, or leave the key out for every method",
+                    ));
+                }
+                if let Some(bad) = methods
+                    .iter()
+                    .find(|m| !self.methods.iter().any(|x| &x.name == *m))
+                {
+                    return Err(SimError::setting(
+                        section,
+                        "methods",
+                        format!(
+                            "`{bad}` is not a configured method (they are: {})",
+                            self.methods
+                                .iter()
+                                .map(|m| m.name.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    ));
+                }
+            }
         }
         if let Some(m) = &self.snapshot_method {
             if !self.methods.iter().any(|x| &x.name == m) {
@@ -274,17 +353,23 @@ pub fn synthetic_episodes(n: usize, seed: u64) -> Result<Vec<Episode>, SimError>
     Ok(out)
 }
 
-/// Builds every configured suite (see the module docs for the fallbacks).
-pub fn build_suites(cfg: &BenchConfig, quick: bool) -> Result<Vec<Suite>, SimError> {
+/// Builds every configured suite. A `real` suite whose episode file is missing is an error
+/// naming the file, unless `synthetic_fallback` gives the reason it may fall back to synthetic
+/// episodes (the datasets are absent, say); the suite's note then starts with "Warning:".
+pub fn build_suites(
+    cfg: &BenchConfig,
+    quick: bool,
+    synthetic_fallback: Option<&str>,
+) -> Result<Vec<Suite>, SimError> {
     let mut suites: Vec<Suite> = Vec::new();
-    for s in &cfg.suites {
+    for (i, s) in cfg.suites.iter().enumerate() {
         let n = if quick {
             s.quick_per_class
         } else {
             s.per_class
         };
         let seed = s.seed.unwrap_or(cfg.seed);
-        let suite = match s.kind {
+        let (kind, episodes, note) = match s.kind {
             SuiteKind::Real => {
                 let file = cfg.resolve(s.episodes.as_deref().unwrap_or(Path::new("")));
                 if file.is_file() {
@@ -310,33 +395,34 @@ pub fn build_suites(cfg: &BenchConfig, quick: bool) -> Result<Vec<Suite>, SimErr
                             format!("; fewer than {n} per class: {}", short.join(", "))
                         }
                     );
-                    Suite {
-                        name: s.name.clone(),
-                        kind: SuiteKind::Real,
-                        episodes,
-                        note: Some(note),
-                    }
+                    (SuiteKind::Real, episodes, note)
+                } else if let Some(reason) = synthetic_fallback {
+                    let note = format!(
+                        "Warning: the real episode file `{}` is absent ({reason}); this suite fell back \
+                         to {n} synthetic episodes per class",
+                        file.display()
+                    );
+                    (SuiteKind::Synthetic, synthetic_episodes(n, seed)?, note)
                 } else {
-                    Suite {
-                        name: s.name.clone(),
-                        kind: SuiteKind::Synthetic,
-                        episodes: synthetic_episodes(n, seed)?,
-                        note: Some(format!(
-                            "The real episode file `{}` is absent (`human2nav data episodes` writes it when the \
-                             datasets are present); this suite fell back to {n} synthetic episodes per class",
+                    return Err(SimError::setting(
+                        format!("suites[{i}]"),
+                        "episodes",
+                        format!(
+                            "suite `{}`: the episode file `{}` does not exist (`human2nav data \
+                             episodes` writes the episode files its data config names)",
+                            s.name,
                             file.display()
-                        )),
-                    }
+                        ),
+                    ));
                 }
             }
-            SuiteKind::Synthetic => Suite {
-                name: s.name.clone(),
-                kind: SuiteKind::Synthetic,
-                episodes: synthetic_episodes(n, seed)?,
-                note: Some(format!(
+            SuiteKind::Synthetic => (
+                SuiteKind::Synthetic,
+                synthetic_episodes(n, seed)?,
+                format!(
                     "{n} episodes per class from the synthetic social-force generator, seed {seed}"
-                )),
-            },
+                ),
+            ),
             SuiteKind::Empty => {
                 let source = suites.iter().find(|x| x.kind != SuiteKind::Empty);
                 let (base, from) = match source {
@@ -358,23 +444,31 @@ pub fn build_suites(cfg: &BenchConfig, quick: bool) -> Result<Vec<Suite>, SimErr
                         e
                     })
                     .collect();
-                Suite {
-                    name: s.name.clone(),
-                    kind: SuiteKind::Empty,
-                    episodes,
-                    note: Some(format!(
-                        "Start, goal and budget of {n} episodes per class of {from}, every pedestrian removed"
-                    )),
-                }
+                let note = format!(
+                    "Start, goal and budget of {n} episodes per class of {from}, every pedestrian removed"
+                );
+                (SuiteKind::Empty, episodes, note)
             }
         };
-        if suite.episodes.is_empty() {
+        if episodes.is_empty() {
             return Err(SimError::Episodes {
                 suite: s.name.clone(),
                 message: "no episode selected".into(),
             });
         }
-        suites.push(suite);
+        let crowd = s.crowd_model();
+        let note = match &crowd {
+            CrowdModel::Replay => note,
+            CrowdModel::Reactive(_) => format!(
+                "{note}. Reactive crowd: recorded paths with a social-force response to the robot"
+            ),
+        };
+        suites.push(Suite {
+            note: Some(note),
+            crowd,
+            methods: s.methods.clone(),
+            ..Suite::new(s.name.clone(), kind, episodes)
+        });
     }
     Ok(suites)
 }

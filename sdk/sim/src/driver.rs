@@ -1,7 +1,9 @@
 //! One benchmark run end to end: suites × robots × methods in parallel, then `results.csv`,
 //! the figures and `report.md` in the output directory.
 
-use crate::bench::{MethodSpec, ResultRow, Suite, SuiteKind, run_bench, run_one};
+use crate::bench::{
+    MethodSpec, MethodTimes, ResultRow, Suite, SuiteKind, run_bench_timed, run_one,
+};
 use crate::episode::{Episode, ScenarioClass};
 use crate::error::SimError;
 use crate::figures::{self, Snapshot};
@@ -41,6 +43,8 @@ pub struct BenchOutcome {
     /// `(method, robot, SR)` on the empty-world suites, where SR < 1.
     pub empty_world_failures: Vec<(String, String, f64)>,
     pub wall_time: f64,
+    /// Thread time per method.
+    pub times: MethodTimes,
 }
 
 /// Runs the plan and writes every output into `out_dir` (created when missing).
@@ -52,7 +56,7 @@ pub fn run(
     std::fs::create_dir_all(out_dir).map_err(|e| SimError::io(out_dir, e))?;
     let started = Instant::now();
     let bench = || {
-        run_bench(
+        run_bench_timed(
             plan.suites,
             plan.robots,
             plan.methods,
@@ -61,7 +65,7 @@ pub fn run(
             progress,
         )
     };
-    let rows = match plan.threads {
+    let (rows, times) = match plan.threads {
         None => bench()?,
         Some(n) => rayon::ThreadPoolBuilder::new()
             .num_threads(n.max(1))
@@ -180,6 +184,7 @@ pub fn run(
         figures: figure_paths,
         empty_world_failures,
         wall_time,
+        times,
     })
 }
 

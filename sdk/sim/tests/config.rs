@@ -82,6 +82,34 @@ fn validation_names_the_offending_setting() {
             "methods[straight].replan_hz",
         ),
         (format!("{BASE}\ncolour = \"red\"\n"), "colour"),
+        (
+            format!(
+                "{BASE}\n[[suites]]\nname = \"s\"\nkind = \"synthetic\"\nmethods = [\"orca\"]\n"
+            ),
+            "suites[0].methods",
+        ),
+        (
+            format!("{BASE}\n[[suites]]\nname = \"s\"\nkind = \"synthetic\"\nmethods = []\n"),
+            "suites[0].methods",
+        ),
+        (
+            format!(
+                "{BASE}\n[[suites]]\nname = \"s\"\nkind = \"synthetic\"\nsocial_force = {{ range = 0.3 }}\n"
+            ),
+            "suites[0].social_force",
+        ),
+        (
+            format!(
+                "{BASE}\n[[suites]]\nname = \"s\"\nkind = \"synthetic\"\ncrowd = \"reactive\"\nsocial_force = {{ range = -1.0 }}\n"
+            ),
+            "suites[0].social_force.range",
+        ),
+        (
+            format!(
+                "{BASE}\n[[suites]]\nname = \"s\"\nkind = \"synthetic\"\ncrowd = \"panicking\"\n"
+            ),
+            "crowd",
+        ),
     ];
     for (i, (body, needle)) in cases.iter().enumerate() {
         let path = write_config(&format!("invalid{i}"), body);
@@ -95,6 +123,23 @@ fn validation_names_the_offending_setting() {
 }
 
 #[test]
+fn missing_real_file_is_an_error_unless_the_fallback_is_allowed() {
+    let body = format!(
+        "{BASE}\n[[suites]]\nname = \"real\"\nkind = \"real\"\nepisodes = \"missing/episodes.json\"\n"
+    );
+    let path = write_config("missing", &body);
+    let cfg = BenchConfig::load(&path).unwrap();
+    let err = build_suites(&cfg, true, None).unwrap_err().to_string();
+    assert!(
+        err.contains("suites[0]")
+            && err.contains("episodes")
+            && err.contains("missing/episodes.json"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(path.parent().unwrap()).unwrap();
+}
+
+#[test]
 fn missing_real_file_falls_back_to_synthetic_and_empty_strips_the_crowd() {
     let body = format!(
         "{BASE}\n[[suites]]\nname = \"real\"\nkind = \"real\"\nepisodes = \"missing/episodes.json\"\n\
@@ -102,12 +147,13 @@ fn missing_real_file_falls_back_to_synthetic_and_empty_strips_the_crowd() {
     );
     let path = write_config("fallback", &body);
     let cfg = BenchConfig::load(&path).unwrap();
-    let suites = build_suites(&cfg, true).unwrap();
+    let suites = build_suites(&cfg, true, Some("no datasets")).unwrap();
     assert_eq!(suites.len(), 2);
     let real = &suites[0];
     assert_eq!(real.kind, SuiteKind::Synthetic);
+    let note = real.note.as_deref().unwrap_or("");
     assert!(
-        real.note.as_deref().unwrap_or("").contains("fell back"),
+        note.starts_with("Warning:") && note.contains("fell back") && note.contains("no datasets"),
         "{:?}",
         real.note
     );
@@ -131,7 +177,7 @@ fn missing_real_file_falls_back_to_synthetic_and_empty_strips_the_crowd() {
         );
     }
     // Deterministic: the same config builds the same suites.
-    let again = build_suites(&cfg, true).unwrap();
+    let again = build_suites(&cfg, true, Some("no datasets")).unwrap();
     assert_eq!(again[0].episodes, real.episodes);
     std::fs::remove_dir_all(path.parent().unwrap()).unwrap();
 }
@@ -143,7 +189,7 @@ fn take_per_class_keeps_file_order_within_each_class() {
         &format!("{BASE}\n[[suites]]\nname = \"s\"\nkind = \"synthetic\"\n"),
     );
     let cfg = BenchConfig::load(&path).unwrap();
-    let mut episodes = build_suites(&cfg, true).unwrap().remove(0).episodes;
+    let mut episodes = build_suites(&cfg, true, None).unwrap().remove(0).episodes;
     episodes.reverse();
     let picked = take_per_class(&episodes, 1);
     assert_eq!(picked.len(), 4);

@@ -57,6 +57,7 @@ fn run_with(
         plans,
         planner_errors: vec![],
         contact: None,
+        crowd: None,
     }
 }
 
@@ -150,12 +151,7 @@ fn small_suite() -> Suite {
         };
         episodes.push(episode(&format!("e{i}"), c, 0.0, agents));
     }
-    Suite {
-        name: "hand".into(),
-        kind: SuiteKind::Synthetic,
-        episodes,
-        note: None,
-    }
+    Suite::new("hand", SuiteKind::Synthetic, episodes)
 }
 
 fn empty_suite() -> Suite {
@@ -163,12 +159,7 @@ fn empty_suite() -> Suite {
     for e in &mut s.episodes {
         e.agents.clear();
     }
-    Suite {
-        name: "empty".into(),
-        kind: SuiteKind::Empty,
-        episodes: s.episodes,
-        note: None,
-    }
+    Suite::new("empty", SuiteKind::Empty, s.episodes)
 }
 
 #[test]

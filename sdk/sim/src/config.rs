@@ -29,7 +29,8 @@
 //! ```
 //!
 //! Relative paths are resolved against the workspace root (the nearest ancestor of the config
-//! file with a `[workspace]` manifest), like the data configuration's.
+//! file with a `[workspace]` manifest), like the data configuration's. `base = "<file>"` starts
+//! from another config: each top-level key the file sets replaces the base's.
 //!
 //! A `real` suite whose episode file is missing is an error naming the file, unless the caller
 //! allows the synthetic fallback (the CLI does when the datasets are absent): the suite then
@@ -169,20 +170,57 @@ impl Default for BenchConfig {
 
 impl BenchConfig {
     /// Reads, parses and validates a config file; relative paths resolve against the workspace
-    /// root above it (else its own directory).
+    /// root above it (else its own directory). A file may start from another one with
+    /// `base = "<path>"` (relative to the workspace root): every top-level key it sets replaces
+    /// the base's (so a validation config can take the robots, simulation settings and
+    /// methods of the test config and name its own suites).
     pub fn load(path: &Path) -> Result<Self, SimError> {
-        let text = std::fs::read_to_string(path).map_err(|e| SimError::io(path, e))?;
-        let mut cfg: BenchConfig = toml::from_str(&text).map_err(|e| SimError::Parse {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
         let dir = path
             .parent()
             .map(Path::to_path_buf)
             .unwrap_or_else(|| PathBuf::from("."));
-        cfg.base_dir = human2nav_data::paths::find_workspace_root(&dir).unwrap_or(dir);
+        let base_dir = human2nav_data::paths::find_workspace_root(&dir).unwrap_or(dir);
+        let table = Self::load_table(path, &base_dir, 0)?;
+        let mut cfg: BenchConfig =
+            table
+                .try_into()
+                .map_err(|e: toml::de::Error| SimError::Parse {
+                    path: path.to_path_buf(),
+                    message: e.to_string(),
+                })?;
+        cfg.base_dir = base_dir;
         cfg.validate()?;
         Ok(cfg)
+    }
+
+    /// The file's table with its `base` chain merged in (at most 8 deep, no cycles).
+    fn load_table(path: &Path, base_dir: &Path, depth: usize) -> Result<toml::Table, SimError> {
+        let parse = |message: String| SimError::Parse {
+            path: path.to_path_buf(),
+            message,
+        };
+        if depth > 8 {
+            return Err(parse("more than 8 nested `base` files (a cycle?)".into()));
+        }
+        let text = std::fs::read_to_string(path).map_err(|e| SimError::io(path, e))?;
+        let mut table: toml::Table = text
+            .parse()
+            .map_err(|e: toml::de::Error| parse(e.to_string()))?;
+        let Some(base) = table.remove("base") else {
+            return Ok(table);
+        };
+        let Some(base) = base.as_str() else {
+            return Err(parse("`base` must be a path (a string)".into()));
+        };
+        let base_path = if Path::new(base).is_absolute() {
+            PathBuf::from(base)
+        } else {
+            base_dir.join(base)
+        };
+        let mut merged = Self::load_table(&base_path, base_dir, depth + 1)
+            .map_err(|e| parse(format!("base `{base}`: {e}")))?;
+        merged.extend(table);
+        Ok(merged)
     }
 
     /// Checks the simulation settings, that names are unique and that every `real` suite names

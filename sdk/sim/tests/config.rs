@@ -199,3 +199,34 @@ fn take_per_class_keeps_file_order_within_each_class() {
     }
     std::fs::remove_dir_all(path.parent().unwrap()).unwrap();
 }
+
+#[test]
+fn a_config_can_start_from_a_base_file() {
+    let base = write_config(
+        "base",
+        &format!("seed = 11\n{BASE}[[suites]]\nname = \"test\"\nkind = \"synthetic\"\n"),
+    );
+    let dir = base.parent().unwrap();
+    let child = dir.join("val.toml");
+    std::fs::write(
+        &child,
+        format!(
+            "base = \"{}\"\n[[suites]]\nname = \"val\"\nkind = \"synthetic\"\nper_class = 2\n",
+            base.display()
+        ),
+    )
+    .unwrap();
+    let cfg = BenchConfig::load(&child).unwrap();
+    assert_eq!(cfg.seed, 11);
+    assert_eq!(cfg.methods[0].name, "straight");
+    let names: Vec<&str> = cfg.suites.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(names, ["val"]);
+    // A cycle is an error naming the chain, not a stack overflow.
+    std::fs::write(&child, format!("base = \"{}\"\n", child.display())).unwrap();
+    let err = BenchConfig::load(&child).unwrap_err().to_string();
+    assert!(err.contains("base") && err.contains("8"), "{err}");
+    std::fs::write(&child, "base = 3\n").unwrap();
+    let err = BenchConfig::load(&child).unwrap_err().to_string();
+    assert!(err.contains("`base` must be a path"), "{err}");
+    std::fs::remove_dir_all(dir).unwrap();
+}

@@ -7,6 +7,7 @@ use crate::error::SimError;
 use crate::figures::{self, Snapshot};
 use crate::report::{self, ReportContext, summarize};
 use crate::runner::{RobotSetup, SimConfig};
+use crate::stats::SuiteComposition;
 use indicatif::ProgressBar;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -154,6 +155,12 @@ pub fn run(
         robot_names: robot_names.clone(),
         figures: figure_list,
         wall_time: Some(wall_time),
+        reference_method: None,
+        composition: plan
+            .suites
+            .iter()
+            .map(|s| SuiteComposition::of(&s.name, &s.episodes))
+            .collect(),
     };
     let report_md = out_dir.join("report.md");
     std::fs::write(&report_md, report::report_markdown(&rows, &ctx))

@@ -162,6 +162,7 @@ fn empty_suite() -> Suite {
     let mut s = small_suite();
     for e in &mut s.episodes {
         e.agents.clear();
+        e.density = 0;
     }
     Suite {
         name: "empty".into(),
@@ -289,6 +290,9 @@ fn driver_writes_csv_report_and_figures() {
         "How the collisions happened",
         "Executed commands outside each limit",
         "| replanning rate | 10 Hz (every 2 steps); slow: 5 Hz (every 4 steps) |",
+        "Suite composition",
+        "Paired comparison with `straight`",
+        "against crowd density",
     ] {
         assert!(
             report.contains(needle),

@@ -1,14 +1,21 @@
-//! The report's paired comparisons, density and composition tables on synthetic result rows
-//! (no simulation). Set `HUMAN2NAV_FIGURE_DIR` to keep the report in that directory for
-//! inspection.
+//! The report's paired comparisons, density and composition tables, and the per-suite figures,
+//! on synthetic result rows (no simulation); a trajectory snapshot in a crowd. Set
+//! `HUMAN2NAV_FIGURE_DIR` to keep the PNGs and the report in that directory for inspection.
+
+mod common;
 
 use human2nav_core::Pose2;
+use human2nav_core::bev::BevSpec;
 use human2nav_sim::bench::{ResultRow, SuiteKind};
+use human2nav_sim::episode::AgentTrack;
 use human2nav_sim::episode::{Episode, ScenarioClass};
+use human2nav_sim::figures::{self, sr_interval, tfs_interval};
+use human2nav_sim::figures::{Snapshot, pedestrians_at};
 use human2nav_sim::metrics::{EpisodeMetrics, LimitCounts};
 use human2nav_sim::report::{ReportContext, report_markdown};
 use human2nav_sim::stats::{SuiteComposition, success_pairs};
-use human2nav_sim::{Contact, Outcome};
+use human2nav_sim::straight::{StraightConfig, StraightPlanner};
+use human2nav_sim::{Contact, Outcome, SimConfig, run_episode};
 use std::path::PathBuf;
 
 const METHODS: [&str; 5] = ["human2nav", "human2nav-noguide", "orca", "sarl", "straight"];
@@ -135,6 +142,13 @@ fn out_dir(name: &str) -> (PathBuf, bool) {
     }
 }
 
+fn png_size(path: &std::path::Path) -> (u32, u32) {
+    let b = std::fs::read(path).expect("the PNG is readable");
+    assert!(b.starts_with(b"\x89PNG"), "{} is not a PNG", path.display());
+    let at = |i: usize| u32::from_be_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
+    (at(16), at(20))
+}
+
 #[test]
 fn report_has_paired_density_and_composition_tables() {
     let interaction = episodes("interaction", 50);
@@ -224,9 +238,110 @@ fn report_has_paired_density_and_composition_tables() {
     };
     assert_eq!(baselines.reference(), Some("orca"));
 
-    let (dir, keep) = out_dir("report");
+    let (dir, keep) = out_dir("report-figures");
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("report.md"), &md).unwrap();
+    for suite in ["interaction", "real"] {
+        let f6 = dir.join(format!("fig6_sr_per_scenario_{suite}.png"));
+        figures::sr_per_scenario(&f6, &all, suite, &methods).unwrap();
+        let f7 = dir.join(format!("fig7_tfs_sr_per_robot_{suite}.png"));
+        figures::tfs_sr_per_robot(&f7, &all, suite, &ctx.robot_names, &methods).unwrap();
+        let fd = dir.join(format!("fig_sr_density_{suite}.png"));
+        figures::sr_per_density(&fd, &all, suite, &methods).unwrap();
+        assert_eq!(png_size(&f6), (1400, 820));
+        assert_eq!(png_size(&f7), (2000, 820));
+        assert_eq!(png_size(&fd), (1400, 820));
+    }
+    if !keep {
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
+
+#[test]
+fn intervals_of_rows() {
+    let eps = episodes("s", 5);
+    let all = rows("s", SuiteKind::Synthetic, &eps, &["m"]);
+    let iv = sr_interval(&all).unwrap();
+    let k = all.iter().filter(|r| r.metrics.success).count();
+    assert_eq!(iv.value, k as f64 / all.len() as f64);
+    assert!(iv.lo <= iv.value && iv.value <= iv.hi && iv.hi <= 1.0);
+    let t = tfs_interval(&all).unwrap();
+    assert!(0.0 <= t.lo && t.lo <= t.value && t.value <= t.hi && t.hi <= 1.0);
+    assert!(sr_interval(std::iter::empty()).is_none());
+    assert!(tfs_interval(std::iter::empty()).is_none());
+}
+
+/// A crowd crossing, meeting and following the robot's straight line from (0, 0) to (5, 0).
+fn crowd() -> Vec<AgentTrack> {
+    let mut agents = Vec::new();
+    for k in 0..14u64 {
+        let f = k as f64;
+        let (p0, v) = match k % 4 {
+            0 => ([1.0 + 0.7 * f, -3.0 - 0.3 * f], [0.1, 1.1]),
+            1 => ([7.0 + 0.4 * f, 1.5 - 0.25 * f], [-1.2, 0.0]),
+            2 => ([-1.0 + 0.5 * f, 2.0], [0.9, -0.2]),
+            _ => ([2.0 + 0.3 * f, 3.5], [0.0, 0.0]),
+        };
+        agents.push(AgentTrack {
+            id: k,
+            start_step: 0,
+            positions: (0..200)
+                .map(|s| [p0[0] + v[0] * 0.1 * s as f64, p0[1] + v[1] * 0.1 * s as f64])
+                .collect(),
+            radius: 0.3,
+        });
+    }
+    agents
+}
+
+#[test]
+fn snapshot_in_a_crowd() {
+    let sim = SimConfig::default();
+    let mut panels = Vec::new();
+    for (i, name) in ["diablo", "ackermann"].into_iter().enumerate() {
+        let robot = common::robot(name);
+        let ep = common::episode(
+            &format!("crowd/{i}"),
+            ScenarioClass::CrossFlow,
+            0.0,
+            crowd(),
+        );
+        let mut planner = StraightPlanner::new(StraightConfig {
+            speed: 0.6 + 0.4 * i as f64,
+            ..StraightConfig::default()
+        })
+        .unwrap();
+        let run = run_episode(&ep, &robot, &mut planner, &sim);
+        panels.push(Snapshot {
+            episode: ep,
+            run,
+            robot: robot.name.clone(),
+            method: "straight".into(),
+            footprint_radius: robot.footprint_radius,
+            footprint: robot.footprint.clone(),
+            bev: BevSpec::default(),
+            sensor_range: sim.sensor_range,
+            history_len: sim.history_len,
+        });
+    }
+    // The pedestrians of a snapshot: every one present, with its recent history.
+    let peds = pedestrians_at(&panels[0], 1.0);
+    assert_eq!(peds.len(), 14);
+    assert!(peds.iter().all(|a| a.history.len() == sim.history_len));
+    let walker = &peds[1];
+    assert!(
+        (walker.position[0] - (7.4 - 1.2)).abs() < 1e-9,
+        "{walker:?}"
+    );
+    assert!((walker.velocity[0] + 1.2).abs() < 1e-9, "{walker:?}");
+
+    let (dir, keep) = out_dir("snapshot");
+    std::fs::create_dir_all(&dir).unwrap();
+    let png = dir.join("snapshot_crowd.png");
+    figures::trajectory_snapshots(&png, &panels).unwrap();
+    let (w, h) = png_size(&png);
+    assert_eq!(w, 1600);
+    assert!((840..1000).contains(&h), "{h}");
     if !keep {
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -441,8 +441,14 @@ fn data_scaling_points_and_figure() {
         assert_relative_eq!(p.sr_se, s.sr_se);
     }
     assert!(scaling_points(&runs, "hand", "other").is_empty());
-    let out = std::env::temp_dir().join(format!("h2n-fig5-{}.png", std::process::id()));
+    let keep = std::env::var_os("HUMAN2NAV_FIGURE_DIR").map(std::path::PathBuf::from);
+    let out = match &keep {
+        Some(d) => d.join("fig5_sr_vs_training_data.png"),
+        None => std::env::temp_dir().join(format!("h2n-fig5-{}.png", std::process::id())),
+    };
     sr_vs_training_data(&out, &points, "SR vs training data").unwrap();
     assert!(std::fs::read(&out).unwrap().starts_with(b"\x89PNG"));
-    std::fs::remove_file(&out).unwrap();
+    if keep.is_none() {
+        std::fs::remove_file(&out).unwrap();
+    }
 }

@@ -4,13 +4,16 @@
 use crate::bench::{
     MethodSpec, MethodTimes, ResultRow, Suite, SuiteKind, run_bench_timed, run_one,
 };
-use crate::episode::{Episode, ScenarioClass};
+use crate::episode::{Episode, ScenarioClass, ScenarioTitle};
 use crate::error::SimError;
 use crate::figures::{self, Snapshot};
 use crate::report::{self, ReportContext, summarize};
 use crate::runner::{RobotSetup, SimConfig};
+use crate::stats::SuiteComposition;
+use human2nav_core::bev::BevSpec;
 use indicatif::ProgressBar;
 use std::collections::HashMap;
+use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -82,43 +85,55 @@ pub fn run(
     let robot_names: Vec<String> = plan.robots.iter().map(|r| r.name.clone()).collect();
     let mut figure_list: Vec<(String, String)> = Vec::new();
     let mut figure_paths = Vec::new();
+    let mut add = |file: String, caption: String| {
+        figure_paths.push(out_dir.join(&file));
+        figure_list.push((file, caption));
+    };
+    for suite in plan.suites.iter().filter(|s| s.kind != SuiteKind::Empty) {
+        let [f6, f7, fd] = suite_figure_files(&suite.name);
+        figures::sr_per_scenario(&out_dir.join(&f6), &rows, &suite.name, &method_names)?;
+        add(
+            f6,
+            format!(
+                "Fig. 6: success rate per scenario and method, suite `{}`, all robots; whiskers: \
+                 95 % Wilson score intervals",
+                suite.name
+            ),
+        );
+        figures::tfs_sr_per_robot(
+            &out_dir.join(&f7),
+            &rows,
+            &suite.name,
+            &robot_names,
+            &method_names,
+        )?;
+        add(
+            f7,
+            format!(
+                "Fig. 7: TFS (left; whiskers: ±1.96 standard errors of the mean of the per-episode \
+                 TFS) and SR (right; whiskers: 95 % Wilson score intervals) per robot and method, \
+                 suite `{}`",
+                suite.name
+            ),
+        );
+        figures::sr_per_density(&out_dir.join(&fd), &rows, &suite.name, &method_names)?;
+        add(
+            fd,
+            format!(
+                "SR against crowd density (relevant pedestrians per episode), suite `{}`, all \
+                 robots and scenarios; whiskers: 95 % Wilson score intervals; under each bin the \
+                 number of episodes in it",
+                suite.name
+            ),
+        );
+    }
     if let Some(primary) = plan.suites.iter().find(|s| s.kind != SuiteKind::Empty) {
-        let f6 = out_dir.join("fig6_sr_per_scenario.png");
-        figures::sr_per_scenario(&f6, &rows, &primary.name, &method_names)?;
-        figure_list.push((
-            "fig6_sr_per_scenario.png".into(),
-            format!(
-                "Fig. 6: success rate per scenario and method, suite `{}`, all robots",
-                primary.name
-            ),
-        ));
-        figure_paths.push(f6);
-        let f7 = out_dir.join("fig7_tfs_sr_per_robot.png");
-        figures::tfs_sr_per_robot(&f7, &rows, &primary.name, &robot_names, &method_names)?;
-        figure_list.push((
-            "fig7_tfs_sr_per_robot.png".into(),
-            format!(
-                "Fig. 7: TFS and SR per robot and method, suite `{}`",
-                primary.name
-            ),
-        ));
-        figure_paths.push(f7);
-        let snaps = snapshots(plan, primary)?;
-        if !snaps.is_empty() {
-            let f4 = out_dir.join("fig4_snapshots.png");
-            figures::trajectory_snapshots(&f4, &snaps)?;
-            figure_list.push((
-                "fig4_snapshots.png".into(),
-                "Fig. 4: one episode per scenario at the moment of closest approach; pedestrians grey with their \
-                 last positions and 0.6 s velocity arrows, robot red (path so far solid, whole path faint), plan \
-                 orange, start green star, goal blue star"
-                    .into(),
-            ));
-            figure_paths.push(f4);
+        if let Some((snaps, caption)) = representative_snapshots(plan, primary, &rows)? {
+            figures::trajectory_snapshots(&out_dir.join(FIG4_FILE), &snaps)?;
+            add(FIG4_FILE.into(), caption);
         }
         for (file, caption) in failure_figures(plan, &rows, primary, out_dir)? {
-            figure_list.push((file.clone(), caption));
-            figure_paths.push(out_dir.join(file));
+            add(file, caption);
         }
     }
 
@@ -158,6 +173,12 @@ pub fn run(
         robot_names: robot_names.clone(),
         figures: figure_list,
         wall_time: Some(wall_time),
+        reference_method: None,
+        composition: plan
+            .suites
+            .iter()
+            .map(|s| SuiteComposition::of(&s.name, &s.episodes))
+            .collect(),
     };
     let report_md = out_dir.join("report.md");
     std::fs::write(&report_md, report::report_markdown(&rows, &ctx))
@@ -340,6 +361,9 @@ fn rerun(
         method: method.name.clone(),
         footprint_radius: robot.footprint_radius,
         footprint: robot.footprint.clone(),
+        bev: BevSpec::default(),
+        sensor_range: plan.sim.sensor_range,
+        history_len: plan.sim.history_len,
     })
 }
 
@@ -356,23 +380,93 @@ fn file_safe(name: &str) -> String {
         .collect()
 }
 
-/// The first episode of each class of `suite`, run by the snapshot method on the first robot.
-fn snapshots(plan: &BenchPlan<'_>, suite: &Suite) -> Result<Vec<Snapshot>, SimError> {
+/// The file of Fig. 4 (the first non-empty suite only).
+pub const FIG4_FILE: &str = "fig4_snapshots.png";
+
+/// The files of Fig. 6, Fig. 7 and the SR-against-density figure of a suite:
+/// `fig6_sr_per_scenario_<suite>.png`, `fig7_tfs_sr_per_robot_<suite>.png`,
+/// `fig_sr_density_<suite>.png` (the suite name with every character other than ASCII
+/// letters, digits, `-` and `_` replaced by `_`).
+pub fn suite_figure_files(suite: &str) -> [String; 3] {
+    let s = file_safe(suite);
+    [
+        format!("fig6_sr_per_scenario_{s}.png"),
+        format!("fig7_tfs_sr_per_robot_{s}.png"),
+        format!("fig_sr_density_{s}.png"),
+    ]
+}
+
+/// Fig. 4: for each scenario class, the first episode of `suite` (in suite order) on which the
+/// snapshot method succeeded on the first robot, run again and kept for drawing; with the
+/// figure's caption. A class without such a success has no panel (the caption says so);
+/// `None` when no class has one.
+fn representative_snapshots(
+    plan: &BenchPlan<'_>,
+    suite: &Suite,
+    rows: &[ResultRow],
+) -> Result<Option<(Vec<Snapshot>, String)>, SimError> {
     let Some(robot) = plan.robots.first() else {
-        return Ok(Vec::new());
+        return Ok(None);
     };
     let method = plan
         .snapshot_method
         .and_then(|name| plan.methods.iter().find(|m| m.name == name))
         .or_else(|| plan.methods.first());
     let Some(method) = method else {
-        return Ok(Vec::new());
+        return Ok(None);
     };
-    let mut out = Vec::new();
+    let succeeded: HashSet<&str> = rows
+        .iter()
+        .filter(|r| {
+            r.suite == suite.name
+                && r.robot == robot.name
+                && r.method == method.name
+                && r.metrics.success
+        })
+        .map(|r| r.episode.as_str())
+        .collect();
+    let mut snaps = Vec::new();
+    let mut ids = Vec::new();
+    let mut missing = Vec::new();
     for c in ScenarioClass::ALL {
-        if let Some(ep) = suite.episodes.iter().find(|e| e.scenario == c) {
-            out.push(rerun(plan, suite, ep, robot, method)?);
+        match suite
+            .episodes
+            .iter()
+            .find(|e| e.scenario == c && succeeded.contains(e.id.as_str()))
+        {
+            Some(ep) => {
+                snaps.push(rerun(plan, suite, ep, robot, method)?);
+                ids.push(format!("{} `{}`", c.title(), ep.id));
+            }
+            None => missing.push(c.title()),
         }
     }
-    Ok(out)
+    if snaps.is_empty() {
+        return Ok(None);
+    }
+    let bev = BevSpec::default();
+    let mut caption = format!(
+        "Fig. 4: suite `{}`, `{}` on {}: for each scenario class the first episode of the suite \
+         on which it succeeded ({}), at the moment of closest approach to a pedestrian. \
+         Pedestrians grey with their last positions and 0.6 s velocity arrows; robot red (path \
+         so far solid, the rest faint; footprint filled, the planners' covering disc outlined, \
+         heading black); the plan it was following orange; start green star, goal blue star. \
+         Inset: the robot-centred BEV raster ({n} × {n} cells of {res:.2} m, forward up) the \
+         drawn plan was made from; occupied cells coloured by the direction of the pedestrian's \
+         velocity (hue wheel in its corner) and its speed (saturation; dark grey: standing), \
+         black arrows 0.6 s of velocity",
+        suite.name,
+        method.name,
+        robot.name,
+        ids.join(", "),
+        n = bev.cells,
+        res = bev.resolution,
+    );
+    if !missing.is_empty() {
+        caption.push_str(&format!(
+            ". No successful run, so no panel, for: {}",
+            missing.join(", ")
+        ));
+    }
+    Ok(Some((snaps, caption)))
 }

@@ -12,7 +12,8 @@
 //! * [`straight`]: the straight-to-goal sanity baseline.
 //! * [`bench`]: methods as planner factories, suites, the parallel deterministic runner.
 //! * [`config`]: the benchmark TOML and suite building.
-//! * [`report`], [`figures`]: `results.csv`, `report.md` and the PNGs.
+//! * [`report`], [`figures`]: `results.csv`, `report.md` and the PNGs; [`stats`]: the paired
+//!   tests, intervals and density bins the report uses.
 //! * [`plan_figure`]: one planning step from an episode, drawn like the paper's Fig. 4.
 
 pub mod bench;
@@ -27,6 +28,7 @@ pub mod plan_figure;
 pub mod replay;
 pub mod report;
 pub mod runner;
+pub mod stats;
 pub mod straight;
 
 pub use bench::{MethodSpec, PlannerContext, ResultRow, Suite, SuiteKind, run_bench};

@@ -32,7 +32,7 @@ use crate::replay::CrowdReplay;
 use crate::runner::StartHeading;
 use human2nav_core::bev::{self, BevSpec};
 use human2nav_core::tfs;
-use human2nav_core::{Limits, Observation, Plan, Pose2, Twist2};
+use human2nav_core::{AgentState, Limits, Observation, Plan, Pose2, Twist2};
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
@@ -671,21 +671,38 @@ fn draw_bev_inset<'b>(
     fig: &PlanFigure<'_>,
 ) -> Result<(), DrawingAreaErrorKind<<BitMapBackend<'b> as DrawingBackend>::ErrorType>> {
     let spec = fig.bev;
+    let n = spec.cells;
+    let label = format!(
+        "BEV input {n}×{n} × {:.2} m (ego frame, forward up)",
+        spec.resolution
+    );
     let obs = fig.observation;
+    draw_bev_raster(area, spec, obs.ego, &obs.agents, &label, 13)
+}
+
+/// The planner's BEV raster of `agents` around `ego` drawn into `area` (see the module docs:
+/// free cells light grey, occupied cells coloured by the direction of their velocity, black
+/// velocity arrows, the robot as a red triangle, the hue wheel in the corner), under a
+/// `label` line of `label_px` pixels.
+pub(crate) fn draw_bev_raster<'b>(
+    area: &Area<'b>,
+    spec: BevSpec,
+    ego: Pose2,
+    agents: &[AgentState],
+    label: &str,
+    label_px: u32,
+) -> Result<(), DrawingAreaErrorKind<<BitMapBackend<'b> as DrawingBackend>::ErrorType>> {
     let n = spec.cells;
     let mut raster = vec![0f32; spec.len()];
-    bev::rasterize(spec, obs.ego, &obs.agents, &mut raster);
+    bev::rasterize(spec, ego, agents, &mut raster);
 
     area.fill(&WHITE)?;
     let (w, h) = area.dim_in_pixel();
-    let (label, grid) = area.split_vertically(22);
-    label.draw(&Text::new(
-        format!(
-            "BEV input {n}×{n} × {:.2} m (ego frame, forward up)",
-            spec.resolution
-        ),
-        (2, 3),
-        ("sans-serif", 13).into_font().color(&BLACK),
+    let (label_area, grid) = area.split_vertically(label_px + 9);
+    label_area.draw(&Text::new(
+        label.to_string(),
+        (3, 4),
+        ("sans-serif", label_px).into_font().color(&BLACK),
     ))?;
     let nf = n as f64;
     // x = column (left of the ego is column 0), y = nf − row (row 0 is farthest ahead).
@@ -717,9 +734,9 @@ fn draw_bev_inset<'b>(
         (c, nf - r)
     };
     let in_grid = |q: (f64, f64)| q.0 >= 0.0 && q.0 <= nf && q.1 >= 0.0 && q.1 <= nf;
-    for a in &obs.agents {
-        let p = obs.ego.inverse_act(a.position);
-        let v = obs.ego.inverse_rotate(a.velocity);
+    for a in agents {
+        let p = ego.inverse_act(a.position);
+        let v = ego.inverse_rotate(a.velocity);
         let from = to_grid(p);
         let to = to_grid([p[0] + 0.6 * v[0], p[1] + 0.6 * v[1]]);
         if !in_grid(from) {

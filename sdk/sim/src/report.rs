@@ -1,11 +1,14 @@
 //! `results.csv` and `report.md`: one row per episode × method × robot, and the tables of the
 //! paper's Fig. 6 (SR per scenario and method) and Fig. 7 (TFS and SR per robot and method),
-//! the other metrics, how the collisions happened, and the empty-world sanity check.
+//! what each suite holds, paired comparisons of every method with the reference method (exact
+//! McNemar test, bootstrap interval of the SR difference), SR against crowd density, the other
+//! metrics, how the collisions happened, and the empty-world sanity check.
 
 use crate::bench::{ResultRow, SuiteKind};
 use crate::episode::{ScenarioClass, ScenarioTitle};
 use crate::metrics::LimitCounts;
 use crate::runner::Contact;
+use crate::stats::{self, BOOTSTRAP_RESAMPLES, DENSITY_BINS, PairedComparison, SuiteComposition};
 use std::fmt::Write as _;
 
 /// The header of `results.csv`.
@@ -177,6 +180,28 @@ pub struct ReportContext {
     pub figures: Vec<(String, String)>,
     /// Wall time of the run (s), if measured.
     pub wall_time: Option<f64>,
+    /// The method every other is compared with in the paired tables (see
+    /// [`ReportContext::reference`]); `None`: `human2nav` when it ran, else the first method.
+    pub reference_method: Option<String>,
+    /// What each suite holds (episodes per class, densities, goal distances), in suite order.
+    pub composition: Vec<SuiteComposition>,
+}
+
+/// The reference method when [`ReportContext::reference_method`] names none that ran.
+pub const DEFAULT_REFERENCE_METHOD: &str = "human2nav";
+
+impl ReportContext {
+    /// The reference method of the paired comparisons: [`ReportContext::reference_method`]
+    /// when it is one of the methods, else [`DEFAULT_REFERENCE_METHOD`] when it is, else the
+    /// first method (`None` without methods).
+    pub fn reference(&self) -> Option<&str> {
+        let ran = |name: &str| self.methods.iter().any(|m| m == name);
+        self.reference_method
+            .as_deref()
+            .filter(|m| ran(m))
+            .or_else(|| ran(DEFAULT_REFERENCE_METHOD).then_some(DEFAULT_REFERENCE_METHOD))
+            .or_else(|| self.methods.first().map(String::as_str))
+    }
 }
 
 fn pct(v: f64) -> String {
@@ -230,6 +255,7 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
         let _ = writeln!(md);
     }
     let _ = writeln!(md);
+    composition_section(&mut md, &ctx.composition);
 
     for (suite, kind, _, _) in ctx.suites.iter().filter(|s| s.1 != SuiteKind::Empty) {
         let in_suite: Vec<&ResultRow> = rows.iter().filter(|r| &r.suite == suite).collect();
@@ -297,6 +323,10 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
                         .copied()
                         .filter(|r| &r.robot == robot && &r.method == m),
                 );
+                if s.n == 0 {
+                    let _ = writeln!(md, "| {robot} | {m} | 0 | – | – | – | – |");
+                    continue;
+                }
                 let _ = writeln!(
                     md,
                     "| {robot} | {m} | {} | {:.3} | {:.3} | {:.3} | {} |",
@@ -308,6 +338,9 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
                 );
             }
         }
+
+        paired_section(&mut md, &in_suite, ctx);
+        density_section(&mut md, &in_suite, &ctx.methods);
 
         let _ = writeln!(
             md,
@@ -321,6 +354,10 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
         );
         for m in &ctx.methods {
             let s = summarize(in_suite.iter().copied().filter(|r| &r.method == m));
+            if s.n == 0 {
+                let _ = writeln!(md, "| {m} | 0 |{}", " – |".repeat(10));
+                continue;
+            }
             let _ = writeln!(
                 md,
                 "| {m} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
@@ -488,5 +525,189 @@ fn cell_sr(s: &Summary) -> String {
         "–".into()
     } else {
         format!("{} ± {} (n={})", pct(s.sr), pct(s.sr_se), s.n)
+    }
+}
+
+fn p_value(p: f64) -> String {
+    if p < 0.001 {
+        "< 0.001".into()
+    } else {
+        format!("{p:.3}")
+    }
+}
+
+/// `Δ [lo, hi]` in percentage points.
+fn difference_cell(d: &PairedComparison) -> String {
+    format!(
+        "{:+.1} [{:+.1}, {:+.1}]",
+        100.0 * d.difference,
+        100.0 * d.ci.0,
+        100.0 * d.ci.1
+    )
+}
+
+fn paired_row(md: &mut String, lead: &str, pairs: &[(bool, bool)]) {
+    match PairedComparison::of(pairs) {
+        Some(d) => {
+            let _ = writeln!(
+                md,
+                "| {lead} | {} | {} | {} | {} | {} | {} | {} |",
+                d.n,
+                pct(d.sr_reference),
+                pct(d.sr_other),
+                difference_cell(&d),
+                d.b,
+                d.c,
+                p_value(d.p_value)
+            );
+        }
+        None => {
+            let _ = writeln!(md, "| {lead} | 0 | – | – | – | – | – | – |");
+        }
+    }
+}
+
+/// Every method against the reference on the same (episode, robot) pairs: pooled over the
+/// robots per class and overall, then per robot.
+fn paired_section(md: &mut String, rows: &[&ResultRow], ctx: &ReportContext) {
+    let Some(reference) = ctx.reference() else {
+        return;
+    };
+    let _ = writeln!(
+        md,
+        "\n### Paired comparison with `{reference}` (exact McNemar test, 95 % bootstrap interval)\n"
+    );
+    let others: Vec<&String> = ctx.methods.iter().filter(|m| *m != reference).collect();
+    if others.is_empty() {
+        let _ = writeln!(md, "Only `{reference}` ran: nothing to compare.");
+        return;
+    }
+    if !rows.iter().any(|r| r.method == reference) {
+        let _ = writeln!(
+            md,
+            "`{reference}` has no runs in this suite: no paired comparison."
+        );
+        return;
+    }
+    let _ = writeln!(
+        md,
+        "A pair is one (episode, robot) that both `{reference}` and the other method ran; the \
+         runs of a pair face the same crowd, so the methods are compared on the pairs where they \
+         differ. n = pairs; b = pairs only `{reference}` succeeded on; c = pairs only the other \
+         method succeeded on; ΔSR = SR(`{reference}`) − SR(method) = (b − c)/n in percentage \
+         points (positive: `{reference}` did better), with the 95 % percentile interval of \
+         {BOOTSTRAP_RESAMPLES} paired bootstrap resamples of the pairs (fixed seed). p is the \
+         exact two-sided McNemar test: under equal success probabilities each of the b + c \
+         discordant pairs goes either way with probability 1/2, p = min(1, 2·P(X ≤ min(b, c))) \
+         for X ~ Binomial(b + c, 1/2), and p = 1 when b + c = 0. A small p with b > c says \
+         `{reference}` succeeds where the method fails more often than the reverse. The tests \
+         are not corrected for multiple comparisons.\n"
+    );
+    let header = format!(
+        "| n | SR `{reference}` (%) | SR method (%) | ΔSR (pp) [95 % CI] | b | c | McNemar p |"
+    );
+    let _ = writeln!(
+        md,
+        "Pooled over the robots:\n\n| method | scenario {header}\n|---|---|---|---|---|---|---|---|---|"
+    );
+    for m in &others {
+        for c in ScenarioClass::ALL.into_iter().map(Some).chain([None]) {
+            let pairs = stats::success_pairs(
+                rows.iter()
+                    .copied()
+                    .filter(|r| c.is_none_or(|c| r.scenario == c)),
+                reference,
+                m,
+            );
+            let name = c.map_or("all", |c| c.title());
+            paired_row(md, &format!("{m} | {name}"), &pairs);
+        }
+    }
+    let _ = writeln!(
+        md,
+        "\nPer robot, all scenarios:\n\n| robot | method {header}\n|---|---|---|---|---|---|---|---|---|"
+    );
+    for robot in &ctx.robot_names {
+        for m in &others {
+            let pairs = stats::success_pairs(
+                rows.iter().copied().filter(|r| &r.robot == robot),
+                reference,
+                m,
+            );
+            paired_row(md, &format!("{robot} | {m}"), &pairs);
+        }
+    }
+}
+
+/// SR per crowd-density bin (rows) and method (columns), all robots and scenarios.
+fn density_section(md: &mut String, rows: &[&ResultRow], methods: &[String]) {
+    let bins = stats::occupied_bins(rows.iter().map(|r| r.density));
+    if bins.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        md,
+        "\n### Success rate (%) against crowd density, all robots and scenarios\n\n\
+         Density is the episode's `density`: its number of relevant pedestrians as the suite \
+         counts them (for episodes mined from recordings, the pedestrians that come within 3 m \
+         of the recorded pedestrian the robot replaces). Cells: SR ± 1 standard error \
+         (n = runs).\n"
+    );
+    let _ = write!(md, "| density |");
+    for m in methods {
+        let _ = write!(md, " {m} |");
+    }
+    let _ = writeln!(md, "\n|---|{}", "---|".repeat(methods.len()));
+    for b in bins {
+        let _ = write!(md, "| {} |", DENSITY_BINS[b].label());
+        for m in methods {
+            let s = summarize(
+                rows.iter()
+                    .copied()
+                    .filter(|r| &r.method == m && DENSITY_BINS[b].contains(r.density)),
+            );
+            let _ = write!(md, " {} |", cell_sr(&s));
+        }
+        let _ = writeln!(md);
+    }
+}
+
+/// Per suite: episodes per class, their density histogram and goal distances.
+fn composition_section(md: &mut String, composition: &[SuiteComposition]) {
+    if composition.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        md,
+        "## Suite composition\n\n\
+         Episodes per scenario class, how many fall in each crowd-density bin (relevant \
+         pedestrians, see the density tables) and the straight-line start-to-goal distance.\n"
+    );
+    for s in composition {
+        let bins: Vec<usize> = (0..DENSITY_BINS.len())
+            .filter(|&b| s.classes.iter().any(|c| c.density_histogram[b] > 0))
+            .collect();
+        let _ = writeln!(md, "`{}`:\n", s.suite);
+        let _ = write!(md, "| scenario | episodes |");
+        for &b in &bins {
+            let _ = write!(md, " density {} |", DENSITY_BINS[b].label());
+        }
+        let _ = writeln!(
+            md,
+            " goal distance min / median / max (m) |\n|---|---|{}---|",
+            "---|".repeat(bins.len())
+        );
+        for c in &s.classes {
+            let name = c.class.map_or("all", |c| c.title());
+            let _ = write!(md, "| {name} | {} |", c.episodes);
+            for &b in &bins {
+                let _ = write!(md, " {} |", c.density_histogram[b]);
+            }
+            let goal = c.goal_distance.map_or("–".to_string(), |(lo, m, hi)| {
+                format!("{lo:.2} / {m:.2} / {hi:.2}")
+            });
+            let _ = writeln!(md, " {goal} |");
+        }
+        let _ = writeln!(md);
     }
 }

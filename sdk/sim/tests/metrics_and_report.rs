@@ -158,6 +158,7 @@ fn empty_suite() -> Suite {
     let mut s = small_suite();
     for e in &mut s.episodes {
         e.agents.clear();
+        e.density = 0;
     }
     Suite::new("empty", SuiteKind::Empty, s.episodes)
 }
@@ -262,7 +263,12 @@ fn driver_writes_csv_report_and_figures() {
         threads: Some(2),
         failures: 2,
     };
-    let out = std::env::temp_dir().join(format!("h2n-sim-driver-{}", std::process::id()));
+    // HUMAN2NAV_FIGURE_DIR keeps the outputs there for inspection.
+    let keep = std::env::var_os("HUMAN2NAV_FIGURE_DIR")
+        .map(|d| std::path::PathBuf::from(d).join("driver"));
+    let out = keep.clone().unwrap_or_else(|| {
+        std::env::temp_dir().join(format!("h2n-sim-driver-{}", std::process::id()))
+    });
     let res = driver::run(&plan, &out, &ProgressBar::hidden()).unwrap();
     assert_eq!(res.rows.len(), 2 * 2 * 2 * 4);
     assert!(
@@ -318,14 +324,48 @@ fn driver_writes_csv_report_and_figures() {
             .sum();
         assert_eq!(counts, n, "{line}");
     }
-    // Fig. 4, 6, 7, and one failure figure per method that failed somewhere in the suite.
+    // Fig. 6, 7 and the density figure of the one non-empty suite, Fig. 4 (`slow` succeeded
+    // on diablo in some class), and one failure figure per method that failed somewhere in
+    // the suite.
     let failing = ["straight", "slow"]
         .iter()
         .filter(|m| hand.iter().any(|r| &r.method == *m && !r.metrics.success))
         .count();
     assert!(failing > 0, "the hand suite should make a method fail");
-    assert_eq!(res.figures.len(), 3 + failing);
+    let names: Vec<String> = res
+        .figures
+        .iter()
+        .map(|f| f.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(res.figures.len(), 4 + failing, "{names:?}");
+    for f in [
+        "fig6_sr_per_scenario_hand.png",
+        "fig7_tfs_sr_per_robot_hand.png",
+        "fig_sr_density_hand.png",
+        "fig4_snapshots.png",
+    ] {
+        assert!(names.iter().any(|n| n == f), "{f} missing: {names:?}");
+        assert!(report.contains(f), "report lacks {f}");
+    }
     assert!(report.contains("failures_straight_1.png") || report.contains("failures_slow_1.png"));
+    // Fig. 4 shows successful runs only: a class where `slow` failed on diablo is left out.
+    let slow_successes: Vec<ScenarioClass> = hand
+        .iter()
+        .filter(|r| r.method == "slow" && r.robot == "diablo" && r.metrics.success)
+        .map(|r| r.scenario)
+        .collect();
+    for c in ScenarioClass::ALL {
+        let panel = format!("{} `", human2nav_sim::episode::ScenarioTitle::title(c));
+        let fig4 = report.lines().find(|l| l.starts_with("*Fig. 4")).unwrap();
+        assert_eq!(fig4.contains(&panel), slow_successes.contains(&c), "{fig4}");
+    }
+    for needle in [
+        "Paired comparison with `straight`",
+        "Suite composition",
+        "against crowd density",
+    ] {
+        assert!(report.contains(needle), "report lacks `{needle}`");
+    }
     for f in &res.figures {
         let bytes = std::fs::read(f).unwrap();
         assert!(
@@ -333,21 +373,33 @@ fn driver_writes_csv_report_and_figures() {
             "{} is not a PNG",
             f.display()
         );
-        // Panels of 600 px, two per row: Fig. 4 has four, a failure figure two (failures: 2).
+        // Panels of 800 px, two per row, and a legend strip below them: a failure figure has
+        // two panels (failures: 2) or one.
         let size = |at: usize| {
             u32::from_be_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]])
         };
         let name = f.file_name().unwrap().to_string_lossy();
         if name.starts_with("fig4") {
-            assert_eq!((size(16), size(20)), (1200, 1200), "{name}");
+            let panels = slow_successes
+                .iter()
+                .collect::<std::collections::HashSet<_>>()
+                .len();
+            assert_eq!(size(16), if panels > 1 { 1600 } else { 800 }, "{name}");
+            let rows = panels.div_ceil(2) as u32;
+            assert!(
+                (800 * rows + 40..800 * rows + 200).contains(&size(20)),
+                "{name}"
+            );
         } else if name.starts_with("failures_") {
-            assert_eq!(size(16), 1200, "{name}");
-            assert!(size(20) == 600 || size(20) == 1200, "{name}");
+            assert!(size(16) == 800 || size(16) == 1600, "{name}");
+            assert!((840..1000).contains(&size(20)), "{name}");
         }
     }
     let csv = std::fs::read_to_string(&res.results_csv).unwrap();
     assert_eq!(csv.lines().count(), res.rows.len() + 1);
-    std::fs::remove_dir_all(&out).unwrap();
+    if keep.is_none() {
+        std::fs::remove_dir_all(&out).unwrap();
+    }
 }
 
 #[test]
@@ -380,8 +432,14 @@ fn data_scaling_points_and_figure() {
         assert_relative_eq!(p.sr_se, s.sr_se);
     }
     assert!(scaling_points(&runs, "hand", "other").is_empty());
-    let out = std::env::temp_dir().join(format!("h2n-fig5-{}.png", std::process::id()));
+    let keep = std::env::var_os("HUMAN2NAV_FIGURE_DIR").map(std::path::PathBuf::from);
+    let out = match &keep {
+        Some(d) => d.join("fig5_sr_vs_training_data.png"),
+        None => std::env::temp_dir().join(format!("h2n-fig5-{}.png", std::process::id())),
+    };
     sr_vs_training_data(&out, &points, "SR vs training data").unwrap();
     assert!(std::fs::read(&out).unwrap().starts_with(b"\x89PNG"));
-    std::fs::remove_file(&out).unwrap();
+    if keep.is_none() {
+        std::fs::remove_file(&out).unwrap();
+    }
 }

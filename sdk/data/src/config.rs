@@ -1,10 +1,12 @@
-//! The `data.toml` configuration of `human2nav data build | episodes | associate`.
+//! The `data.toml` configuration of `human2nav data build | episodes | associate` (and of the
+//! interaction-rich episodes, `[interaction]`).
 //!
 //! Every section is optional and defaults to the values documented on its struct; unknown
 //! keys are rejected. Relative paths are resolved against the workspace root.
 
 use crate::association::TrackerOptions;
 use crate::error::DataError;
+use crate::interaction::InteractionOptions;
 use crate::loaders::sdd::SddRawOptions;
 use crate::resample::ResampleOptions;
 use crate::scenario::MiningOptions;
@@ -23,6 +25,12 @@ pub struct PathsConfig {
     pub cache_dir: PathBuf,
     /// Episode suite file. Default `out/data/episodes.json`.
     pub episodes: PathBuf,
+    /// Interaction-rich episodes of the test scenes ([`crate::interaction`]). Default
+    /// `out/data/episodes-interaction.json`.
+    pub interaction_episodes: PathBuf,
+    /// Interaction-rich episodes of the validation scenes. Default
+    /// `out/data/episodes-interaction-val.json`.
+    pub interaction_val_episodes: PathBuf,
 }
 
 impl Default for PathsConfig {
@@ -31,6 +39,8 @@ impl Default for PathsConfig {
             data_root: PathBuf::new(),
             cache_dir: PathBuf::from("out/data/cache"),
             episodes: PathBuf::from("out/data/episodes.json"),
+            interaction_episodes: PathBuf::from("out/data/episodes-interaction.json"),
+            interaction_val_episodes: PathBuf::from("out/data/episodes-interaction-val.json"),
         }
     }
 }
@@ -109,6 +119,8 @@ pub struct DataConfig {
     pub bev: BevSpec,
     pub tuples: TupleOptions,
     pub episodes: MiningOptions,
+    /// Interaction-rich episodes; their geometry comes from `episodes`.
+    pub interaction: InteractionOptions,
     pub association: TrackerOptions,
 }
 
@@ -140,6 +152,7 @@ impl DataConfig {
             .map_err(|e| DataError::option("bev", e.to_string()))?;
         self.tuples.validate()?;
         self.episodes.validate()?;
+        self.interaction.validate()?;
         self.association.validate()?;
         if (self.resample.dt - 0.1).abs() > 1e-12 {
             return Err(DataError::option(

@@ -4,17 +4,20 @@
 //! Pipeline: [`loaders`] (ETH, UCY, sgan benchmark, SDD raw and TrajNet) → [`track::RawScene`]
 //! in metres → [`resample`] to 0.1 s with velocity and heading → [`tuples`] (BEV raster, goal,
 //! velocity, 32 future SE(2) poses) in a versioned binary [`cache`] split by scene, and
-//! [`scenario`] mining of benchmark [`Episode`]s from held-out scenes. [`association`] builds
-//! tracks from identity-free detections with the Hungarian algorithm, [`homography`] maps image
-//! to world (Eq. 1), [`synthetic`] generates crowds of the four flow classes. [`config`] is the
-//! `data.toml` schema, [`pipeline`] the parallel, thread-count-independent jobs behind
-//! `human2nav data build | episodes | associate`, and [`paths`] locates datasets and outputs.
+//! [`scenario`] mining of benchmark [`Episode`]s from held-out scenes, with [`interaction`]
+//! mining interaction-rich ones (the robot's path and the crowd from different times).
+//! [`association`] builds tracks from identity-free detections with the Hungarian algorithm,
+//! [`homography`] maps image to world (Eq. 1), [`synthetic`] generates crowds of the four flow
+//! classes. [`config`] is the `data.toml` schema, [`pipeline`] the parallel,
+//! thread-count-independent jobs behind `human2nav data build | episodes | associate`, and
+//! [`paths`] locates datasets and outputs.
 
 pub mod association;
 pub mod cache;
 pub mod config;
 pub mod error;
 pub mod homography;
+pub mod interaction;
 pub mod loaders;
 pub mod paths;
 pub mod pipeline;
@@ -28,6 +31,7 @@ pub mod tuples;
 pub use cache::{Manifest, SceneInfo, TupleCache};
 pub use error::DataError;
 pub use homography::Homography;
+pub use interaction::{InteractionOptions, InteractionStats, SuiteSummary};
 pub use resample::{ResampleOptions, Scene, Track};
 pub use scenario::{AgentTrack, Episode, EpisodeSuite, ScenarioClass};
 pub use track::{AgentClass, RawScene, RawTrack, Sample};

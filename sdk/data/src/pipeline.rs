@@ -1,11 +1,15 @@
-//! End-to-end jobs: dataset discovery, the tuple cache build, episode mining and the
-//! association evaluation. Scenes are processed in parallel (rayon) and collected in name
-//! order, so the output is identical for any number of threads.
+//! End-to-end jobs: dataset discovery, the tuple cache build, episode mining (paper protocol
+//! and interaction-rich) and the association evaluation. Scenes are processed in parallel
+//! (rayon) and collected in name order, so the output is identical for any number of threads.
 
 use crate::association::{AssociationReport, associate, evaluate, sdd_detections};
 use crate::cache::{Manifest, SceneInfo, TupleCache};
 use crate::config::DataConfig;
 use crate::error::DataError;
+pub use crate::interaction::InteractionReport;
+use crate::interaction::{
+    InteractionStats, mine_interaction_scene, select_interaction_suite, summarize,
+};
 use crate::loaders::{eth, sdd, sgan, ucy};
 use crate::paths;
 use crate::resample::{Scene, median, resample};
@@ -524,6 +528,117 @@ pub fn build_episodes(
         notes,
         scenes: names,
     })
+}
+
+/// The interaction-rich suite file of a split (`paths.interaction_episodes` for test,
+/// `paths.interaction_val_episodes` for val), resolved against the workspace.
+pub fn interaction_episodes_path(
+    cfg: &DataConfig,
+    loc: &Locations,
+    split: Split,
+) -> Result<PathBuf, DataError> {
+    let p = match split {
+        Split::Test => &cfg.paths.interaction_episodes,
+        Split::Val => &cfg.paths.interaction_val_episodes,
+        Split::Train => return Err(not_held_out()),
+    };
+    Ok(paths::output_path(p, &loc.workspace))
+}
+
+fn not_held_out() -> DataError {
+    DataError::option(
+        "split",
+        "interaction episodes are mined from the test or val scenes, not from train",
+    )
+}
+
+/// Mines interaction-rich episodes ([`crate::interaction`]) from the scenes of `split`
+/// (`[split] test` or `val`) and selects up to `episodes.per_class` per class. Errors when no
+/// scene of the split is found or a class yields no episode at all; fewer than `per_class`
+/// in a class is a note. Without a dataset directory and with `sources.synthetic_fallback`,
+/// the synthetic episodes of `build_episodes` (paper protocol), with a note saying so.
+pub fn build_interaction_episodes(
+    cfg: &DataConfig,
+    loc: &Locations,
+    split: Split,
+    progress: &dyn Progress,
+) -> Result<InteractionReport, DataError> {
+    if split == Split::Train {
+        return Err(not_held_out());
+    }
+    let geometry = &cfg.episodes;
+    let opts = &cfg.interaction;
+    if !loc.data_root.is_dir() {
+        if !cfg.sources.synthetic_fallback {
+            return Err(DataError::NoData(format!(
+                "{} does not exist",
+                loc.data_root.display()
+            )));
+        }
+        progress.stage("synthetic episodes", 4);
+        let seed = match split {
+            Split::Val => geometry.seed ^ 0x5641_4C00, // other crowds than the test fallback
+            _ => geometry.seed,
+        };
+        let episodes: Vec<_> = ScenarioClass::ALL
+            .par_iter()
+            .map(|&c| {
+                let e = synthetic::episodes_with(c, geometry.per_class, seed, geometry);
+                progress.inc(1);
+                e
+            })
+            .flatten()
+            .collect();
+        let note = format!(
+            "no datasets at {}: synthetic social-force episodes of the paper protocol, NOT \
+             interaction-rich (no time shift, no interaction criterion)",
+            loc.data_root.display()
+        );
+        let suite = EpisodeSuite::new(format!("synthetic ({split})"), episodes);
+        return Ok(InteractionReport {
+            split,
+            summary: summarize(&suite.episodes),
+            suite,
+            scenes: Vec::new(),
+            stats: InteractionStats::default(),
+            notes: vec![note],
+        });
+    }
+    let (sources, mut notes) = discover(&loc.data_root, cfg);
+    let sources: Vec<Source> = sources
+        .into_iter()
+        .filter(|s| cfg.split.of(&s.name) == Some(split))
+        .collect();
+    let listed = match split {
+        Split::Val => &cfg.split.val,
+        _ => &cfg.split.test,
+    };
+    for name in listed {
+        if !sources.iter().any(|s| &s.name == name) && !cfg.split.exclude.contains(name) {
+            notes.push(format!(
+                "{split} scene {name} not found under the data root"
+            ));
+        }
+    }
+    if sources.is_empty() {
+        return Err(DataError::NoData(format!(
+            "no {split} scene found under {} (see [split] {split})",
+            loc.data_root.display()
+        )));
+    }
+    progress.stage("mine interactions", sources.len() as u64);
+    let mined = sources
+        .par_iter()
+        .map(|src| {
+            let raw = load_source(src, cfg)?;
+            let scene = resample(&raw, &cfg.resample);
+            let mut stats = InteractionStats::default();
+            let eps = mine_interaction_scene(&scene, geometry, opts, &mut stats);
+            progress.inc(1);
+            Ok((src.name.clone(), eps, stats))
+        })
+        .collect::<Result<Vec<_>, DataError>>()?;
+    select_interaction_suite(split, mined, &cfg.episodes, &cfg.interaction, notes)
 }
 
 /// Association quality per SDD raw video (identities removed, pedestrians only by default).

@@ -446,11 +446,11 @@ pub struct MiningStats {
     pub candidates: BTreeMap<ScenarioClass, usize>,
 }
 
-fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
+pub(crate) fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
     (a[0] - b[0]).hypot(a[1] - b[1])
 }
 
-fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+pub(crate) fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     let ab = [b[0] - a[0], b[1] - a[1]];
     let l2 = ab[0] * ab[0] + ab[1] * ab[1];
     let t = if l2 > 0.0 {
@@ -461,23 +461,22 @@ fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     dist(p, [a[0] + t * ab[0], a[1] + t * ab[1]])
 }
 
-/// The relevant agents of an ego window `[s0, s_goal]`: (track index, mean velocity while in range).
+/// The agents that come within `radius` of a probe moving through the scene (the ego
+/// pedestrian here, the reference robot in [`crate::interaction`]): at each `(global step,
+/// probe position)`, every track present then except `exclude`. Returns (track index, mean
+/// velocity over the steps it was in range), sorted by track index.
 pub(crate) fn relevant_agents(
     scene: &Scene,
     index: &StepIndex,
-    ego: usize,
-    s0: i64,
-    s_goal: i64,
+    probe: impl IntoIterator<Item = (i64, [f64; 2])>,
+    exclude: Option<usize>,
     radius: f64,
 ) -> Vec<(usize, [f64; 2])> {
-    let ego_t = &scene.tracks[ego];
     let mut acc: BTreeMap<usize, ([f64; 2], usize)> = BTreeMap::new();
-    for s in s0..=s_goal {
-        let Some(ei) = ego_t.local(s) else { continue };
-        let pe = ego_t.positions[ei];
+    for (s, pe) in probe {
         for &j in index.at(s) {
             let j = j as usize;
-            if j == ego {
+            if Some(j) == exclude {
                 continue;
             }
             let t = &scene.tracks[j];
@@ -493,6 +492,37 @@ pub(crate) fn relevant_agents(
     acc.into_iter()
         .map(|(j, (v, n))| (j, [v[0] / n as f64, v[1] / n as f64]))
         .collect()
+}
+
+/// True when a track other than `exclude` comes within `min_start_clearance` of `start`
+/// during the `start_window` after global step `s0` (module docs).
+pub(crate) fn start_blocked(
+    scene: &Scene,
+    index: &StepIndex,
+    exclude: Option<usize>,
+    s0: i64,
+    start: [f64; 2],
+    opts: &MiningOptions,
+) -> bool {
+    let window = (opts.start_window / scene.dt + 1e-9).floor() as i64;
+    (s0..=s0 + window).any(|step| {
+        index.at(step).iter().any(|&j| {
+            let j = j as usize;
+            Some(j) != exclude
+                && scene.tracks[j].local(step).is_some_and(|k| {
+                    dist(scene.tracks[j].positions[k], start) < opts.min_start_clearance
+                })
+        })
+    })
+}
+
+/// The local index at which track `t`, starting at local index `i0`, is first
+/// `goal_distance` from its position there in a straight line, if within `max_goal_time`.
+pub(crate) fn goal_index(t: &Track, i0: usize, dt: f64, opts: &MiningOptions) -> Option<usize> {
+    let max_goal_steps = (opts.max_goal_time / dt).round() as usize;
+    let p0 = t.positions[i0];
+    (i0 + 1..t.len().min(i0 + max_goal_steps + 1))
+        .find(|&i| dist(t.positions[i], p0) >= opts.goal_distance)
 }
 
 /// Why [`try_episode`] rejected a window.
@@ -517,11 +547,8 @@ pub fn try_episode(
     let t = &scene.tracks[ego];
     let dt = scene.dt;
     let last = scene.step_range().map(|r| r.1).unwrap_or(i64::MIN);
-    let max_goal_steps = (opts.max_goal_time / dt).round() as usize;
     let p0 = t.positions[i0];
-    let ig = (i0 + 1..t.len().min(i0 + max_goal_steps + 1))
-        .find(|&i| dist(t.positions[i], p0) >= opts.goal_distance)
-        .ok_or(Reject::GoalNotReached)?;
+    let ig = goal_index(t, i0, dt, opts).ok_or(Reject::GoalNotReached)?;
     let s0 = t.start + i0 as i64;
     let sg = t.start + ig as i64;
     let goal = t.positions[ig];
@@ -531,20 +558,11 @@ pub fn try_episode(
     if s0 + steps > last {
         return Err(Reject::OutsideRecording);
     }
-    let window = (opts.start_window / dt + 1e-9).floor() as i64;
-    let blocked = (s0..=s0 + window).any(|step| {
-        index.at(step).iter().any(|&j| {
-            let j = j as usize;
-            j != ego
-                && scene.tracks[j].local(step).is_some_and(|k| {
-                    dist(scene.tracks[j].positions[k], p0) < opts.min_start_clearance
-                })
-        })
-    });
-    if blocked {
+    if start_blocked(scene, index, Some(ego), s0, p0, opts) {
         return Err(Reject::StartBlocked);
     }
-    let relevant = relevant_agents(scene, index, ego, s0, sg, opts.density_radius);
+    let ego_path = (s0..=sg).filter_map(|s| t.local(s).map(|i| (s, t.positions[i])));
+    let relevant = relevant_agents(scene, index, ego_path, Some(ego), opts.density_radius);
     let density = relevant.len();
     if density < opts.min_density || density > opts.max_density {
         return Err(Reject::DensityOutOfRange);
@@ -552,7 +570,7 @@ pub fn try_episode(
     let u = [goal[0] - p0[0], goal[1] - p0[1]];
     let class =
         classify(u, relevant.iter().map(|r| r.1), &opts.classify).ok_or(Reject::Unclassified)?;
-    let agents = export_agents(scene, index, ego, s0, steps, p0, goal, opts);
+    let agents = export_agents(scene, index, Some(ego), s0, steps, p0, goal, opts);
     let episode = Episode {
         id: format!("{}/ped{}/t{:.1}", scene.name, t.source_id, s0 as f64 * dt),
         scene: scene.name.clone(),
@@ -603,10 +621,13 @@ pub fn mine_scene(scene: &Scene, opts: &MiningOptions, stats: &mut MiningStats) 
     out
 }
 
-fn export_agents(
+/// The replayed crowd of an episode whose step 0 is global step `s0`: every track present
+/// during `[s0, s0 + steps]` (except `exclude`) that comes within `export_radius` of the
+/// segment `a`–`b` then, clipped to that window, in track order.
+pub(crate) fn export_agents(
     scene: &Scene,
     index: &StepIndex,
-    ego: usize,
+    exclude: Option<usize>,
     s0: i64,
     steps: i64,
     a: [f64; 2],
@@ -617,7 +638,7 @@ fn export_agents(
     for s in s0..=s0 + steps {
         for &j in index.at(s) {
             let j = j as usize;
-            if j == ego || ids.contains(&j) {
+            if Some(j) == exclude || ids.contains(&j) {
                 continue;
             }
             let t: &Track = &scene.tracks[j];

@@ -6,6 +6,7 @@ mod common;
 
 use approx::assert_relative_eq;
 use human2nav_core::bev::BevSpec;
+use human2nav_data::InteractionOptions;
 use human2nav_data::cache::TupleCache;
 use human2nav_data::config::DataConfig;
 use human2nav_data::pipeline::{self, Locations, NoProgress};
@@ -39,12 +40,27 @@ fn shipped_config_parses_and_unknown_keys_are_rejected() {
     assert_eq!(cfg.bev, BevSpec::default());
     assert_eq!(cfg.tuples, TupleOptions::default());
     assert_eq!(cfg.episodes, MiningOptions::default());
+    assert_eq!(cfg.interaction, InteractionOptions::default());
+    assert_eq!(cfg.paths, human2nav_data::config::PathsConfig::default());
     assert!(cfg.split.test.contains(&"eth/eth".to_string()));
     let err = DataConfig::parse("[tuples]\nstrde = 3\n", Path::new("x.toml")).unwrap_err();
     assert!(
         matches!(err, DataError::Config { .. }) && err.to_string().contains("strde"),
         "{err}"
     );
+    let err = DataConfig::parse("[interaction]\nshifts = 3\n", Path::new("x.toml")).unwrap_err();
+    assert!(err.to_string().contains("shifts"), "{err}");
+    let err = DataConfig::parse(
+        "[interaction]\nreference_speeds = []\n",
+        Path::new("x.toml"),
+    )
+    .unwrap_err();
+    assert!(
+        err.to_string().contains("interaction.reference_speeds"),
+        "{err}"
+    );
+    let cfg = DataConfig::parse("[interaction]\nmax_density = 30\n", Path::new("x.toml")).unwrap();
+    assert_eq!(cfg.interaction.max_density, Some(30));
     let err = DataConfig::parse("[bev]\ncells = 0\n", Path::new("x.toml")).unwrap_err();
     assert!(err.to_string().contains("cells"), "{err}");
     let err = DataConfig::parse(

@@ -5,21 +5,21 @@
 //! shipped flow model, see [`human2nav_method`]) is built here because it needs libtorch.
 //!
 //! Episodes: a `real` suite reads its episode file; when the file is missing but the datasets
-//! are present (per `--data-config`), the held-out episodes are mined first exactly as
+//! are present (per `--data-config`), its episodes are mined first exactly as
 //! `human2nav data episodes` does and written there. Without the datasets the suite falls back
-//! to synthetic episodes (and the report says so).
+//! to synthetic episodes, with a warning on stderr and in the report.
 
 use anyhow::{Context, anyhow, bail};
 use clap::Args;
 use human2nav_core::human2nav::Human2NavSettings;
-use human2nav_data::config::DataConfig;
-use human2nav_data::pipeline::{self, Locations, NoProgress};
 use human2nav_flow::planner::{PlannerConfig, RobotPlanner, load_model};
 use human2nav_plugin::PluginHost;
+use human2nav_sim::MethodSpec;
 use human2nav_sim::config::MethodConfig;
-use human2nav_sim::config::{BenchConfig, build_suites, builtin_method, load_robots};
+use human2nav_sim::config::{
+    BenchConfig, build_suites, builtin_method, ensure_episode_files, load_robots,
+};
 use human2nav_sim::driver::{self, BenchPlan};
-use human2nav_sim::{MethodSpec, SuiteKind};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::HashMap;
 use std::io::IsTerminal;
@@ -263,43 +263,14 @@ fn log_progress(bar: &ProgressBar, done: &std::sync::atomic::AtomicBool) {
     }
 }
 
-/// Mines the held-out episodes of every `real` suite whose file is missing, when the datasets
-/// named by `data_config` are present (see the module docs). Returns why the missing files may
-/// fall back to synthetic episodes (the datasets are absent), or `None` when they may not.
+/// [`ensure_episode_files`], telling stderr what it mines.
 pub(crate) fn ensure_real_episodes(
     cfg: &BenchConfig,
     data_config: &Path,
 ) -> anyhow::Result<Option<String>> {
-    let dcfg = DataConfig::load(data_config)
-        .with_context(|| format!("loading {}", data_config.display()))?;
-    let loc = Locations::resolve(&dcfg, data_config);
-    if !loc.data_root.is_dir() {
-        return Ok(Some(format!(
-            "no datasets at {} (set HUMAN2NAV_DATA or paths.data_root in {})",
-            loc.data_root.display(),
-            data_config.display()
-        )));
-    }
-    for s in cfg.suites.iter().filter(|s| s.kind == SuiteKind::Real) {
-        let Some(file) = s.episodes.as_deref().map(|p| cfg.resolve(p)) else {
-            continue;
-        };
-        if file.is_file() {
-            continue;
-        }
-        eprintln!(
-            "suite `{}`: mining held-out episodes from {} into {}",
-            s.name,
-            loc.data_root.display(),
-            file.display()
-        );
-        let report = pipeline::build_episodes(&dcfg, &loc, &NoProgress)?;
-        for n in &report.notes {
-            eprintln!("  note: {n}");
-        }
-        report.suite.save(&file)?;
-    }
-    Ok(None)
+    Ok(ensure_episode_files(cfg, data_config, &|m| {
+        eprintln!("{m}")
+    })?)
 }
 
 /// A `human2nav` method: the reference planner with the model and settings of a planner

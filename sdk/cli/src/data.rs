@@ -27,12 +27,16 @@ pub enum DataCommand {
         /// Cache directory (holding manifest.json).
         cache: PathBuf,
     },
-    /// Mine benchmark episodes from the held-out test scenes.
+    /// Mine the benchmark episodes: the paper protocol's from the test scenes
+    /// (`paths.episodes`), and the interaction-rich ones from the test and the validation
+    /// scenes (`paths.interaction_episodes`, `paths.interaction_val_episodes`, each with its
+    /// mining report beside it as `<file>.md`).
     Episodes {
         /// Data config (e.g. sdk/configs/data.toml).
         #[arg(long)]
         config: PathBuf,
-        /// Write the suite here instead of the config's `paths.episodes`.
+        /// Write the paper-protocol suite here instead of the config's `paths.episodes`
+        /// (the interaction suites still go to their configured paths).
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -377,6 +381,28 @@ fn episodes(config: &Path, out: Option<PathBuf>) -> anyhow::Result<ExitCode> {
         path.display(),
         t0.elapsed().as_secs_f64()
     );
+    for file in [Split::Test, Split::Val].map(pipeline::EpisodeFile::Interaction) {
+        let t0 = Instant::now();
+        let written = pipeline::write_episode_file(file, &cfg, &loc, None, &bars)?;
+        bars.finish();
+        if let Some((_, md)) = &written.report {
+            println!("\n{md}");
+        }
+        for n in &written.notes {
+            println!("note: {n}");
+        }
+        println!(
+            "{} episodes written to {} in {:.1} s{}",
+            written.episodes,
+            written.path.display(),
+            t0.elapsed().as_secs_f64(),
+            written
+                .report
+                .as_ref()
+                .map(|(p, _)| format!(" (report: {})", p.display()))
+                .unwrap_or_default()
+        );
+    }
     Ok(ExitCode::SUCCESS)
 }
 

@@ -693,3 +693,93 @@ pub fn evaluate_association(
         })
         .collect()
 }
+
+/// The episode files `human2nav data episodes` writes, each named by a key of `[paths]`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EpisodeFile {
+    /// The paper protocol's held-out test episodes (`paths.episodes`).
+    Real,
+    /// Interaction-rich episodes of the test or val scenes (`paths.interaction_episodes`,
+    /// `paths.interaction_val_episodes`).
+    Interaction(Split),
+}
+
+impl EpisodeFile {
+    /// Every file, in the order `data episodes` writes them.
+    pub const ALL: [EpisodeFile; 3] = [
+        EpisodeFile::Real,
+        EpisodeFile::Interaction(Split::Test),
+        EpisodeFile::Interaction(Split::Val),
+    ];
+
+    /// The `[paths]` key that names the file.
+    pub fn key(self) -> &'static str {
+        match self {
+            EpisodeFile::Real => "paths.episodes",
+            EpisodeFile::Interaction(Split::Val) => "paths.interaction_val_episodes",
+            EpisodeFile::Interaction(_) => "paths.interaction_episodes",
+        }
+    }
+
+    /// Where the file goes.
+    pub fn path(self, cfg: &DataConfig, loc: &Locations) -> Result<PathBuf, DataError> {
+        match self {
+            EpisodeFile::Real => Ok(loc.episodes.clone()),
+            EpisodeFile::Interaction(split) => interaction_episodes_path(cfg, loc, split),
+        }
+    }
+}
+
+/// What [`write_episode_file`] wrote.
+#[derive(Clone, Debug)]
+pub struct WrittenEpisodes {
+    pub path: PathBuf,
+    pub episodes: usize,
+    /// The mining report beside it (`<file>.md`, interaction files only) and its text.
+    pub report: Option<(PathBuf, String)>,
+    pub notes: Vec<String>,
+}
+
+/// Mines the episodes of `file` and writes them to `out` (default: the file's path); an
+/// interaction file gets its mining report ([`InteractionReport::markdown`]) beside it as
+/// `<file>.md`.
+pub fn write_episode_file(
+    file: EpisodeFile,
+    cfg: &DataConfig,
+    loc: &Locations,
+    out: Option<&Path>,
+    progress: &dyn Progress,
+) -> Result<WrittenEpisodes, DataError> {
+    let path = match out {
+        Some(p) => p.to_path_buf(),
+        None => file.path(cfg, loc)?,
+    };
+    let (suite, notes, report) = match file {
+        EpisodeFile::Real => {
+            let r = build_episodes(cfg, loc, progress)?;
+            (r.suite, r.notes, None)
+        }
+        EpisodeFile::Interaction(split) => {
+            let r = build_interaction_episodes(cfg, loc, split, progress)?;
+            let md = r.markdown(&cfg.interaction);
+            (r.suite, r.notes, Some(md))
+        }
+    };
+    suite.save(&path)?;
+    let report = match report {
+        Some(md) => {
+            let mut p = path.as_os_str().to_owned();
+            p.push(".md");
+            let p = PathBuf::from(p);
+            std::fs::write(&p, &md).map_err(|e| DataError::io(&p, e))?;
+            Some((p, md))
+        }
+        None => None,
+    };
+    Ok(WrittenEpisodes {
+        path,
+        episodes: suite.episodes.len(),
+        report,
+        notes,
+    })
+}

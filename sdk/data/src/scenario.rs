@@ -701,6 +701,46 @@ pub fn select(candidates: Vec<Episode>, per_class: usize, seed: u64) -> Vec<Epis
     out
 }
 
+/// Like [`select`] (classes filled round-robin over density values, each density's candidates
+/// in a seeded shuffled order), but each density's next episode comes from the scene with the
+/// fewest episodes in the class so far (the first in the shuffled order among ties), so that
+/// the scenes with the most candidates do not fill the common densities. The result is sorted
+/// by class, then id. Deterministic for a given input order.
+pub fn select_across_scenes(candidates: Vec<Episode>, per_class: usize, seed: u64) -> Vec<Episode> {
+    let mut out = Vec::new();
+    for class in ScenarioClass::ALL {
+        let mut by_density: BTreeMap<usize, Vec<Episode>> = BTreeMap::new();
+        for e in candidates.iter().filter(|e| e.scenario == class) {
+            by_density.entry(e.density).or_default().push(e.clone());
+        }
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
+            seed ^ (class.index() as u64).wrapping_mul(0x9E37_79B9),
+        );
+        for v in by_density.values_mut() {
+            v.shuffle(&mut rng);
+        }
+        let mut per_scene: BTreeMap<String, usize> = BTreeMap::new();
+        let mut picked = Vec::new();
+        while picked.len() < per_class && by_density.values().any(|v| !v.is_empty()) {
+            for v in by_density.values_mut() {
+                if picked.len() >= per_class {
+                    break;
+                }
+                let used = |e: &Episode| per_scene.get(&e.scene).copied().unwrap_or(0);
+                let Some(i) = (0..v.len()).min_by_key(|&i| used(&v[i])) else {
+                    continue;
+                };
+                let e = v.remove(i);
+                *per_scene.entry(e.scene.clone()).or_default() += 1;
+                picked.push(e);
+            }
+        }
+        picked.sort_by(|a, b| a.id.cmp(&b.id));
+        out.extend(picked);
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -814,6 +854,37 @@ mod tests {
         let (ep, _) = try_episode(&scene, &scene.index(), 0, 0, &opts).unwrap();
         assert_eq!(ep.scenario, ScenarioClass::CrossFlow);
         assert_eq!(ep.agents.len(), 1);
+    }
+
+    #[test]
+    fn selection_across_scenes_spreads_each_density_over_the_scenes() {
+        let ep = |scene: &str, k: usize, density: usize| Episode {
+            id: format!("{scene}/{k}"),
+            scene: scene.into(),
+            source: "test".into(),
+            scenario: ScenarioClass::CoFlow,
+            dt: 0.1,
+            start: Pose2::new(0.0, 0.0, 0.0),
+            goal: [5.0, 0.0],
+            time_budget: 12.5,
+            agents: Vec::new(),
+            density,
+        };
+        // Scene a: 40 candidates at density 1 and 2 at density 9; scene b: 4 at density 1.
+        let mut all: Vec<Episode> = (0..40).map(|k| ep("a", k, 1)).collect();
+        all.extend((40..42).map(|k| ep("a", k, 9)));
+        all.extend((0..4).map(|k| ep("b", k, 1)));
+        let picked = select_across_scenes(all.clone(), 8, 3);
+        assert_eq!(picked.len(), 8);
+        // Density 9 gets its two, density 1 its six, shared between the scenes.
+        assert_eq!(picked.iter().filter(|e| e.density == 9).count(), 2);
+        assert_eq!(picked.iter().filter(|e| e.scene == "b").count(), 4);
+        assert_eq!(select_across_scenes(all.clone(), 8, 3), picked);
+        // `select` on the same candidates draws density 1 from the 44 regardless of scene.
+        assert_eq!(
+            select(all, 8, 3).iter().filter(|e| e.density == 9).count(),
+            2
+        );
     }
 
     #[test]

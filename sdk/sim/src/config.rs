@@ -511,6 +511,83 @@ pub fn build_suites(
     Ok(suites)
 }
 
+/// Makes sure the episode file of every `real` suite exists: one that is missing is mined and
+/// written (with `human2nav data episodes`'s rules, per the data config `data_config`) when
+/// the datasets are present; `log` hears what is mined. Returns why missing files may fall back
+/// to synthetic episodes when the datasets are absent (for [`build_suites`]), else `None`. A
+/// missing file the data config does not name is an error naming the suite's `episodes` key.
+pub fn ensure_episode_files(
+    cfg: &BenchConfig,
+    data_config: &Path,
+    log: &dyn Fn(String),
+) -> Result<Option<String>, SimError> {
+    use human2nav_data::config::DataConfig;
+    use human2nav_data::pipeline::{self, EpisodeFile, Locations, NoProgress};
+    let data_err = |message: String| SimError::Parse {
+        path: data_config.to_path_buf(),
+        message,
+    };
+    let dcfg = DataConfig::load(data_config).map_err(|e| data_err(e.to_string()))?;
+    let loc = Locations::resolve(&dcfg, data_config);
+    if !loc.data_root.is_dir() {
+        return Ok(Some(format!(
+            "no datasets at {} (set ${} or paths.data_root in {})",
+            loc.data_root.display(),
+            human2nav_data::paths::DATA_ENV,
+            data_config.display()
+        )));
+    }
+    let mut files = Vec::new();
+    for f in EpisodeFile::ALL {
+        files.push((f, f.path(&dcfg, &loc).map_err(|e| data_err(e.to_string()))?));
+    }
+    let mut written: Vec<PathBuf> = Vec::new();
+    for (i, s) in cfg.suites.iter().enumerate() {
+        let Some(file) = s.episodes.as_deref().map(|p| cfg.resolve(p)) else {
+            continue;
+        };
+        if s.kind != SuiteKind::Real || file.is_file() || written.contains(&file) {
+            continue;
+        }
+        let Some((kind, _)) = files.iter().find(|(_, p)| *p == file) else {
+            let known: Vec<String> = files
+                .iter()
+                .map(|(f, p)| format!("{} = {}", f.key(), p.display()))
+                .collect();
+            return Err(SimError::setting(
+                format!("suites[{i}]"),
+                "episodes",
+                format!(
+                    "suite `{}`: `{}` does not exist, and the data config {} writes only {}",
+                    s.name,
+                    file.display(),
+                    data_config.display(),
+                    known.join(", ")
+                ),
+            ));
+        };
+        log(format!(
+            "suite `{}`: mining its episodes ({}) from {} into {}",
+            s.name,
+            kind.key(),
+            loc.data_root.display(),
+            file.display()
+        ));
+        let out =
+            pipeline::write_episode_file(*kind, &dcfg, &loc, None, &NoProgress).map_err(|e| {
+                SimError::Episodes {
+                    suite: s.name.clone(),
+                    message: e.to_string(),
+                }
+            })?;
+        for n in &out.notes {
+            log(format!("  note: {n}"));
+        }
+        written.push(file);
+    }
+    Ok(None)
+}
+
 /// The robots of the configuration (built-in embodiments), in order.
 pub fn load_robots(cfg: &BenchConfig) -> Result<Vec<RobotSetup>, SimError> {
     cfg.robots

@@ -1,7 +1,8 @@
 //! The benchmark's quick mode end to end with the shipped configurations: ORCA loaded from its
 //! built plugin library, the straight baseline, every robot of the workspace, the real held-out
-//! episodes when `human2nav data episodes` has written them (else the synthetic fallback), the
-//! synthetic suite, and the `human2nav bench --quick` command itself. Run after
+//! suites (mined first when the datasets are present and a file is missing, else the synthetic
+//! fallback), the reactive crowd, the synthetic suite, and the `human2nav bench --quick`
+//! command itself. Run after
 //! `cargo build --workspace` (as `sdk/dev.sh test` does), which builds the plugin and the CLI.
 
 // Helpers outside #[test] functions unwrap too (clippy.toml only allows it inside tests).
@@ -9,7 +10,9 @@
 
 use human2nav_integration_tests::{target_profile_dir, workspace_root};
 use human2nav_plugin::PluginHost;
-use human2nav_sim::config::{BenchConfig, build_suites, builtin_method, load_robots};
+use human2nav_sim::config::{
+    BenchConfig, build_suites, builtin_method, ensure_episode_files, load_robots,
+};
 use human2nav_sim::driver::{self, BenchOutcome, BenchPlan};
 use human2nav_sim::report::CSV_HEADER;
 use human2nav_sim::{MethodSpec, ProgressBar, RobotSetup, Suite, SuiteKind};
@@ -50,9 +53,15 @@ impl Quick {
             failures: 1,
         };
         let res = driver::run(&plan, out, &ProgressBar::hidden()).unwrap();
-        let expected: usize = self.suites.iter().map(|s| s.episodes.len()).sum::<usize>()
-            * self.robots.len()
-            * self.methods.len();
+        let expected: usize = self
+            .suites
+            .iter()
+            .map(|s| {
+                s.episodes.len()
+                    * self.robots.len()
+                    * self.methods.iter().filter(|m| s.runs(&m.name)).count()
+            })
+            .sum();
         assert_eq!(res.rows.len(), expected);
         res
     }
@@ -79,7 +88,9 @@ fn quick(config: &str) -> Quick {
         methods.iter().any(|m| m.name == "orca"),
         "{config} must benchmark ORCA"
     );
-    let suites = build_suites(&cfg, true, Some("test")).unwrap();
+    let data = workspace_root().join("sdk/configs/data.toml");
+    let fallback = ensure_episode_files(&cfg, &data, &|m| eprintln!("{m}")).unwrap();
+    let suites = build_suites(&cfg, true, fallback.as_deref()).unwrap();
     Quick {
         config: config.to_string(),
         cfg,
@@ -89,7 +100,7 @@ fn quick(config: &str) -> Quick {
     }
 }
 
-fn check_outputs(res: &BenchOutcome, methods: &[String]) {
+fn check_outputs(res: &BenchOutcome, suites: &[Suite], methods: &[String]) {
     // The empty-world sanity suite: every method reaches SR = 1 on every robot.
     assert!(
         res.empty_world_failures.is_empty(),
@@ -130,17 +141,27 @@ fn check_outputs(res: &BenchOutcome, methods: &[String]) {
             "report lacks method {m}"
         );
     }
-    // Fig. 4, 6, 7 and one failure figure per method that failed on the primary suite.
-    let primary = &res.rows[0].suite;
-    let failing = methods
+    // Per suite with pedestrians: Fig. 6, 7 and the density figure, Fig. 4 when the snapshot
+    // method succeeded somewhere on the first robot, and one failure figure per method that
+    // failed in it (quick mode draws one failed run each).
+    let names: Vec<String> = res
+        .figures
         .iter()
-        .filter(|m| {
-            res.rows
+        .map(|f| f.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    for s in suites.iter().filter(|s| s.kind != SuiteKind::Empty) {
+        for f in driver::suite_figure_files(&s.name) {
+            assert!(names.contains(&f), "{f} missing: {names:?}");
+        }
+        for m in methods.iter().filter(|m| s.runs(m)) {
+            let failed = res
+                .rows
                 .iter()
-                .any(|r| &r.suite == primary && &r.method == *m && !r.metrics.success)
-        })
-        .count();
-    assert_eq!(res.figures.len(), 3 + failing);
+                .any(|r| r.suite == s.name && &r.method == m && !r.metrics.success);
+            let file = driver::failure_file(&s.name, m, 1);
+            assert_eq!(names.contains(&file), failed, "{file}: {names:?}");
+        }
+    }
     for f in &res.figures {
         let bytes = std::fs::read(f).unwrap();
         assert!(
@@ -158,7 +179,7 @@ fn quick_bench_with_the_shipped_config_is_sane_and_deterministic() {
     // episodes file while this test runs, which would change what a second `build_suites` reads.
     let q = quick("sdk/configs/bench.toml");
     let a = q.run(&a_dir);
-    check_outputs(&a, &q.names());
+    check_outputs(&a, &q.suites, &q.names());
     let real = q.suites.iter().any(|s| s.kind == SuiteKind::Real);
     eprintln!(
         "bench.toml quick: {} rows, real episodes: {real}",
@@ -183,7 +204,7 @@ fn quick_bench_on_the_synthetic_suite() {
     let dir = scratch("bench-synthetic");
     let q = quick("sdk/configs/bench_synthetic.toml");
     let res = q.run(&dir);
-    check_outputs(&res, &q.names());
+    check_outputs(&res, &q.suites, &q.names());
     assert!(
         res.rows
             .iter()
@@ -219,14 +240,19 @@ fn cli_bench_quick_writes_the_report() {
         .status()
         .unwrap();
     assert!(status.success(), "human2nav bench --quick failed: {status}");
-    for f in [
-        "results.csv",
-        "report.md",
-        "fig4_snapshots.png",
-        "fig6_sr_per_scenario.png",
-        "fig7_tfs_sr_per_robot.png",
-    ] {
-        assert!(out.join(f).is_file(), "{f} missing");
+    let mut files = vec!["results.csv".to_string(), "report.md".to_string()];
+    for suite in ["real", "interaction", "interaction-reactive"] {
+        files.extend(driver::suite_figure_files(suite));
+    }
+    for f in files {
+        assert!(out.join(&f).is_file(), "{f} missing");
+    }
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    for s in ["real", "interaction", "interaction-reactive"] {
+        assert!(
+            report.contains(&format!("## Suite `{s}`")),
+            "report lacks suite {s}"
+        );
     }
     std::fs::remove_dir_all(&out).unwrap();
 }

@@ -127,12 +127,13 @@ pub fn run(
             ),
         );
     }
-    if let Some(primary) = plan.suites.iter().find(|s| s.kind != SuiteKind::Empty) {
-        if let Some((snaps, caption)) = representative_snapshots(plan, primary, &rows)? {
-            figures::trajectory_snapshots(&out_dir.join(FIG4_FILE), &snaps)?;
-            add(FIG4_FILE.into(), caption);
+    for suite in plan.suites.iter().filter(|s| s.kind != SuiteKind::Empty) {
+        if let Some((snaps, caption)) = representative_snapshots(plan, suite, &rows)? {
+            let f4 = fig4_file(&suite.name);
+            figures::trajectory_snapshots(&out_dir.join(&f4), &snaps)?;
+            add(f4, caption);
         }
-        for (file, caption) in failure_figures(plan, &rows, primary, out_dir)? {
+        for (file, caption) in failure_figures(plan, &rows, suite, out_dir)? {
             add(file, caption);
         }
     }
@@ -173,6 +174,7 @@ pub fn run(
         robot_names: robot_names.clone(),
         figures: figure_list,
         wall_time: Some(wall_time),
+        method_times: times.per_method.clone(),
         reference_method: None,
         composition: plan
             .suites
@@ -276,7 +278,7 @@ fn replanning_rates(sim: &SimConfig, methods: &[MethodSpec]) -> String {
 }
 
 /// Up to `plan.failures` failed runs (collision or timeout) of each method on `suite`, drawn
-/// four to a figure at their closest approach: `failures_<method>_<k>.png`. The failures shown
+/// four to a figure at their closest approach: [`failure_file`]. The failures shown
 /// first are those the most other methods succeeded on (same episode and robot), which are the
 /// ones that tell a method's weaknesses from a hard episode. Runs are deterministic, so each is
 /// simply run again. Returns each figure's file name and caption.
@@ -296,7 +298,7 @@ fn failure_figures(
     for r in in_suite.iter().filter(|r| r.metrics.success) {
         *successes.entry((&r.episode, &r.robot)).or_default() += 1;
     }
-    for method in plan.methods {
+    for method in plan.methods.iter().filter(|m| suite.runs(&m.name)) {
         let mut failed: Vec<(usize, &ResultRow)> = in_suite
             .iter()
             .filter(|r| r.method == method.name && !r.metrics.success)
@@ -330,13 +332,15 @@ fn failure_figures(
             snaps.push(snap);
         }
         for (k, (chunk, names)) in snaps.chunks(4).zip(names.chunks(4)).enumerate() {
-            let file = format!("failures_{}_{}.png", file_safe(&method.name), k + 1);
+            let file = failure_file(&suite.name, &method.name, k + 1);
             figures::trajectory_snapshots(&out_dir.join(&file), chunk)?;
             figures.push((
                 file,
                 format!(
-                    "failed runs of `{}` at their closest approach, panels left to right, top to bottom: {}",
+                    "failed runs of `{}` on suite `{}` at their closest approach, panels left to \
+                     right, top to bottom: {}",
                     method.name,
+                    suite.name,
                     names.join("; ")
                 ),
             ));
@@ -380,8 +384,21 @@ fn file_safe(name: &str) -> String {
         .collect()
 }
 
-/// The file of Fig. 4 (the first non-empty suite only).
-pub const FIG4_FILE: &str = "fig4_snapshots.png";
+/// The file of a suite's Fig. 4: `fig4_snapshots_<suite>.png` (the suite name made file-safe
+/// as in [`suite_figure_files`]).
+pub fn fig4_file(suite: &str) -> String {
+    format!("fig4_snapshots_{}.png", file_safe(suite))
+}
+
+/// The file of the `k`-th (from 1) failure figure of `method` on `suite`:
+/// `failures_<suite>_<method>_<k>.png`.
+pub fn failure_file(suite: &str, method: &str, k: usize) -> String {
+    format!(
+        "failures_{}_{}_{k}.png",
+        file_safe(suite),
+        file_safe(method)
+    )
+}
 
 /// The files of Fig. 6, Fig. 7 and the SR-against-density figure of a suite:
 /// `fig6_sr_per_scenario_<suite>.png`, `fig7_tfs_sr_per_robot_<suite>.png`,

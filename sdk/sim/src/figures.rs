@@ -662,9 +662,39 @@ impl Snapshot {
 /// The pedestrians of `snap` present at `t`: position, velocity, radius and the last
 /// [`Snapshot::history_len`] recorded positions, in the episode's track order. Every picture of
 /// a snapshot (the discs, their history and arrows, the BEV inset) takes its pedestrians from
-/// here, so a crowd recorded during the run instead of replayed needs a change here only.
+/// here: the episode's recording, or for a reactive run the crowd as it was simulated.
 pub fn pedestrians_at(snap: &Snapshot, t: f64) -> Vec<AgentState> {
-    CrowdReplay::new(&snap.episode).observe(t, [0.0, 0.0], f64::INFINITY, snap.history_len)
+    let Some(states) = snap.run.crowd.as_ref() else {
+        return CrowdReplay::new(&snap.episode).observe(
+            t,
+            [0.0, 0.0],
+            f64::INFINITY,
+            snap.history_len,
+        );
+    };
+    // A reactive run recorded where everyone was at every step: history at the episode's
+    // step, oldest first, ending at `t`.
+    let n = snap.state_index(t).min(states.len().saturating_sub(1));
+    let every = (snap.episode.dt / snap.run.dt).round().max(1.0) as usize;
+    let Some(now) = states.get(n) else {
+        return Vec::new();
+    };
+    now.iter()
+        .map(|p| {
+            let mut history: Vec<[f64; 2]> = (0..snap.history_len)
+                .map_while(|k| n.checked_sub(k * every))
+                .map_while(|m| states[m].iter().find(|q| q.id == p.id).map(|q| q.position))
+                .collect();
+            history.reverse();
+            AgentState {
+                id: p.id,
+                position: p.position,
+                velocity: p.velocity,
+                radius: p.radius,
+                history,
+            }
+        })
+        .collect()
 }
 
 /// Polygon (24 vertices) of a disc of radius `r` around `c`.

@@ -180,6 +180,8 @@ pub struct ReportContext {
     pub figures: Vec<(String, String)>,
     /// Wall time of the run (s), if measured.
     pub wall_time: Option<f64>,
+    /// `(method, runs, thread-seconds)`, if measured.
+    pub method_times: Vec<(String, usize, f64)>,
     /// The method every other is compared with in the paired tables (see
     /// [`ReportContext::reference`]); `None`: `human2nav` when it ran, else the first method.
     pub reference_method: Option<String>,
@@ -233,8 +235,23 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
         },
         ctx.seed
     );
+    for (name, _, _, note) in &ctx.suites {
+        if let Some(w) = note.as_deref().and_then(|n| n.strip_prefix("Warning:")) {
+            let _ = writeln!(md, "> **Warning** (suite `{name}`):{w}\n");
+        }
+    }
     if let Some(w) = ctx.wall_time {
-        let _ = writeln!(md, "Wall time: {w:.1} s for {} episode runs.\n", rows.len());
+        let _ = write!(md, "Wall time: {w:.1} s for {} episode runs", rows.len());
+        let per: Vec<String> = ctx
+            .method_times
+            .iter()
+            .filter(|(_, n, _)| *n > 0)
+            .map(|(m, n, secs)| format!("{m} {:.2} s", secs / *n as f64))
+            .collect();
+        if !per.is_empty() {
+            let _ = write!(md, " (thread time per run: {})", per.join(", "));
+        }
+        let _ = writeln!(md, ".\n");
     }
 
     let _ = writeln!(md, "## Setup\n");

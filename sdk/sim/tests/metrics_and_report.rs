@@ -342,12 +342,15 @@ fn driver_writes_csv_report_and_figures() {
         "fig6_sr_per_scenario_hand.png",
         "fig7_tfs_sr_per_robot_hand.png",
         "fig_sr_density_hand.png",
-        "fig4_snapshots.png",
+        "fig4_snapshots_hand.png",
     ] {
         assert!(names.iter().any(|n| n == f), "{f} missing: {names:?}");
         assert!(report.contains(f), "report lacks {f}");
     }
-    assert!(report.contains("failures_straight_1.png") || report.contains("failures_slow_1.png"));
+    assert!(
+        report.contains("failures_hand_straight_1.png")
+            || report.contains("failures_hand_slow_1.png")
+    );
     // Fig. 4 shows successful runs only: a class where `slow` failed on diablo is left out.
     let slow_successes: Vec<ScenarioClass> = hand
         .iter()

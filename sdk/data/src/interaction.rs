@@ -173,13 +173,7 @@ impl Default for InteractionOptions {
 impl InteractionOptions {
     /// Checks every option is usable; errors name the `interaction.<field>` key.
     pub fn validate(&self) -> Result<(), DataError> {
-        let pos = |v: f64, f: &str| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(DataError::option(f, "must be finite and positive"))
-            }
-        };
+        let pos = crate::scenario::positive;
         pos(self.reference_radius, "interaction.reference_radius")?;
         pos(self.reference_accel, "interaction.reference_accel")?;
         for (v, f) in [

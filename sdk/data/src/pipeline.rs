@@ -457,22 +457,7 @@ pub fn build_episodes(
 ) -> Result<EpisodeReport, DataError> {
     let opts = &cfg.episodes;
     if !loc.data_root.is_dir() {
-        if !cfg.sources.synthetic_fallback {
-            return Err(DataError::NoData(format!(
-                "{} does not exist",
-                loc.data_root.display()
-            )));
-        }
-        progress.stage("synthetic episodes", 4);
-        let episodes: Vec<_> = ScenarioClass::ALL
-            .par_iter()
-            .map(|&c| {
-                let e = synthetic::episodes_with(c, opts.per_class, opts.seed, opts);
-                progress.inc(1);
-                e
-            })
-            .flatten()
-            .collect();
+        let episodes = synthetic_fallback(cfg, loc, opts.seed, progress)?;
         let note = format!(
             "no datasets at {}: synthetic social-force episodes",
             loc.data_root.display()
@@ -569,26 +554,11 @@ pub fn build_interaction_episodes(
     let geometry = &cfg.episodes;
     let opts = &cfg.interaction;
     if !loc.data_root.is_dir() {
-        if !cfg.sources.synthetic_fallback {
-            return Err(DataError::NoData(format!(
-                "{} does not exist",
-                loc.data_root.display()
-            )));
-        }
-        progress.stage("synthetic episodes", 4);
         let seed = match split {
             Split::Val => geometry.seed ^ 0x5641_4C00, // other crowds than the test fallback
             _ => geometry.seed,
         };
-        let episodes: Vec<_> = ScenarioClass::ALL
-            .par_iter()
-            .map(|&c| {
-                let e = synthetic::episodes_with(c, geometry.per_class, seed, geometry);
-                progress.inc(1);
-                e
-            })
-            .flatten()
-            .collect();
+        let episodes = synthetic_fallback(cfg, loc, seed, progress)?;
         let note = format!(
             "no datasets at {}: synthetic social-force episodes of the paper protocol, NOT \
              interaction-rich (no time shift, no interaction criterion)",
@@ -639,6 +609,34 @@ pub fn build_interaction_episodes(
         })
         .collect::<Result<Vec<_>, DataError>>()?;
     select_interaction_suite(split, mined, &cfg.episodes, &cfg.interaction, notes)
+}
+
+/// Without a dataset directory: synthetic episodes of the paper protocol (`episodes.per_class`
+/// per class), or the error saying the directory is missing when `sources.synthetic_fallback`
+/// is off.
+fn synthetic_fallback(
+    cfg: &DataConfig,
+    loc: &Locations,
+    seed: u64,
+    progress: &dyn Progress,
+) -> Result<Vec<crate::scenario::Episode>, DataError> {
+    if !cfg.sources.synthetic_fallback {
+        return Err(DataError::NoData(format!(
+            "{} does not exist",
+            loc.data_root.display()
+        )));
+    }
+    let opts = &cfg.episodes;
+    progress.stage("synthetic episodes", 4);
+    Ok(ScenarioClass::ALL
+        .par_iter()
+        .map(|&c| {
+            let e = synthetic::episodes_with(c, opts.per_class, seed, opts);
+            progress.inc(1);
+            e
+        })
+        .flatten()
+        .collect())
 }
 
 /// Association quality per SDD raw video (identities removed, pedestrians only by default).

@@ -392,16 +392,19 @@ impl Default for MiningOptions {
     }
 }
 
+/// `Ok` when `v` is finite and positive, else an error naming the option `key`.
+pub(crate) fn positive(v: f64, key: &str) -> Result<(), DataError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(DataError::option(key, "must be finite and positive"))
+    }
+}
+
 impl MiningOptions {
     /// Checks every option is usable.
     pub fn validate(&self) -> Result<(), DataError> {
-        let pos = |v: f64, f: &str| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(DataError::option(f, "must be finite and positive"))
-            }
-        };
+        let pos = positive;
         pos(self.goal_distance, "episodes.goal_distance")?;
         pos(self.max_goal_time, "episodes.max_goal_time")?;
         pos(self.reference_speed, "episodes.reference_speed")?;
@@ -671,42 +674,22 @@ pub(crate) fn export_agents(
 /// filled round-robin over density values, each density's candidates in a seeded shuffled
 /// order. The result is sorted by class, then id. Deterministic for a given input order.
 pub fn select(candidates: Vec<Episode>, per_class: usize, seed: u64) -> Vec<Episode> {
-    let mut out = Vec::new();
-    for class in ScenarioClass::ALL {
-        let mut by_density: BTreeMap<usize, Vec<Episode>> = BTreeMap::new();
-        for e in candidates.iter().filter(|e| e.scenario == class) {
-            by_density.entry(e.density).or_default().push(e.clone());
-        }
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
-            seed ^ (class.index() as u64).wrapping_mul(0x9E37_79B9),
-        );
-        for v in by_density.values_mut() {
-            v.shuffle(&mut rng);
-            v.reverse(); // pop() takes from the shuffled front
-        }
-        let mut picked = Vec::new();
-        while picked.len() < per_class && by_density.values().any(|v| !v.is_empty()) {
-            for v in by_density.values_mut() {
-                if picked.len() >= per_class {
-                    break;
-                }
-                if let Some(e) = v.pop() {
-                    picked.push(e);
-                }
-            }
-        }
-        picked.sort_by(|a, b| a.id.cmp(&b.id));
-        out.extend(picked);
-    }
-    out
+    select_with(candidates, per_class, seed, false)
 }
 
-/// Like [`select`] (classes filled round-robin over density values, each density's candidates
-/// in a seeded shuffled order), but each density's next episode comes from the scene with the
-/// fewest episodes in the class so far (the first in the shuffled order among ties), so that
-/// the scenes with the most candidates do not fill the common densities. The result is sorted
-/// by class, then id. Deterministic for a given input order.
+/// Like [`select`], but each density's next episode comes from the scene with the fewest
+/// episodes in the class so far (the first in the shuffled order among ties), so that the
+/// scenes with the most candidates do not fill the common densities.
 pub fn select_across_scenes(candidates: Vec<Episode>, per_class: usize, seed: u64) -> Vec<Episode> {
+    select_with(candidates, per_class, seed, true)
+}
+
+fn select_with(
+    candidates: Vec<Episode>,
+    per_class: usize,
+    seed: u64,
+    spread_scenes: bool,
+) -> Vec<Episode> {
     let mut out = Vec::new();
     for class in ScenarioClass::ALL {
         let mut by_density: BTreeMap<usize, Vec<Episode>> = BTreeMap::new();
@@ -726,7 +709,14 @@ pub fn select_across_scenes(candidates: Vec<Episode>, per_class: usize, seed: u6
                 if picked.len() >= per_class {
                     break;
                 }
-                let used = |e: &Episode| per_scene.get(&e.scene).copied().unwrap_or(0);
+                let used = |e: &Episode| {
+                    if spread_scenes {
+                        per_scene.get(&e.scene).copied().unwrap_or(0)
+                    } else {
+                        0
+                    }
+                };
+                // The first of the least used scenes, in the shuffled order.
                 let Some(i) = (0..v.len()).min_by_key(|&i| used(&v[i])) else {
                     continue;
                 };

@@ -119,9 +119,7 @@ impl SuiteConfig {
     pub fn crowd_model(&self) -> CrowdModel {
         match self.crowd {
             CrowdMode::Replay => CrowdModel::Replay,
-            CrowdMode::Reactive => {
-                CrowdModel::Reactive(self.social_force.clone().unwrap_or_default())
-            }
+            CrowdMode::Reactive => CrowdModel::Reactive(self.social_force.unwrap_or_default()),
         }
     }
 }

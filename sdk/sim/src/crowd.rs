@@ -45,7 +45,7 @@ use human2nav_core::{AgentState, Pose2};
 use serde::{Deserialize, Serialize};
 
 /// Parameters of the reactive crowd (module docs). Every field is optional in TOML.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SocialForce {
     /// Relaxation time τ of the driving term (s). Default 0.5 (Helbing & Molnár 1995).
@@ -183,7 +183,7 @@ impl<'a> Crowd<'a> {
             replay: CrowdReplay::new(episode),
             force: match model {
                 CrowdModel::Replay => None,
-                CrowdModel::Reactive(f) => Some(f.clone()),
+                CrowdModel::Reactive(f) => Some(*f),
             },
             walkers: vec![None; episode.agents.len()],
             present: Vec::new(),
@@ -191,11 +191,6 @@ impl<'a> Crowd<'a> {
         };
         crowd.refresh(0.0, None, 0.0);
         crowd
-    }
-
-    /// The episode being run.
-    pub fn episode(&self) -> &'a Episode {
-        self.replay.episode()
     }
 
     /// True for a reactive crowd.
@@ -218,7 +213,7 @@ impl<'a> Crowd<'a> {
     fn refresh(&mut self, t: f64, robot: Option<(&[FootprintShape], Pose2)>, dt: f64) {
         self.time = t;
         let episode = self.replay.episode();
-        let Some(force) = self.force.clone() else {
+        let Some(force) = self.force else {
             self.present = self.replay.at(t);
             return;
         };

@@ -276,6 +276,13 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
 
     for (suite, kind, _, _) in ctx.suites.iter().filter(|s| s.1 != SuiteKind::Empty) {
         let in_suite: Vec<&ResultRow> = rows.iter().filter(|r| &r.suite == suite).collect();
+        // The methods that ran this suite (a suite may name its own).
+        let methods: Vec<String> = ctx
+            .methods
+            .iter()
+            .filter(|m| in_suite.iter().any(|r| &r.method == *m))
+            .cloned()
+            .collect();
         let _ = writeln!(md, "## Suite `{suite}` ({})\n", kind.as_str());
 
         let _ = writeln!(
@@ -287,7 +294,7 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
             let _ = write!(md, " {} |", c.title());
         }
         let _ = writeln!(md, " all |\n|---|---|---|---|---|---|");
-        for m in &ctx.methods {
+        for m in &methods {
             let _ = write!(md, "| {m} |");
             for c in ScenarioClass::ALL {
                 let s = summarize(
@@ -312,7 +319,7 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
         }
         let _ = writeln!(md, "\n|---|---|---|---|---|---|");
         for robot in &ctx.robot_names {
-            for m in &ctx.methods {
+            for m in &methods {
                 let _ = write!(md, "| {robot} | {m} |");
                 for c in ScenarioClass::ALL {
                     let s = summarize(
@@ -333,7 +340,7 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
             "| robot | method | n | TFS | TFS plan | TFS executed | SR (%) |\n|---|---|---|---|---|---|---|"
         );
         for robot in &ctx.robot_names {
-            for m in &ctx.methods {
+            for m in &methods {
                 let s = summarize(
                     in_suite
                         .iter()
@@ -356,8 +363,8 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
             }
         }
 
-        paired_section(&mut md, &in_suite, ctx);
-        density_section(&mut md, &in_suite, &ctx.methods);
+        paired_section(&mut md, &in_suite, ctx, &methods);
+        density_section(&mut md, &in_suite, &methods);
 
         let _ = writeln!(
             md,
@@ -369,7 +376,7 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
              min clearance (m) | time < 0.45 m (s) | time < 1.2 m (s) | mean jerk (m/s³) | fallback plans (%) |\n\
              |---|---|---|---|---|---|---|---|---|---|---|"
         );
-        for m in &ctx.methods {
+        for m in &methods {
             let s = summarize(in_suite.iter().copied().filter(|r| &r.method == m));
             if s.n == 0 {
                 let _ = writeln!(md, "| {m} | 0 |{}", " – |".repeat(10));
@@ -390,8 +397,8 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
                 pct(s.fallback_rate)
             );
         }
-        collision_table(&mut md, &in_suite, &ctx.methods);
-        violation_table(&mut md, &in_suite, &ctx.robot_names, &ctx.methods);
+        collision_table(&mut md, &in_suite, &methods);
+        violation_table(&mut md, &in_suite, &ctx.robot_names, &methods);
         let _ = writeln!(md);
     }
 
@@ -586,7 +593,7 @@ fn paired_row(md: &mut String, lead: &str, pairs: &[(bool, bool)]) {
 
 /// Every method against the reference on the same (episode, robot) pairs: pooled over the
 /// robots per class and overall, then per robot.
-fn paired_section(md: &mut String, rows: &[&ResultRow], ctx: &ReportContext) {
+fn paired_section(md: &mut String, rows: &[&ResultRow], ctx: &ReportContext, methods: &[String]) {
     let Some(reference) = ctx.reference() else {
         return;
     };
@@ -594,7 +601,7 @@ fn paired_section(md: &mut String, rows: &[&ResultRow], ctx: &ReportContext) {
         md,
         "\n### Paired comparison with `{reference}` (exact McNemar test, 95 % bootstrap interval)\n"
     );
-    let others: Vec<&String> = ctx.methods.iter().filter(|m| *m != reference).collect();
+    let others: Vec<&String> = methods.iter().filter(|m| *m != reference).collect();
     if others.is_empty() {
         let _ = writeln!(md, "Only `{reference}` ran: nothing to compare.");
         return;
@@ -666,8 +673,9 @@ fn density_section(md: &mut String, rows: &[&ResultRow], methods: &[String]) {
         md,
         "\n### Success rate (%) against crowd density, all robots and scenarios\n\n\
          Density is the episode's `density`: its number of relevant pedestrians as the suite \
-         counts them (for episodes mined from recordings, the pedestrians that come within 3 m \
-         of the recorded pedestrian the robot replaces). Cells: SR ± 1 standard error \
+         counts them (for the paper protocol's episodes, the pedestrians that come within 3 m \
+         of the recorded pedestrian the robot replaces; for the interaction-rich ones, within \
+         3 m of the straight-driving reference robot). Cells: SR ± 1 standard error \
          (n = runs).\n"
     );
     let _ = write!(md, "| density |");

@@ -1,7 +1,7 @@
 //! The benchmark configuration: parsing, validation and suite building with its fallbacks.
 
 use human2nav_sim::SuiteKind;
-use human2nav_sim::config::{BenchConfig, build_suites, take_per_class};
+use human2nav_sim::config::{BenchConfig, build_suites, ensure_episode_files, take_per_class};
 use human2nav_sim::episode::ScenarioClass;
 use std::path::{Path, PathBuf};
 
@@ -228,5 +228,57 @@ fn a_config_can_start_from_a_base_file() {
     std::fs::write(&child, "base = 3\n").unwrap();
     let err = BenchConfig::load(&child).unwrap_err().to_string();
     assert!(err.contains("`base` must be a path"), "{err}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// The workspace's data directory as the tests find it (`$HUMAN2NAV_DATA`, else
+/// `../shared/data` beside the workspace).
+fn data_root() -> Option<PathBuf> {
+    let root = human2nav_data::paths::data_root(
+        None,
+        &PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../.."),
+    );
+    root.is_dir().then_some(root)
+}
+
+#[test]
+fn missing_datasets_are_a_visible_fallback_and_an_unknown_missing_file_is_an_error() {
+    let dir = write_config("ensure", "").parent().unwrap().to_path_buf();
+    let bench = dir.join("bench.toml");
+    std::fs::write(
+        &bench,
+        format!(
+            "{BASE}\n[[suites]]\nname = \"typo\"\nkind = \"real\"\nepisodes = \"out/episodes-interation.json\"\n"
+        ),
+    )
+    .unwrap();
+    let cfg = BenchConfig::load(&bench).unwrap();
+    // A misspelled data root: the fallback is allowed, and says why.
+    let data = dir.join("data.toml");
+    std::fs::write(&data, "[paths]\ndata_root = \"no/such/datsets\"\n").unwrap();
+    let why = ensure_episode_files(&cfg, &data, &|_| {}).unwrap().unwrap();
+    assert!(
+        why.contains("no/such/datsets") && why.contains("data_root"),
+        "{why}"
+    );
+    let suites = build_suites(&cfg, true, Some(&why)).unwrap();
+    assert!(suites[0].note.as_deref().unwrap().starts_with("Warning:"));
+    // With the datasets present, a missing file the data config does not write is an error.
+    if let Some(root) = data_root() {
+        std::fs::write(
+            &data,
+            format!("[paths]\ndata_root = \"{}\"\n", root.display()),
+        )
+        .unwrap();
+        let err = ensure_episode_files(&cfg, &data, &|_| {})
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("suites[0].episodes") && err.contains("episodes-interation.json"),
+            "{err}"
+        );
+    } else {
+        eprintln!("skipping the datasets-present half: no datasets found");
+    }
     std::fs::remove_dir_all(dir).unwrap();
 }

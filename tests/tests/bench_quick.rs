@@ -256,3 +256,33 @@ fn cli_bench_quick_writes_the_report() {
     }
     std::fs::remove_dir_all(&out).unwrap();
 }
+
+/// An unknown name in `--suites` fails before anything runs, naming it and the suites there are.
+#[test]
+fn cli_bench_rejects_an_unknown_suite() {
+    let exe = target_profile_dir().join(format!("human2nav{}", std::env::consts::EXE_SUFFIX));
+    if !exe.is_file() {
+        eprintln!(
+            "skipping cli_bench_rejects_an_unknown_suite: {} not built",
+            exe.display()
+        );
+        return;
+    }
+    let out = std::process::Command::new(&exe)
+        .current_dir(workspace_root())
+        .args([
+            "bench",
+            "--config",
+            "sdk/configs/bench.toml",
+            "--suites",
+            "real,intraction",
+        ])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("intraction") && err.contains("interaction-reactive"),
+        "{err}"
+    );
+}

@@ -99,6 +99,15 @@ impl Progress for Bars {
 fn load_config(path: &Path) -> anyhow::Result<(DataConfig, Locations)> {
     let cfg = DataConfig::load(path).with_context(|| format!("loading {}", path.display()))?;
     let loc = Locations::resolve(&cfg, path);
+    if !loc.data_root.is_dir() && cfg.sources.synthetic_fallback {
+        eprintln!(
+            "warning: no datasets at {} (paths.data_root in {}, else ${}, else ../shared/data \
+             beside the workspace); falling back to synthetic crowds",
+            loc.data_root.display(),
+            path.display(),
+            human2nav_data::paths::DATA_ENV
+        );
+    }
     Ok((cfg, loc))
 }
 

@@ -922,24 +922,7 @@ mod tests {
     use super::*;
     use crate::resample::Track;
 
-    /// A straight track from `from` at `velocity` (m/s), 0.1 s steps, from global step `start`.
-    fn walker(id: u64, start: i64, from: [f64; 2], velocity: [f64; 2], steps: usize) -> Track {
-        let positions: Vec<[f64; 2]> = (0..steps)
-            .map(|k| {
-                let t = 0.1 * k as f64;
-                [from[0] + velocity[0] * t, from[1] + velocity[1] * t]
-            })
-            .collect();
-        Track {
-            id,
-            source_id: id,
-            class: AgentClass::Pedestrian,
-            start,
-            velocities: vec![velocity; steps],
-            headings: vec![velocity[1].atan2(velocity[0]); steps],
-            positions,
-        }
-    }
+    use crate::scenario::test_track as walker;
 
     fn scene(tracks: Vec<Track>) -> Scene {
         Scene {

@@ -731,6 +731,33 @@ fn select_with(
     out
 }
 
+/// A straight pedestrian track from `from` at `velocity` (m/s), 0.1 s steps, from global step
+/// `start` (for the tests of the miners).
+#[cfg(test)]
+pub(crate) fn test_track(
+    id: u64,
+    start: i64,
+    from: [f64; 2],
+    velocity: [f64; 2],
+    steps: usize,
+) -> Track {
+    let positions: Vec<[f64; 2]> = (0..steps)
+        .map(|k| {
+            let t = 0.1 * k as f64;
+            [from[0] + velocity[0] * t, from[1] + velocity[1] * t]
+        })
+        .collect();
+    Track {
+        id,
+        source_id: id,
+        class: AgentClass::Pedestrian,
+        start,
+        velocities: vec![velocity; steps],
+        headings: vec![velocity[1].atan2(velocity[0]); steps],
+        positions,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -791,21 +818,7 @@ mod tests {
 
     /// A straight track from `from` at `velocity` (m/s), 0.1 s steps, from global step 0.
     fn straight_track(id: u64, from: [f64; 2], velocity: [f64; 2], steps: usize) -> Track {
-        let positions: Vec<[f64; 2]> = (0..steps)
-            .map(|k| {
-                let t = 0.1 * k as f64;
-                [from[0] + velocity[0] * t, from[1] + velocity[1] * t]
-            })
-            .collect();
-        Track {
-            id,
-            source_id: id,
-            class: AgentClass::Pedestrian,
-            start: 0,
-            velocities: vec![velocity; steps],
-            headings: vec![velocity[1].atan2(velocity[0]); steps],
-            positions,
-        }
+        test_track(id, 0, from, velocity, steps)
     }
 
     /// The ego walks +x at 1 m/s from the origin; one other pedestrian walks −y at `speed`

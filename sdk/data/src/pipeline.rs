@@ -495,15 +495,7 @@ pub fn build_episodes(
     let mut stats = MiningStats::default();
     for (eps, st) in mined {
         all.extend(eps);
-        stats.windows += st.windows;
-        stats.goal_not_reached += st.goal_not_reached;
-        stats.outside_recording += st.outside_recording;
-        stats.start_blocked += st.start_blocked;
-        stats.density_out_of_range += st.density_out_of_range;
-        stats.unclassified += st.unclassified;
-        for (c, n) in st.candidates {
-            *stats.candidates.entry(c).or_default() += n;
-        }
+        stats.add(&st);
     }
     let names: Vec<String> = sources.iter().map(|s| s.name.clone()).collect();
     let episodes = select(all, opts.per_class, opts.seed);

@@ -449,6 +449,21 @@ pub struct MiningStats {
     pub candidates: BTreeMap<ScenarioClass, usize>,
 }
 
+impl MiningStats {
+    /// Adds another scene's counters.
+    pub fn add(&mut self, o: &Self) {
+        self.windows += o.windows;
+        self.goal_not_reached += o.goal_not_reached;
+        self.outside_recording += o.outside_recording;
+        self.start_blocked += o.start_blocked;
+        self.density_out_of_range += o.density_out_of_range;
+        self.unclassified += o.unclassified;
+        for (c, n) in &o.candidates {
+            *self.candidates.entry(*c).or_default() += n;
+        }
+    }
+}
+
 pub(crate) fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
     (a[0] - b[0]).hypot(a[1] - b[1])
 }

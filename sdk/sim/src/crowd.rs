@@ -323,10 +323,10 @@ fn repulsion(
     // The circular specification's direction: from the centre of the nearest body shape to
     // the pedestrian. (The normal of a flat face would push a walker who meets it head-on
     // straight back, never around.)
-    let nearest = shapes.iter().min_by(|x, y| {
-        x.signed_distance(to_body(pose, p))
-            .total_cmp(&y.signed_distance(to_body(pose, p)))
-    });
+    let body = to_body(pose, p);
+    let nearest = shapes
+        .iter()
+        .min_by(|x, y| x.signed_distance(body).total_cmp(&y.signed_distance(body)));
     let centre = match nearest {
         Some(FootprintShape::Disc { center, .. } | FootprintShape::Rect { center, .. }) => {
             let (sn, cs) = pose.theta.sin_cos();

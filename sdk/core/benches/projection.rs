@@ -1,11 +1,13 @@
 //! Cost of the exact last-step correction ([`human2nav_core::projection`]) on one plan of 32
 //! poses with centimetre jitter (what the trained flow model produces), for a differential
-//! drive and for a car with a curvature limit, with the default settings.
+//! drive and for a car with a curvature limit, with the default settings: a fresh solver per
+//! plan (`project`), and the solver a planner keeps from plan to plan (`project_with`, cycling
+//! through differently jittered plans so that every QP has new values).
 //!
 //! Run: `cargo bench -p human2nav-core --bench projection`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use human2nav_core::projection::{ProjectionSettings, project};
+use human2nav_core::projection::{ProjectionSettings, ProjectionSolver, project, project_with};
 use human2nav_core::{Limits, Pose2, Twist2};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -13,8 +15,8 @@ use std::hint::black_box;
 
 /// 32 poses along an arc at 1.3 m/s turning at 0.2 rad/s, each coordinate jittered by ±3 cm
 /// (±0.09 rad in heading).
-fn jittery_plan() -> Vec<Pose2> {
-    let mut rng = ChaCha8Rng::seed_from_u64(7);
+fn jittery_plan(seed: u64) -> Vec<Pose2> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut p = Pose2::IDENTITY;
     (0..32)
         .map(|_| {
@@ -29,7 +31,8 @@ fn jittery_plan() -> Vec<Pose2> {
 }
 
 fn bench_projection(c: &mut Criterion) {
-    let plan = jittery_plan();
+    let plan = jittery_plan(7);
+    let plans: Vec<Vec<Pose2>> = (0..8).map(jittery_plan).collect();
     let v0 = Twist2::new(1.3, 0.0, 0.2);
     let settings = ProjectionSettings::default();
     let diff_drive = Limits {
@@ -48,6 +51,21 @@ fn bench_projection(c: &mut Criterion) {
     for (name, limits) in [("diff_drive", diff_drive), ("car", car)] {
         c.bench_function(&format!("projection/{name}_t32"), |b| {
             b.iter(|| project(black_box(&plan), 0.1, &limits, v0, &settings))
+        });
+        let mut solver = ProjectionSolver::default();
+        let mut i = 0;
+        c.bench_function(&format!("projection/{name}_t32_kept_solver"), |b| {
+            b.iter(|| {
+                i = (i + 1) % plans.len();
+                project_with(
+                    black_box(&plans[i]),
+                    0.1,
+                    &limits,
+                    v0,
+                    &settings,
+                    &mut solver,
+                )
+            })
         });
     }
 }

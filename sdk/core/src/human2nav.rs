@@ -217,6 +217,8 @@ pub struct Human2Nav<M> {
     settings: Human2NavSettings,
     rng: ChaCha8Rng,
     workspace: GuidanceWorkspace,
+    /// The last-step correction's QP solver, kept from call to call.
+    projection: projection::ProjectionSolver,
     previous: Option<Plan>,
     raster: Vec<f32>,
 }
@@ -265,6 +267,7 @@ impl<M: FlowModel> Human2Nav<M> {
             bev,
             settings,
             workspace: GuidanceWorkspace::new(),
+            projection: projection::ProjectionSolver::default(),
             previous: None,
         })
     }
@@ -405,12 +408,13 @@ impl<M: FlowModel> Human2Nav<M> {
             }
             if self.settings.projection.enabled {
                 for c in candidates.iter_mut() {
-                    match projection::project(
+                    match projection::project_with(
                         c,
                         dt,
                         &self.robot.limits,
                         obs.ego_velocity,
                         &self.settings.projection,
+                        &mut self.projection,
                     ) {
                         Ok(p) => *c = p.poses,
                         Err(e) => notes.push(format!("last-step correction skipped: {e}")),

@@ -179,6 +179,43 @@ pub fn project(
     initial_velocity: Twist2,
     settings: &ProjectionSettings,
 ) -> Result<Projected, ProjectionError> {
+    project_with(
+        target,
+        dt,
+        limits,
+        initial_velocity,
+        settings,
+        &mut ProjectionSolver::default(),
+    )
+}
+
+/// The QP solver of the last correction, kept for the next: every correction of one robot
+/// with one horizon has the same sparsity pattern (only values change), so a later QP only
+/// overwrites the values of the first one's solver, which keeps its KKT structure, ordering and
+/// symbolic factorisation (Clarabel's data updates), instead of building them again. A planner
+/// keeps one per robot; the scaling of the first problem is reused for the later ones.
+#[derive(Default)]
+pub struct ProjectionSolver {
+    cached: Option<((usize, bool), DefaultSolver<f64>)>,
+}
+
+impl std::fmt::Debug for ProjectionSolver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ProjectionSolver")
+            .field("structure", &self.cached.as_ref().map(|(k, _)| *k))
+            .finish_non_exhaustive()
+    }
+}
+
+/// [`project`] with a solver kept from earlier corrections (see [`ProjectionSolver`]).
+pub fn project_with(
+    target: &[Pose2],
+    dt: f64,
+    limits: &Limits,
+    initial_velocity: Twist2,
+    settings: &ProjectionSettings,
+    solver: &mut ProjectionSolver,
+) -> Result<Projected, ProjectionError> {
     settings.validate()?;
     if !target.iter().all(|p| p.is_finite()) {
         return Err(ProjectionError::NonFinite);
@@ -204,7 +241,16 @@ pub fn project(
         1.0
     };
     for _ in 0..settings.iterations {
-        let delta = solve_step(&xi, target, dt, limits, initial_velocity, gear, settings)?;
+        let delta = solve_step(
+            &xi,
+            target,
+            dt,
+            limits,
+            initial_velocity,
+            gear,
+            settings,
+            solver,
+        )?;
         for (x, d) in xi.iter_mut().zip(&delta) {
             *x += d;
         }
@@ -236,6 +282,7 @@ fn solve_step(
     initial_velocity: Twist2,
     gear: f64,
     settings: &ProjectionSettings,
+    cache: &mut ProjectionSolver,
 ) -> Result<Vec<f64>, ProjectionError> {
     let t = target.len();
     let n = 3 * t;
@@ -346,6 +393,11 @@ fn solve_step(
     let cones = [ZeroConeT(n), NonnegativeConeT(inequalities)];
     let qp_settings = DefaultSettingsBuilder::default()
         .verbose(false)
+        // Values are overwritten in place for the next correction (see ProjectionSolver):
+        // the presolver must not drop rows, nor the input its zeros.
+        .presolve_enable(false)
+        .input_sparse_dropzeros(false)
+        .iterative_refinement_enable(false)
         // Micrometres and micro-radians are plenty for a plan (default 1e-8; −19 % solve time
         // for the car in the `projection` bench).
         .tol_gap_abs(1e-6)
@@ -360,8 +412,24 @@ fn solve_step(
         speed: initial_velocity.vx,
         status,
     };
-    let mut solver = DefaultSolver::new(&p, &q, &a, &b, &cones, qp_settings)
-        .map_err(|e| infeasible(format!("a setup error: {e:?}")))?;
+    let key = (t, limits.kappa_max.is_some());
+    let updated = match &mut cache.cached {
+        Some((k, solver)) if *k == key => solver
+            .update_P(&p.nzval)
+            .and_then(|()| solver.update_q(&q))
+            .and_then(|()| solver.update_A(&a.nzval))
+            .and_then(|()| solver.update_b(&b))
+            .is_ok(),
+        _ => false,
+    };
+    if !updated {
+        let solver = DefaultSolver::new(&p, &q, &a, &b, &cones, qp_settings)
+            .map_err(|e| infeasible(format!("a setup error: {e:?}")))?;
+        cache.cached = Some((key, solver));
+    }
+    let Some((_, solver)) = cache.cached.as_mut() else {
+        return Err(infeasible("no solver".into()));
+    };
     solver.solve();
     match solver.solution.status {
         SolverStatus::Solved | SolverStatus::AlmostSolved

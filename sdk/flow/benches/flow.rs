@@ -1,6 +1,7 @@
 //! Latency of the default architecture's trait calls (randomly initialised weights cost the
-//! same as trained ones): velocity and velocity + VJP at batch 1 and 16 with the condition
-//! cached, one condition encoding, and one training step of batch 64.
+//! same as trained ones), for the libtorch model (`velocity_b*`, `velocity_vjp_b*`) and the
+//! native one on the same weights (`native/…`): velocity and velocity + VJP at batch 1, 4, 16
+//! and 32 with the condition cached, one condition encoding, and one training step of batch 64.
 //!
 //! Run: `cargo bench -p human2nav-flow --bench flow` (set threads with `H2N_THREADS`, default 1).
 
@@ -10,7 +11,7 @@ use human2nav_core::se2::Pose2;
 use human2nav_flow::cfm::sample_source;
 use human2nav_flow::perf::bench_condition;
 use human2nav_flow::train::{Example, TrainOptions, Trainer};
-use human2nav_flow::{CfmModel, NetConfig, Normalisation};
+use human2nav_flow::{CfmModel, NativeCfm, NetConfig, Normalisation};
 use rand::SeedableRng;
 use std::hint::black_box;
 use tch::Device;
@@ -32,8 +33,9 @@ fn bench_model(c: &mut Criterion) {
     };
     let model = CfmModel::new(&net, &norm, Device::Cpu).expect("default config is valid");
     let cond = bench_condition(net.bev_cells);
+    let native = NativeCfm::from_model(&model).expect("same weights");
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
-    for k in [1usize, 16, 32] {
+    for k in [1usize, 4, 16, 32] {
         let x = sample_source(k, net.horizon, model.source_std(), &mut rng);
         let cot = vec![0.1; x.len()];
         let mut out = vec![0.0; x.len()];
@@ -51,6 +53,52 @@ fn bench_model(c: &mut Criterion) {
                     .velocity_vjp(black_box(&x), 0.5, &cond, &cot, &mut out, &mut vjp)
                     .expect("vjp")
             })
+        });
+        // The native model keeps recent forward passes for a VJP at the same input, so every
+        // iteration perturbs the input to measure fresh calls.
+        let mut xs = x.clone();
+        let mut step = 0u64;
+        let mut fresh = move || {
+            step += 1;
+            xs[0] = x[0] + 1e-9 * step as f64;
+            xs.clone()
+        };
+        c.bench_function(&format!("native/velocity_b{k}"), |b| {
+            b.iter_batched(
+                &mut fresh,
+                |xi| {
+                    native
+                        .velocity(&xi, 0.5, &cond, &mut out)
+                        .expect("velocity")
+                },
+                criterion::BatchSize::SmallInput,
+            )
+        });
+        c.bench_function(&format!("native/velocity_vjp_b{k}"), |b| {
+            b.iter_batched(
+                &mut fresh,
+                |xi| {
+                    native
+                        .velocity_vjp(&xi, 0.5, &cond, &cot, &mut out, &mut vjp)
+                        .expect("vjp")
+                },
+                criterion::BatchSize::SmallInput,
+            )
+        });
+        // Algorithm 1's pattern: the rollout's forward pass, then the VJP at the same point.
+        c.bench_function(&format!("native/velocity_then_vjp_b{k}"), |b| {
+            b.iter_batched(
+                &mut fresh,
+                |xi| {
+                    native
+                        .velocity(&xi, 0.5, &cond, &mut out)
+                        .expect("velocity");
+                    native
+                        .velocity_vjp(&xi, 0.5, &cond, &cot, &mut out, &mut vjp)
+                        .expect("vjp")
+                },
+                criterion::BatchSize::SmallInput,
+            )
         });
     }
     c.bench_function("encode_condition", |b| {

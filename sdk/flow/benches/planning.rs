@@ -1,5 +1,8 @@
 //! Latency of one Human2Nav planning call (BEV, K samples, guidance, selection) with and
-//! without guidance, on one libtorch thread by default.
+//! without guidance, with the network run natively and by libtorch (one thread by default):
+//! `plan/{guided,unguided}/{native,torch}`. Before the timings it prints each configuration's
+//! network operations per call, this machine's single-thread SGEMM rate and the resulting
+//! lower bound on a call's time, so the criterion medians can be read as ratios to it.
 //!
 //! The model is the shipped one (`models/human2nav-cfm`, or `$H2N_MODEL`); without it, a
 //! freshly initialised model of the default architecture (same cost per network call, but
@@ -15,7 +18,11 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use human2nav_core::human2nav::Human2NavSettings;
 use human2nav_core::{AgentState, Observation, Planner, Pose2, Twist2};
 use human2nav_data::{Episode, EpisodeSuite, ScenarioClass};
-use human2nav_flow::planner::{DEFAULT_MODEL_DIR, PlannerConfig, RobotPlanner, load_profile};
+use human2nav_flow::net::Complexity;
+use human2nav_flow::planner::{
+    Backend, DEFAULT_MODEL_DIR, PlannerConfig, RobotPlanner, TimedModel, load_model, load_profile,
+    robot_model, robot_phi,
+};
 use human2nav_flow::{CfmModel, NetConfig, Normalisation};
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
@@ -115,24 +122,62 @@ fn bench_planning(c: &mut Criterion) {
         PlannerConfig::load(&workspace().join("sdk/configs/planner.toml"))
             .map(|c| c.human2nav)
             .unwrap_or_default();
-    let mut group = c.benchmark_group("plan");
-    group
-        .sample_size(20)
-        .measurement_time(std::time::Duration::from_secs(15));
+    let peak = human2nav_flow::native::sgemm_gflops(512, 21);
     for guided in [false, true] {
         let mut settings = base;
         settings.guidance.enabled = guided;
-        let model = CfmModel::load(&dir, Device::Cpu).expect("model");
-        let mut rp = RobotPlanner::new(profile.clone(), model, settings).expect("planner");
-        let mut i = 0usize;
-        let name = if guided { "guided" } else { "unguided" };
-        group.bench_function(name, |b| {
-            b.iter(|| {
-                rp.planner.reset();
-                i = (i + 1) % obs.len();
-                black_box(rp.planner.plan(black_box(&obs[i])).expect("plan"))
-            })
-        });
+        let model = load_model(&dir, Backend::Native).expect("model");
+        let macs = Complexity::of(&model.card().net).unet_macs;
+        let bev = human2nav_flow::planner::bev_spec(model.card()).0;
+        let timed = TimedModel::new(model);
+        let stats = timed.stats();
+        let phi = robot_phi(&profile).expect("robot terms");
+        let mut p = human2nav_core::human2nav::Human2Nav::new(
+            timed,
+            robot_model(&profile, phi),
+            bev,
+            settings,
+        )
+        .expect("planner");
+        for o in &obs {
+            p.reset();
+            p.plan(o).expect("plan");
+        }
+        let flops = stats.lock().expect("stats").network_flops(macs) / obs.len() as f64;
+        eprintln!(
+            "plan/{}: {:.0} MFLOP of network per call; single-thread SGEMM {peak:.1} GFLOP/s; limit {:.2} ms",
+            if guided { "guided" } else { "unguided" },
+            flops / 1e6,
+            flops / (peak * 1e9) * 1e3
+        );
+    }
+    let mut group = c.benchmark_group("plan");
+    group
+        .sample_size(20)
+        .measurement_time(std::time::Duration::from_secs(10));
+    for guided in [false, true] {
+        for backend in [Backend::Native, Backend::Torch] {
+            let mut settings = base;
+            settings.guidance.enabled = guided;
+            let model = load_model(&dir, backend).expect("model");
+            let mut rp = RobotPlanner::new(profile.clone(), model, settings).expect("planner");
+            let mut i = 0usize;
+            let name = format!(
+                "{}/{}",
+                if guided { "guided" } else { "unguided" },
+                match backend {
+                    Backend::Native => "native",
+                    Backend::Torch => "torch",
+                }
+            );
+            group.bench_function(name, |b| {
+                b.iter(|| {
+                    rp.planner.reset();
+                    i = (i + 1) % obs.len();
+                    black_box(rp.planner.plan(black_box(&obs[i])).expect("plan"))
+                })
+            });
+        }
     }
     group.finish();
 }

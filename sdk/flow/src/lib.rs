@@ -5,6 +5,8 @@
 //!   the Beta distribution of flow time.
 //! * [`model`]: [`CfmModel`], which implements core's [`human2nav_core::FlowModel`]
 //!   (velocity and autograd vector-Jacobian product) and loads/saves checkpoints.
+//! * [`native`]: [`NativeCfm`], the same network's forward pass and input gradient on Rust
+//!   kernels (no per-operator dispatch): what the planner runs on the CPU.
 //! * [`sampler`]: the `N`-step Lie-group Euler integrator (Eq. 5).
 //! * [`train`]: AdamW with warm-up and cosine decay, EMA weights, gradient clipping,
 //!   resumable training state.
@@ -25,6 +27,7 @@ pub mod config;
 pub mod error;
 pub mod eval;
 pub mod model;
+pub mod native;
 pub mod net;
 pub mod perf;
 pub mod planner;
@@ -36,5 +39,6 @@ pub use card::ModelCard;
 pub use config::{Activation, NetConfig, Normalisation};
 pub use error::CfmError;
 pub use model::CfmModel;
+pub use native::NativeCfm;
 /// The libtorch bindings this crate is built on (for thread count and device selection).
 pub use tch;

@@ -1,4 +1,4 @@
-//! The reference planner with the trained flow model: a [`Human2Nav<CfmModel>`] built from a
+//! The reference planner with the trained flow model: a [`Human2Nav<PlannerModel>`] built from a
 //! robot profile (`robot.toml` + URDF + plugin constraint terms) and a model folder
 //! (`model.toml` card + weights), plus the two measurements the issue asks of it:
 //!
@@ -20,6 +20,7 @@
 use crate::card::ModelCard;
 use crate::error::CfmError;
 use crate::model::CfmModel;
+use crate::native::NativeCfm;
 use human2nav_core::bev::BevSpec;
 use human2nav_core::constraint::Phi;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
@@ -71,9 +72,13 @@ pub struct PlannerConfig {
     /// Model folder (`model.toml` + weights); relative paths are resolved against the workspace
     /// root. Default [`DEFAULT_MODEL_DIR`].
     pub model: PathBuf,
-    /// libtorch intra-op threads for planning. Default 1 (one core per robot; the latency
-    /// targets are stated for one thread).
+    /// libtorch intra-op threads for planning with the `torch` backend. Default 1 (one core
+    /// per robot; the latency targets are stated for one thread). The native backend always
+    /// runs on the calling thread.
     pub threads: usize,
+    /// What runs the network: `native` (Rust kernels on the CPU, the default) or `torch`
+    /// (libtorch: the reference, and the way to a GPU).
+    pub backend: Backend,
     /// The planner's settings (sampling, guidance, selection).
     pub human2nav: Human2NavSettings,
 }
@@ -83,6 +88,7 @@ impl Default for PlannerConfig {
         Self {
             model: PathBuf::from(DEFAULT_MODEL_DIR),
             threads: 1,
+            backend: Backend::default(),
             human2nav: Human2NavSettings::default(),
         }
     }
@@ -133,6 +139,100 @@ impl PlannerConfig {
             self.model.clone()
         } else {
             workspace.join(&self.model)
+        }
+    }
+}
+
+/// What runs a planner's network (`backend` in `planner.toml`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Backend {
+    /// [`NativeCfm`]: Rust kernels on the CPU, no per-operator dispatch.
+    #[default]
+    Native,
+    /// [`CfmModel`]: libtorch, the reference implementation (CPU or GPU).
+    Torch,
+}
+
+/// The network behind a planner: the same trained weights run natively or by libtorch.
+#[derive(Debug)]
+pub enum PlannerModel {
+    /// Rust kernels.
+    Native(NativeCfm),
+    /// libtorch.
+    Torch(CfmModel),
+}
+
+impl PlannerModel {
+    /// The model card.
+    pub fn card(&self) -> &ModelCard {
+        match self {
+            Self::Native(m) => m.card(),
+            Self::Torch(m) => m.card(),
+        }
+    }
+
+    /// Which backend this is.
+    pub fn backend(&self) -> Backend {
+        match self {
+            Self::Native(_) => Backend::Native,
+            Self::Torch(_) => Backend::Torch,
+        }
+    }
+}
+
+impl From<CfmModel> for PlannerModel {
+    fn from(m: CfmModel) -> Self {
+        Self::Torch(m)
+    }
+}
+
+impl From<NativeCfm> for PlannerModel {
+    fn from(m: NativeCfm) -> Self {
+        Self::Native(m)
+    }
+}
+
+impl FlowModel for PlannerModel {
+    fn horizon(&self) -> usize {
+        match self {
+            Self::Native(m) => m.horizon(),
+            Self::Torch(m) => m.horizon(),
+        }
+    }
+
+    fn source_std(&self) -> [f64; 3] {
+        match self {
+            Self::Native(m) => m.source_std(),
+            Self::Torch(m) => m.source_std(),
+        }
+    }
+
+    fn velocity(
+        &self,
+        x: &[f64],
+        t: f64,
+        cond: &FlowCondition,
+        out: &mut [f64],
+    ) -> Result<(), FlowError> {
+        match self {
+            Self::Native(m) => m.velocity(x, t, cond, out),
+            Self::Torch(m) => m.velocity(x, t, cond, out),
+        }
+    }
+
+    fn velocity_vjp(
+        &self,
+        x: &[f64],
+        t: f64,
+        cond: &FlowCondition,
+        cotangent: &[f64],
+        out: &mut [f64],
+        vjp: &mut [f64],
+    ) -> Result<(), FlowError> {
+        match self {
+            Self::Native(m) => m.velocity_vjp(x, t, cond, cotangent, out, vjp),
+            Self::Torch(m) => m.velocity_vjp(x, t, cond, cotangent, out, vjp),
         }
     }
 }
@@ -211,9 +311,13 @@ pub fn load_profile(path: &Path) -> Result<RobotProfile, PlannerError> {
     })
 }
 
-/// Loads a model folder on the CPU, naming the folder in the error.
-pub fn load_model(dir: &Path) -> Result<CfmModel, PlannerError> {
-    CfmModel::load(dir, Device::Cpu).map_err(|source| PlannerError::Model {
+/// Loads a model folder for `backend` (libtorch on the CPU), naming the folder in the error.
+pub fn load_model(dir: &Path, backend: Backend) -> Result<PlannerModel, PlannerError> {
+    let model = match backend {
+        Backend::Native => NativeCfm::load(dir).map(PlannerModel::Native),
+        Backend::Torch => CfmModel::load(dir, Device::Cpu).map(PlannerModel::Torch),
+    };
+    model.map_err(|source| PlannerError::Model {
         path: dir.to_path_buf(),
         source,
     })
@@ -229,7 +333,7 @@ pub struct RobotPlanner {
     /// Where `bev`'s cell size came from.
     pub bev_origin: BevOrigin,
     /// The planner.
-    pub planner: Human2Nav<CfmModel>,
+    pub planner: Human2Nav<PlannerModel>,
 }
 
 impl RobotPlanner {
@@ -237,9 +341,10 @@ impl RobotPlanner {
     /// plugin terms), the BEV raster from the model card.
     pub fn new(
         profile: RobotProfile,
-        model: CfmModel,
+        model: impl Into<PlannerModel>,
         settings: Human2NavSettings,
     ) -> Result<Self, PlannerError> {
+        let model = model.into();
         let phi = robot_phi(&profile)?;
         let (bev, bev_origin) = bev_spec(model.card());
         let planner = Human2Nav::new(model, robot_model(&profile, phi), bev, settings)?;
@@ -251,15 +356,25 @@ impl RobotPlanner {
         })
     }
 
-    /// Loads the robot profile at `robot_toml` and the model folder `model_dir`, and builds the
-    /// planner.
+    /// Loads the robot profile at `robot_toml` and the model folder `model_dir` (run by the
+    /// native backend), and builds the planner.
     pub fn load(
         robot_toml: &Path,
         model_dir: &Path,
         settings: Human2NavSettings,
     ) -> Result<Self, PlannerError> {
+        Self::load_with(robot_toml, model_dir, Backend::Native, settings)
+    }
+
+    /// [`Self::load`] with the backend chosen.
+    pub fn load_with(
+        robot_toml: &Path,
+        model_dir: &Path,
+        backend: Backend,
+        settings: Human2NavSettings,
+    ) -> Result<Self, PlannerError> {
         let profile = load_profile(robot_toml)?;
-        let model = load_model(model_dir)?;
+        let model = load_model(model_dir, backend)?;
         Self::new(profile, model, settings)
     }
 
@@ -487,6 +602,33 @@ pub struct FlowCallStats {
     /// Calls of [`FlowModel::velocity_vjp`] and their total time (s).
     pub vjp_calls: u64,
     pub vjp_s: f64,
+    /// Trajectories passed through the network by velocity and VJP calls.
+    pub velocity_rows: u64,
+    pub vjp_rows: u64,
+}
+
+impl FlowCallStats {
+    /// The counts accumulated since `earlier`.
+    pub fn since(&self, earlier: &Self) -> Self {
+        Self {
+            velocity_calls: self.velocity_calls - earlier.velocity_calls,
+            velocity_s: self.velocity_s - earlier.velocity_s,
+            vjp_calls: self.vjp_calls - earlier.vjp_calls,
+            vjp_s: self.vjp_s - earlier.vjp_s,
+            velocity_rows: self.velocity_rows - earlier.velocity_rows,
+            vjp_rows: self.vjp_rows - earlier.vjp_rows,
+        }
+    }
+
+    /// Floating-point operations of the network's convolutions and linear layers in these calls
+    /// (2 per multiply-accumulate): `unet` per trajectory forward, twice that for a VJP (the
+    /// forward pass and the gradient of its input, which is the transposed products, no weight
+    /// gradients). The condition encoding and FiLM layers are not included (see
+    /// [`crate::net::Complexity`]: under 1 % of a planning call).
+    pub fn network_flops(&self, unet_macs_per_trajectory: u64) -> f64 {
+        let f = 2.0 * unet_macs_per_trajectory as f64;
+        self.velocity_rows as f64 * f + self.vjp_rows as f64 * 2.0 * f
+    }
 }
 
 /// A flow model that times every call of the model it wraps (a profiler for the planner:
@@ -513,14 +655,16 @@ impl<M> TimedModel<M> {
         Arc::clone(&self.stats)
     }
 
-    fn record(&self, vjp: bool, seconds: f64) {
+    fn record(&self, vjp: bool, rows: u64, seconds: f64) {
         if let Ok(mut s) = self.stats.lock() {
             if vjp {
                 s.vjp_calls += 1;
                 s.vjp_s += seconds;
+                s.vjp_rows += rows;
             } else {
                 s.velocity_calls += 1;
                 s.velocity_s += seconds;
+                s.velocity_rows += rows;
             }
         }
     }
@@ -544,7 +688,8 @@ impl<M: FlowModel> FlowModel for TimedModel<M> {
     ) -> Result<(), FlowError> {
         let start = Instant::now();
         let r = self.inner.velocity(x, t, cond, out);
-        self.record(false, start.elapsed().as_secs_f64());
+        let rows = (x.len() / (3 * self.inner.horizon()).max(1)) as u64;
+        self.record(false, rows, start.elapsed().as_secs_f64());
         r
     }
 
@@ -559,7 +704,8 @@ impl<M: FlowModel> FlowModel for TimedModel<M> {
     ) -> Result<(), FlowError> {
         let start = Instant::now();
         let r = self.inner.velocity_vjp(x, t, cond, cotangent, out, vjp);
-        self.record(true, start.elapsed().as_secs_f64());
+        let rows = (x.len() / (3 * self.inner.horizon()).max(1)) as u64;
+        self.record(true, rows, start.elapsed().as_secs_f64());
         r
     }
 }
@@ -732,7 +878,7 @@ mod tests {
 
         // The timing wrapper counts the calls Algorithm 1 documents: N for the first rollout,
         // then N per iteration forward and N − 1 VJPs backward.
-        let model = load_model(&dir).unwrap();
+        let model = load_model(&dir, Backend::Native).unwrap();
         let timed = TimedModel::new(model);
         let stats = timed.stats();
         let (bev, _) = bev_spec(timed.inner.card());
@@ -755,8 +901,10 @@ mod tests {
 
     #[test]
     fn missing_model_and_profile_are_named() {
-        let err = load_model(Path::new("no/such/model")).unwrap_err();
-        assert!(err.to_string().contains("no/such/model"), "{err}");
+        for backend in [Backend::Native, Backend::Torch] {
+            let err = load_model(Path::new("no/such/model"), backend).unwrap_err();
+            assert!(err.to_string().contains("no/such/model"), "{err}");
+        }
         let err = load_profile(Path::new("no/such/robot.toml")).unwrap_err();
         assert!(matches!(err, PlannerError::Profile { .. }), "{err}");
     }

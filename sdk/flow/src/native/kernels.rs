@@ -1,0 +1,662 @@
+//! The few kernels the native network is made of, over `[C, B, L]` activations (channel-major,
+//! batch, then position): a single-threaded SGEMM, the gather/scatter pair that turns 1-D
+//! convolutions (plain and transposed) into matrix products, group normalisation and the
+//! activations, each with the backward pass of its data input (no weight gradients: the native
+//! path runs a trained model, it does not train one).
+
+use crate::config::Activation;
+
+/// Defines a function whose body is compiled three times, for AVX-512, for AVX2 + FMA and for
+/// the baseline target, and calls the best one this CPU runs: the elementwise kernels are
+/// plain loops that the compiler vectorises to the width it is allowed.
+macro_rules! multiversion {
+    ($(#[$m:meta])* $vis:vis fn $name:ident($($arg:ident : $ty:ty),* $(,)?) $body:block) => {
+        $(#[$m])*
+        $vis fn $name($($arg: $ty),*) {
+            #[cfg(target_arch = "x86_64")]
+            {
+                #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
+                fn v4($($arg: $ty),*) $body
+                #[target_feature(enable = "avx2,fma")]
+                fn v3($($arg: $ty),*) $body
+                if std::arch::is_x86_feature_detected!("avx512f")
+                    && std::arch::is_x86_feature_detected!("avx512vl")
+                {
+                    // SAFETY: this CPU has the features `v4` is compiled for.
+                    return unsafe { v4($($arg),*) };
+                }
+                if std::arch::is_x86_feature_detected!("avx2")
+                    && std::arch::is_x86_feature_detected!("fma")
+                {
+                    // SAFETY: this CPU has the features `v3` is compiled for.
+                    return unsafe { v3($($arg),*) };
+                }
+            }
+            #[allow(unreachable_code)]
+            $body
+        }
+    };
+}
+
+/// `eˣ` for `f32` without a library call, so that loops over it vectorise: Cephes' `expf`
+/// (range reduction by `ln 2`, a degree-6 polynomial, relative error about 2·10⁻⁷), with the
+/// argument clamped to `[−87, 88]` (the normal range; the activations never need more).
+#[inline(always)]
+fn exp(x: f32) -> f32 {
+    const LOG2E: f32 = std::f32::consts::LOG2_E;
+    const LN2_HI: f32 = 0.693_359_4;
+    const LN2_LO: f32 = -2.121_944_4e-4;
+    let x = x.clamp(-87.0, 88.0);
+    let n = (x * LOG2E + 0.5).floor();
+    let r = x - n * LN2_HI - n * LN2_LO;
+    let p = ((((1.987_569_1e-4 * r + 1.398_199_9e-3) * r + 8.333_452e-3) * r + 4.166_579_6e-2) * r
+        + 1.666_666_5e-1)
+        * r
+        + 0.5;
+    let y = p * r * r + r + 1.0;
+    // 2ⁿ without a float-to-int conversion (Rust's saturating `as` does not vectorise):
+    // adding 1.5·2²³ puts the integer n in the low mantissa bits.
+    let biased = (n + 12_582_912.0).to_bits().wrapping_sub(0x4B40_0000);
+    y * f32::from_bits(biased.wrapping_add(127) << 23)
+}
+
+/// `c ← a·b` (or `c ← c + a·b` when `accumulate`) for row-major views with explicit strides:
+/// `a` is `m × k` with element `(i, p)` at `a[i·a_rs + p·a_cs]`, `b` is `k × n` likewise and
+/// `c` is `m × n`, contiguous row-major.
+///
+/// # Panics
+/// When a view reaches past its slice (a programming error of the caller, checked here so the
+/// kernel below never reads or writes out of bounds).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn sgemm(
+    m: usize,
+    n: usize,
+    k: usize,
+    a: &[f32],
+    a_rs: usize,
+    a_cs: usize,
+    b: &[f32],
+    b_rs: usize,
+    b_cs: usize,
+    c: &mut [f32],
+    accumulate: bool,
+) {
+    if m == 0 || n == 0 {
+        return;
+    }
+    assert!(
+        c.len() >= m * n,
+        "sgemm: output holds {} < {}",
+        c.len(),
+        m * n
+    );
+    if k == 0 {
+        if !accumulate {
+            c[..m * n].fill(0.0);
+        }
+        return;
+    }
+    let last = |rows: usize, cols: usize, rs: usize, cs: usize| (rows - 1) * rs + (cols - 1) * cs;
+    assert!(
+        last(m, k, a_rs, a_cs) < a.len(),
+        "sgemm: lhs view out of bounds"
+    );
+    assert!(
+        last(k, n, b_rs, b_cs) < b.len(),
+        "sgemm: rhs view out of bounds"
+    );
+    // SAFETY: every element the views address lies inside its slice (checked above), `c` is a
+    // distinct mutable slice of at least m·n elements, and the strides fit in isize because
+    // the addressed ranges fit in slices.
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            c.as_mut_ptr(),
+            1,
+            n as isize,
+            accumulate,
+            a.as_ptr(),
+            a_cs as isize,
+            a_rs as isize,
+            b.as_ptr(),
+            b_cs as isize,
+            b_rs as isize,
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            gemm::Parallelism::None,
+        );
+    }
+}
+
+/// Shape of a 1-D (transposed) convolution's index map: output column `n` of kernel tap `kk`
+/// touches source position `n·stride − pad + kk`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Taps {
+    pub k: usize,
+    pub stride: usize,
+    pub pad: usize,
+}
+
+impl Taps {
+    /// The source position of column `n`, tap `kk`, if it lies in `0..len`.
+    #[inline]
+    fn source(self, n: usize, kk: usize, len: usize) -> Option<usize> {
+        let p = (n * self.stride + kk).checked_sub(self.pad)?;
+        (p < len).then_some(p)
+    }
+}
+
+/// `col[(c·k + kk), b·ln + n] = src[c, b, n·stride − pad + kk]` (zero outside `0..ls`):
+/// `src` is `[channels, batch, ls]`, `col` is `[channels·k, batch·ln]`.
+pub(crate) fn gather(
+    src: &[f32],
+    channels: usize,
+    batch: usize,
+    ls: usize,
+    ln: usize,
+    taps: Taps,
+    col: &mut Vec<f32>,
+) {
+    let k = taps.k;
+    resize_for_overwrite(col, channels * k * batch * ln);
+    for c in 0..channels {
+        for kk in 0..k {
+            let row = &mut col[(c * k + kk) * batch * ln..(c * k + kk + 1) * batch * ln];
+            for b in 0..batch {
+                let s = &src[(c * batch + b) * ls..(c * batch + b + 1) * ls];
+                let r = &mut row[b * ln..(b + 1) * ln];
+                if taps.stride == 1 {
+                    // Contiguous run: positions n − pad + kk for n in 0..ln, zero outside.
+                    let lo = taps.pad.saturating_sub(kk).min(ln);
+                    let hi = (ls + taps.pad).saturating_sub(kk).clamp(lo, ln);
+                    r[..lo].fill(0.0);
+                    let s0 = lo + kk - taps.pad;
+                    r[lo..hi].copy_from_slice(&s[s0..s0 + (hi - lo)]);
+                    r[hi..].fill(0.0);
+                } else {
+                    for (n, v) in r.iter_mut().enumerate() {
+                        *v = taps.source(n, kk, ls).map_or(0.0, |p| s[p]);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The adjoint of [`gather`]: `dst[c, b, n·stride − pad + kk] += col[(c·k + kk), b·ln + n]`.
+pub(crate) fn scatter_add(
+    col: &[f32],
+    channels: usize,
+    batch: usize,
+    ld: usize,
+    ln: usize,
+    taps: Taps,
+    dst: &mut [f32],
+) {
+    let k = taps.k;
+    for c in 0..channels {
+        for kk in 0..k {
+            let row = &col[(c * k + kk) * batch * ln..(c * k + kk + 1) * batch * ln];
+            for b in 0..batch {
+                let d = &mut dst[(c * batch + b) * ld..(c * batch + b + 1) * ld];
+                let r = &row[b * ln..(b + 1) * ln];
+                if taps.stride == 1 {
+                    // Contiguous run, as in `gather`.
+                    let lo = taps.pad.saturating_sub(kk);
+                    let hi = (ld + taps.pad).saturating_sub(kk).min(ln);
+                    if lo < hi {
+                        let d0 = lo + kk - taps.pad;
+                        add_to(&mut d[d0..d0 + (hi - lo)], &r[lo..hi]);
+                    }
+                    continue;
+                }
+                for (n, &v) in r.iter().enumerate() {
+                    if let Some(p) = taps.source(n, kk, ld) {
+                        d[p] += v;
+                    }
+                }
+            }
+        }
+    }
+}
+
+multiversion! {
+    /// `dst += src` elementwise.
+    pub(crate) fn add_to(dst: &mut [f32], src: &[f32]) {
+        for (d, s) in dst.iter_mut().zip(src) {
+            *d += s;
+        }
+    }
+}
+
+/// Adds `bias[c]` to every element of channel `c` of `[channels, rest]`.
+pub(crate) fn add_bias(x: &mut [f32], bias: &[f32]) {
+    let rest = x.len() / bias.len();
+    for (row, &b) in x.chunks_exact_mut(rest).zip(bias) {
+        for v in row {
+            *v += b;
+        }
+    }
+}
+
+/// Torch's GroupNorm epsilon.
+const GN_EPS: f32 = 1e-5;
+
+/// Sums in 16 independent lanes, so that the loops vectorise (a single running sum would force
+/// the additions into order); a group's rows accumulate into the same lanes and are reduced
+/// once.
+#[inline(always)]
+fn lanes(acc: [f32; 16]) -> f32 {
+    acc.iter().sum()
+}
+
+/// `acc += x` lane-wise (`x.len()` a multiple of 16 goes entirely through the lanes).
+#[inline(always)]
+fn add_lanes(acc: &mut [f32; 16], x: &[f32]) {
+    let c = x.chunks_exact(16);
+    for (i, v) in c.remainder().iter().enumerate() {
+        acc[i] += v;
+    }
+    for ch in c {
+        for i in 0..16 {
+            acc[i] += ch[i];
+        }
+    }
+}
+
+/// `acc += w·x` lane-wise.
+#[inline(always)]
+fn add_scaled_lanes(acc: &mut [f32; 16], x: &[f32], w: f32) {
+    let c = x.chunks_exact(16);
+    for (i, v) in c.remainder().iter().enumerate() {
+        acc[i] += w * v;
+    }
+    for ch in c {
+        for i in 0..16 {
+            acc[i] += w * ch[i];
+        }
+    }
+}
+
+/// `acc += (x − m)²` lane-wise.
+#[inline(always)]
+fn add_sq_dev_lanes(acc: &mut [f32; 16], x: &[f32], m: f32) {
+    let c = x.chunks_exact(16);
+    for (i, v) in c.remainder().iter().enumerate() {
+        acc[i] += (v - m) * (v - m);
+    }
+    for ch in c {
+        for i in 0..16 {
+            let d = ch[i] - m;
+            acc[i] += d * d;
+        }
+    }
+}
+
+/// `acc += x·y` lane-wise, scaled by `w`.
+#[inline(always)]
+fn add_dot_lanes(acc: &mut [f32; 16], x: &[f32], y: &[f32], w: f32) {
+    let (cx, cy) = (x.chunks_exact(16), y.chunks_exact(16));
+    for (i, (a, b)) in cx.remainder().iter().zip(cy.remainder()).enumerate() {
+        acc[i] += w * a * b;
+    }
+    for (a, b) in cx.zip(cy) {
+        for i in 0..16 {
+            acc[i] += w * a[i] * b[i];
+        }
+    }
+}
+
+/// `Σ xᵢ·yᵢ` over the common length.
+#[inline(always)]
+pub(crate) fn dot(x: &[f32], y: &[f32]) -> f32 {
+    let n = x.len().min(y.len());
+    let (x, y) = (&x[..n], &y[..n]);
+    let mut acc = [0f32; 16];
+    let (cx, cy) = (x.chunks_exact(16), y.chunks_exact(16));
+    let tail: f32 = cx
+        .remainder()
+        .iter()
+        .zip(cy.remainder())
+        .map(|(a, b)| a * b)
+        .sum();
+    for (a, b) in cx.zip(cy) {
+        for i in 0..16 {
+            acc[i] += a[i] * b[i];
+        }
+    }
+    lanes(acc) + tail
+}
+
+/// Resizes a buffer that the caller overwrites completely (no zeroing when it already has
+/// the length).
+#[inline]
+pub(crate) fn resize_for_overwrite(v: &mut Vec<f32>, n: usize) {
+    if v.len() != n {
+        v.resize(n, 0.0);
+    }
+}
+
+multiversion! {
+    /// Group normalisation of `x` (`[channels, batch, len]`) in place, with per-channel affine
+    /// `gamma`, `beta`: writes the normalised values `x̂` into `xhat` and `1/σ` per
+    /// `(b, group)` into `inv_std` (both for the backward pass). Mean and variance in two
+    /// passes over the group's rows (each row, one channel of one sample, is contiguous).
+    pub(crate) fn group_norm(
+        x: &mut [f32],
+        groups: usize,
+        batch: usize,
+        len: usize,
+        gamma: &[f32],
+        beta: &[f32],
+        xhat: &mut Vec<f32>,
+        inv_std: &mut Vec<f32>,
+    ) {
+        let channels = gamma.len();
+        let per = channels / groups;
+        resize_for_overwrite(xhat, x.len());
+        resize_for_overwrite(inv_std, batch * groups);
+        let count = (per * len) as f32;
+        for b in 0..batch {
+            for g in 0..groups {
+                let mut acc = [0f32; 16];
+                for c in g * per..(g + 1) * per {
+                    let r = (c * batch + b) * len;
+                    add_lanes(&mut acc, &x[r..r + len]);
+                }
+                let mean = lanes(acc) / count;
+                let mut acc = [0f32; 16];
+                for c in g * per..(g + 1) * per {
+                    let r = (c * batch + b) * len;
+                    add_sq_dev_lanes(&mut acc, &x[r..r + len], mean);
+                }
+                let inv = 1.0 / (lanes(acc) / count + GN_EPS).sqrt();
+                inv_std[b * groups + g] = inv;
+                for c in g * per..(g + 1) * per {
+                    let r = (c * batch + b) * len;
+                    let (ga, be) = (gamma[c], beta[c]);
+                    for (v, h) in x[r..r + len].iter_mut().zip(&mut xhat[r..r + len]) {
+                        let n = (*v - mean) * inv;
+                        *h = n;
+                        *v = n * ga + be;
+                    }
+                }
+            }
+        }
+    }
+}
+
+multiversion! {
+    /// The data gradient of [`group_norm`]: `dx = (1/σ)·(dx̂ − mean(dx̂) − x̂·mean(dx̂·x̂))` per
+    /// group, with `dx̂ = dz·γ`. `dz` is overwritten with `dx`.
+    pub(crate) fn group_norm_backward(
+        dz: &mut [f32],
+        groups: usize,
+        batch: usize,
+        len: usize,
+        gamma: &[f32],
+        xhat: &[f32],
+        inv_std: &[f32],
+    ) {
+        let channels = gamma.len();
+        let per = channels / groups;
+        let count = (per * len) as f32;
+        for b in 0..batch {
+            for g in 0..groups {
+                let (mut a1, mut a2) = ([0f32; 16], [0f32; 16]);
+                for c in g * per..(g + 1) * per {
+                    let r = (c * batch + b) * len;
+                    add_scaled_lanes(&mut a1, &dz[r..r + len], gamma[c]);
+                    add_dot_lanes(&mut a2, &dz[r..r + len], &xhat[r..r + len], gamma[c]);
+                }
+                let (m1, m2) = (lanes(a1) / count, lanes(a2) / count);
+                let inv = inv_std[b * groups + g];
+                for c in g * per..(g + 1) * per {
+                    let r = (c * batch + b) * len;
+                    let ga = gamma[c];
+                    for (d, &h) in dz[r..r + len].iter_mut().zip(&xhat[r..r + len]) {
+                        *d = inv * (*d * ga - m1 - h * m2);
+                    }
+                }
+            }
+        }
+    }
+}
+
+multiversion! {
+    /// `x[c, ·] ← bias[c] + x[c, ·]·scale[c]` over `[channels, rest]` (FiLM).
+    pub(crate) fn scale_shift(x: &mut [f32], scale: &[f32], bias: &[f32]) {
+        let rest = x.len() / scale.len();
+        for ((row, &sc), &bi) in x.chunks_exact_mut(rest).zip(scale).zip(bias) {
+            for v in row {
+                *v = bi + *v * sc;
+            }
+        }
+    }
+}
+
+multiversion! {
+    /// `x[c, ·] ← x[c, ·]·scale[c]` over `[channels, rest]`.
+    pub(crate) fn scale_rows(x: &mut [f32], scale: &[f32]) {
+        let rest = x.len() / scale.len();
+        for (row, &sc) in x.chunks_exact_mut(rest).zip(scale) {
+            for v in row {
+                *v *= sc;
+            }
+        }
+    }
+}
+
+#[inline(always)]
+fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + exp(-x))
+}
+
+/// `tanh(softplus(x))` as a rational function of `eˣ`: with `n = eˣ·(eˣ + 2)`,
+/// `tanh(ln(1 + eˣ)) = n / (n + 2)`; 1 beyond `x = 20` (torch's softplus threshold).
+#[inline(always)]
+fn tanh_softplus(x: f32) -> f32 {
+    let e = exp(x.min(20.0));
+    let n = e * (e + 2.0);
+    if x > 20.0 { 1.0 } else { n / (n + 2.0) }
+}
+
+multiversion! {
+    /// `a = act(z)` elementwise, from `z` into `out`.
+    pub(crate) fn activate(act: Activation, z: &[f32], out: &mut [f32]) {
+        match act {
+            Activation::Silu => {
+                for (o, &v) in out.iter_mut().zip(z) {
+                    *o = v * sigmoid(v);
+                }
+            }
+            Activation::Mish => {
+                for (o, &v) in out.iter_mut().zip(z) {
+                    *o = v * tanh_softplus(v);
+                }
+            }
+        }
+    }
+}
+
+multiversion! {
+    /// `act(x)` in place.
+    pub(crate) fn activate_in_place(act: Activation, x: &mut [f32]) {
+        match act {
+            Activation::Silu => x.iter_mut().for_each(|v| *v *= sigmoid(*v)),
+            Activation::Mish => x.iter_mut().for_each(|v| *v *= tanh_softplus(*v)),
+        }
+    }
+}
+
+multiversion! {
+    /// `da ← da · act'(z)` elementwise.
+    pub(crate) fn activate_backward(act: Activation, z: &[f32], da: &mut [f32]) {
+        match act {
+            Activation::Silu => {
+                for (d, &v) in da.iter_mut().zip(z) {
+                    let s = sigmoid(v);
+                    *d *= s * (1.0 + v * (1.0 - s));
+                }
+            }
+            Activation::Mish => {
+                for (d, &v) in da.iter_mut().zip(z) {
+                    let t = tanh_softplus(v);
+                    *d *= t + v * (1.0 - t * t) * sigmoid(v);
+                }
+            }
+        }
+    }
+}
+
+multiversion! {
+    /// `y = W·x + b` for one vector (`W` row-major `[out, in]`).
+    pub(crate) fn linear(w: &[f32], b: &[f32], x: &[f32], y: &mut [f32]) {
+        let n = x.len();
+        for ((o, row), &bias) in y.iter_mut().zip(w.chunks_exact(n)).zip(b) {
+            *o = dot(row, x) + bias;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn naive(m: usize, n: usize, k: usize, a: impl Fn(usize, usize) -> f32, b: &[f32]) -> Vec<f32> {
+        let mut c = vec![0f32; m * n];
+        for i in 0..m {
+            for j in 0..n {
+                c[i * n + j] = (0..k).map(|p| a(i, p) * b[p * n + j]).sum();
+            }
+        }
+        c
+    }
+
+    #[test]
+    fn sgemm_matches_a_naive_product_with_transposed_views() {
+        let (m, n, k) = (5, 7, 3);
+        let a: Vec<f32> = (0..m * k).map(|i| (i as f32 * 0.37).sin()).collect();
+        let b: Vec<f32> = (0..k * n).map(|i| (i as f32 * 0.11).cos()).collect();
+        let mut c = vec![1.0f32; m * n];
+        sgemm(m, n, k, &a, k, 1, &b, n, 1, &mut c, false);
+        let want = naive(m, n, k, |i, p| a[i * k + p], &b);
+        for (x, y) in c.iter().zip(&want) {
+            assert!((x - y).abs() < 1e-5, "{x} {y}");
+        }
+        // a stored as its transpose [k, m]; accumulate onto the previous result.
+        let at: Vec<f32> = (0..k * m).map(|i| a[(i % m) * k + i / m]).collect();
+        sgemm(m, n, k, &at, 1, m, &b, n, 1, &mut c, true);
+        for (x, y) in c.iter().zip(&want) {
+            assert!((x - 2.0 * y).abs() < 1e-5, "{x} {y}");
+        }
+    }
+
+    #[test]
+    fn scatter_add_is_the_adjoint_of_gather() {
+        // <gather(x), y> = <x, scatter_add(y)> for every stride and padding used.
+        for (taps, ls, ln) in [
+            (
+                Taps {
+                    k: 3,
+                    stride: 1,
+                    pad: 1,
+                },
+                8,
+                8,
+            ),
+            (
+                Taps {
+                    k: 3,
+                    stride: 2,
+                    pad: 1,
+                },
+                8,
+                4,
+            ),
+            (
+                Taps {
+                    k: 4,
+                    stride: 2,
+                    pad: 1,
+                },
+                8,
+                4,
+            ),
+            (
+                Taps {
+                    k: 1,
+                    stride: 1,
+                    pad: 0,
+                },
+                5,
+                5,
+            ),
+        ] {
+            let (ch, batch) = (2, 3);
+            let x: Vec<f32> = (0..ch * batch * ls)
+                .map(|i| (i as f32 * 0.7).sin())
+                .collect();
+            let y: Vec<f32> = (0..ch * taps.k * batch * ln)
+                .map(|i| (i as f32 * 0.3).cos())
+                .collect();
+            let mut col = Vec::new();
+            gather(&x, ch, batch, ls, ln, taps, &mut col);
+            let lhs: f32 = col.iter().zip(&y).map(|(a, b)| a * b).sum();
+            let mut back = vec![0f32; x.len()];
+            scatter_add(&y, ch, batch, ls, ln, taps, &mut back);
+            let rhs: f32 = x.iter().zip(&back).map(|(a, b)| a * b).sum();
+            assert!((lhs - rhs).abs() < 1e-4, "{taps:?}: {lhs} vs {rhs}");
+        }
+    }
+
+    #[test]
+    fn group_norm_backward_matches_finite_differences() {
+        let (ch, groups, batch, len) = (4, 2, 2, 3);
+        let gamma = [1.0f32, 0.5, -0.7, 2.0];
+        let beta = [0.1f32, -0.2, 0.3, 0.0];
+        let x: Vec<f32> = (0..ch * batch * len)
+            .map(|i| (i as f32 * 0.91).sin() * 2.0)
+            .collect();
+        let w: Vec<f32> = (0..x.len()).map(|i| (i as f32 * 0.43).cos()).collect();
+        let f = |x: &[f32]| -> f64 {
+            let mut y = x.to_vec();
+            let (mut h, mut s) = (Vec::new(), Vec::new());
+            group_norm(&mut y, groups, batch, len, &gamma, &beta, &mut h, &mut s);
+            y.iter().zip(&w).map(|(a, b)| f64::from(a * b)).sum()
+        };
+        let mut y = x.clone();
+        let (mut h, mut s) = (Vec::new(), Vec::new());
+        group_norm(&mut y, groups, batch, len, &gamma, &beta, &mut h, &mut s);
+        let mut d = w.clone();
+        group_norm_backward(&mut d, groups, batch, len, &gamma, &h, &s);
+        for i in 0..x.len() {
+            let e = 1e-2f32;
+            let (mut p, mut m) = (x.clone(), x.clone());
+            p[i] += e;
+            m[i] -= e;
+            let fd = (f(&p) - f(&m)) / (2.0 * f64::from(e));
+            assert!((fd - f64::from(d[i])).abs() < 2e-3, "{i}: {fd} vs {}", d[i]);
+        }
+    }
+
+    #[test]
+    fn activation_derivatives_match_finite_differences() {
+        for act in [Activation::Silu, Activation::Mish] {
+            for &z in &[-25.0f32, -3.0, -0.5, 0.0, 0.7, 4.0, 25.0] {
+                let e = 1e-3f32;
+                let mut o = [0f32; 2];
+                activate(act, &[z + e, z - e], &mut o);
+                let fd = (o[0] - o[1]) / (2.0 * e);
+                let mut d = [1.0f32];
+                activate_backward(act, &[z], &mut d);
+                assert!((fd - d[0]).abs() < 2e-3, "{act:?} at {z}: {fd} vs {}", d[0]);
+            }
+        }
+    }
+}

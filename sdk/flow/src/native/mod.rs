@@ -1,0 +1,447 @@
+//! [`NativeCfm`]: the trained flow model run by Rust kernels instead of libtorch.
+//!
+//! A planning call makes a few dozen network calls on batches of 4–16 trajectories of 32
+//! poses. Through libtorch each call is some 150 small operators, and on tensors this small the
+//! per-operator dispatch, allocation and oneDNN set-up cost more than the arithmetic. The native
+//! path runs the same network ([`net`]: the same layers, read by name from the same
+//! safetensors file) as a fixed sequence of batched kernels ([`kernels`]: one SGEMM per
+//! convolution over the whole batch, group normalisation and the activation), with every buffer
+//! reused from call to call. It computes the forward pass and the gradient of its input (the
+//! vector-Jacobian product guidance needs); weight gradients, and so training, stay with tch.
+//!
+//! [`NativeCfm`] implements core's [`FlowModel`] exactly as [`CfmModel`] does (same features,
+//! normalisation and output scaling), so a planner can use either; the agreement tests compare
+//! the two. It runs on the CPU, one thread per model; a GPU runs [`CfmModel`].
+
+mod kernels;
+mod net;
+
+use crate::card::ModelCard;
+use crate::error::CfmError;
+use crate::model::{CARD_FILE, CfmModel, normalise_condition};
+use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
+use net::{Net, Pool, Tape, WeightError, Weights};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+/// At most this many flow times keep their FiLM vector per condition.
+const FILM_CACHE: usize = 64;
+
+/// Forward passes kept for a later VJP at the same input (Algorithm 1's adjoint pass pulls
+/// back through the very points its rollout just evaluated): at least the integration steps
+/// of one rollout.
+const KEPT_FORWARDS: usize = 8;
+
+/// One forward pass with its input, output and tape.
+#[derive(Debug, Default)]
+struct Forward {
+    /// Bits of the flow time.
+    t: u64,
+    x: Vec<f64>,
+    batch: usize,
+    tape: Tape,
+    raw: Vec<f32>,
+    /// Last use (for least-recently-used replacement).
+    stamp: u64,
+}
+
+/// Per-condition caches and the reusable buffers of one model.
+#[derive(Debug, Default)]
+struct State {
+    cond: Option<FlowCondition>,
+    embedding: Vec<f32>,
+    /// FiLM vectors per flow time (keyed by the bits of `t`).
+    films: Vec<(u64, Vec<f32>)>,
+    /// Recent forward passes under this condition.
+    forwards: Vec<Forward>,
+    clock: u64,
+    pool: Pool,
+    feat: Vec<f32>,
+    dfeat: Vec<f32>,
+    cot: Vec<f32>,
+}
+
+/// The flow model on Rust kernels; see the [module documentation](self).
+#[derive(Debug)]
+pub struct NativeCfm {
+    card: ModelCard,
+    net: Net,
+    out_scale: [f64; 3],
+    state: Mutex<State>,
+}
+
+impl NativeCfm {
+    /// Loads a model folder (`model.toml` + the weights it names) or a card file directly,
+    /// reading the weights without libtorch. Every tensor the card's architecture needs must be
+    /// in the file with its size, and the file must hold no other tensor.
+    pub fn load(path: &Path) -> Result<Self, CfmError> {
+        let card_path = if path.is_dir() {
+            path.join(CARD_FILE)
+        } else {
+            path.to_path_buf()
+        };
+        let card = ModelCard::load(&card_path)?;
+        let dir = card_path
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_default();
+        let weights_path = dir.join(&card.weights);
+        let weights = read_weights(&weights_path)?;
+        Self::from_weights(card, weights, &weights_path)
+    }
+
+    /// The same network as a loaded (or trained) libtorch model, with its weights copied.
+    pub fn from_model(model: &CfmModel) -> Result<Self, CfmError> {
+        let mut weights = Weights::new();
+        for (name, t) in model.named_tensors("") {
+            let n = t.numel();
+            let mut v = vec![0f32; n];
+            t.f_copy_data(&mut v, n)?;
+            weights.insert(name, v);
+        }
+        Self::from_weights(model.card().clone(), weights, Path::new("<in memory>"))
+    }
+
+    fn from_weights(card: ModelCard, mut weights: Weights, path: &Path) -> Result<Self, CfmError> {
+        card.net.validate()?;
+        card.normalisation.validate()?;
+        let net = Net::load(&card.net, &mut weights).map_err(|e| weight_error(path, e))?;
+        if let Some(name) = weights.keys().next() {
+            return Err(CfmError::UnexpectedTensor {
+                path: path.to_path_buf(),
+                name: name.clone(),
+            });
+        }
+        let n = &card.normalisation;
+        let s = n.position_scale;
+        let out_scale = [
+            s * n.velocity_std[0],
+            s * n.velocity_std[1],
+            n.velocity_std[2],
+        ];
+        Ok(Self {
+            card,
+            net,
+            out_scale,
+            state: Mutex::new(State::default()),
+        })
+    }
+
+    /// The model card (architecture, normalisation, provenance).
+    pub fn card(&self) -> &ModelCard {
+        &self.card
+    }
+
+    fn lock(&self) -> Result<std::sync::MutexGuard<'_, State>, FlowError> {
+        self.state
+            .lock()
+            .map_err(|_| FlowError::Backend("native model state poisoned".into()))
+    }
+
+    /// Fills the condition embedding and the FiLM vector of `(cond, t)` in `st` (cached) and
+    /// returns the index of the FiLM vector in `st.films`.
+    fn prepare(&self, st: &mut State, cond: &FlowCondition, t: f64) -> Result<usize, FlowError> {
+        if st.cond.as_ref() != Some(cond) {
+            let len = self.card.net.bev_len();
+            if cond.bev.len() != len {
+                let cells = self.card.net.bev_cells;
+                return Err(FlowError::Shape(format!(
+                    "BEV raster has {} values, the model expects 3×{cells}×{cells} = {len}",
+                    cond.bev.len()
+                )));
+            }
+            let mut bev = vec![0f32; len];
+            let mut gv = [0f32; 4];
+            normalise_condition(
+                &self.card.normalisation,
+                &cond.bev,
+                cond.goal,
+                cond.velocity,
+                &mut bev,
+                &mut gv,
+            );
+            st.embedding = self.net.encode_condition(&bev, &gv);
+            st.films.clear();
+            st.forwards.iter_mut().for_each(|f| f.x.clear());
+            st.cond = Some(cond.clone());
+        }
+        let key = t.to_bits();
+        if let Some(i) = st.films.iter().position(|(k, _)| *k == key) {
+            return Ok(i);
+        }
+        if st.films.len() >= FILM_CACHE {
+            st.films.remove(0);
+        }
+        let film = self.net.film(t, &st.embedding);
+        st.films.push((key, film));
+        Ok(st.films.len() - 1)
+    }
+
+    /// The forward pass of poses `x` at flow time `t`: a kept one with exactly this input, or a
+    /// new one in the least recently used slot. Returns the slot and the FiLM index.
+    fn run_forward(
+        &self,
+        st: &mut State,
+        x: &[f64],
+        t: f64,
+        cond: &FlowCondition,
+    ) -> Result<(usize, usize), FlowError> {
+        let h = self.card.net.horizon;
+        let k = batch_of(x.len(), h)?;
+        let fi = self.prepare(st, cond, t)?;
+        st.clock += 1;
+        let key = t.to_bits();
+        if let Some(i) = st.forwards.iter().position(|f| f.t == key && f.x == x) {
+            st.forwards[i].stamp = st.clock;
+            return Ok((i, fi));
+        }
+        let slot = if st.forwards.len() < KEPT_FORWARDS {
+            st.forwards.push(Forward::default());
+            st.forwards.len() - 1
+        } else {
+            (0..st.forwards.len())
+                .min_by_key(|&i| st.forwards[i].stamp)
+                .unwrap_or(0)
+        };
+        write_features(x, h, self.card.normalisation.position_scale, &mut st.feat);
+        let f = &mut st.forwards[slot];
+        self.net.forward(
+            &st.feat,
+            k,
+            &st.films[fi].1,
+            &mut f.tape,
+            &mut st.pool,
+            &mut f.raw,
+        );
+        f.t = key;
+        f.x.clear();
+        f.x.extend_from_slice(x);
+        f.batch = k;
+        f.stamp = st.clock;
+        Ok((slot, fi))
+    }
+
+    /// Writes `out[k, j, c] = raw[c, k, j]·scale_c`.
+    fn write_velocity(&self, raw: &[f32], k: usize, out: &mut [f64]) -> Result<(), FlowError> {
+        let h = self.card.net.horizon;
+        for (b, o_traj) in out.chunks_exact_mut(3 * h).enumerate().take(k) {
+            for j in 0..h {
+                for c in 0..3 {
+                    o_traj[3 * j + c] = f64::from(raw[(c * k + b) * h + j]) * self.out_scale[c];
+                }
+            }
+        }
+        if out.iter().any(|v| !v.is_finite()) {
+            return Err(FlowError::NonFinite);
+        }
+        Ok(())
+    }
+}
+
+/// This machine's single-thread SGEMM rate through the native path's kernel, GFLOP/s: the
+/// median of `repeats` products of two `n × n` matrices. With the network's operation count it
+/// gives the lower bound on a call's time that `human2nav plan --bench` compares against.
+pub fn sgemm_gflops(n: usize, repeats: usize) -> f64 {
+    let a: Vec<f32> = (0..n * n).map(|i| ((i % 17) as f32 - 8.0) * 0.01).collect();
+    let b: Vec<f32> = (0..n * n).map(|i| ((i % 13) as f32 - 6.0) * 0.01).collect();
+    let mut c = vec![0f32; n * n];
+    kernels::sgemm(n, n, n, &a, n, 1, &b, n, 1, &mut c, false);
+    let mut secs: Vec<f64> = (0..repeats.max(1))
+        .map(|_| {
+            let start = std::time::Instant::now();
+            kernels::sgemm(n, n, n, &a, n, 1, &b, n, 1, &mut c, false);
+            start.elapsed().as_secs_f64()
+        })
+        .collect();
+    std::hint::black_box(&c);
+    secs.sort_by(f64::total_cmp);
+    2.0 * (n * n * n) as f64 / secs[secs.len() / 2] / 1e9
+}
+
+fn batch_of(len: usize, horizon: usize) -> Result<usize, FlowError> {
+    if len == 0 || len % (3 * horizon) != 0 {
+        return Err(FlowError::Shape(format!(
+            "x has {len} values, not a positive multiple of T·3 = {}",
+            3 * horizon
+        )));
+    }
+    Ok(len / (3 * horizon))
+}
+
+fn check_len(name: &str, got: usize, want: usize) -> Result<(), FlowError> {
+    if got != want {
+        return Err(FlowError::Shape(format!(
+            "{name} has {got} values, expected {want}"
+        )));
+    }
+    Ok(())
+}
+
+/// Network features `[5, K, T]` of metric poses (flat `[K, T, 3]`): the values of
+/// [`crate::model::trajectory_features`] of the normalised poses, channel-major over the batch.
+fn write_features(x: &[f64], h: usize, position_scale: f64, out: &mut Vec<f32>) {
+    let k = x.len() / (3 * h);
+    out.clear();
+    out.resize(5 * k * h, 0.0);
+    let inv_s = 1.0 / position_scale;
+    let plane = k * h;
+    for (b, traj) in x.chunks_exact(3 * h).enumerate() {
+        for (j, p) in traj.chunks_exact(3).enumerate() {
+            let (sin, cos) = p[2].sin_cos();
+            let i = b * h + j;
+            out[i] = (p[0] * inv_s) as f32;
+            out[plane + i] = (p[1] * inv_s) as f32;
+            out[2 * plane + i] = cos as f32;
+            out[3 * plane + i] = sin as f32;
+            out[4 * plane + i] = ((j + 1) as f64 / h as f64) as f32;
+        }
+    }
+}
+
+impl FlowModel for NativeCfm {
+    fn horizon(&self) -> usize {
+        self.card.net.horizon
+    }
+
+    fn source_std(&self) -> [f64; 3] {
+        self.card.normalisation.source_std()
+    }
+
+    fn velocity(
+        &self,
+        x: &[f64],
+        t: f64,
+        cond: &FlowCondition,
+        out: &mut [f64],
+    ) -> Result<(), FlowError> {
+        check_len("out", out.len(), x.len())?;
+        let mut st = self.lock()?;
+        let (slot, _) = self.run_forward(&mut st, x, t, cond)?;
+        let f = &st.forwards[slot];
+        self.write_velocity(&f.raw, f.batch, out)
+    }
+
+    /// The backward pass of the network input runs on the activations of the forward pass at
+    /// `(x, t)`, reused when [`FlowModel::velocity`] was just called there; the pull-back through the features `(x/s, y/s, cos θ, sin θ)` and the output
+    /// scaling is done in closed form, as in [`CfmModel`].
+    fn velocity_vjp(
+        &self,
+        x: &[f64],
+        t: f64,
+        cond: &FlowCondition,
+        cotangent: &[f64],
+        out: &mut [f64],
+        vjp: &mut [f64],
+    ) -> Result<(), FlowError> {
+        check_len("out", out.len(), x.len())?;
+        check_len("vjp", vjp.len(), x.len())?;
+        check_len("cotangent", cotangent.len(), x.len())?;
+        let h = self.card.net.horizon;
+        let mut st = self.lock()?;
+        let (slot, fi) = self.run_forward(&mut st, x, t, cond)?;
+        let State {
+            films,
+            forwards,
+            dfeat,
+            cot,
+            pool,
+            ..
+        } = &mut *st;
+        let Forward {
+            batch: k,
+            tape,
+            raw,
+            ..
+        } = &mut forwards[slot];
+        let k = *k;
+        self.write_velocity(raw, k, out)?;
+        // Cotangent of the standardised output [3, K, T]: cot[k, j, c]·scale_c.
+        cot.clear();
+        cot.resize(3 * k * h, 0.0);
+        for (b, src) in cotangent.chunks_exact(3 * h).enumerate() {
+            for j in 0..h {
+                for c in 0..3 {
+                    cot[(c * k + b) * h + j] = (src[3 * j + c] * self.out_scale[c]) as f32;
+                }
+            }
+        }
+        self.net.backward(cot, &films[fi].1, tape, pool, dfeat);
+        let inv_s = 1.0 / self.card.normalisation.position_scale;
+        let plane = k * h;
+        for (b, (o, xt)) in vjp
+            .chunks_exact_mut(3 * h)
+            .zip(x.chunks_exact(3 * h))
+            .enumerate()
+        {
+            for j in 0..h {
+                let i = b * h + j;
+                let (sin, cos) = xt[3 * j + 2].sin_cos();
+                let g = |c: usize| f64::from(dfeat[c * plane + i]);
+                o[3 * j] = g(0) * inv_s;
+                o[3 * j + 1] = g(1) * inv_s;
+                o[3 * j + 2] = -sin * g(2) + cos * g(3);
+            }
+        }
+        if vjp.iter().any(|v| !v.is_finite()) {
+            return Err(FlowError::NonFinite);
+        }
+        Ok(())
+    }
+}
+
+fn weight_error(path: &Path, e: WeightError) -> CfmError {
+    match e.found {
+        None => CfmError::MissingTensor {
+            path: path.to_path_buf(),
+            name: e.name,
+        },
+        Some(found) => CfmError::TensorShape {
+            path: path.to_path_buf(),
+            name: e.name,
+            expected: vec![e.expected as i64],
+            found: vec![found as i64],
+        },
+    }
+}
+
+/// Reads every tensor of a safetensors file as flat `f32` (stored as F32 or F64).
+fn read_weights(path: &Path) -> Result<Weights, CfmError> {
+    let corrupt = |message: String| CfmError::Corrupt {
+        path: PathBuf::from(path),
+        message,
+    };
+    let bytes = std::fs::read(path).map_err(|e| CfmError::io(path, e))?;
+    let st = safetensors::SafeTensors::deserialize(&bytes).map_err(|e| corrupt(e.to_string()))?;
+    let mut out = Weights::new();
+    for (name, view) in st.tensors() {
+        let data = view.data();
+        use safetensors::Dtype;
+        let values: Vec<f32> = match view.dtype() {
+            Dtype::F32 => data
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect(),
+            Dtype::F64 => data
+                .chunks_exact(8)
+                .map(|b| {
+                    let mut a = [0u8; 8];
+                    a.copy_from_slice(b);
+                    f64::from_le_bytes(a) as f32
+                })
+                .collect(),
+            other => {
+                return Err(corrupt(format!(
+                    "tensor `{name}` has dtype {other:?}; the native path reads F32 and F64"
+                )));
+            }
+        };
+        if values.iter().any(|v| !v.is_finite()) {
+            return Err(corrupt(format!("tensor `{name}` holds a non-finite value")));
+        }
+        out.insert(name, values);
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests;

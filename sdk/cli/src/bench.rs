@@ -305,7 +305,8 @@ pub(crate) fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::R
     }
     let model_dir = planner_cfg.model_dir(&cfg.base_dir);
     // Fail now, with the folder named, rather than once per episode.
-    load_model(&model_dir).with_context(|| format!("method `{}`", m.name))?;
+    let backend = planner_cfg.backend;
+    load_model(&model_dir, backend).with_context(|| format!("method `{}`", m.name))?;
     human2nav_flow::tch::set_num_threads(1);
 
     let mut profiles = HashMap::new();
@@ -320,7 +321,7 @@ pub(crate) fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::R
             .get(&ctx.robot.name)
             .cloned()
             .ok_or_else(|| format!("no robot profile named `{}`", ctx.robot.name))?;
-        let model = load_model(&model_dir)?;
+        let model = load_model(&model_dir, backend)?;
         let planner = RobotPlanner::new(
             profile,
             model,

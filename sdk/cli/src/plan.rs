@@ -12,11 +12,11 @@ use human2nav_core::human2nav::{Human2Nav, Human2NavSettings};
 use human2nav_core::{Observation, Planner};
 use human2nav_data::ScenarioClass;
 use human2nav_data::paths::find_workspace_root;
-use human2nav_flow::CfmModel;
+use human2nav_flow::net::Complexity;
 use human2nav_flow::planner::{
-    BevOrigin, FlowCallStats, GuidanceComparison, GuidanceSummary, LatencyStats, PlannerConfig,
-    RobotPlanner, TimedModel, bev_spec, compare_guidance, load_model, load_profile,
-    measure_latency, plan_tfs, robot_model, robot_phi,
+    Backend, BevOrigin, FlowCallStats, GuidanceComparison, GuidanceSummary, LatencyStats,
+    PlannerConfig, PlannerModel, RobotPlanner, TimedModel, bev_spec, compare_guidance, load_model,
+    load_profile, measure_latency, plan_tfs, robot_model, robot_phi,
 };
 use human2nav_sim::episode::{Episode, ScenarioTitle};
 use human2nav_sim::plan_figure::{
@@ -69,6 +69,10 @@ pub struct PlanArgs {
     /// libtorch threads (overrides the configuration).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// What runs the network: native or torch (overrides the configuration; `--bench` measures
+    /// both when this is not given).
+    #[arg(long, value_parser = parse_backend)]
+    pub backend: Option<Backend>,
     /// Output PNG [default: out/plan/<robot>-<episode index>.png under the workspace root].
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -110,6 +114,9 @@ pub fn run(args: PlanArgs) -> anyhow::Result<ExitCode> {
     }
     if let Some(t) = args.threads {
         cfg.threads = t;
+    }
+    if let Some(b) = args.backend {
+        cfg.backend = b;
     }
     if args.no_guidance {
         cfg.human2nav.guidance.enabled = false;
@@ -161,7 +168,7 @@ fn plan_one(
     step: &StepOptions,
 ) -> anyhow::Result<ExitCode> {
     let robot_path = &args.robot[0];
-    let mut rp = RobotPlanner::load(robot_path, model_dir, cfg.human2nav)?;
+    let mut rp = RobotPlanner::load_with(robot_path, model_dir, cfg.backend, cfg.human2nav)?;
     let ep = select_episode(episodes, args.index, args.id.as_deref())?;
     let obs = observation_at(ep, step)?;
     let plan = rp.planner.plan(&obs)?;
@@ -348,9 +355,9 @@ fn eval(
     );
     let mut rows = Vec::new();
     for robot in &args.robot {
-        let mut g = RobotPlanner::load(robot, model_dir, guided_settings)?;
-        let mut u = RobotPlanner::load(robot, model_dir, unguided_settings)?;
-        let mut a1 = RobotPlanner::load(robot, model_dir, alg1_settings)?;
+        let mut g = RobotPlanner::load_with(robot, model_dir, cfg.backend, guided_settings)?;
+        let mut u = RobotPlanner::load_with(robot, model_dir, cfg.backend, unguided_settings)?;
+        let mut a1 = RobotPlanner::load_with(robot, model_dir, cfg.backend, alg1_settings)?;
         let limits = *g.limits();
         let mut tfs_alg1 = Vec::with_capacity(wins.len());
         let pb = bar(wins.len(), &format!("windows ({})", g.profile.name));
@@ -403,15 +410,16 @@ fn eval(
     Ok(ExitCode::SUCCESS)
 }
 
-type TimedPlanner = Human2Nav<TimedModel<CfmModel>>;
+type TimedPlanner = Human2Nav<TimedModel<PlannerModel>>;
 
 fn timed_planner(
     robot: &Path,
     model_dir: &Path,
+    backend: Backend,
     settings: Human2NavSettings,
 ) -> anyhow::Result<(TimedPlanner, Arc<Mutex<FlowCallStats>>)> {
     let profile = load_profile(robot)?;
-    let model = load_model(model_dir)?;
+    let model = load_model(model_dir, backend)?;
     let (bev, _) = bev_spec(model.card());
     let timed = TimedModel::new(model);
     let stats = timed.stats();
@@ -433,68 +441,118 @@ fn bench(
         .map(|(_, o)| o)
         .collect();
     let robot = &args.robot[0];
+    let backends = match args.backend {
+        Some(b) => vec![b],
+        None => vec![Backend::Torch, Backend::Native],
+    };
     println!(
-        "planning latency: {} ({} windows), model {}, {} libtorch thread(s), K = {}, N = {}, M ≤ {}",
+        "planning latency: {} ({} windows), model {}, one thread, K = {}, N = {}, M ≤ {}, guided samples {}",
         robot.display(),
         wins.len(),
         model_dir.display(),
-        cfg.threads,
         cfg.human2nav.samples,
         cfg.human2nav.guidance.steps_n,
-        cfg.human2nav.guidance.iterations_m
+        cfg.human2nav.guidance.iterations_m,
+        cfg.human2nav.guided_samples
+    );
+    let unet_macs = Complexity::of(&load_model(model_dir, Backend::Native)?.card().net).unet_macs;
+    // The machine's single-thread matrix-multiply rate, measured now (the limit a call is
+    // compared with): the native kernel and libtorch's, the faster of the two counts.
+    let native_rate = human2nav_flow::native::sgemm_gflops(512, 21);
+    let torch_rate = torch_sgemm_gflops(512, 21);
+    let peak = native_rate.max(torch_rate);
+    println!(
+        "single-thread SGEMM 512³: native kernel {native_rate:.1} GFLOP/s, libtorch {torch_rate:.1} GFLOP/s; limit = {peak:.1} GFLOP/s"
     );
     println!(
-        "| mode | calls | p50 (ms) | p95 (ms) | mean (ms) | max (ms) | velocity calls | velocity (ms) | VJP calls | VJP (ms) | rest (ms) |"
+        "| mode | backend | calls | p50 (ms) | p95 (ms) | mean (ms) | network calls (fwd + VJP) | network (ms) | rest (ms) | MFLOP/call | limit (ms) | p50 / limit |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     for guided in [false, true] {
-        let mut settings = cfg.human2nav;
-        settings.guidance.enabled = guided;
-        let (mut planner, stats) = timed_planner(robot, model_dir, settings)?;
-        let warmup = 5.min(calls);
-        let pb = bar(
-            calls,
-            if guided {
-                "guided calls"
-            } else {
-                "unguided calls"
-            },
-        );
-        // Warm-up calls are timed by the wrapper too: measure them separately and subtract.
-        measure_latency(&mut planner, &wins, warmup, 0, || ())?;
-        let before = *stats
-            .lock()
-            .map_err(|_| anyhow::anyhow!("stats lock poisoned"))?;
-        let lat: LatencyStats = measure_latency(&mut planner, &wins, 0, calls, || pb.inc(1))?;
-        pb.finish_and_clear();
-        let after = *stats
-            .lock()
-            .map_err(|_| anyhow::anyhow!("stats lock poisoned"))?;
-        let n = lat.calls.max(1) as f64;
-        let vel_calls = (after.velocity_calls - before.velocity_calls) as f64 / n;
-        let vel_ms = (after.velocity_s - before.velocity_s) * 1e3 / n;
-        let vjp_calls = (after.vjp_calls - before.vjp_calls) as f64 / n;
-        let vjp_ms = (after.vjp_s - before.vjp_s) * 1e3 / n;
-        println!(
-            "| {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.1} | {:.2} | {:.1} | {:.2} | {:.2} |",
-            if guided { "guided" } else { "unguided" },
-            lat.calls,
-            lat.p50_ms,
-            lat.p95_ms,
-            lat.mean_ms,
-            lat.max_ms,
-            vel_calls,
-            vel_ms,
-            vjp_calls,
-            vjp_ms,
-            lat.mean_ms - vel_ms - vjp_ms
-        );
+        for &backend in &backends {
+            let mut settings = cfg.human2nav;
+            settings.guidance.enabled = guided;
+            let (mut planner, stats) = timed_planner(robot, model_dir, backend, settings)?;
+            let mode = if guided { "guided" } else { "unguided" };
+            let pb = bar(calls, &format!("{mode} calls ({})", backend_name(backend)));
+            let lock = || {
+                stats
+                    .lock()
+                    .map(|s| *s)
+                    .map_err(|_| anyhow::anyhow!("stats lock poisoned"))
+            };
+            // Warm-up calls are timed by the wrapper too: measure them separately and subtract.
+            measure_latency(&mut planner, &wins, 5.min(calls), 0, || ())?;
+            let before = lock()?;
+            let lat: LatencyStats = measure_latency(&mut planner, &wins, 0, calls, || pb.inc(1))?;
+            pb.finish_and_clear();
+            let d = lock()?.since(&before);
+            let n = lat.calls.max(1) as f64;
+            let net_ms = (d.velocity_s + d.vjp_s) * 1e3 / n;
+            let mflop = d.network_flops(unet_macs) / n / 1e6;
+            // MFLOP / (GFLOP/s) = ms.
+            let limit_ms = mflop / peak;
+            println!(
+                "| {mode} | {} | {} | {:.2} | {:.2} | {:.2} | {:.1} + {:.1} | {:.2} | {:.2} | {:.0} | {:.2} | {:.1} |",
+                backend_name(backend),
+                lat.calls,
+                lat.p50_ms,
+                lat.p95_ms,
+                lat.mean_ms,
+                d.velocity_calls as f64 / n,
+                d.vjp_calls as f64 / n,
+                net_ms,
+                lat.mean_ms - net_ms,
+                mflop,
+                limit_ms,
+                lat.p50_ms / limit_ms
+            );
+        }
     }
     println!(
-        "per call: velocity/VJP = flow-network calls (batch K, condition encoding included in the first), \
-         rest = everything else (BEV, sampling arithmetic, Φ, adjoint, selection)"
+        "per call: network = flow-network calls (the condition encoding included in the first); rest = everything \
+         else (BEV, sampling arithmetic, Φ, adjoint, last-step correction QPs, selection). MFLOP/call counts the \
+         network's convolutions (a VJP is its forward pass plus the transposed products); limit = MFLOP/call at \
+         the SGEMM rate above, so p50 / limit is how far a call is from the machine's arithmetic bound."
     );
     Ok(ExitCode::SUCCESS)
+}
+
+fn parse_backend(s: &str) -> Result<Backend, String> {
+    match s {
+        "native" => Ok(Backend::Native),
+        "torch" => Ok(Backend::Torch),
+        other => Err(format!(
+            "unknown backend `{other}` (expected native or torch)"
+        )),
+    }
+}
+
+fn backend_name(b: Backend) -> &'static str {
+    match b {
+        Backend::Native => "native",
+        Backend::Torch => "torch",
+    }
+}
+
+/// libtorch's single-thread SGEMM rate on `n × n` matrices (median of `repeats`), GFLOP/s.
+fn torch_sgemm_gflops(n: i64, repeats: usize) -> f64 {
+    use human2nav_flow::tch::{Device, Kind, Tensor};
+    let threads = human2nav_flow::tch::get_num_threads();
+    human2nav_flow::tch::set_num_threads(1);
+    let a = Tensor::randn([n, n], (Kind::Float, Device::Cpu));
+    let b = Tensor::randn([n, n], (Kind::Float, Device::Cpu));
+    let _ = a.matmul(&b);
+    let mut secs: Vec<f64> = (0..repeats.max(1))
+        .map(|_| {
+            let start = std::time::Instant::now();
+            let _ = std::hint::black_box(a.matmul(&b));
+            start.elapsed().as_secs_f64()
+        })
+        .collect();
+    human2nav_flow::tch::set_num_threads(threads);
+    secs.sort_by(f64::total_cmp);
+    2.0 * (n * n * n) as f64 / secs[secs.len() / 2] / 1e9
 }
 
 #[cfg(test)]

@@ -274,9 +274,11 @@ pub struct GuidanceWorkspace {
     ws: Vec<f64>,
     /// Controls `u_i`, `N·K·T·3`.
     u: Vec<f64>,
-    /// Gradient `∂J/∂u_i`, `N·K·T·3`.
-    grad_u: Vec<f64>,
+    /// Direction `d_i` of the control update, `N·K·T·3`: `∂J/∂u_i` or its preconditioned form.
+    dir: Vec<f64>,
+    /// The co-state `μ_{i+1}`, then `μ_i`, during the backward pass.
     mu: Vec<f64>,
+    /// Cotangent `S_wᵀ·μ_{i+1}` of the flow model's VJP.
     cot: Vec<f64>,
     /// `S_xᵀ·μ_{i+1}` per waypoint during the backward pass.
     back: Vec<f64>,
@@ -315,7 +317,7 @@ impl GuidanceWorkspace {
         self.xs.resize((steps + 1) * m, 0.0);
         self.ws.resize(steps * m, 0.0);
         self.u.resize(steps * m, 0.0);
-        self.grad_u.resize(steps * m, 0.0);
+        self.dir.resize(steps * m, 0.0);
         for b in [
             &mut self.mu,
             &mut self.cot,
@@ -615,90 +617,108 @@ fn solve3(a: &Jacobian3, v: [f64; 3]) -> Option<[f64; 3]> {
     Some(out)
 }
 
-/// Adjoint backward pass: fills `grad_u` with `∂Φ(x_N)/∂u_i` (co-states clipped to `clip`).
+/// What the backward pass leaves in `dir` for the control update, and how it treats the
+/// co-states.
+#[derive(Clone, Copy, Debug)]
+enum Direction<'a> {
+    /// `d_i = ∂J/∂u_i = S_wᵀ·μ_{i+1}`, every co-state clipped (without preconditioning, and
+    /// [`control_gradient`] with clipping off).
+    Gradient,
+    /// With preconditioning: `μ_N` preconditioned by the metric, `d_i = Δt²·S_w⁻¹·μ_{i+1}`, the
+    /// inner co-states not clipped.
+    GaussNewton(&'a TwistMetric),
+}
+
+/// Adjoint backward pass (Alg. 1 lines 6-11): `μ_N = clip(∇_{x_N} Φ)`, then per step
+/// `μ_i = clip(S_xᵀ·μ_{i+1} + (∂f/∂x)ᵀ·S_wᵀ·μ_{i+1})`, filling `dir` as `direction` says.
 fn backward(
     model: &(impl FlowModel + ?Sized),
     cond: &FlowCondition,
     ws: &mut GuidanceWorkspace,
     clip: f64,
-    metric: Option<&TwistMetric>,
+    direction: Direction<'_>,
     iteration: usize,
 ) -> Result<(), GuidanceError> {
     let (k, t) = (ws.samples, ws.horizon);
     let m = ws.size();
     let n = ws.steps;
     let dt = 1.0 / n as f64;
-    // μ_N: ∇Φ at the T generated poses (pose 0 of the extended batch is fixed).
+    // μ_N: ∇Φ at the T generated poses (pose 0 of the extended batch is fixed), clipped per
+    // waypoint (line 6).
     for b in 0..k {
         let src = &ws.ext_grad[(b * (t + 1) + 1) * 3..(b + 1) * (t + 1) * 3];
         ws.mu[b * t * 3..(b + 1) * t * 3].copy_from_slice(src);
     }
-    // Alg. 1 line 6: clip the terminal gradient per waypoint, then precondition it.
     for c in ws.mu.chunks_exact_mut(3) {
         clip3(c, clip);
     }
-    if let Some(metric) = metric {
+    let mut clip_inner = clip;
+    if let Direction::GaussNewton(metric) = direction {
         metric.apply(&mut ws.mu, &ws.ext, k, t, &mut ws.gxi, &mut ws.tri);
+        // After preconditioning the co-states are steps, not gradients, and the adaptive step
+        // bounds them.
+        clip_inner = f64::INFINITY;
     }
-    // Lines 10 and 12 clip co-states and control gradients in the plain method only: after
-    // preconditioning they are steps, not gradients, and the adaptive step bounds them.
-    let clip_inner = if metric.is_some() {
-        f64::INFINITY
-    } else {
-        clip
-    };
     for i in (0..n).rev() {
-        let x = &ws.xs[i * m..(i + 1) * m];
-        let w = &ws.ws[i * m..(i + 1) * m];
-        let g = &mut ws.grad_u[i * m..(i + 1) * m];
-        // Cotangent S_wᵀ·μ_{i+1}: the control gradient and the input of the VJP.
-        for j in 0..m / 3 {
-            let r = 3 * j..3 * j + 3;
-            let (sx, sw) = euler_step_jacobians(
-                Pose2::from_slice(&x[r.clone()]),
-                Twist2::from_slice(&w[r.clone()]),
-                dt,
-            );
-            let mu = [ws.mu[3 * j], ws.mu[3 * j + 1], ws.mu[3 * j + 2]];
-            let c = transpose_apply(&sw, mu);
-            ws.back[r.clone()].copy_from_slice(&transpose_apply(&sx, mu));
-            // With the metric, the control moves along S_w⁻¹·μ·Δt² (Gauss-Newton through the
-            // step) so that the realised change of the pose is the preconditioned direction.
-            let step_dir = match metric.and_then(|_| solve3(&sw, mu)) {
-                Some(d) => [d[0] * dt * dt, d[1] * dt * dt, d[2] * dt * dt],
-                None => c,
-            };
-            g[r.clone()].copy_from_slice(&step_dir);
-            ws.cot[r].copy_from_slice(&c);
-        }
+        pull_back_step(ws, i, dt, direction);
+        // μ_0 is never needed.
         if i == 0 {
             break;
         }
-        let t_i = i as f64 * dt;
-        model.velocity_vjp(x, t_i, cond, &ws.cot, &mut ws.fout, &mut ws.vjp)?;
+        let x = &ws.xs[i * m..(i + 1) * m];
+        model.velocity_vjp(x, i as f64 * dt, cond, &ws.cot, &mut ws.fout, &mut ws.vjp)?;
         if !all_finite(&ws.vjp) {
             return Err(GuidanceError::NonFinite {
                 stage: "flow vector-Jacobian product",
                 iteration,
             });
         }
-        // μ_i = clip(S_xᵀ·μ_{i+1} + vjp).
-        for j in 0..m / 3 {
-            let r = 3 * j..3 * j + 3;
-            let out = &mut ws.mu[r.clone()];
-            for d in 0..3 {
-                out[d] = ws.back[3 * j + d] + ws.vjp[3 * j + d];
+        // μ_i = clip(S_xᵀ·μ_{i+1} + vjp) (lines 9-10).
+        for (j, out) in ws.mu.chunks_exact_mut(3).enumerate() {
+            for c in 0..3 {
+                out[c] = ws.back[3 * j + c] + ws.vjp[3 * j + c];
             }
             clip3(out, clip_inner);
         }
     }
-    if !all_finite(&ws.grad_u) {
+    if !all_finite(&ws.dir) {
         return Err(GuidanceError::NonFinite {
             stage: "adjoint pass",
             iteration,
         });
     }
     Ok(())
+}
+
+/// One step of the backward pass before the model's VJP: with `(S_x, S_w)` the Jacobians of the
+/// step `x_{i+1} = x_i·exp(Δt·w_i)` at the forward pass's `(x_i, w_i)`, writes `S_xᵀ·μ_{i+1}`
+/// into `back`, the cotangent `S_wᵀ·μ_{i+1}` into `cot` and `d_i` into `dir`.
+fn pull_back_step(ws: &mut GuidanceWorkspace, i: usize, dt: f64, direction: Direction<'_>) {
+    let m = ws.size();
+    let x = &ws.xs[i * m..(i + 1) * m];
+    let w = &ws.ws[i * m..(i + 1) * m];
+    let d = &mut ws.dir[i * m..(i + 1) * m];
+    for j in 0..m / 3 {
+        let r = 3 * j..3 * j + 3;
+        let (sx, sw) = euler_step_jacobians(
+            Pose2::from_slice(&x[r.clone()]),
+            Twist2::from_slice(&w[r.clone()]),
+            dt,
+        );
+        let mu = [ws.mu[3 * j], ws.mu[3 * j + 1], ws.mu[3 * j + 2]];
+        let c = transpose_apply(&sw, mu);
+        ws.back[r.clone()].copy_from_slice(&transpose_apply(&sx, mu));
+        ws.cot[r.clone()].copy_from_slice(&c);
+        match direction {
+            Direction::Gradient => d[r].copy_from_slice(&c),
+            // The control moves along S_w⁻¹·μ·Δt² (Gauss-Newton through the step) so that the
+            // realised change of the pose is the preconditioned direction.
+            Direction::GaussNewton(_) => {
+                let step = solve3(&sw, mu).map_or(c, |v| v.map(|e| e * dt * dt));
+                d[r].copy_from_slice(&step);
+            }
+        }
+    }
 }
 
 fn start(
@@ -768,8 +788,8 @@ pub fn control_gradient(
     ws.u.copy_from_slice(controls);
     forward(model, cond, ws, 0)?;
     terminal_cost(phi, ctx, ws, 0)?;
-    backward(model, cond, ws, f64::INFINITY, None, 0)?;
-    grad.copy_from_slice(&ws.grad_u);
+    backward(model, cond, ws, f64::INFINITY, Direction::Gradient, 0)?;
+    grad.copy_from_slice(&ws.dir);
     Ok(ws.phi.clone())
 }
 
@@ -860,35 +880,11 @@ fn optimise(
 
     let unguided = ws.final_state().to_vec();
     let phi_before = ws.phi.clone();
-    let mut iterations_run = 0;
-    if settings.enabled {
-        ws.step.clear();
-        ws.step.resize(ws.samples, settings.learning_rate);
-        for iteration in 1..=settings.iterations_m {
-            let mut any = false;
-            for (a, p) in ws.active.iter_mut().zip(&ws.phi) {
-                *a = *p >= settings.tolerance;
-                any |= *a;
-            }
-            if !any {
-                break;
-            }
-            let metric = settings
-                .precondition
-                .then(|| TwistMetric::new(ctx, settings.steps_n));
-            backward(model, cond, ws, settings.clip, metric.as_ref(), iteration)?;
-            if settings.adaptive_step {
-                ws.save();
-            }
-            update_controls(ws, settings);
-            forward(model, cond, ws, iteration)?;
-            terminal_cost(phi, ctx, ws, iteration)?;
-            if settings.adaptive_step {
-                ws.accept_or_restore();
-            }
-            iterations_run = iteration;
-        }
-    }
+    let iterations_run = if settings.enabled {
+        iterate_adaptive(model, cond, phi, ctx, settings, ws)?
+    } else {
+        0
+    };
     ws.plain = iterations_run == 0;
     Ok(GuidanceResult {
         samples: ws.samples,
@@ -901,13 +897,57 @@ fn optimise(
     })
 }
 
-/// `u_i ← β·u_i − γ_k·clip(∂J/∂u_i)` for every active sample `k`.
-fn update_controls(ws: &mut GuidanceWorkspace, settings: &GuidanceSettings) {
+/// The iterations of Algorithm 1 (module docs); returns how many ran.
+fn iterate_adaptive(
+    model: &(impl FlowModel + ?Sized),
+    cond: &FlowCondition,
+    phi: &Phi,
+    ctx: &ConstraintContext<'_>,
+    settings: &GuidanceSettings,
+    ws: &mut GuidanceWorkspace,
+) -> Result<usize, GuidanceError> {
+    ws.step.clear();
+    ws.step.resize(ws.samples, settings.learning_rate);
+    let metric = settings
+        .precondition
+        .then(|| TwistMetric::new(ctx, settings.steps_n));
+    let (direction, clip_dir) = match &metric {
+        Some(metric) => (Direction::GaussNewton(metric), f64::INFINITY),
+        None => (Direction::Gradient, settings.clip),
+    };
+    let mut iterations_run = 0;
+    for iteration in 1..=settings.iterations_m {
+        let mut any = false;
+        for (a, p) in ws.active.iter_mut().zip(&ws.phi) {
+            *a = *p >= settings.tolerance;
+            any |= *a;
+        }
+        if !any {
+            break;
+        }
+        backward(model, cond, ws, settings.clip, direction, iteration)?;
+        if settings.adaptive_step {
+            ws.save();
+        }
+        update_controls(ws, settings.momentum, clip_dir);
+        forward(model, cond, ws, iteration)?;
+        terminal_cost(phi, ctx, ws, iteration)?;
+        if settings.adaptive_step {
+            ws.accept_or_restore();
+        }
+        iterations_run = iteration;
+    }
+    Ok(iterations_run)
+}
+
+/// Line 12: `u_i ← β·u_i − γ_k·d_i` for every active sample `k` (`γ_k` its step), `d_i` first
+/// clipped per waypoint to `clip_dir`.
+fn update_controls(ws: &mut GuidanceWorkspace, momentum: f64, clip_dir: f64) {
     let m = ws.size();
     let per_sample = ws.horizon * 3;
     for i in 0..ws.steps {
         let u = &mut ws.u[i * m..(i + 1) * m];
-        let g = &mut ws.grad_u[i * m..(i + 1) * m];
+        let g = &mut ws.dir[i * m..(i + 1) * m];
         for (b, active) in ws.active.iter().enumerate() {
             if !active {
                 continue;
@@ -918,11 +958,9 @@ fn update_controls(ws: &mut GuidanceWorkspace, settings: &GuidanceSettings) {
                 .chunks_exact_mut(3)
                 .zip(g[r].chunks_exact_mut(3))
             {
-                if !settings.precondition {
-                    clip3(gc, settings.clip);
-                }
+                clip3(gc, clip_dir);
                 for d in 0..3 {
-                    uc[d] = settings.momentum * uc[d] - lr * gc[d];
+                    uc[d] = momentum * uc[d] - lr * gc[d];
                 }
             }
         }

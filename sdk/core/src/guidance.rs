@@ -1,6 +1,18 @@
 //! Feasibility-guided sampling (paper Algorithm 1, E-MSA with a PMP adjoint), generic over
 //! [`FlowModel`] so it runs and is tested without libtorch.
 //!
+//! Two variants share the rollout, the cost, the adjoint and the control update, selected by
+//! [`GuidanceSettings::variant`]:
+//!
+//! * **paper** ([`GuidanceVariant::Paper`]): Algorithm 1 lines 5-14 as printed, see "The paper
+//!   variant" below;
+//! * **adaptive** ([`GuidanceVariant::Adaptive`], the default): the project's variant, see "The
+//!   adaptive variant" below. It differs from the paper in five ways: the control update uses
+//!   the exact gradient `∂J/∂u_i` (or a preconditioned form) instead of `μ_{t_i}`; the model's
+//!   Jacobian is taken at `x_i` (exact for the forward pass) instead of `x_i + u_i`; the step is
+//!   adaptive per sample with an early stop; `β = 1` by default; and a planner guides a
+//!   shortlist of the samples.
+//!
 //! # Integration on SE(2)
 //!
 //! A sample is `T` waypoint poses, flat `[K, T, 3]` for `K` samples. Starting from given poses
@@ -9,6 +21,8 @@
 //! Eq. 6 added in the algebra are taken, per waypoint:
 //!
 //! `x_{i+1} = x_i · exp(Δt·w_i)`, `w_i = f(x_i, t_i, c) + u_i`, `t_i = i/N`, `Δt = 1/N`.
+//!
+//! The stored control `u_i` is a velocity in the algebra, in both variants.
 //!
 //! # Cost
 //!
@@ -24,27 +38,70 @@
 //! differentiates, and in which the step Jacobians have closed forms
 //! ([`se2::euler_step_jacobians`](crate::se2::euler_step_jacobians); the angle wrap has
 //! derivative 1). With `S_x = ∂(x·exp(Δt·w))/∂x` and `S_w = ∂(x·exp(Δt·w))/∂w` (which contains
-//! the factor `Δt`), per waypoint:
+//! the factor `Δt`) at the forward pass's `(x_i, w_i)`, per waypoint:
 //!
 //! * `μ_N = clip(∇_{x_N} Φ)` (Alg. 1 line 6),
 //! * `∂J/∂u_i = S_wᵀ·μ_{i+1}`,
-//! * `μ_i = clip(S_xᵀ·μ_{i+1} + (∂f/∂x_i)ᵀ·S_wᵀ·μ_{i+1})` (lines 7-10), the second product by
-//!   [`FlowModel::velocity_vjp`] with cotangent `S_wᵀ·μ_{i+1}`; `μ_0` is never needed, so the
-//!   backward pass makes `N − 1` VJP calls.
+//! * `μ_i = clip(S_xᵀ·μ_{i+1} + (∂f/∂x)ᵀ·S_wᵀ·μ_{i+1})` (lines 7-10), the second product by
+//!   [`FlowModel::velocity_vjp`] with cotangent `S_wᵀ·μ_{i+1}`, evaluated at `x_i` (adaptive:
+//!   the exact adjoint of the rollout) or at `x_i ⊕ u_{t_i}` (paper, line 8).
 //!
-//! `clip(·)` rescales each waypoint's 3-vector to a Euclidean norm of at most
-//! [`GuidanceSettings::clip`]. [`control_gradient`] returns exactly this gradient (unclipped) and
-//! is checked against finite differences in the tests.
+//! `clip(·)` rescales each waypoint's 3-vector to a Euclidean norm of at most the clip setting
+//! ([`GuidanceSettings::clip`], [`PaperSettings::clip`]). [`control_gradient`] returns the
+//! adaptive variant's gradient (unclipped) and is checked against finite differences in the
+//! tests.
 //!
-//! # Control update (Alg. 1 line 12)
+//! # The paper variant
 //!
-//! `u_i ← β·u_i − γ_k·d_i` with `γ_k` the step of sample `k` (starting at
-//! [`GuidanceSettings::learning_rate`]) and `β` = [`GuidanceSettings::momentum`]. With `β < 1`
-//! and the plain direction this is gradient descent on `Φ(x_N) + (1 − β)/(2γ)·Σ_i ‖u_i‖²`, the
-//! effort penalty `∫L(u)` of Eq. 7; `β = 1` (the default) leaves the intervention to be bounded
-//! by the tolerance and the small number of iterations.
+//! Parameters [`PaperSettings`] (γ, β, clip) and [`GuidanceSettings::iterations_m`] (`M`),
+//! [`GuidanceSettings::steps_n`] (`N`). The printed algorithm is written in a flat space with
+//! the step `Δt` folded into `f`; on SE(2), with `a ⊕ ξ = a·exp(ξ)` (the right composition of
+//! Eq. 5) and the control `u_{t_i}` of the paper a displacement in the algebra, each line is:
 //!
-//! **Plain direction** (`precondition = false`, the paper's algorithm): `d_i = clip(∂J/∂u_i)`.
+//! * **line 3**: `u_{t_i} = 0`; `x_0` is given (the sampler's draw).
+//! * **line 5**: `x_{i+1} = x_i ⊕ (Δt·f(x_i, t_i, c) + u_{t_i}) = x_i·exp(Δt·f(x_i, t_i, c) +
+//!   u_{t_i})`. This is the rollout above with `u_{t_i} = Δt·u_i`: the workspace stores
+//!   `u_i = u_{t_i}/Δt` so that both variants share one forward pass.
+//! * **line 6**: `μ_T = clip(∇_{x_N} Φ(x_N))`, the co-state of the final poses in coordinates.
+//! * **lines 7-10**: for `i = N−1` down to `0`, `μ_i = clip(∇_{x_i}J(x_i)ᵀ·μ_{i+1})` with the
+//!   step Jacobian of line 5, `∇_{x_i}J = S_x + S_w·∂f/∂x`, whose model Jacobian `∂f/∂x` is
+//!   taken at `x_i ⊕ u_{t_i} = x_i·exp(u_{t_i})` at flow time `t_i`, as line 8's
+//!   `J(x) = x + u + f(x + u)` prescribes: the VJP is called at `x_i ⊕ u_{t_i}`, not at `x_i`.
+//!   `S_x`, `S_w` are those of the step actually taken (line 5); in a flat chart (`S_x = I`,
+//!   `S_w = Δt·I`) this is exactly `μ_i = μ_{i+1} + Δt·(∂f/∂x(x_i + u_i))ᵀ·μ_{i+1}`. Every
+//!   `μ_i` is clipped, `μ_0` included (line 12 needs it).
+//! * **line 12**: `u_{t_i} ← β·u_{t_i} − γ·μ_{t_i}` for every `i` and every sample, i.e.
+//!   `u_i ← β·u_i − (γ/Δt)·μ̃_i` on the stored velocity. `u_{t_i}` lives in se(2) at `x_i`
+//!   (body frame) while `μ_i` is carried in world coordinates, so the update uses `μ_{t_i}`
+//!   in the same space: `μ̃_i = (R(θ_i)ᵀ·(μ_x, μ_y), μ_θ)`, the gradient with respect to a
+//!   right perturbation `x_i·exp(δ)` (the identity in a flat chart; same norm, so the clip is
+//!   unchanged). No adaptive step, no acceptance test.
+//! * **lines 4 and 13**: exactly `M` iterations; no tolerance and no early stop.
+//! * **line 14**: the rollout after the last update is the result.
+//!
+//! Network calls: `N` for the first rollout, then `2N` per iteration (`N` VJPs, `N` forward).
+//!
+//! Line 12 uses `μ_{t_i}`, the co-state *at* `x_i`. With line 5's forward pass the gradient
+//! with respect to `u_{t_i}` is the pull-back of `μ_{i+1}` through the step (the adaptive
+//! variant's direction); `μ_{t_i}` would be that gradient if the pass were `x_{i+1} = J(x_i)`
+//! of line 8 (control applied before the flow step, so that `∂J/∂u = ∂J/∂x`). As printed the
+//! update is therefore not an exact gradient step and Φ need not fall: on a field that maps
+//! every `x_{N−1}` onto one target ([`analytic::GeodesicTarget`]) `μ_{t_{N−1}}`, and with it
+//! every `μ_{t_i}`, vanishes and the samples are left as they are; and, with no acceptance
+//! test, a step past the stiffness of Φ's acceleration term raises Φ (measured numbers in the
+//! tests). β < 1 makes a control the co-states stop asking for decay geometrically (the
+//! minimal-intervention effort of Eq. 7). Φ is returned before and after, as for the other
+//! variant; a planner using this variant guides every sample.
+//!
+//! # The adaptive variant
+//!
+//! **Control update** (line 12): `u_i ← β·u_i − γ_k·d_i` with `γ_k` the step of sample `k`
+//! (starting at [`GuidanceSettings::learning_rate`]) and `β` = [`GuidanceSettings::momentum`].
+//! With `β < 1` and the plain direction this is gradient descent on `Φ(x_N) + (1 − β)/(2γ)·Σ_i
+//! ‖u_i‖²`, the effort penalty `∫L(u)` of Eq. 7; `β = 1` (the default) leaves the intervention
+//! to be bounded by the tolerance and the small number of iterations.
+//!
+//! **Plain direction** (`precondition = false`): `d_i = clip(∂J/∂u_i)`, the exact gradient.
 //! On the kinematic costs of Φ this is badly conditioned: the quantities are first and second
 //! finite differences of the poses at `dt = 0.1 s`, so a uniform over-speed only pulls the last
 //! waypoint back (interior gradients cancel), while the acceleration term is `1/dt²` stiffer than
@@ -78,17 +135,18 @@
 //! is only linearised, so large yaw-rate and curvature violations are reduced but not always
 //! removed within `M` iterations (see the tests for measured numbers).
 //!
-//! # Iterations and early stop
+//! **Iterations and early stop.** One iteration is a backward pass, a control update and a new
+//! forward rollout; the last accepted rollout is the result (line 14). The first rollout
+//! (`u = 0`) is the unguided sample. A sample whose `Φ` is below [`GuidanceSettings::tolerance`]
+//! is frozen (its controls are not updated, so a feasible sample is left exactly as it is); the
+//! loop stops once every sample is frozen (so in particular once their mean `Φ` is below the
+//! tolerance), or after `M` iterations. Network calls: `N` for the first rollout, then `2N − 1`
+//! per iteration (`μ_0` is never needed).
 //!
-//! One iteration is a backward pass, a control update and a new forward rollout; the last
-//! accepted rollout is the result (line 14). The first rollout (`u = 0`) is the unguided sample.
-//! A sample whose `Φ` is below [`GuidanceSettings::tolerance`] is frozen (its controls are not
-//! updated, so a feasible sample is left exactly as it is); the loop stops once every sample is
-//! frozen (so in particular once their mean `Φ` is below the tolerance), or after `M`
-//! iterations. Network calls: `N` for the first rollout, then `2N − 1` per iteration.
+//! # Both variants
 //!
 //! Nothing non-finite leaves: a non-finite pose, velocity, cost or gradient is a
-//! [`GuidanceError::NonFinite`] naming the stage.
+//! [`GuidanceError::NonFinite`] naming the stage (a planner then falls back to stopping).
 //!
 //! All buffers live in a reusable [`GuidanceWorkspace`]; once it has seen a batch of a given
 //! shape, guidance allocates nothing but its result.
@@ -100,21 +158,76 @@ use crate::flow::{FlowCondition, FlowError, FlowModel};
 use crate::se2::{Jacobian3, Pose2, Twist2, euler_step_jacobians, transpose_apply};
 use serde::{Deserialize, Serialize};
 
+/// Which form of Algorithm 1 runs (`variant` in the TOML table).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GuidanceVariant {
+    /// The project's variant (the default): exact adjoint gradient `∂J/∂u_i`, optional
+    /// preconditioning, per-sample adaptive step, samples below the tolerance frozen and an
+    /// early stop; parameters [`GuidanceSettings::learning_rate`], [`GuidanceSettings::momentum`],
+    /// [`GuidanceSettings::clip`], [`GuidanceSettings::tolerance`],
+    /// [`GuidanceSettings::precondition`] and [`GuidanceSettings::adaptive_step`].
+    #[default]
+    Adaptive,
+    /// Algorithm 1 as printed (module docs, "The paper variant"), with the parameters of
+    /// [`GuidanceSettings::paper`]; the adaptive variant's parameters are ignored. A planner
+    /// guides every sample with it.
+    Paper,
+}
+
+/// Parameters of the paper variant (the `paper` sub-table, every field optional).
+///
+/// Defaults: `learning_rate = 1e-4`, `momentum = 0.9`, `clip = 10.0`. The paper gives no
+/// values: β = 0.9 is a choice (the common momentum default; a decay of 10 % of the control per
+/// iteration), `clip` is the adaptive variant's, and γ is the best of a sweep on the analytic
+/// fields of the tests (`paper_variant_step_sizes`: the violation cases on a constant field,
+/// `N = 10`, `M = 8`; Φ falls to 0.24 of its value on average, while 5·10⁻⁴ and above raise
+/// it). Not tuned on the trained model.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PaperSettings {
+    /// `γ` of line 12, `u_{t_i} ← β·u_{t_i} − γ·μ_{t_i}`: metres (radians) of control per unit
+    /// of co-state. Finite, > 0.
+    pub learning_rate: f64,
+    /// `β` of line 12, in `(0, 1]`: with `β < 1` a control the co-state no longer asks for
+    /// decays geometrically, the effort penalty of Eq. 7.
+    pub momentum: f64,
+    /// Largest Euclidean norm of a waypoint's 3-vector in `μ_T` (line 6) and in every `μ_{t_i}`
+    /// (line 10). Finite, > 0.
+    pub clip: f64,
+}
+
+impl Default for PaperSettings {
+    fn default() -> Self {
+        Self {
+            learning_rate: 1e-4,
+            momentum: 0.9,
+            clip: 10.0,
+        }
+    }
+}
+
 /// Parameters of Algorithm 1 (TOML table, every field optional).
 ///
-/// Defaults: `enabled = true`, `steps_n = 10`, `iterations_m = 8`, `learning_rate = 0.03`,
-/// `momentum = 1.0`, `clip = 10.0`, `tolerance = 0.01`, `precondition = true`,
-/// `adaptive_step = true`. See the module docs for what each does; the step and tolerance were
-/// chosen on the analytic fields of the tests (a unit-less step: with preconditioning, 1 would
-/// move each violated twist component by about its own limit per iteration).
+/// Defaults: `variant = "adaptive"`, `enabled = true`, `steps_n = 10`, `iterations_m = 8`,
+/// `learning_rate = 0.03`, `momentum = 1.0`, `clip = 10.0`, `tolerance = 0.01`,
+/// `precondition = true`, `adaptive_step = true`, and the [`PaperSettings`] defaults. See the
+/// module docs for what each does; the step and tolerance were chosen on the analytic fields of
+/// the tests (a unit-less step: with preconditioning, 1 would move each violated twist component
+/// by about its own limit per iteration). `enabled`, `steps_n` and `iterations_m` apply to both
+/// variants; `learning_rate` to `adaptive_step` to the adaptive variant only, `paper` to the
+/// paper variant only.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GuidanceSettings {
+    /// Which form of Algorithm 1 runs.
+    pub variant: GuidanceVariant,
     /// When false, sampling is the plain rollout (the "w/o guidance" ablation).
     pub enabled: bool,
     /// Number of Euler integration steps `N` (≥ 1).
     pub steps_n: usize,
-    /// Maximum number of optimisation iterations `M` (0 disables guidance).
+    /// Number of optimisation iterations `M`: at most (adaptive) or exactly (paper); 0 disables
+    /// guidance.
     pub iterations_m: usize,
     /// Initial step size `γ` of the control update (Algorithm 1's γ; not the softplus sharpness
     /// γ of Eq. 8, which is [`GuidanceWeights::gamma`](crate::GuidanceWeights)). Finite, ≥ 0.
@@ -132,6 +245,8 @@ pub struct GuidanceSettings {
     /// Per-sample adaptive step: an update that raises a sample's Φ is undone and its step
     /// halved; an accepted one grows the step by half.
     pub adaptive_step: bool,
+    /// The paper variant's `γ`, `β` and clip (validated whichever variant is selected).
+    pub paper: PaperSettings,
 }
 
 /// Factor applied to a sample's step size after an accepted update.
@@ -143,6 +258,7 @@ pub const STEP_SHRINK: f64 = 0.5;
 impl Default for GuidanceSettings {
     fn default() -> Self {
         Self {
+            variant: GuidanceVariant::default(),
             enabled: true,
             steps_n: 10,
             iterations_m: 8,
@@ -152,6 +268,7 @@ impl Default for GuidanceSettings {
             tolerance: 1e-2,
             precondition: true,
             adaptive_step: true,
+            paper: PaperSettings::default(),
         }
     }
 }
@@ -185,6 +302,22 @@ impl GuidanceSettings {
                 "tolerance",
                 format!("{} must be finite and ≥ 0", self.tolerance),
             );
+        }
+        let p = &self.paper;
+        if !(p.learning_rate.is_finite() && p.learning_rate > 0.0) {
+            return bad(
+                "paper.learning_rate",
+                format!("{} must be finite and > 0", p.learning_rate),
+            );
+        }
+        if !(p.momentum > 0.0 && p.momentum <= 1.0) {
+            return bad(
+                "paper.momentum",
+                format!("{} must lie in (0, 1]", p.momentum),
+            );
+        }
+        if !(p.clip.is_finite() && p.clip > 0.0) {
+            return bad("paper.clip", format!("{} must be finite and > 0", p.clip));
         }
         Ok(())
     }
@@ -274,12 +407,17 @@ pub struct GuidanceWorkspace {
     ws: Vec<f64>,
     /// Controls `u_i`, `N·K·T·3`.
     u: Vec<f64>,
-    /// Gradient `∂J/∂u_i`, `N·K·T·3`.
-    grad_u: Vec<f64>,
+    /// Direction `d_i` of the control update, `N·K·T·3`: `∂J/∂u_i` or its preconditioned form
+    /// (adaptive variant), `μ_{t_i}` (paper variant).
+    dir: Vec<f64>,
+    /// The co-state `μ_{i+1}`, then `μ_i`, during the backward pass.
     mu: Vec<f64>,
+    /// Cotangent `S_wᵀ·μ_{i+1}` of the flow model's VJP.
     cot: Vec<f64>,
     /// `S_xᵀ·μ_{i+1}` per waypoint during the backward pass.
     back: Vec<f64>,
+    /// `x_i ⊕ u_{t_i}`, where the paper variant evaluates the model's VJP (line 8).
+    shifted: Vec<f64>,
     fout: Vec<f64>,
     vjp: Vec<f64>,
     /// Final samples with the current pose prepended, `K·(T + 1)·3`, and Φ's gradient there.
@@ -315,11 +453,12 @@ impl GuidanceWorkspace {
         self.xs.resize((steps + 1) * m, 0.0);
         self.ws.resize(steps * m, 0.0);
         self.u.resize(steps * m, 0.0);
-        self.grad_u.resize(steps * m, 0.0);
+        self.dir.resize(steps * m, 0.0);
         for b in [
             &mut self.mu,
             &mut self.cot,
             &mut self.back,
+            &mut self.shifted,
             &mut self.fout,
             &mut self.vjp,
         ] {
@@ -615,90 +754,150 @@ fn solve3(a: &Jacobian3, v: [f64; 3]) -> Option<[f64; 3]> {
     Some(out)
 }
 
-/// Adjoint backward pass: fills `grad_u` with `∂Φ(x_N)/∂u_i` (co-states clipped to `clip`).
+/// What the backward pass leaves in `dir` for the control update, and how it treats the
+/// co-states.
+#[derive(Clone, Copy, Debug)]
+enum Direction<'a> {
+    /// `d_i = ∂J/∂u_i = S_wᵀ·μ_{i+1}`, every co-state clipped (the adaptive variant without
+    /// preconditioning, and [`control_gradient`] with clipping off).
+    Gradient,
+    /// The adaptive variant with preconditioning: `μ_N` preconditioned by the metric,
+    /// `d_i = Δt²·S_w⁻¹·μ_{i+1}`, the inner co-states not clipped.
+    GaussNewton(&'a TwistMetric),
+    /// The paper variant: the model's VJP at `x_i ⊕ u_{t_i}` (line 8), every co-state clipped
+    /// (line 10), `d_i = μ_{t_i}` in `x_i`'s body frame (line 12), so `μ_0` is computed as well.
+    CoState,
+}
+
+/// Adjoint backward pass (Alg. 1 lines 6-11): `μ_N = clip(∇_{x_N} Φ)`, then per step
+/// `μ_i = clip(S_xᵀ·μ_{i+1} + (∂f/∂x)ᵀ·S_wᵀ·μ_{i+1})`, filling `dir` as `direction` says.
 fn backward(
     model: &(impl FlowModel + ?Sized),
     cond: &FlowCondition,
     ws: &mut GuidanceWorkspace,
     clip: f64,
-    metric: Option<&TwistMetric>,
+    direction: Direction<'_>,
     iteration: usize,
 ) -> Result<(), GuidanceError> {
     let (k, t) = (ws.samples, ws.horizon);
     let m = ws.size();
     let n = ws.steps;
     let dt = 1.0 / n as f64;
-    // μ_N: ∇Φ at the T generated poses (pose 0 of the extended batch is fixed).
+    // μ_N: ∇Φ at the T generated poses (pose 0 of the extended batch is fixed), clipped per
+    // waypoint (line 6).
     for b in 0..k {
         let src = &ws.ext_grad[(b * (t + 1) + 1) * 3..(b + 1) * (t + 1) * 3];
         ws.mu[b * t * 3..(b + 1) * t * 3].copy_from_slice(src);
     }
-    // Alg. 1 line 6: clip the terminal gradient per waypoint, then precondition it.
     for c in ws.mu.chunks_exact_mut(3) {
         clip3(c, clip);
     }
-    if let Some(metric) = metric {
+    let mut clip_inner = clip;
+    if let Direction::GaussNewton(metric) = direction {
         metric.apply(&mut ws.mu, &ws.ext, k, t, &mut ws.gxi, &mut ws.tri);
+        // After preconditioning the co-states are steps, not gradients, and the adaptive step
+        // bounds them.
+        clip_inner = f64::INFINITY;
     }
-    // Lines 10 and 12 clip co-states and control gradients in the plain method only: after
-    // preconditioning they are steps, not gradients, and the adaptive step bounds them.
-    let clip_inner = if metric.is_some() {
-        f64::INFINITY
-    } else {
-        clip
-    };
+    let paper = matches!(direction, Direction::CoState);
     for i in (0..n).rev() {
-        let x = &ws.xs[i * m..(i + 1) * m];
-        let w = &ws.ws[i * m..(i + 1) * m];
-        let g = &mut ws.grad_u[i * m..(i + 1) * m];
-        // Cotangent S_wᵀ·μ_{i+1}: the control gradient and the input of the VJP.
-        for j in 0..m / 3 {
-            let r = 3 * j..3 * j + 3;
-            let (sx, sw) = euler_step_jacobians(
-                Pose2::from_slice(&x[r.clone()]),
-                Twist2::from_slice(&w[r.clone()]),
-                dt,
-            );
-            let mu = [ws.mu[3 * j], ws.mu[3 * j + 1], ws.mu[3 * j + 2]];
-            let c = transpose_apply(&sw, mu);
-            ws.back[r.clone()].copy_from_slice(&transpose_apply(&sx, mu));
-            // With the metric, the control moves along S_w⁻¹·μ·Δt² (Gauss-Newton through the
-            // step) so that the realised change of the pose is the preconditioned direction.
-            let step_dir = match metric.and_then(|_| solve3(&sw, mu)) {
-                Some(d) => [d[0] * dt * dt, d[1] * dt * dt, d[2] * dt * dt],
-                None => c,
-            };
-            g[r.clone()].copy_from_slice(&step_dir);
-            ws.cot[r].copy_from_slice(&c);
-        }
-        if i == 0 {
+        pull_back_step(ws, i, dt, direction);
+        if i == 0 && !paper {
             break;
         }
-        let t_i = i as f64 * dt;
-        model.velocity_vjp(x, t_i, cond, &ws.cot, &mut ws.fout, &mut ws.vjp)?;
+        if paper {
+            shift_by_controls(ws, i, dt);
+        }
+        let x = if paper {
+            &ws.shifted[..]
+        } else {
+            &ws.xs[i * m..(i + 1) * m]
+        };
+        model.velocity_vjp(x, i as f64 * dt, cond, &ws.cot, &mut ws.fout, &mut ws.vjp)?;
         if !all_finite(&ws.vjp) {
             return Err(GuidanceError::NonFinite {
                 stage: "flow vector-Jacobian product",
                 iteration,
             });
         }
-        // μ_i = clip(S_xᵀ·μ_{i+1} + vjp).
-        for j in 0..m / 3 {
-            let r = 3 * j..3 * j + 3;
-            let out = &mut ws.mu[r.clone()];
-            for d in 0..3 {
-                out[d] = ws.back[3 * j + d] + ws.vjp[3 * j + d];
+        // μ_i = clip(S_xᵀ·μ_{i+1} + vjp) (lines 9-10).
+        let d = &mut ws.dir[i * m..(i + 1) * m];
+        for (j, out) in ws.mu.chunks_exact_mut(3).enumerate() {
+            for c in 0..3 {
+                out[c] = ws.back[3 * j + c] + ws.vjp[3 * j + c];
             }
             clip3(out, clip_inner);
+            if paper {
+                // Line 12 subtracts μ_{t_i} from u_{t_i} ∈ se(2) at x_i: the co-state of a right
+                // perturbation x_i·exp(δ), i.e. its translation part in x_i's body frame.
+                let theta = ws.xs[i * m + 3 * j + 2];
+                d[3 * j..3 * j + 3].copy_from_slice(&to_body(theta, out));
+            }
         }
     }
-    if !all_finite(&ws.grad_u) {
+    if !all_finite(&ws.dir) {
         return Err(GuidanceError::NonFinite {
             stage: "adjoint pass",
             iteration,
         });
     }
     Ok(())
+}
+
+/// One step of the backward pass before the model's VJP: with `(S_x, S_w)` the Jacobians of the
+/// step `x_{i+1} = x_i·exp(Δt·w_i)` at the forward pass's `(x_i, w_i)`, writes `S_xᵀ·μ_{i+1}`
+/// into `back` and the cotangent `S_wᵀ·μ_{i+1}` into `cot`, and, for the adaptive directions,
+/// `d_i` into `dir`.
+fn pull_back_step(ws: &mut GuidanceWorkspace, i: usize, dt: f64, direction: Direction<'_>) {
+    let m = ws.size();
+    let x = &ws.xs[i * m..(i + 1) * m];
+    let w = &ws.ws[i * m..(i + 1) * m];
+    let d = &mut ws.dir[i * m..(i + 1) * m];
+    for j in 0..m / 3 {
+        let r = 3 * j..3 * j + 3;
+        let (sx, sw) = euler_step_jacobians(
+            Pose2::from_slice(&x[r.clone()]),
+            Twist2::from_slice(&w[r.clone()]),
+            dt,
+        );
+        let mu = [ws.mu[3 * j], ws.mu[3 * j + 1], ws.mu[3 * j + 2]];
+        let c = transpose_apply(&sw, mu);
+        ws.back[r.clone()].copy_from_slice(&transpose_apply(&sx, mu));
+        ws.cot[r.clone()].copy_from_slice(&c);
+        match direction {
+            Direction::Gradient => d[r].copy_from_slice(&c),
+            // The control moves along S_w⁻¹·μ·Δt² (Gauss-Newton through the step) so that the
+            // realised change of the pose is the preconditioned direction.
+            Direction::GaussNewton(_) => {
+                let step = solve3(&sw, mu).map_or(c, |v| v.map(|e| e * dt * dt));
+                d[r].copy_from_slice(&step);
+            }
+            Direction::CoState => {}
+        }
+    }
+}
+
+/// `(R(θ)ᵀ·(v_x, v_y), v_θ)`: a coordinate gradient at a pose of heading `θ` as the gradient
+/// with respect to a right perturbation `x·exp(δ)` of that pose (same norm).
+fn to_body(theta: f64, v: &[f64]) -> [f64; 3] {
+    let (s, c) = theta.sin_cos();
+    [c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]]
+}
+
+/// `shifted = x_i ⊕ u_{t_i} = x_i·exp(u_{t_i})` per waypoint, with `u_{t_i} = Δt·u_i` the
+/// control as a displacement in the algebra (the point of line 8).
+fn shift_by_controls(ws: &mut GuidanceWorkspace, i: usize, dt: f64) {
+    let m = ws.size();
+    let x = &ws.xs[i * m..(i + 1) * m];
+    let u = &ws.u[i * m..(i + 1) * m];
+    for ((p, v), o) in x
+        .chunks_exact(3)
+        .zip(u.chunks_exact(3))
+        .zip(ws.shifted.chunks_exact_mut(3))
+    {
+        let q = Pose2::from_slice(p).euler_step(Twist2::from_slice(v), dt);
+        o.copy_from_slice(&q.to_array());
+    }
 }
 
 fn start(
@@ -768,8 +967,8 @@ pub fn control_gradient(
     ws.u.copy_from_slice(controls);
     forward(model, cond, ws, 0)?;
     terminal_cost(phi, ctx, ws, 0)?;
-    backward(model, cond, ws, f64::INFINITY, None, 0)?;
-    grad.copy_from_slice(&ws.grad_u);
+    backward(model, cond, ws, f64::INFINITY, Direction::Gradient, 0)?;
+    grad.copy_from_slice(&ws.dir);
     Ok(ws.phi.clone())
 }
 
@@ -860,35 +1059,11 @@ fn optimise(
 
     let unguided = ws.final_state().to_vec();
     let phi_before = ws.phi.clone();
-    let mut iterations_run = 0;
-    if settings.enabled {
-        ws.step.clear();
-        ws.step.resize(ws.samples, settings.learning_rate);
-        for iteration in 1..=settings.iterations_m {
-            let mut any = false;
-            for (a, p) in ws.active.iter_mut().zip(&ws.phi) {
-                *a = *p >= settings.tolerance;
-                any |= *a;
-            }
-            if !any {
-                break;
-            }
-            let metric = settings
-                .precondition
-                .then(|| TwistMetric::new(ctx, settings.steps_n));
-            backward(model, cond, ws, settings.clip, metric.as_ref(), iteration)?;
-            if settings.adaptive_step {
-                ws.save();
-            }
-            update_controls(ws, settings);
-            forward(model, cond, ws, iteration)?;
-            terminal_cost(phi, ctx, ws, iteration)?;
-            if settings.adaptive_step {
-                ws.accept_or_restore();
-            }
-            iterations_run = iteration;
-        }
-    }
+    let iterations_run = match (settings.enabled, settings.variant) {
+        (false, _) => 0,
+        (true, GuidanceVariant::Adaptive) => iterate_adaptive(model, cond, phi, ctx, settings, ws)?,
+        (true, GuidanceVariant::Paper) => iterate_paper(model, cond, phi, ctx, settings, ws)?,
+    };
     ws.plain = iterations_run == 0;
     Ok(GuidanceResult {
         samples: ws.samples,
@@ -901,13 +1076,85 @@ fn optimise(
     })
 }
 
-/// `u_i ← β·u_i − γ_k·clip(∂J/∂u_i)` for every active sample `k`.
-fn update_controls(ws: &mut GuidanceWorkspace, settings: &GuidanceSettings) {
+/// The adaptive variant's iterations; returns how many ran.
+fn iterate_adaptive(
+    model: &(impl FlowModel + ?Sized),
+    cond: &FlowCondition,
+    phi: &Phi,
+    ctx: &ConstraintContext<'_>,
+    settings: &GuidanceSettings,
+    ws: &mut GuidanceWorkspace,
+) -> Result<usize, GuidanceError> {
+    ws.step.clear();
+    ws.step.resize(ws.samples, settings.learning_rate);
+    let metric = settings
+        .precondition
+        .then(|| TwistMetric::new(ctx, settings.steps_n));
+    let (direction, clip_dir) = match &metric {
+        Some(metric) => (Direction::GaussNewton(metric), f64::INFINITY),
+        None => (Direction::Gradient, settings.clip),
+    };
+    let mut iterations_run = 0;
+    for iteration in 1..=settings.iterations_m {
+        let mut any = false;
+        for (a, p) in ws.active.iter_mut().zip(&ws.phi) {
+            *a = *p >= settings.tolerance;
+            any |= *a;
+        }
+        if !any {
+            break;
+        }
+        backward(model, cond, ws, settings.clip, direction, iteration)?;
+        if settings.adaptive_step {
+            ws.save();
+        }
+        update_controls(ws, settings.momentum, clip_dir);
+        forward(model, cond, ws, iteration)?;
+        terminal_cost(phi, ctx, ws, iteration)?;
+        if settings.adaptive_step {
+            ws.accept_or_restore();
+        }
+        iterations_run = iteration;
+    }
+    Ok(iterations_run)
+}
+
+/// The paper variant: exactly `M` iterations of Algorithm 1 on every sample (module docs, "The
+/// paper variant"); returns `M`. The rollout in `ws` is the first iteration's line 5.
+fn iterate_paper(
+    model: &(impl FlowModel + ?Sized),
+    cond: &FlowCondition,
+    phi: &Phi,
+    ctx: &ConstraintContext<'_>,
+    settings: &GuidanceSettings,
+    ws: &mut GuidanceWorkspace,
+) -> Result<usize, GuidanceError> {
+    let p = settings.paper;
+    // `u` holds velocities, `u_{t_i} = Δt·u_i`: line 12's step γ on `u_{t_i}` is γ/Δt on `u_i`.
+    let dt = 1.0 / ws.steps as f64;
+    ws.active.fill(true);
+    ws.step.clear();
+    ws.step.resize(ws.samples, p.learning_rate / dt);
+    for iteration in 1..=settings.iterations_m {
+        // Lines 6-11.
+        backward(model, cond, ws, p.clip, Direction::CoState, iteration)?;
+        // Line 12; the co-states are already clipped.
+        update_controls(ws, p.momentum, f64::INFINITY);
+        // Line 5 of the next iteration, or line 14 after the last; Φ and ∇Φ for line 6.
+        forward(model, cond, ws, iteration)?;
+        terminal_cost(phi, ctx, ws, iteration)?;
+    }
+    Ok(settings.iterations_m)
+}
+
+/// Line 12: `u_i ← β·u_i − γ_k·d_i` for every active sample `k` (`γ_k` its step), `d_i` first
+/// clipped per waypoint to `clip_dir`.
+fn update_controls(ws: &mut GuidanceWorkspace, momentum: f64, clip_dir: f64) {
     let m = ws.size();
     let per_sample = ws.horizon * 3;
     for i in 0..ws.steps {
         let u = &mut ws.u[i * m..(i + 1) * m];
-        let g = &mut ws.grad_u[i * m..(i + 1) * m];
+        let g = &mut ws.dir[i * m..(i + 1) * m];
         for (b, active) in ws.active.iter().enumerate() {
             if !active {
                 continue;
@@ -918,11 +1165,9 @@ fn update_controls(ws: &mut GuidanceWorkspace, settings: &GuidanceSettings) {
                 .chunks_exact_mut(3)
                 .zip(g[r].chunks_exact_mut(3))
             {
-                if !settings.precondition {
-                    clip3(gc, settings.clip);
-                }
+                clip3(gc, clip_dir);
                 for d in 0..3 {
-                    uc[d] = settings.momentum * uc[d] - lr * gc[d];
+                    uc[d] = momentum * uc[d] - lr * gc[d];
                 }
             }
         }

@@ -15,7 +15,8 @@
 //!    and to the warm-start candidate (see "Selection rule"). Guiding a shortlist instead of all `K`
 //!    samples divides the cost of the `M` iterations (a forward and a vector-Jacobian product
 //!    through the network per integration step) by `K / guided_samples`;
-//!    `guided_samples = 0` guides all of them, as in the paper;
+//!    `guided_samples = 0` guides all of them, as in the paper, and so does the paper variant
+//!    of Algorithm 1 ([`guidance::GuidanceVariant::Paper`]) whatever `guided_samples` says;
 //! 4. scores every candidate (and the previous plan, shifted to the current time: the warm
 //!    start of receding-horizon use) and keeps the lowest score (see [`SelectionWeights`]);
 //! 5. returns the plan in the world frame: the current pose followed by the `T` future poses at
@@ -52,7 +53,7 @@
 use crate::bev::{self, BevSpec};
 use crate::constraint::{ConstraintContext, Phi};
 use crate::flow::{FlowCondition, FlowModel};
-use crate::guidance::{self, GuidanceSettings, GuidanceWorkspace};
+use crate::guidance::{self, GuidanceSettings, GuidanceVariant, GuidanceWorkspace};
 use crate::limits::Limits;
 use crate::planner::{AgentState, Observation, Plan, PlanError, PlanInfo, Planner};
 use crate::projection::{self, ProjectionSettings};
@@ -110,7 +111,8 @@ pub struct Human2NavSettings {
     /// Keep the previous plan as a candidate (warm start). Default true.
     pub warm_start: bool,
     /// How many of the `K` samples Algorithm 1 runs on (0: all). Default 4: the best by the
-    /// selection score without its feasibility term.
+    /// selection score without its feasibility term. Ignored with the paper variant of
+    /// Algorithm 1 (`guidance.variant = "paper"`), which guides all `K`, as the paper does.
     pub guided_samples: usize,
     /// Each guided candidate is also offered at this fraction of its speed along the same path
     /// (in `(0, 1]`; 1: no slowed copies). Default 0.5.
@@ -501,7 +503,8 @@ impl<M: FlowModel> Human2Nav<M> {
 
     /// The samples Algorithm 1 runs on: the [`Human2NavSettings::guided_samples`] best by the
     /// selection score without its feasibility term (guidance is what fixes feasibility), all
-    /// of them when that is 0 or at least `K`. Indices in sample order.
+    /// of them when that is 0 or at least `K`, or when the paper variant of Algorithm 1 is
+    /// selected (the paper guides every sample). Indices in sample order.
     fn shortlist(
         &self,
         samples: &[Vec<Pose2>],
@@ -511,7 +514,8 @@ impl<M: FlowModel> Human2Nav<M> {
         previous: Option<&[Pose2]>,
     ) -> Vec<usize> {
         let g = self.settings.guided_samples;
-        if g == 0 || g >= samples.len() {
+        let paper = self.settings.guidance.variant == GuidanceVariant::Paper;
+        if paper || g == 0 || g >= samples.len() {
             return (0..samples.len()).collect();
         }
         let mut scored: Vec<(f64, usize)> = samples

@@ -8,6 +8,7 @@ use human2nav_core::bev::BevSpec;
 use human2nav_core::constraint::Phi;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use human2nav_core::guidance::analytic::ConstantField;
+use human2nav_core::guidance::{GuidanceVariant, PaperSettings};
 use human2nav_core::human2nav::{Human2Nav, Human2NavSettings, RobotModel, pose_at};
 use human2nav_core::robot::footprint::FootprintShape;
 use human2nav_core::tfs::tfs_plan;
@@ -170,6 +171,33 @@ fn the_default_pipeline_guides_a_shortlist_and_ends_feasible() {
     assert_eq!(tfs_g, 1.0, "Algorithm 1 + last-step correction");
     assert!(after < before, "Φ {before} → {after}");
     assert_eq!(guided, Human2NavSettings::default().guided_samples);
+}
+
+#[test]
+fn the_paper_variant_guides_every_sample() {
+    let mut settings = Human2NavSettings::default();
+    settings.guidance.variant = GuidanceVariant::Paper;
+    assert_eq!(settings.guided_samples, 4);
+    let mut p = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings).unwrap();
+    let (_, tfs_g, before, after, guided) = tfs_pair(&mut p);
+    assert_eq!(guided, 16, "the paper variant ignores guided_samples");
+    assert!(
+        before.is_finite() && after.is_finite(),
+        "Φ {before} → {after}"
+    );
+    assert_eq!(tfs_g, 1.0, "Algorithm 1 + last-step correction");
+}
+
+#[test]
+fn the_shipped_planner_table_parses_and_validates() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/planner.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut table: toml::Table = toml::from_str(&text).unwrap();
+    let settings: Human2NavSettings = table.remove("human2nav").unwrap().try_into().unwrap();
+    settings.validate().unwrap();
+    assert_eq!(settings.guidance.variant, GuidanceVariant::Adaptive);
+    // The commented [human2nav.guidance.paper] table holds the core defaults.
+    assert_eq!(settings.guidance.paper, PaperSettings::default());
 }
 
 #[test]

@@ -5,6 +5,8 @@ use crate::tfs::tfs_plan;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+mod paper;
+
 const DT: f64 = 0.1;
 
 fn cond() -> FlowCondition {

@@ -76,11 +76,20 @@ fn build(specs: &[Spec], search: NeighborSearch) -> OrcaSim {
 }
 
 /// Steps `steps` times with the given search; returns the positions and velocities after each
-/// step.
-fn run_sim(specs: &[Spec], search: NeighborSearch, steps: usize) -> Vec<(Vec<Vec2>, Vec<Vec2>)> {
+/// step. At step `reverse_at` the positions are handed out in reverse order first (agent `i`
+/// jumps to agent `n − 1 − i`'s place), which makes last step's neighbours a poor guess.
+fn run_sim(
+    specs: &[Spec],
+    search: NeighborSearch,
+    steps: usize,
+    reverse_at: Option<usize>,
+) -> Vec<(Vec<Vec2>, Vec<Vec2>)> {
     let mut sim = build(specs, search);
     let mut out = Vec::new();
-    for _ in 0..steps {
+    for step in 0..steps {
+        if reverse_at == Some(step) {
+            sim.positions_mut().reverse();
+        }
         for (i, (_, goal, _)) in specs.iter().enumerate() {
             let p = sim.positions()[i];
             sim.pref_velocities_mut()[i] = pref(p, *goal);
@@ -93,12 +102,19 @@ fn run_sim(specs: &[Spec], search: NeighborSearch, steps: usize) -> Vec<(Vec<Vec
 
 /// The same simulation with the per-agent code (each agent sees all others in index order),
 /// as the crate's callers stepped crowds before `OrcaSim`.
-fn run_per_agent(specs: &[Spec], steps: usize) -> Vec<(Vec<Vec2>, Vec<Vec2>)> {
+fn run_per_agent(
+    specs: &[Spec],
+    steps: usize,
+    reverse_at: Option<usize>,
+) -> Vec<(Vec<Vec2>, Vec<Vec2>)> {
     let n = specs.len();
     let mut pos: Vec<Vec2> = specs.iter().map(|s| s.0).collect();
     let mut vel = vec![Vec2::ZERO; n];
     let mut out = Vec::new();
-    for _ in 0..steps {
+    for step in 0..steps {
+        if reverse_at == Some(step) {
+            pos.reverse();
+        }
         let mut new_vel = vel.clone();
         for i in 0..n {
             let others: Vec<Neighbor> = (0..n)
@@ -175,15 +191,19 @@ fn tree_scan_and_per_agent_code_give_identical_crowds() {
                 );
             }
             let steps = 80;
-            let reference = run_per_agent(&specs, steps);
-            for search in [
-                NeighborSearch::BruteForce,
-                NeighborSearch::KdTree,
-                NeighborSearch::Auto,
-            ] {
-                let sim = run_sim(&specs, search, steps);
-                assert_identical(&format!("{name} n = {n} {search:?}"), &sim, &reference);
+            for reverse_at in [None, Some(40)] {
+                let reference = run_per_agent(&specs, steps, reverse_at);
+                for search in [
+                    NeighborSearch::BruteForce,
+                    NeighborSearch::KdTree,
+                    NeighborSearch::Auto,
+                ] {
+                    let sim = run_sim(&specs, search, steps, reverse_at);
+                    let what = format!("{name} n = {n} {search:?}, reversed at {reverse_at:?}");
+                    assert_identical(&what, &sim, &reference);
+                }
             }
+            let reference = run_per_agent(&specs, steps, None);
             // The crowd moved (the comparison is not between resting agents).
             let (last, _) = &reference[steps - 1];
             let moved = last.iter().zip(&specs).filter(|(p, s)| **p != s.0).count();

@@ -16,14 +16,17 @@
 //!
 //! # How a query runs
 //!
-//! Comparisons with unpredictable outcomes dominate such small queries, so a query avoids
-//! them where it can. Given an upper bound `B` of the `k`-th squared distance (the caller's
-//! guess, see [`AgentTree::query_within`]; the simulation derives it from the previous step),
-//! it collects every agent with squared distance `≤ B` (and `< neighbor_dist²`) from the leaves
-//! whose box is within `B`, without branching per agent, then picks the `k` best by counting,
-//! for each candidate, the candidates that beat it (no sorting branches either). If fewer than
-//! `k` were found and `B` was below the range, the guess was too small and the query is run
-//! again over the whole range, so the guess only affects the speed, never the answer.
+//! Mispredicted comparisons dominate such small queries, so a query avoids data-dependent
+//! branches where it can. Given an upper bound `B` of the `k`-th squared distance (the
+//! caller's guess, see [`AgentTree::query_within`]; [`crate::sim::OrcaSim`] takes the current
+//! distances to last step's neighbours), it collects every agent with squared distance `≤ B`
+//! (and `< neighbor_dist²`) from the leaves whose box is within `B`, appending without a branch
+//! per agent, and then orders the candidates: a few by insertion, up to 48 by counting for
+//! each the candidates that beat it (no branch either), more with the standard sort. If fewer
+//! than `k` were found and `B` was below the range, the guess was too small and the query runs
+//! again over the whole range, so the guess only affects the speed, never the answer. Without
+//! a guess (`B = ∞`) a query collects every agent in range, which is fine for a few queries
+//! but slow in a dense crowd.
 //!
 //! # Same answer as the scan
 //!
@@ -92,7 +95,8 @@ impl NeighborList {
     /// Prepares for at most `n` candidates.
     fn begin(&mut self, n: usize) {
         self.count = 0;
-        // Room for one more (see `push_if`) and for the padding of `finish`.
+        // Room for one more (an append writes before it knows whether it keeps) and for the
+        // padding of `finish`.
         if self.cand_dist.len() < n + 4 {
             self.cand_dist.resize(n + 4, 0.0);
             self.cand_index.resize(n + 4, 0);
@@ -178,24 +182,11 @@ impl NeighborList {
     }
 }
 
-/// Where a search appends its candidates: slices and a count held locally, so that the
-/// append loop keeps the count in a register.
+/// Where a search appends its candidates.
 struct Sink<'a> {
     dist: &'a mut [f64],
     index: &'a mut [usize],
     count: usize,
-}
-
-impl Sink<'_> {
-    /// Appends agent `index` at squared distance `dist_sq` if `keep`, without a branch: the
-    /// slot after the last candidate is always free (see [`NeighborList::begin`]).
-    #[inline(always)]
-    fn push_if(&mut self, keep: bool, dist_sq: f64, index: usize) {
-        let at = self.count;
-        self.dist[at] = dist_sq;
-        self.index[at] = index;
-        self.count = at + keep as usize;
-    }
 }
 
 /// The brute-force scan over `positions`: every agent but `exclude` is a candidate. Fills
@@ -222,12 +213,16 @@ pub fn scan_neighbors_within(
     let scan = |out: &mut NeighborList, bound: f64| {
         out.begin(positions.len());
         let range_sq = out.range_sq;
-        let mut sink = out.sink();
+        let Sink { dist, index, count } = out.sink();
+        let mut c = count;
         for (j, p) in positions.iter().enumerate() {
             let d = (*p - position).norm_sq();
-            sink.push_if((d <= bound) & (d < range_sq) & (j != exclude), d, j);
+            // Branch-free append: the slot after the last candidate is always free.
+            dist[c] = d;
+            index[c] = j;
+            c += ((d <= bound) & (d < range_sq) & (j != exclude)) as usize;
         }
-        out.count = sink.count;
+        out.count = c;
     };
     out.begin(0);
     if out.k > 0 {
@@ -433,18 +428,21 @@ impl AgentTree {
             return;
         }
         let range = node.begin as usize..node.end as usize;
-        for ((&x, &y), &index) in self.xs[range.clone()]
-            .iter()
-            .zip(&self.ys[range.clone()])
-            .zip(&self.indices[range])
-        {
-            let d = (Vec2::new(x, y) - q).norm_sq();
-            sink.push_if(
-                (d <= bound_sq) & (d < range_sq) & (index != exclude),
-                d,
-                index,
-            );
+        let (xs, ys, ids) = (
+            &self.xs[range.clone()],
+            &self.ys[range.clone()],
+            &self.indices[range],
+        );
+        let Sink { dist, index, count } = sink;
+        let mut c = *count;
+        for t in 0..ids.len() {
+            let d = (Vec2::new(xs[t], ys[t]) - q).norm_sq();
+            // Branch-free append: the slot after the last candidate is always free.
+            dist[c] = d;
+            index[c] = ids[t];
+            c += ((d <= bound_sq) & (d < range_sq) & (ids[t] != exclude)) as usize;
         }
+        *count = c;
     }
 }
 

@@ -17,7 +17,7 @@ use crate::planner::OrcaError;
 /// How [`OrcaSim`] finds each agent's neighbours. All choices give identical results.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum NeighborSearch {
-    /// The k-d tree above [`AUTO_TREE_MIN_AGENTS`] agents, the scan below (where it is faster).
+    /// The k-d tree from [`AUTO_TREE_MIN_AGENTS`] agents, the scan below (where it is as fast).
     #[default]
     Auto,
     /// Every agent checks every other one: `O(N²)` per step.
@@ -27,8 +27,8 @@ pub enum NeighborSearch {
 }
 
 /// With [`NeighborSearch::Auto`], crowds of at least this many agents use the k-d tree. On
-/// the circle scenario of the `orca` bench the branch-free scan is ahead up to 48 agents, level
-/// at 64, and the tree is ahead from 100 (15 % at 100, 33 % at 200).
+/// the circle scenario of the `orca` bench the two are within noise of each other up to 64
+/// agents (the scan mostly ahead) and the tree is ahead from 100 (by 15 % at 100, 33 % at 200).
 pub const AUTO_TREE_MIN_AGENTS: usize = 64;
 
 /// N ORCA agents (agents only, no static obstacles) with RVO2's update.
@@ -45,8 +45,8 @@ pub struct OrcaSim {
     /// Each agent's neighbours at the last step: agent `i`'s are
     /// `last_neighbors[last_start[i]..last_start[i + 1]]`. When it had its full
     /// `max_neighbors`, their current distances bound this step's `k`-th distance, a guess
-    /// that speeds up the search (it never changes the result). Rebuilt
-    /// every step into the `next_*` buffers, then swapped.
+    /// that speeds up the search (it never changes the result). Rebuilt every step into the
+    /// `next_*` buffers, then swapped.
     last_neighbors: Vec<usize>,
     last_start: Vec<usize>,
     next_neighbors: Vec<usize>,

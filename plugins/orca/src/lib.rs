@@ -2,7 +2,9 @@
 //! docs) behind the plugin entry point. The crate builds both as a `cdylib` (what the host
 //! loads) and as a Rust library (its tests and benches).
 
-pub use human2nav_orca_core::{OrcaConfig, OrcaError, OrcaPlanner, lp, orca, planner};
+pub use human2nav_orca_core::{
+    NeighborSearch, OrcaConfig, OrcaError, OrcaPlanner, OrcaSim, kdtree, lp, orca, planner, sim,
+};
 
 human2nav_plugin::export_plugin! {
     name: "orca",

@@ -205,14 +205,35 @@ pub fn linear_program3(
     num_fixed: usize,
     begin_line: usize,
     radius: f64,
+    result: Vec2,
+) -> Vec2 {
+    linear_program3_in(
+        lines,
+        num_fixed,
+        begin_line,
+        radius,
+        result,
+        &mut Vec::new(),
+    )
+}
+
+/// [`linear_program3`] with a caller-owned buffer for the projected lines, so that repeated
+/// calls do not allocate. The result is the same.
+pub fn linear_program3_in(
+    lines: &[Line],
+    num_fixed: usize,
+    begin_line: usize,
+    radius: f64,
     mut result: Vec2,
+    proj: &mut Vec<Line>,
 ) -> Vec2 {
     let mut distance = 0.0;
     for i in begin_line..lines.len() {
         if lines[i].violation(result) > distance {
             // Project the lines before `i` onto line `i`'s family of parallel shifts: each
             // projected line holds the points equidistant (in violation) from lines `i` and `j`.
-            let mut proj: Vec<Line> = lines[..num_fixed].to_vec();
+            proj.clear();
+            proj.extend_from_slice(&lines[..num_fixed]);
             for j in num_fixed..i {
                 let determinant = lines[i].direction.det(lines[j].direction);
                 let point = if determinant.abs() <= EPSILON {
@@ -234,7 +255,7 @@ pub fn linear_program3(
             }
             let previous = result;
             let inward = Vec2::new(-lines[i].direction.y, lines[i].direction.x);
-            let (r, fail) = linear_program2(&proj, radius, inward, true);
+            let (r, fail) = linear_program2(proj, radius, inward, true);
             // Failure can only come from rounding (the previous result is feasible for the
             // projected program); keep the previous result then, like RVO2.
             result = if fail < proj.len() { previous } else { r };
@@ -247,9 +268,15 @@ pub fn linear_program3(
 /// Solves the full program: closest velocity to `opt` inside the disc and all half-planes, or,
 /// when they are jointly infeasible, the velocity of least maximal violation.
 pub fn solve(lines: &[Line], max_speed: f64, opt: Vec2) -> Vec2 {
+    solve_in(lines, max_speed, opt, &mut Vec::new())
+}
+
+/// [`solve`] with a caller-owned scratch buffer (see [`linear_program3_in`]); the result is
+/// the same.
+pub fn solve_in(lines: &[Line], max_speed: f64, opt: Vec2, scratch: &mut Vec<Line>) -> Vec2 {
     let (result, fail) = linear_program2(lines, max_speed, opt, false);
     if fail < lines.len() {
-        linear_program3(lines, 0, fail, max_speed, result)
+        linear_program3_in(lines, 0, fail, max_speed, result, scratch)
     } else {
         result
     }

@@ -68,7 +68,27 @@ pub fn orca_line(
     time_horizon: f64,
     time_step: f64,
 ) -> Line {
-    let inv_tau = 1.0 / time_horizon;
+    orca_line_inv(
+        position,
+        velocity,
+        radius,
+        other,
+        1.0 / time_horizon,
+        1.0 / time_step,
+    )
+}
+
+/// [`orca_line`] given `1/time_horizon` and `1/time_step` (the same divisions, done once per
+/// agent by callers that build many lines).
+#[inline]
+pub(crate) fn orca_line_inv(
+    position: Vec2,
+    velocity: Vec2,
+    radius: f64,
+    other: &Neighbor,
+    inv_tau: f64,
+    inv_dt: f64,
+) -> Line {
     let rel_pos = other.position - position;
     let rel_vel = velocity - other.velocity;
     let dist_sq = rel_pos.norm_sq();
@@ -109,7 +129,6 @@ pub fn orca_line(
         }
     } else {
         // Already overlapping: leave the cut-off disc of the time step.
-        let inv_dt = 1.0 / time_step;
         let w = rel_vel - rel_pos * inv_dt;
         let w_len = w.norm();
         // RVO2 divides by |w| unguarded; when it vanishes, push straight away from the other.

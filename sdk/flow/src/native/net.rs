@@ -5,8 +5,8 @@
 //! is a plain append and a convolution is one matrix product over the whole batch.
 
 use super::kernels::{
-    Taps, activate, activate_backward, activate_in_place, add_bias, add_to, gather, group_norm,
-    group_norm_backward, linear, resize_for_overwrite, scale_rows, scale_shift, scatter_add, sgemm,
+    BlockNorm, Taps, activate_in_place, add_bias, add_to, gather, linear, norm_act,
+    norm_act_backward, resize_for_overwrite, scatter_add, sgemm,
 };
 use crate::config::{Activation, NetConfig};
 use crate::net::{GOAL_FEATURES, OUT_CHANNELS, TRAJ_CHANNELS};
@@ -97,6 +97,19 @@ impl Conv1d {
 
     /// `y = conv(x)`: `x` `[cin, batch, len]` → `y` `[cout, batch, out_len]`.
     fn forward(&self, x: &[f32], batch: usize, len: usize, col: &mut Vec<f32>, y: &mut Vec<f32>) {
+        self.forward_unbiased(x, batch, len, col, y);
+        add_bias(y, &self.b);
+    }
+
+    /// [`Self::forward`] without the bias (for a block that folds it into its normalisation).
+    fn forward_unbiased(
+        &self,
+        x: &[f32],
+        batch: usize,
+        len: usize,
+        col: &mut Vec<f32>,
+        y: &mut Vec<f32>,
+    ) {
         let (lo, ck) = (self.out_len(len), self.cin * self.taps.k);
         resize_for_overwrite(y, self.cout() * batch * lo);
         let pointwise = self.taps.k == 1 && self.taps.stride == 1 && self.taps.pad == 0;
@@ -108,7 +121,6 @@ impl Conv1d {
         };
         let n = batch * lo;
         sgemm(self.cout(), n, ck, &self.w, ck, 1, src, n, 1, y, false);
-        add_bias(y, &self.b);
     }
 
     /// `dx += convᵀ(dy)`: `dy` `[cout, batch, out_len]` → `dx` `[cin, batch, len]`.
@@ -198,12 +210,10 @@ impl Norm {
 /// What the backward pass of one Conv → GroupNorm → activation block needs.
 #[derive(Debug, Default)]
 struct BlockCache {
-    /// Normalised conv output `x̂`.
+    /// Normalised conv output `x̂` (the pre-activation is `γ·x̂ + β`).
     xhat: Vec<f32>,
     /// `1/σ` per `(b, group)`.
     inv_std: Vec<f32>,
-    /// Pre-activation `z = γ·x̂ + β`.
-    z: Vec<f32>,
 }
 
 /// Conv1d → GroupNorm → activation (`Conv1dBlock`).
@@ -233,50 +243,63 @@ impl ConvBlock {
         })
     }
 
-    /// `out = act(GN(conv(x)))`; the length is unchanged.
+    fn block_norm(&self) -> BlockNorm<'_> {
+        BlockNorm {
+            groups: self.norm.groups,
+            gamma: &self.norm.gamma,
+            beta: &self.norm.beta,
+            conv_bias: &self.conv.b,
+        }
+    }
+
+    /// `out = act(GN(conv(x)))`, then `shift + out·scale` with `film = (scale, shift)`; the
+    /// length is unchanged.
     fn forward(
         &self,
         act: Activation,
         x: &[f32],
-        batch: usize,
-        len: usize,
+        (batch, len): (usize, usize),
+        film: Option<(&[f32], &[f32])>,
         s: &mut Scratch,
         cache: &mut BlockCache,
         out: &mut Vec<f32>,
     ) {
-        self.conv.forward(x, batch, len, &mut s.col, &mut cache.z);
-        group_norm(
-            &mut cache.z,
-            self.norm.groups,
+        let mut y = std::mem::take(&mut s.y);
+        self.conv
+            .forward_unbiased(x, batch, len, &mut s.col, &mut y);
+        norm_act(
+            act,
+            &y,
+            self.block_norm(),
             batch,
             len,
-            &self.norm.gamma,
-            &self.norm.beta,
+            film,
             &mut cache.xhat,
             &mut cache.inv_std,
+            out,
         );
-        resize_for_overwrite(out, cache.z.len());
-        activate(act, &cache.z, out);
+        s.y = y;
     }
 
-    /// `dx += ∂out/∂xᵀ·dout`; `dout` is consumed as scratch.
+    /// `dx += ∂out/∂xᵀ·dout` (with the FiLM scale the forward pass had); `dout` is consumed as
+    /// scratch.
     fn backward(
         &self,
         act: Activation,
         dout: &mut [f32],
-        batch: usize,
-        len: usize,
+        (batch, len): (usize, usize),
+        film_scale: Option<&[f32]>,
         s: &mut Scratch,
         cache: &BlockCache,
         dx: &mut [f32],
     ) {
-        activate_backward(act, &cache.z, dout);
-        group_norm_backward(
+        norm_act_backward(
+            act,
             dout,
-            self.norm.groups,
+            self.block_norm(),
             batch,
             len,
-            &self.norm.gamma,
+            film_scale,
             &cache.xhat,
             &cache.inv_std,
         );
@@ -352,13 +375,13 @@ impl ResBlock {
         out: &mut Vec<f32>,
     ) {
         let c = self.cout();
-        let (scale, bias) = film[self.film_offset..self.film_offset + 2 * c].split_at(c);
+        let film = film[self.film_offset..self.film_offset + 2 * c].split_at(c);
         let mut h = std::mem::take(&mut s.h);
+        let bl = (batch, len);
         self.block0
-            .forward(net.act, x, batch, len, s, &mut cache.b0, &mut h);
-        scale_shift(&mut h, scale, bias);
+            .forward(net.act, x, bl, Some(film), s, &mut cache.b0, &mut h);
         self.block1
-            .forward(net.act, &h, batch, len, s, &mut cache.b1, out);
+            .forward(net.act, &h, bl, None, s, &mut cache.b1, out);
         s.h = h;
         match &self.residual {
             Some(r) => {
@@ -396,11 +419,12 @@ impl ResBlock {
         let mut dh = std::mem::take(&mut s.h);
         dh.clear();
         dh.resize(c * batch * len, 0.0);
+        let bl = (batch, len);
         self.block1
-            .backward(net.act, &mut d1, batch, len, s, &cache.b1, &mut dh);
-        scale_rows(&mut dh, &film[self.film_offset..self.film_offset + c]);
+            .backward(net.act, &mut d1, bl, None, s, &cache.b1, &mut dh);
+        let scale = &film[self.film_offset..self.film_offset + c];
         self.block0
-            .backward(net.act, &mut dh, batch, len, s, &cache.b0, dx);
+            .backward(net.act, &mut dh, bl, Some(scale), s, &cache.b0, dx);
         s.d1 = d1;
         s.h = dh;
     }
@@ -427,7 +451,9 @@ struct Conv2d {
 }
 
 impl Conv2d {
-    fn forward(&self, x: &[f32], side: usize) -> (Vec<f32>, usize) {
+    /// The convolution without its bias (which the normalisation after it folds in), and the
+    /// output side.
+    fn forward_unbiased(&self, x: &[f32], side: usize) -> (Vec<f32>, usize) {
         let out_side = (side + 2 - 3) / 2 + 1;
         let ck = self.cin * 9;
         let n = out_side * out_side;
@@ -491,6 +517,7 @@ pub(crate) struct Net {
 #[derive(Debug, Default)]
 pub(crate) struct Scratch {
     col: Vec<f32>,
+    y: Vec<f32>,
     h: Vec<f32>,
     res: Vec<f32>,
     d1: Vec<f32>,
@@ -654,20 +681,15 @@ impl Net {
         let mut h = bev.to_vec();
         let mut side = self.cfg.bev_cells;
         for (conv, norm) in &self.bev {
-            let (mut y, s) = conv.forward(&h, side);
+            let (y, s) = conv.forward_unbiased(&h, side);
+            let n = BlockNorm {
+                groups: norm.groups,
+                gamma: &norm.gamma,
+                beta: &norm.beta,
+                conv_bias: &conv.b,
+            };
             let (mut xh, mut inv) = (Vec::new(), Vec::new());
-            group_norm(
-                &mut y,
-                norm.groups,
-                1,
-                s * s,
-                &norm.gamma,
-                &norm.beta,
-                &mut xh,
-                &mut inv,
-            );
-            activate_in_place(self.act, &mut y);
-            h = y;
+            norm_act(self.act, &y, n, 1, s * s, None, &mut xh, &mut inv, &mut h);
             side = s;
         }
         let pooled = adaptive_avg_pool_4x4(&h, side);
@@ -765,8 +787,9 @@ impl Net {
             spent.push(std::mem::replace(&mut h, o));
         }
         let mut o = next();
+        let fb = &mut tape.final_block;
         self.final_block
-            .forward(self.act, &h, batch, len, s, &mut tape.final_block, &mut o);
+            .forward(self.act, &h, (batch, len), None, s, fb, &mut o);
         spent.push(h);
         self.final_conv.forward(&o, batch, len, &mut s.col, out);
         spent.push(o);
@@ -807,15 +830,9 @@ impl Net {
         let mut gh = next();
         gh.clear();
         gh.resize(d0 * batch * final_len, 0.0);
-        self.final_block.backward(
-            self.act,
-            &mut g,
-            batch,
-            final_len,
-            s,
-            &tape.final_block,
-            &mut gh,
-        );
+        let fb = &tape.final_block;
+        self.final_block
+            .backward(self.act, &mut g, (batch, final_len), None, s, fb, &mut gh);
         let mut spent = vec![g];
         // Gradients arriving at each skip connection.
         let mut dskips: Vec<Option<Vec<f32>>> = vec![None; self.down.len()];

@@ -26,6 +26,7 @@ pub mod cfm;
 pub mod config;
 pub mod error;
 pub mod eval;
+mod io_map;
 pub mod model;
 pub mod native;
 pub mod net;

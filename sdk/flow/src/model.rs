@@ -10,6 +10,7 @@
 use crate::card::{FORMAT_VERSION, ModelCard, SourceInfo};
 use crate::config::{NetConfig, Normalisation};
 use crate::error::CfmError;
+use crate::io_map;
 use crate::net::{CondUnet1d, Film, store_kind};
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use std::collections::BTreeMap;
@@ -366,18 +367,9 @@ impl CfmModel {
             )));
         }
         let k = x.len() / (3 * t);
-        let inv_s = 1.0 / self.card.normalisation.position_scale;
         let mut f = vec![0f64; k * 5 * t];
-        for (traj, out) in x.chunks_exact(3 * t).zip(f.chunks_exact_mut(5 * t)) {
-            for (j, p) in traj.chunks_exact(3).enumerate() {
-                let (sin, cos) = p[2].sin_cos();
-                out[j] = p[0] * inv_s;
-                out[t + j] = p[1] * inv_s;
-                out[2 * t + j] = cos;
-                out[3 * t + j] = sin;
-                out[4 * t + j] = (j + 1) as f64 / t as f64;
-            }
-        }
+        let s = self.card.normalisation.position_scale;
+        io_map::for_each_feature(x, t, s, |b, c, j, v| f[(b * 5 + c) * t + j] = v);
         let shape = [k as i64, 5, t as i64];
         Ok((tensor_of(&f, &shape, self.kind(), self.device()), k))
     }
@@ -386,17 +378,7 @@ impl CfmModel {
     fn write_velocity(&self, net_out: &Tensor, out: &mut [f64]) -> Result<(), FlowError> {
         let t = self.card.net.horizon;
         let raw = values_of(net_out, out.len())?;
-        for (o_traj, r_traj) in out.chunks_exact_mut(3 * t).zip(raw.chunks_exact(3 * t)) {
-            for j in 0..t {
-                for c in 0..3 {
-                    o_traj[3 * j + c] = r_traj[c * t + j] * self.out_scale[c];
-                }
-            }
-        }
-        if out.iter().any(|v| !v.is_finite()) {
-            return Err(FlowError::NonFinite);
-        }
-        Ok(())
+        io_map::write_velocity(out, t, self.out_scale, |b, c, j| raw[(b * 3 + c) * t + j])
     }
 }
 
@@ -494,18 +476,11 @@ impl FlowModel for CfmModel {
         let h = self.card.net.horizon;
         let (feat, k) = self.feature_tensor(x)?;
         let film = self.film(cond, t)?;
-        // Cotangent of the standardised output [K, 3, T]: cot[k, j, c]·scale_c.
+        // Cotangent of the standardised output [K, 3, T].
         let mut cot = vec![0f64; x.len()];
-        for (c_traj, src) in cot
-            .chunks_exact_mut(3 * h)
-            .zip(cotangent.chunks_exact(3 * h))
-        {
-            for j in 0..h {
-                for c in 0..3 {
-                    c_traj[c * h + j] = src[3 * j + c] * self.out_scale[c];
-                }
-            }
-        }
+        io_map::for_each_output_cotangent(cotangent, h, self.out_scale, |b, c, j, v| {
+            cot[(b * 3 + c) * h + j] = v;
+        });
         let cot = tensor_of(&cot, &[k as i64, 3, h as i64], self.kind(), self.device());
         let (v, grad) = tch::with_grad(|| -> Result<(Tensor, Tensor), FlowError> {
             let feat = feat.set_requires_grad(true);
@@ -521,23 +496,8 @@ impl FlowModel for CfmModel {
         })?;
         self.write_velocity(&v, out)?;
         let g = values_of(&grad, k * 5 * h)?;
-        let inv_s = 1.0 / self.card.normalisation.position_scale;
-        let rows = vjp
-            .chunks_exact_mut(3 * h)
-            .zip(g.chunks_exact(5 * h))
-            .zip(x.chunks_exact(3 * h));
-        for ((o, gf), xt) in rows {
-            for j in 0..h {
-                let (sin, cos) = xt[3 * j + 2].sin_cos();
-                o[3 * j] = gf[j] * inv_s;
-                o[3 * j + 1] = gf[h + j] * inv_s;
-                o[3 * j + 2] = -sin * gf[2 * h + j] + cos * gf[3 * h + j];
-            }
-        }
-        if vjp.iter().any(|v| !v.is_finite()) {
-            return Err(FlowError::NonFinite);
-        }
-        Ok(())
+        let s = self.card.normalisation.position_scale;
+        io_map::pull_back_features(x, h, s, |b, c, j| g[(b * 5 + c) * h + j], vjp)
     }
 }
 

@@ -18,6 +18,7 @@ mod net;
 
 use crate::card::ModelCard;
 use crate::error::CfmError;
+use crate::io_map;
 use crate::model::{CARD_FILE, CfmModel, normalise_condition};
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use net::{Net, Pool, Tape, WeightError, Weights};
@@ -221,21 +222,6 @@ impl NativeCfm {
         Ok((slot, fi))
     }
 
-    /// Writes `out[k, j, c] = raw[c, k, j]·scale_c`.
-    fn write_velocity(&self, raw: &[f32], k: usize, out: &mut [f64]) -> Result<(), FlowError> {
-        let h = self.card.net.horizon;
-        for (b, o_traj) in out.chunks_exact_mut(3 * h).enumerate().take(k) {
-            for j in 0..h {
-                for c in 0..3 {
-                    o_traj[3 * j + c] = f64::from(raw[(c * k + b) * h + j]) * self.out_scale[c];
-                }
-            }
-        }
-        if out.iter().any(|v| !v.is_finite()) {
-            return Err(FlowError::NonFinite);
-        }
-        Ok(())
-    }
 }
 
 /// This machine's single-thread SGEMM rate through the native path's kernel, GFLOP/s: the
@@ -277,25 +263,19 @@ fn check_len(name: &str, got: usize, want: usize) -> Result<(), FlowError> {
     Ok(())
 }
 
-/// Network features `[5, K, T]` of metric poses (flat `[K, T, 3]`): the values of
-/// [`crate::model::trajectory_features`] of the normalised poses, channel-major over the batch.
+/// Network features `[5, K, T]` of metric poses (flat `[K, T, 3]`).
 fn write_features(x: &[f64], h: usize, position_scale: f64, out: &mut Vec<f32>) {
     let k = x.len() / (3 * h);
     out.clear();
     out.resize(5 * k * h, 0.0);
-    let inv_s = 1.0 / position_scale;
-    let plane = k * h;
-    for (b, traj) in x.chunks_exact(3 * h).enumerate() {
-        for (j, p) in traj.chunks_exact(3).enumerate() {
-            let (sin, cos) = p[2].sin_cos();
-            let i = b * h + j;
-            out[i] = (p[0] * inv_s) as f32;
-            out[plane + i] = (p[1] * inv_s) as f32;
-            out[2 * plane + i] = cos as f32;
-            out[3 * plane + i] = sin as f32;
-            out[4 * plane + i] = ((j + 1) as f64 / h as f64) as f32;
-        }
-    }
+    io_map::for_each_feature(x, h, position_scale, |b, c, j, v| {
+        out[(c * k + b) * h + j] = v as f32;
+    });
+}
+
+/// Metric velocities from the raw output `[3, K, T]`.
+fn velocity_of(raw: &[f32], k: usize, h: usize, scale: [f64; 3], out: &mut [f64]) -> Result<(), FlowError> {
+    io_map::write_velocity(out, h, scale, |b, c, j| f64::from(raw[(c * k + b) * h + j]))
 }
 
 impl FlowModel for NativeCfm {
@@ -318,12 +298,12 @@ impl FlowModel for NativeCfm {
         let mut st = self.lock()?;
         let (slot, _) = self.run_forward(&mut st, x, t, cond)?;
         let f = &st.forwards[slot];
-        self.write_velocity(&f.raw, f.batch, out)
+        velocity_of(&f.raw, f.batch, self.card.net.horizon, self.out_scale, out)
     }
 
     /// The backward pass of the network input runs on the activations of the forward pass at
-    /// `(x, t)`, reused when [`FlowModel::velocity`] was just called there; the pull-back through the features `(x/s, y/s, cos θ, sin θ)` and the output
-    /// scaling is done in closed form, as in [`CfmModel`].
+    /// `(x, t)`, reused when [`FlowModel::velocity`] was just called there; the pull-back
+    /// through the features and the output scaling are the closed forms [`CfmModel`] uses.
     fn velocity_vjp(
         &self,
         x: &[f64],
@@ -354,38 +334,15 @@ impl FlowModel for NativeCfm {
             ..
         } = &mut forwards[slot];
         let k = *k;
-        self.write_velocity(raw, k, out)?;
-        // Cotangent of the standardised output [3, K, T]: cot[k, j, c]·scale_c.
+        velocity_of(raw, k, h, self.out_scale, out)?;
         cot.clear();
         cot.resize(3 * k * h, 0.0);
-        for (b, src) in cotangent.chunks_exact(3 * h).enumerate() {
-            for j in 0..h {
-                for c in 0..3 {
-                    cot[(c * k + b) * h + j] = (src[3 * j + c] * self.out_scale[c]) as f32;
-                }
-            }
-        }
+        io_map::for_each_output_cotangent(cotangent, h, self.out_scale, |b, c, j, v| {
+            cot[(c * k + b) * h + j] = v as f32;
+        });
         self.net.backward(cot, &films[fi].1, tape, pool, dfeat);
-        let inv_s = 1.0 / self.card.normalisation.position_scale;
-        let plane = k * h;
-        for (b, (o, xt)) in vjp
-            .chunks_exact_mut(3 * h)
-            .zip(x.chunks_exact(3 * h))
-            .enumerate()
-        {
-            for j in 0..h {
-                let i = b * h + j;
-                let (sin, cos) = xt[3 * j + 2].sin_cos();
-                let g = |c: usize| f64::from(dfeat[c * plane + i]);
-                o[3 * j] = g(0) * inv_s;
-                o[3 * j + 1] = g(1) * inv_s;
-                o[3 * j + 2] = -sin * g(2) + cos * g(3);
-            }
-        }
-        if vjp.iter().any(|v| !v.is_finite()) {
-            return Err(FlowError::NonFinite);
-        }
-        Ok(())
+        let s = self.card.normalisation.position_scale;
+        io_map::pull_back_features(x, h, s, |b, c, j| f64::from(dfeat[(c * k + b) * h + j]), vjp)
     }
 }
 

@@ -797,7 +797,7 @@ impl Net {
         pool.acts = acts;
     }
 
-    /// `dx = ∂out/∂xᵀ·dout` of the last [`Self::forward`] (its tape), `dx` `[5, batch, T]`.
+    /// `dx = ∂out/∂xᵀ·dout` of the forward pass recorded in `tape`, `dx` `[5, batch, T]`.
     pub(crate) fn backward(
         &self,
         dout: &[f32],

@@ -221,7 +221,6 @@ impl NativeCfm {
         f.stamp = st.clock;
         Ok((slot, fi))
     }
-
 }
 
 /// This machine's single-thread SGEMM rate through the native path's kernel, GFLOP/s: the
@@ -274,7 +273,13 @@ fn write_features(x: &[f64], h: usize, position_scale: f64, out: &mut Vec<f32>) 
 }
 
 /// Metric velocities from the raw output `[3, K, T]`.
-fn velocity_of(raw: &[f32], k: usize, h: usize, scale: [f64; 3], out: &mut [f64]) -> Result<(), FlowError> {
+fn velocity_of(
+    raw: &[f32],
+    k: usize,
+    h: usize,
+    scale: [f64; 3],
+    out: &mut [f64],
+) -> Result<(), FlowError> {
     io_map::write_velocity(out, h, scale, |b, c, j| f64::from(raw[(c * k + b) * h + j]))
 }
 
@@ -342,7 +347,13 @@ impl FlowModel for NativeCfm {
         });
         self.net.backward(cot, &films[fi].1, tape, pool, dfeat);
         let s = self.card.normalisation.position_scale;
-        io_map::pull_back_features(x, h, s, |b, c, j| f64::from(dfeat[(c * k + b) * h + j]), vjp)
+        io_map::pull_back_features(
+            x,
+            h,
+            s,
+            |b, c, j| f64::from(dfeat[(c * k + b) * h + j]),
+            vjp,
+        )
     }
 }
 

@@ -5,6 +5,27 @@
 
 use human2nav_core::flow::FlowError;
 
+/// The number of trajectories in flat poses `x` of `horizon` waypoints, or a shape error.
+pub(crate) fn batch_of(len: usize, horizon: usize) -> Result<usize, FlowError> {
+    if len == 0 || len % (3 * horizon) != 0 {
+        return Err(FlowError::Shape(format!(
+            "x has {len} values, not a positive multiple of T·3 = {}",
+            3 * horizon
+        )));
+    }
+    Ok(len / (3 * horizon))
+}
+
+/// A shape error unless the array `name` has `want` values.
+pub(crate) fn check_len(name: &str, got: usize, want: usize) -> Result<(), FlowError> {
+    if got != want {
+        return Err(FlowError::Shape(format!(
+            "{name} has {got} values, expected {want}"
+        )));
+    }
+    Ok(())
+}
+
 /// Calls `write(b, c, j, value)` with the network features of metric poses `x`: for waypoint
 /// `j` of trajectory `b`, `x/s, y/s, cos θ, sin θ, (j + 1)/T` (`s` = `position_scale`).
 pub(crate) fn for_each_feature(

@@ -10,7 +10,7 @@
 use crate::card::{FORMAT_VERSION, ModelCard, SourceInfo};
 use crate::config::{NetConfig, Normalisation};
 use crate::error::CfmError;
-use crate::io_map;
+use crate::io_map::{self, check_len};
 use crate::net::{CondUnet1d, Film, store_kind};
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use std::collections::BTreeMap;
@@ -359,14 +359,7 @@ impl CfmModel {
     /// the same values as [`trajectory_features`] of the normalised poses.
     pub fn feature_tensor(&self, x: &[f64]) -> Result<(Tensor, usize), FlowError> {
         let t = self.card.net.horizon;
-        if x.is_empty() || x.len() % (3 * t) != 0 {
-            return Err(FlowError::Shape(format!(
-                "x has {} values, not a positive multiple of T·3 = {}",
-                x.len(),
-                3 * t
-            )));
-        }
-        let k = x.len() / (3 * t);
+        let k = io_map::batch_of(x.len(), t)?;
         let mut f = vec![0f64; k * 5 * t];
         let s = self.card.normalisation.position_scale;
         io_map::for_each_feature(x, t, s, |b, c, j, v| f[(b * 5 + c) * t + j] = v);
@@ -425,15 +418,6 @@ fn values_of(t: &Tensor, n: usize) -> Result<Vec<f64>, FlowError> {
             Ok(v)
         }
     }
-}
-
-fn check_len(name: &str, got: usize, want: usize) -> Result<(), FlowError> {
-    if got != want {
-        return Err(FlowError::Shape(format!(
-            "{name} has {got} values, expected {want}"
-        )));
-    }
-    Ok(())
 }
 
 impl FlowModel for CfmModel {

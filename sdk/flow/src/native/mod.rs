@@ -18,7 +18,7 @@ mod net;
 
 use crate::card::ModelCard;
 use crate::error::CfmError;
-use crate::io_map;
+use crate::io_map::{self, batch_of, check_len};
 use crate::model::{CARD_FILE, CfmModel, normalise_condition};
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use net::{Net, Pool, Tape, WeightError, Weights};
@@ -241,25 +241,6 @@ pub fn sgemm_gflops(n: usize, repeats: usize) -> f64 {
     std::hint::black_box(&c);
     secs.sort_by(f64::total_cmp);
     2.0 * (n * n * n) as f64 / secs[secs.len() / 2] / 1e9
-}
-
-fn batch_of(len: usize, horizon: usize) -> Result<usize, FlowError> {
-    if len == 0 || len % (3 * horizon) != 0 {
-        return Err(FlowError::Shape(format!(
-            "x has {len} values, not a positive multiple of T·3 = {}",
-            3 * horizon
-        )));
-    }
-    Ok(len / (3 * horizon))
-}
-
-fn check_len(name: &str, got: usize, want: usize) -> Result<(), FlowError> {
-    if got != want {
-        return Err(FlowError::Shape(format!(
-            "{name} has {got} values, expected {want}"
-        )));
-    }
-    Ok(())
 }
 
 /// Network features `[5, K, T]` of metric poses (flat `[K, T, 3]`).

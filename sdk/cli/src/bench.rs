@@ -12,7 +12,7 @@
 use anyhow::{Context, anyhow, bail};
 use clap::Args;
 use human2nav_core::human2nav::Human2NavSettings;
-use human2nav_flow::planner::{PlannerConfig, RobotPlanner, load_model};
+use human2nav_flow::planner::{PlannerConfig, PlannerModel, RobotPlanner, load_model};
 use human2nav_plugin::PluginHost;
 use human2nav_sim::MethodSpec;
 use human2nav_sim::config::MethodConfig;
@@ -304,9 +304,14 @@ pub(crate) fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::R
             .ok_or_else(|| anyhow!("{}: must be true or false", field("guidance")))?;
     }
     let model_dir = planner_cfg.model_dir(&cfg.base_dir);
-    // Fail now, with the folder named, rather than once per episode.
     let backend = planner_cfg.backend;
-    load_model(&model_dir, backend).with_context(|| format!("method `{}`", m.name))?;
+    // Fail now, with the folder named, rather than once per episode; the native weights are
+    // read this once and shared by every run's planner.
+    let shared =
+        match load_model(&model_dir, backend).with_context(|| format!("method `{}`", m.name))? {
+            PlannerModel::Native(model) => Some(model),
+            PlannerModel::Torch(_) => None,
+        };
     human2nav_flow::tch::set_num_threads(1);
 
     let mut profiles = HashMap::new();
@@ -321,7 +326,10 @@ pub(crate) fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::R
             .get(&ctx.robot.name)
             .cloned()
             .ok_or_else(|| format!("no robot profile named `{}`", ctx.robot.name))?;
-        let model = load_model(&model_dir, backend)?;
+        let model = match &shared {
+            Some(native) => PlannerModel::Native(native.clone()),
+            None => load_model(&model_dir, backend)?,
+        };
         let planner = RobotPlanner::new(
             profile,
             model,

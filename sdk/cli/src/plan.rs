@@ -71,7 +71,7 @@ pub struct PlanArgs {
     pub threads: Option<usize>,
     /// What runs the network: native or torch (overrides the configuration; `--bench` measures
     /// both when this is not given).
-    #[arg(long, value_parser = parse_backend)]
+    #[arg(long)]
     pub backend: Option<Backend>,
     /// Output PNG [default: out/plan/<robot>-<episode index>.png under the workspace root].
     #[arg(long)]
@@ -455,7 +455,8 @@ fn bench(
         cfg.human2nav.guidance.iterations_m,
         cfg.human2nav.guided_samples
     );
-    let unet_macs = Complexity::of(&load_model(model_dir, Backend::Native)?.card().net).unet_macs;
+    let card = human2nav_flow::ModelCard::load(&model_dir.join(human2nav_flow::model::CARD_FILE))?;
+    let unet_macs = Complexity::of(&card.net).unet_macs;
     // The machine's single-thread matrix-multiply rate, measured now (the limit a call is
     // compared with): the native kernel and libtorch's, the faster of the two counts.
     let native_rate = human2nav_flow::native::sgemm_gflops(512, 21);
@@ -474,7 +475,7 @@ fn bench(
             settings.guidance.enabled = guided;
             let (mut planner, stats) = timed_planner(robot, model_dir, backend, settings)?;
             let mode = if guided { "guided" } else { "unguided" };
-            let pb = bar(calls, &format!("{mode} calls ({})", backend_name(backend)));
+            let pb = bar(calls, &format!("{mode} calls ({backend})"));
             let lock = || {
                 stats
                     .lock()
@@ -494,7 +495,7 @@ fn bench(
             let limit_ms = mflop / peak;
             println!(
                 "| {mode} | {} | {} | {:.2} | {:.2} | {:.2} | {:.1} + {:.1} | {:.2} | {:.2} | {:.0} | {:.2} | {:.1} |",
-                backend_name(backend),
+                backend,
                 lat.calls,
                 lat.p50_ms,
                 lat.p95_ms,
@@ -516,23 +517,6 @@ fn bench(
          the SGEMM rate above, so p50 / limit is how far a call is from the machine's arithmetic bound."
     );
     Ok(ExitCode::SUCCESS)
-}
-
-fn parse_backend(s: &str) -> Result<Backend, String> {
-    match s {
-        "native" => Ok(Backend::Native),
-        "torch" => Ok(Backend::Torch),
-        other => Err(format!(
-            "unknown backend `{other}` (expected native or torch)"
-        )),
-    }
-}
-
-fn backend_name(b: Backend) -> &'static str {
-    match b {
-        Backend::Native => "native",
-        Backend::Torch => "torch",
-    }
 }
 
 /// libtorch's single-thread SGEMM rate on `n × n` matrices (median of `repeats`), GFLOP/s.

@@ -162,14 +162,8 @@ fn bench_planning(c: &mut Criterion) {
             let model = load_model(&dir, backend).expect("model");
             let mut rp = RobotPlanner::new(profile.clone(), model, settings).expect("planner");
             let mut i = 0usize;
-            let name = format!(
-                "{}/{}",
-                if guided { "guided" } else { "unguided" },
-                match backend {
-                    Backend::Native => "native",
-                    Backend::Torch => "torch",
-                }
-            );
+            let mode = if guided { "guided" } else { "unguided" };
+            let name = format!("{mode}/{backend}");
             group.bench_function(name, |b| {
                 b.iter(|| {
                     rp.planner.reset();

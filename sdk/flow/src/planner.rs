@@ -158,9 +158,36 @@ pub enum Backend {
 #[derive(Debug)]
 pub enum PlannerModel {
     /// Rust kernels.
-    Native(NativeCfm),
+    Native(Box<NativeCfm>),
     /// libtorch.
-    Torch(CfmModel),
+    Torch(Box<CfmModel>),
+}
+
+impl Backend {
+    /// The name `planner.toml` and `--backend` use.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Native => "native",
+            Self::Torch => "torch",
+        }
+    }
+}
+
+impl std::fmt::Display for Backend {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Backend {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        [Self::Native, Self::Torch]
+            .into_iter()
+            .find(|b| b.name() == s)
+            .ok_or_else(|| format!("unknown backend `{s}` (expected native or torch)"))
+    }
 }
 
 impl PlannerModel {
@@ -172,40 +199,34 @@ impl PlannerModel {
         }
     }
 
-    /// Which backend this is.
-    pub fn backend(&self) -> Backend {
+    /// The model behind either backend.
+    fn flow(&self) -> &dyn FlowModel {
         match self {
-            Self::Native(_) => Backend::Native,
-            Self::Torch(_) => Backend::Torch,
+            Self::Native(m) => m.as_ref(),
+            Self::Torch(m) => m.as_ref(),
         }
     }
 }
 
 impl From<CfmModel> for PlannerModel {
     fn from(m: CfmModel) -> Self {
-        Self::Torch(m)
+        Self::Torch(Box::new(m))
     }
 }
 
 impl From<NativeCfm> for PlannerModel {
     fn from(m: NativeCfm) -> Self {
-        Self::Native(m)
+        Self::Native(Box::new(m))
     }
 }
 
 impl FlowModel for PlannerModel {
     fn horizon(&self) -> usize {
-        match self {
-            Self::Native(m) => m.horizon(),
-            Self::Torch(m) => m.horizon(),
-        }
+        self.flow().horizon()
     }
 
     fn source_std(&self) -> [f64; 3] {
-        match self {
-            Self::Native(m) => m.source_std(),
-            Self::Torch(m) => m.source_std(),
-        }
+        self.flow().source_std()
     }
 
     fn velocity(
@@ -215,10 +236,7 @@ impl FlowModel for PlannerModel {
         cond: &FlowCondition,
         out: &mut [f64],
     ) -> Result<(), FlowError> {
-        match self {
-            Self::Native(m) => m.velocity(x, t, cond, out),
-            Self::Torch(m) => m.velocity(x, t, cond, out),
-        }
+        self.flow().velocity(x, t, cond, out)
     }
 
     fn velocity_vjp(
@@ -230,10 +248,7 @@ impl FlowModel for PlannerModel {
         out: &mut [f64],
         vjp: &mut [f64],
     ) -> Result<(), FlowError> {
-        match self {
-            Self::Native(m) => m.velocity_vjp(x, t, cond, cotangent, out, vjp),
-            Self::Torch(m) => m.velocity_vjp(x, t, cond, cotangent, out, vjp),
-        }
+        self.flow().velocity_vjp(x, t, cond, cotangent, out, vjp)
     }
 }
 
@@ -314,8 +329,8 @@ pub fn load_profile(path: &Path) -> Result<RobotProfile, PlannerError> {
 /// Loads a model folder for `backend` (libtorch on the CPU), naming the folder in the error.
 pub fn load_model(dir: &Path, backend: Backend) -> Result<PlannerModel, PlannerError> {
     let model = match backend {
-        Backend::Native => NativeCfm::load(dir).map(PlannerModel::Native),
-        Backend::Torch => CfmModel::load(dir, Device::Cpu).map(PlannerModel::Torch),
+        Backend::Native => NativeCfm::load(dir).map(PlannerModel::from),
+        Backend::Torch => CfmModel::load(dir, Device::Cpu).map(PlannerModel::from),
     };
     model.map_err(|source| PlannerError::Model {
         path: dir.to_path_buf(),

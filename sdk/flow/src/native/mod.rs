@@ -23,7 +23,7 @@ use crate::model::{CARD_FILE, CfmModel, normalise_condition};
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use net::{Net, Pool, Tape, WeightError, Weights};
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 /// At most this many flow times keep their FiLM vector per condition.
 const FILM_CACHE: usize = 64;
@@ -66,9 +66,22 @@ struct State {
 #[derive(Debug)]
 pub struct NativeCfm {
     card: ModelCard,
-    net: Net,
+    net: Arc<Net>,
     out_scale: [f64; 3],
     state: Mutex<State>,
+}
+
+/// A copy that shares the weights and starts with empty caches (one per planner: the weights
+/// are read once, each planner keeps its own condition cache and forward passes).
+impl Clone for NativeCfm {
+    fn clone(&self) -> Self {
+        Self {
+            card: self.card.clone(),
+            net: Arc::clone(&self.net),
+            out_scale: self.out_scale,
+            state: Mutex::new(State::default()),
+        }
+    }
 }
 
 impl NativeCfm {
@@ -122,7 +135,7 @@ impl NativeCfm {
         ];
         Ok(Self {
             card,
-            net,
+            net: Arc::new(net),
             out_scale,
             state: Mutex::new(State::default()),
         })

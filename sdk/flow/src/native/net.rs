@@ -838,12 +838,9 @@ impl Net {
         let mut dskips: Vec<Option<Vec<f32>>> = vec![None; self.down.len()];
         let mut len = final_len;
         for (j, lvl) in self.up.iter().enumerate().rev() {
-            let lin = len / lvl.up.taps.stride;
-            let lin = if lvl.up.out_len(lin) == len {
-                lin
-            } else {
-                lin + 1
-            };
+            // An up level works at the length of the skip connection it joins.
+            let skip = self.down.len() - 1 - j;
+            let lin = lens[skip];
             let mut gi = next();
             gi.clear();
             gi.resize(lvl.up.cin * batch * lin, 0.0);
@@ -857,7 +854,6 @@ impl Net {
                 spent.push(std::mem::replace(&mut gh, o));
             }
             // Split the gradient of [h; skip].
-            let skip = self.down.len() - 1 - j;
             let split = gh.len() - tape.skips[skip].len();
             dskips[skip] = Some(gh[split..].to_vec());
             gh.truncate(split);

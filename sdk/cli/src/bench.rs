@@ -11,6 +11,7 @@
 
 use anyhow::{Context, anyhow, bail};
 use clap::Args;
+use human2nav_core::ablation::Arm;
 use human2nav_core::human2nav::Human2NavSettings;
 use human2nav_flow::planner::{PlannerConfig, PlannerModel, RobotPlanner, load_model};
 use human2nav_plugin::PluginHost;
@@ -275,20 +276,27 @@ pub(crate) fn ensure_real_episodes(
 
 /// A `human2nav` method: the reference planner with the model and settings of a planner
 /// configuration. Its `config` table takes `planner` (the planner TOML, relative to the
-/// workspace root; default `sdk/configs/planner.toml`) and `guidance` (bool; `false` is the
-/// "w/o guidance" ablation). Each episode gets a fresh planner (model loaded from disk, source
+/// workspace root; default `sdk/configs/planner.toml`) and either `guidance` (bool; `false` is
+/// the "w/o guidance" ablation) or `arm` (one of the guidance ablation's arms, `raw`, `alg1`,
+/// `qp` or `alg1+qp`, see [`human2nav_core::ablation::Arm`]). Each episode gets a fresh planner (model loaded from disk, source
 /// noise seeded with the episode's seed) for the robot of that episode, with the robot's Φ
 /// including its plugin constraint terms; libtorch runs one thread per planner (the episodes
 /// already run in parallel).
 pub(crate) fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<MethodSpec> {
     let field = |key: &str| format!("methods[{}].config.{key}", m.name);
     for key in m.config.keys() {
-        if key != "planner" && key != "guidance" {
+        if !["planner", "guidance", "arm"].contains(&key.as_str()) {
             bail!(
-                "{}: unknown key (expected `planner` or `guidance`)",
+                "{}: unknown key (expected `planner`, `guidance` or `arm`)",
                 field(key)
             );
         }
+    }
+    if m.config.contains_key("guidance") && m.config.contains_key("arm") {
+        bail!(
+            "{}: give `guidance` or `arm`, not both (`arm = \"raw\"` is `guidance = false`)",
+            field("arm")
+        );
     }
     let planner_toml = match m.config.get("planner") {
         Some(v) => cfg
@@ -302,6 +310,14 @@ pub(crate) fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::R
         planner_cfg.human2nav.guidance.enabled = v
             .as_bool()
             .ok_or_else(|| anyhow!("{}: must be true or false", field("guidance")))?;
+    }
+    if let Some(v) = m.config.get("arm") {
+        let arm: Arm = v
+            .as_str()
+            .ok_or_else(|| anyhow!("{}: must be a string", field("arm")))?
+            .parse()
+            .map_err(|e| anyhow!("{}: {e}", field("arm")))?;
+        planner_cfg.human2nav = arm.settings(&planner_cfg.human2nav);
     }
     let model_dir = planner_cfg.model_dir(&cfg.base_dir);
     let backend = planner_cfg.backend;

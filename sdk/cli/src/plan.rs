@@ -6,17 +6,21 @@
 //! `human2nav_sim::plan_figure::observation_at`: the robot at the episode's start pose (facing
 //! the goal), moving at `--speed`, the replayed crowd at `--time`.
 
+use crate::train::cache_windows;
 use anyhow::{Context, bail};
 use clap::Args;
+use human2nav_core::ablation::{Arm, ArmSummary, LimitShares, ablation_step};
 use human2nav_core::human2nav::{Human2Nav, Human2NavSettings};
 use human2nav_core::{Observation, Planner};
 use human2nav_data::ScenarioClass;
+use human2nav_data::cache::TupleCache;
 use human2nav_data::paths::find_workspace_root;
+use human2nav_data::tuples::Split;
+use human2nav_flow::eval::{EvalOptions, guided_windows};
 use human2nav_flow::net::Complexity;
 use human2nav_flow::planner::{
-    Backend, BevOrigin, FlowCallStats, GuidanceComparison, GuidanceSummary, LatencyStats,
-    PlannerConfig, PlannerModel, RobotPlanner, TimedModel, bev_spec, compare_guidance, load_model,
-    load_profile, measure_latency, plan_tfs, robot_model, robot_phi,
+    Backend, BevOrigin, FlowCallStats, LatencyStats, PlannerConfig, PlannerModel, RobotPlanner,
+    TimedModel, bev_spec, load_model, load_profile, measure_latency, robot_model, robot_phi,
 };
 use human2nav_sim::episode::{Episode, ScenarioTitle};
 use human2nav_sim::plan_figure::{
@@ -86,6 +90,14 @@ pub struct PlanArgs {
     /// Windows per robot for `--eval`, spread evenly over the episode file.
     #[arg(long, default_value_t = 50)]
     pub windows: usize,
+    /// With `--eval`: also run Algorithm 1 (every sample guided, no correction) on this many
+    /// recorded human windows of the validation split of the tuple cache, and report TFS and
+    /// the ADE to the recorded future before and after guidance.
+    #[arg(long, value_name = "WINDOWS")]
+    pub human: Option<usize>,
+    /// Tuple cache for `--human` [default: out/data/cache under the workspace root].
+    #[arg(long)]
+    pub cache: Option<PathBuf>,
     /// Seed of the synthetic episodes used without `--episode`.
     #[arg(long, default_value_t = 1)]
     pub synthetic_seed: u64,
@@ -151,6 +163,13 @@ pub fn run(args: PlanArgs) -> anyhow::Result<ExitCode> {
     };
 
     if args.eval {
+        if let Some(n) = args.human {
+            let cache = args
+                .cache
+                .clone()
+                .unwrap_or_else(|| workspace.join("out/data/cache"));
+            human_windows(&args, &cfg, &model_dir, &cache, n)?;
+        }
         return eval(&args, &cfg, &model_dir, &episodes, &step);
     }
     if let Some(calls) = args.bench {
@@ -334,15 +353,9 @@ fn eval(
     step: &StepOptions,
 ) -> anyhow::Result<ExitCode> {
     let wins = windows(episodes, args.windows, step)?;
-    let mut guided_settings = cfg.human2nav;
-    guided_settings.guidance.enabled = true;
-    let mut unguided_settings = cfg.human2nav;
-    unguided_settings.guidance.enabled = false;
-    // Algorithm 1 without the last-step correction, to report what each stage contributes.
-    let mut alg1_settings = guided_settings;
-    alg1_settings.projection.enabled = false;
     println!(
-        "held-out windows: {} of {} episodes ({}), t = {:.1} s, robot speed {:.2} m/s, K = {}, seed {}",
+        "held-out windows: {} of {} episodes ({}), t = {:.1} s, robot speed {:.2} m/s, K = {}, seed {}, \
+         guidance {} (N = {}, M ≤ {})",
         wins.len(),
         episodes.len(),
         args.episode
@@ -351,63 +364,179 @@ fn eval(
         step.time,
         step.ego_speed,
         cfg.human2nav.samples,
-        cfg.human2nav.seed
+        cfg.human2nav.seed,
+        cfg.human2nav.guidance.variant.name(),
+        cfg.human2nav.guidance.steps_n,
+        cfg.human2nav.guidance.iterations_m,
     );
     let mut rows = Vec::new();
     for robot in &args.robot {
-        let mut g = RobotPlanner::load_with(robot, model_dir, cfg.backend, guided_settings)?;
-        let mut u = RobotPlanner::load_with(robot, model_dir, cfg.backend, unguided_settings)?;
-        let mut a1 = RobotPlanner::load_with(robot, model_dir, cfg.backend, alg1_settings)?;
-        let limits = *g.limits();
-        let mut tfs_alg1 = Vec::with_capacity(wins.len());
-        let pb = bar(wins.len(), &format!("windows ({})", g.profile.name));
-        let mut results: Vec<GuidanceComparison> = Vec::with_capacity(wins.len());
+        let profile = load_profile(robot)?;
+        let mut planners = Arm::ALL
+            .iter()
+            .map(|&arm| {
+                let model = load_model(model_dir, cfg.backend)?;
+                RobotPlanner::new(profile.clone(), model, arm.settings(&cfg.human2nav))
+                    .map(|p| (arm, p))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let limits = profile.limits;
+        let pb = bar(wins.len(), &format!("windows ({})", profile.name));
+        let mut steps = Vec::with_capacity(wins.len() * Arm::ALL.len());
         for (id, obs) in &wins {
-            let r = compare_guidance(&mut g.planner, &mut u.planner, obs, &limits)
-                .with_context(|| format!("planning window {id} for {}", g.profile.name))?;
-            results.push(r);
-            a1.planner.reset();
-            let p = a1
-                .planner
-                .plan(obs)
-                .with_context(|| format!("planning window {id} for {}", g.profile.name))?;
-            tfs_alg1.push(plan_tfs(&p, &limits, obs));
+            let mut arms: Vec<(Arm, &mut dyn Planner)> = planners
+                .iter_mut()
+                .map(|(arm, p)| (*arm, &mut p.planner as &mut dyn Planner))
+                .collect();
+            steps.extend(
+                ablation_step(&mut arms, obs, &limits)
+                    .with_context(|| format!("planning window {id} for {}", profile.name))?,
+            );
             pb.inc(1);
         }
         pb.finish_and_clear();
-        let alg1 = tfs_alg1.iter().sum::<f64>() / tfs_alg1.len().max(1) as f64;
-        rows.push((g.profile.name.clone(), GuidanceSummary::of(&results), alg1));
+        rows.extend(Arm::ALL.map(|arm| (profile.name.clone(), ArmSummary::of(arm, &steps))));
     }
     println!();
     println!(
-        "| robot | windows | TFS unguided | TFS Alg. 1 only | TFS guided | all-feasible unguided | all-feasible guided | displacement plan (m) | displacement sample (m) | Φ unguided plan | Φ before | Φ after | fallbacks |"
+        "| robot | arm | windows | TFS | all-feasible | Φ before | Φ after | displacement vs raw (m) | displacement vs sample (m) | iterations | ms p50 | fallbacks |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
-    for (name, s, alg1) in &rows {
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for (name, s) in &rows {
         println!(
-            "| {name} | {} | {:.3} | {alg1:.3} | {:.3} | {:.2} | {:.2} | {:.3} | {:.3} | {:.4} | {:.4} | {:.4} | {} |",
+            "| {name} | {} | {} | {:.3} | {:.2} | {} | {} | {:.3} | {} | {} | {:.1} | {} |",
+            s.arm.label(),
             s.windows,
-            s.tfs_unguided,
-            s.tfs_guided,
-            s.all_feasible_unguided,
-            s.all_feasible_guided,
-            s.plan_displacement,
-            s.sample_displacement,
-            s.phi_unguided,
-            s.phi_before,
-            s.phi_after,
+            s.tfs,
+            s.all_feasible,
+            fmt_nan(s.phi_before, 3),
+            fmt_nan(s.phi_after, 3),
+            s.displacement,
+            fmt_nan(s.sample_displacement, 3),
+            fmt_nan(s.iterations, 1),
+            s.millis_p50,
             s.fallbacks
         );
     }
     println!();
+    println!("| robot | arm | {} |", LimitShares::NAMES.join(" | "));
+    println!("|---|---|{}", "---|".repeat(LimitShares::NAMES.len()));
+    for (name, s) in &rows {
+        let shares: Vec<String> = s
+            .violations
+            .values()
+            .iter()
+            .map(|v| format!("{v:.3}"))
+            .collect();
+        println!("| {name} | {} | {} |", s.arm.label(), shares.join(" | "));
+    }
+    println!();
     println!(
-        "TFS: mean plan TFS (pose 0 = robot at rest/--speed); Alg. 1 only: guidance without the last-step correction; \
-         guided: the planner as configured; all-feasible: share of windows with TFS = 1; \
-         displacement plan: mean distance between the guided and the unguided plan at equal times; \
-         displacement sample: guided plan vs the same sample before guidance; \
-         Φ before/after: the guided plan's sample before and after Algorithm 1."
+        "Arms: raw samples (no guidance, no correction), Algorithm 1 only, QP only (M = 0: the \
+         correction of the same candidates), Algorithm 1 + QP (the configured planner); every arm \
+         draws the same source samples. TFS: mean plan TFS (pose 0 = the robot at rest/--speed); \
+         all-feasible: share of windows with TFS = 1; Φ before/after: the kept sample before and \
+         after Algorithm 1; displacement vs raw: mean distance to the raw arm's plan at equal \
+         times; vs sample: to the kept sample before guidance and correction; iterations: \
+         Algorithm 1 iterations run (mean); ms p50: wall time of a planning call. Second table: \
+         share of waypoints violating each limit."
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// Algorithm 1 on recorded human windows (`--human`), per robot.
+fn human_windows(
+    args: &PlanArgs,
+    cfg: &PlannerConfig,
+    model_dir: &Path,
+    cache_dir: &Path,
+    n: usize,
+) -> anyhow::Result<()> {
+    let cache = TupleCache::open(cache_dir).with_context(|| {
+        format!(
+            "opening the tuple cache {} (build it with `human2nav data build`)",
+            cache_dir.display()
+        )
+    })?;
+    let seed = cfg.human2nav.seed;
+    let windows = cache_windows(&cache, Split::Val, n, seed)?;
+    let model = load_model(model_dir, cfg.backend)?;
+    let mut guidance = cfg.human2nav.guidance;
+    guidance.enabled = true;
+    let opts = EvalOptions {
+        samples: cfg.human2nav.samples,
+        steps: guidance.steps_n,
+        dt: cfg.human2nav.dt,
+        seed,
+        ..EvalOptions::default()
+    };
+    println!(
+        "recorded human windows: {} of the validation split ({}), K = {} all guided, guidance {} \
+         (N = {}, M ≤ {}), no correction",
+        windows.len(),
+        cache_dir.display(),
+        opts.samples,
+        guidance.variant.name(),
+        guidance.steps_n,
+        guidance.iterations_m
+    );
+    let mut rows = Vec::new();
+    for robot in &args.robot {
+        let profile = load_profile(robot)?;
+        let phi = robot_phi(&profile)?;
+        let pb = bar(windows.len(), &format!("human windows ({})", profile.name));
+        let m = guided_windows(
+            &model,
+            &windows,
+            &phi,
+            &profile.limits,
+            &guidance,
+            &opts,
+            |_| pb.inc(1),
+        )
+        .with_context(|| format!("guiding the human windows for {}", profile.name))?;
+        pb.finish_and_clear();
+        rows.push((profile.name, m));
+    }
+    println!();
+    println!(
+        "| robot | windows | TFS human | TFS raw | TFS guided | ADE raw (m) | ADE guided (m) | min ADE raw (m) | min ADE guided (m) | displacement (m) | Φ raw | Φ guided | iterations |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for (name, m) in &rows {
+        println!(
+            "| {name} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.1} |",
+            m.windows,
+            m.tfs_human,
+            m.tfs_raw,
+            m.tfs_guided,
+            m.ade_raw,
+            m.ade_guided,
+            m.min_ade_raw,
+            m.min_ade_guided,
+            m.displacement,
+            m.phi_raw,
+            m.phi_guided,
+            m.iterations
+        );
+    }
+    println!();
+    println!(
+        "TFS human: the recorded futures against the robot's limits (starting at the recorded \
+         velocity); raw/guided: mean over the K samples before/after Algorithm 1; ADE: mean over \
+         samples of the distance to the recorded future; min ADE: best of K; displacement: \
+         guided vs the same raw sample."
+    );
+    println!();
+    Ok(())
+}
+
+fn fmt_nan(v: f64, decimals: usize) -> String {
+    if v.is_nan() {
+        "–".into()
+    } else {
+        format!("{v:.decimals$}")
+    }
 }
 
 type TimedPlanner = Human2Nav<TimedModel<PlannerModel>>;

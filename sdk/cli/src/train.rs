@@ -557,11 +557,22 @@ fn true_future_windows(
     Ok(windows)
 }
 
-/// Test windows from the cache alone: the cache stores the other agents only at the planning
-/// instant, so their future positions are extrapolated at constant velocity.
+/// Test windows from the cache alone, see [`cache_windows`].
 fn test_windows(cfg: &TrainConfig, cache: &TupleCache) -> anyhow::Result<Vec<EvalWindow>> {
-    let mut compact: Vec<CompactTuple> = cache.load_compact(Split::Test)?;
-    human2nav_flow::eval::subsample(&mut compact, cfg.eval.max_windows, cfg.eval.seed);
+    cache_windows(cache, Split::Test, cfg.eval.max_windows, cfg.eval.seed)
+}
+
+/// At most `max` windows of `split` (seeded subsample) from the cache alone: the cache stores
+/// the other agents only at the planning instant, so their future positions are extrapolated
+/// at constant velocity.
+pub(crate) fn cache_windows(
+    cache: &TupleCache,
+    split: Split,
+    max: usize,
+    seed: u64,
+) -> anyhow::Result<Vec<EvalWindow>> {
+    let mut compact: Vec<CompactTuple> = cache.load_compact(split)?;
+    human2nav_flow::eval::subsample(&mut compact, max, seed);
     let spec = cache.manifest().bev;
     let dt = cache.manifest().dt;
     Ok(compact

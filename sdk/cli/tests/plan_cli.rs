@@ -116,8 +116,30 @@ fn eval_and_bench_print_their_tables() {
     );
     let stdout = text(&out.stdout);
     assert!(out.status.success(), "{}", text(&out.stderr));
-    assert!(stdout.contains("| diablo | 2 |"), "{stdout}");
-    assert!(stdout.contains("| go2 | 2 |"), "{stdout}");
+    // Four arms per robot, each on both windows, and the QP arms always feasible.
+    for robot in ["diablo", "go2"] {
+        for arm in [
+            "raw samples",
+            "Algorithm 1 only",
+            "QP only",
+            "Algorithm 1 + QP",
+        ] {
+            assert!(
+                stdout.contains(&format!("| {robot} | {arm} | 2 |")),
+                "{stdout}"
+            );
+        }
+        for arm in ["QP only", "Algorithm 1 + QP"] {
+            assert!(
+                stdout.contains(&format!("| {robot} | {arm} | 2 | 1.000 | 1.00 |")),
+                "{stdout}"
+            );
+        }
+    }
+    assert!(
+        stdout.contains("| robot | arm | speed | reverse | acceleration |"),
+        "{stdout}"
+    );
 
     let out = plan(
         &["--bench", "3", "--robot", "robots/go2/robot.toml"],

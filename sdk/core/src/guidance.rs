@@ -175,6 +175,16 @@ pub enum GuidanceVariant {
     Paper,
 }
 
+impl GuidanceVariant {
+    /// The name used in the TOML (`adaptive`, `paper`).
+    pub fn name(self) -> &'static str {
+        match self {
+            GuidanceVariant::Adaptive => "adaptive",
+            GuidanceVariant::Paper => "paper",
+        }
+    }
+}
+
 /// Parameters of the paper variant (the `paper` sub-table, every field optional).
 ///
 /// Defaults: `learning_rate = 1e-4`, `momentum = 0.9`, `clip = 10.0`. The paper gives no

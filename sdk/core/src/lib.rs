@@ -11,7 +11,9 @@
 //! * [`flow`], [`guidance`]: the flow-model interface and feasibility guidance (Algorithm 1).
 //! * [`planner`]: the `Planner` trait, observations and plans.
 //! * [`human2nav`]: the reference planner (sampling, guidance, selection).
+//! * [`ablation`]: the four-arm guidance ablation (raw, Algorithm 1, QP, both).
 
+pub mod ablation;
 pub mod bev;
 pub mod constraint;
 pub mod embodiment;

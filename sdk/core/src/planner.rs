@@ -51,6 +51,8 @@ pub struct PlanInfo {
     /// Φ of the selected trajectory before and after guidance.
     pub phi_before: Option<f64>,
     pub phi_after: Option<f64>,
+    /// Algorithm 1 iterations run for this plan (`None` when guidance did not run).
+    pub guidance_iterations: Option<usize>,
     /// True when the planner fell back to its documented safe behaviour (stop in place).
     pub fallback: bool,
     /// Free-form notes (why a fallback happened, for instance).

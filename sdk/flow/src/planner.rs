@@ -2,8 +2,8 @@
 //! robot profile (`robot.toml` + URDF + plugin constraint terms) and a model folder
 //! (`model.toml` card + weights), plus the two measurements the issue asks of it:
 //!
-//! * [`compare_guidance`] / [`GuidanceSummary`]: the same planning step with and without
-//!   feasibility guidance (TFS of both plans, how far guidance moved the plan, Φ before/after);
+//! * the guidance ablation (raw, Algorithm 1, QP, both) lives in
+//!   [`human2nav_core::ablation`]; `human2nav plan --eval` runs it with this planner;
 //! * [`measure_latency`] / [`LatencyStats`]: p50/p95 wall time of one planning call, and
 //!   [`TimedModel`], which splits that time into flow-network calls and everything else.
 //!
@@ -26,8 +26,7 @@ use human2nav_core::constraint::Phi;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use human2nav_core::human2nav::{Human2Nav, Human2NavSettings, RobotModel};
 use human2nav_core::robot::RobotProfile;
-use human2nav_core::tfs;
-use human2nav_core::{Limits, Observation, Plan, PlanError, Planner, Pose2};
+use human2nav_core::{Limits, Observation, PlanError, Planner};
 use human2nav_plugin::PluginHost;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -400,141 +399,6 @@ impl RobotPlanner {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Guided vs unguided
-// ---------------------------------------------------------------------------------------------
-
-/// Mean distance (m) between the positions of two pose sequences, over the poses both have.
-pub fn mean_displacement(a: &[Pose2], b: &[Pose2]) -> f64 {
-    let n = a.len().min(b.len());
-    if n == 0 {
-        return 0.0;
-    }
-    a.iter()
-        .zip(b)
-        .map(|(p, q)| (p.x - q.x).hypot(p.y - q.y))
-        .sum::<f64>()
-        / n as f64
-}
-
-/// TFS of a plan (its pose 0 is the robot at the planning instant), see [`tfs::tfs_plan`].
-pub fn plan_tfs(plan: &Plan, limits: &Limits, obs: &Observation) -> f64 {
-    tfs::tfs_plan(&plan.poses, plan.dt, limits, obs.ego_velocity)
-}
-
-/// One planning step planned twice, with and without guidance.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct GuidanceComparison {
-    /// TFS of the plan of the planner without guidance.
-    pub tfs_unguided: f64,
-    /// TFS of the plan of the planner with guidance.
-    pub tfs_guided: f64,
-    /// Mean distance (m) between the guided and the unguided plan at equal times.
-    pub plan_displacement: f64,
-    /// Mean distance (m) between the guided plan and the same source sample before guidance
-    /// (`None` when the guided planner kept something other than a fresh sample).
-    pub sample_displacement: Option<f64>,
-    /// Φ of the unguided plan.
-    pub phi_unguided: Option<f64>,
-    /// Φ of the guided plan's sample before and after guidance.
-    pub phi_before: Option<f64>,
-    pub phi_after: Option<f64>,
-    /// True when either planner fell back to stopping in place.
-    pub fallback: bool,
-}
-
-/// Plans `obs` with both planners (each reset first, so neither has a warm start) and
-/// compares the plans. With the same settings but `guidance.enabled` and the same seed, both
-/// planners draw the same source samples, so the comparison isolates guidance (and the
-/// selection it changes).
-pub fn compare_guidance<G, U>(
-    guided: &mut G,
-    unguided: &mut U,
-    obs: &Observation,
-    limits: &Limits,
-) -> Result<GuidanceComparison, PlanError>
-where
-    G: Planner + ?Sized,
-    U: Planner + ?Sized,
-{
-    guided.reset();
-    unguided.reset();
-    let g = guided.plan(obs)?;
-    let u = unguided.plan(obs)?;
-    let sample_displacement = g
-        .info
-        .selected
-        .and_then(|i| g.info.candidates.get(i))
-        .filter(|_| g.info.phi_after.is_some())
-        .map(|before| mean_displacement(&g.poses, before));
-    Ok(GuidanceComparison {
-        tfs_unguided: plan_tfs(&u, limits, obs),
-        tfs_guided: plan_tfs(&g, limits, obs),
-        plan_displacement: mean_displacement(&g.poses, &u.poses),
-        sample_displacement,
-        phi_unguided: u.info.phi_before,
-        phi_before: g.info.phi_before,
-        phi_after: g.info.phi_after,
-        fallback: g.info.fallback || u.info.fallback,
-    })
-}
-
-/// Means over many [`GuidanceComparison`]s (Φ and displacement means skip missing values).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct GuidanceSummary {
-    /// Number of planning steps.
-    pub windows: usize,
-    pub tfs_unguided: f64,
-    pub tfs_guided: f64,
-    /// Fraction of steps whose plan is entirely feasible (TFS = 1).
-    pub all_feasible_unguided: f64,
-    pub all_feasible_guided: f64,
-    pub plan_displacement: f64,
-    pub sample_displacement: f64,
-    pub phi_unguided: f64,
-    pub phi_before: f64,
-    pub phi_after: f64,
-    /// Number of steps where a planner fell back to stopping in place.
-    pub fallbacks: usize,
-}
-
-impl GuidanceSummary {
-    /// Summarises a set of comparisons.
-    pub fn of(results: &[GuidanceComparison]) -> Self {
-        let n = results.len();
-        let mean = |f: &dyn Fn(&GuidanceComparison) -> f64| {
-            if n == 0 {
-                f64::NAN
-            } else {
-                results.iter().map(f).sum::<f64>() / n as f64
-            }
-        };
-        let mean_some = |f: &dyn Fn(&GuidanceComparison) -> Option<f64>| {
-            let v: Vec<f64> = results.iter().filter_map(f).collect();
-            if v.is_empty() {
-                f64::NAN
-            } else {
-                v.iter().sum::<f64>() / v.len() as f64
-            }
-        };
-        let ones =
-            |f: &dyn Fn(&GuidanceComparison) -> f64| mean(&|r| if f(r) >= 1.0 { 1.0 } else { 0.0 });
-        Self {
-            windows: n,
-            tfs_unguided: mean(&|r| r.tfs_unguided),
-            tfs_guided: mean(&|r| r.tfs_guided),
-            all_feasible_unguided: ones(&|r| r.tfs_unguided),
-            all_feasible_guided: ones(&|r| r.tfs_guided),
-            plan_displacement: mean(&|r| r.plan_displacement),
-            sample_displacement: mean_some(&|r| r.sample_displacement),
-            phi_unguided: mean_some(&|r| r.phi_unguided),
-            phi_before: mean_some(&|r| r.phi_before),
-            phi_after: mean_some(&|r| r.phi_after),
-            fallbacks: results.iter().filter(|r| r.fallback).count(),
-        }
-    }
-}
-
-// ---------------------------------------------------------------------------------------------
 // Latency
 // ---------------------------------------------------------------------------------------------
 
@@ -730,6 +594,8 @@ mod tests {
     use super::*;
     use crate::card::TrainingInfo;
     use approx::assert_relative_eq;
+    use human2nav_core::Pose2;
+    use human2nav_core::ablation::{Arm, ablation_step};
 
     #[test]
     fn bev_resolution_comes_from_the_training_record() {
@@ -876,20 +742,28 @@ mod tests {
         let (before, after) = (plan.info.phi_before.unwrap(), plan.info.phi_after.unwrap());
         assert!(after <= before + 1e-12, "Φ {before} → {after}");
 
-        let cmp =
-            compare_guidance(&mut guided.planner, &mut unguided.planner, &obs, &limits).unwrap();
-        assert!((0.0..=1.0).contains(&cmp.tfs_guided));
-        assert!((0.0..=1.0).contains(&cmp.tfs_unguided));
-        assert!(cmp.plan_displacement.is_finite() && cmp.plan_displacement >= 0.0);
-        // Both planners drew the same source samples: identical pre-guidance candidates.
+        let m = settings.guidance.iterations_m;
+        assert!(
+            plan.info.guidance_iterations.is_some_and(|i| i <= m),
+            "{:?}",
+            plan.info
+        );
+        // Both planners drew the same source samples: identical pre-guidance candidates, and
+        // the ablation's arms plan from them.
         guided.planner.reset();
         unguided.planner.reset();
         let g = guided.planner.plan(&obs).unwrap();
         let u = unguided.planner.plan(&obs).unwrap();
         assert_eq!(g.info.candidates, u.info.candidates);
-        let summary = GuidanceSummary::of(&[cmp, cmp]);
-        assert_eq!(summary.windows, 2);
-        assert_relative_eq!(summary.tfs_guided, cmp.tfs_guided, epsilon = 1e-12);
+        let mut arms: [(Arm, &mut dyn Planner); 2] = [
+            (Arm::Raw, &mut unguided.planner),
+            (Arm::Both, &mut guided.planner),
+        ];
+        let steps = ablation_step(&mut arms, &obs, &limits).unwrap();
+        assert_eq!(steps[0].displacement, 0.0);
+        assert_eq!(steps[0].iterations, None);
+        assert!((0.0..=1.0).contains(&steps[1].tfs));
+        assert_eq!(steps[1].phi_after, plan.info.phi_after);
 
         // The timing wrapper counts the calls Algorithm 1 documents: N for the first rollout,
         // then N per iteration forward and N − 1 VJPs backward.
@@ -922,13 +796,5 @@ mod tests {
         }
         let err = load_profile(Path::new("no/such/robot.toml")).unwrap_err();
         assert!(matches!(err, PlannerError::Profile { .. }), "{err}");
-    }
-
-    #[test]
-    fn displacement_is_the_mean_position_gap() {
-        let a = [Pose2::new(0.0, 0.0, 0.0), Pose2::new(1.0, 0.0, 0.3)];
-        let b = [Pose2::new(0.0, 0.0, 1.0), Pose2::new(1.0, 2.0, 0.0)];
-        assert_relative_eq!(mean_displacement(&a, &b), 1.0);
-        assert_relative_eq!(mean_displacement(&a, &[]), 0.0);
     }
 }

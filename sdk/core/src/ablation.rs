@@ -1,0 +1,449 @@
+//! The guidance ablation: one planning step under the four configurations ("arms") that tell
+//! apart what Algorithm 1 and the last-step correction each contribute.
+//!
+//! | arm | Algorithm 1 | last-step correction (QP) |
+//! |---|---|---|
+//! | [`Arm::Raw`] | off | off (the planner without guidance: selection among all `K` samples) |
+//! | [`Arm::Alg1`] | on | off |
+//! | [`Arm::Qp`] | on with `M = 0` (shortlist, slowed and stop candidates, no iteration) | on |
+//! | [`Arm::Both`] | on | on (the shipped planner) |
+//!
+//! [`ablation_step`] plans one observation with one planner per arm, each reset first so that
+//! no warm start carries over; with the same seed every arm draws the same source samples, so
+//! the differences are the stages' alone. [`ArmSummary`] aggregates the steps of one arm.
+
+use crate::human2nav::Human2NavSettings;
+use crate::limits::Limits;
+use crate::planner::{Observation, Plan, PlanError, Planner};
+use crate::se2::Pose2;
+use crate::tfs::{self, Violations};
+use std::time::Instant;
+
+/// One configuration of the ablation (module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Arm {
+    /// The flow model's samples, no guidance, no correction.
+    Raw,
+    /// Algorithm 1 without the last-step correction.
+    Alg1,
+    /// The last-step correction without Algorithm 1's iterations.
+    Qp,
+    /// Algorithm 1 followed by the correction.
+    Both,
+}
+
+impl Arm {
+    /// Every arm, in table order.
+    pub const ALL: [Arm; 4] = [Arm::Raw, Arm::Alg1, Arm::Qp, Arm::Both];
+
+    /// Short name for tables and file names.
+    pub fn key(self) -> &'static str {
+        match self {
+            Arm::Raw => "raw",
+            Arm::Alg1 => "alg1",
+            Arm::Qp => "qp",
+            Arm::Both => "alg1+qp",
+        }
+    }
+
+    /// Description for table legends.
+    pub fn label(self) -> &'static str {
+        match self {
+            Arm::Raw => "raw samples",
+            Arm::Alg1 => "Algorithm 1 only",
+            Arm::Qp => "QP only",
+            Arm::Both => "Algorithm 1 + QP",
+        }
+    }
+
+    /// `base` (the configured planner) with this arm's stages switched on or off; every other
+    /// setting is kept, so the arms differ in the stages alone.
+    pub fn settings(self, base: &Human2NavSettings) -> Human2NavSettings {
+        let mut s = *base;
+        match self {
+            Arm::Raw => {
+                s.guidance.enabled = false;
+                s.projection.enabled = false;
+            }
+            Arm::Alg1 => {
+                s.guidance.enabled = true;
+                s.projection.enabled = false;
+            }
+            Arm::Qp => {
+                s.guidance.enabled = true;
+                s.guidance.iterations_m = 0;
+                s.projection.enabled = true;
+            }
+            Arm::Both => {
+                s.guidance.enabled = true;
+                s.projection.enabled = true;
+            }
+        }
+        s
+    }
+}
+
+impl std::str::FromStr for Arm {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Arm::ALL.into_iter().find(|a| a.key() == s).ok_or_else(|| {
+            format!(
+                "unknown arm `{s}` (expected one of {})",
+                Arm::ALL.map(Arm::key).join(", ")
+            )
+        })
+    }
+}
+
+impl std::fmt::Display for Arm {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.key())
+    }
+}
+
+/// Share of a plan's waypoints that violate each hard limit (a waypoint may violate several).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LimitShares {
+    pub speed: f64,
+    pub reverse: f64,
+    pub acceleration: f64,
+    pub yaw_rate: f64,
+    pub curvature: f64,
+    pub lateral: f64,
+}
+
+impl LimitShares {
+    /// Column names, in the order of [`Self::values`].
+    pub const NAMES: [&'static str; 6] = [
+        "speed",
+        "reverse",
+        "acceleration",
+        "yaw rate",
+        "curvature",
+        "lateral",
+    ];
+
+    /// The shares of `violations` (all zero for an empty slice).
+    pub fn of(violations: &[Violations]) -> Self {
+        let n = violations.len().max(1) as f64;
+        let share =
+            |f: fn(&Violations) -> bool| violations.iter().filter(|v| f(v)).count() as f64 / n;
+        Self {
+            speed: share(|v| v.speed),
+            reverse: share(|v| v.reverse),
+            acceleration: share(|v| v.acceleration),
+            yaw_rate: share(|v| v.yaw_rate),
+            curvature: share(|v| v.curvature),
+            lateral: share(|v| v.lateral),
+        }
+    }
+
+    /// The shares in the order of [`Self::NAMES`].
+    pub fn values(&self) -> [f64; 6] {
+        [
+            self.speed,
+            self.reverse,
+            self.acceleration,
+            self.yaw_rate,
+            self.curvature,
+            self.lateral,
+        ]
+    }
+
+    fn from_values(v: [f64; 6]) -> Self {
+        Self {
+            speed: v[0],
+            reverse: v[1],
+            acceleration: v[2],
+            yaw_rate: v[3],
+            curvature: v[4],
+            lateral: v[5],
+        }
+    }
+}
+
+/// One arm's plan of one observation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ArmStep {
+    pub arm: Arm,
+    /// Plan TFS ([`tfs::tfs_plan`]; pose 0 is the robot with its current velocity).
+    pub tfs: f64,
+    /// Which limits the plan's waypoints violate.
+    pub violations: LimitShares,
+    /// Φ of the kept sample before and after Algorithm 1 (`None` when the plan follows no
+    /// sample, e.g. braking to a stop).
+    pub phi_before: Option<f64>,
+    pub phi_after: Option<f64>,
+    /// Mean distance (m) between this plan and the raw arm's plan at equal times.
+    pub displacement: f64,
+    /// Mean distance (m) between this plan and the sample it follows before any guidance or
+    /// correction (`None` when it follows no sample).
+    pub sample_displacement: Option<f64>,
+    /// Algorithm 1 iterations run (`None` when it did not run).
+    pub iterations: Option<usize>,
+    /// Wall time of the planning call, milliseconds.
+    pub millis: f64,
+    /// The planner fell back to stopping in place.
+    pub fallback: bool,
+}
+
+/// Mean distance (m) between the positions of two pose sequences, over the poses both have.
+pub fn mean_displacement(a: &[Pose2], b: &[Pose2]) -> f64 {
+    let n = a.len().min(b.len());
+    if n == 0 {
+        return 0.0;
+    }
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| (p.x - q.x).hypot(p.y - q.y))
+        .sum::<f64>()
+        / n as f64
+}
+
+/// TFS of a plan (its pose 0 is the robot at the planning instant), see [`tfs::tfs_plan`].
+pub fn plan_tfs(plan: &Plan, limits: &Limits, obs: &Observation) -> f64 {
+    tfs::tfs_plan(&plan.poses, plan.dt, limits, obs.ego_velocity)
+}
+
+/// Plans `obs` with each `(arm, planner)` (reset first) and measures each plan; the raw arm's
+/// plan, when present, is the reference of [`ArmStep::displacement`] (else the first arm's).
+pub fn ablation_step<P: Planner + ?Sized>(
+    planners: &mut [(Arm, &mut P)],
+    obs: &Observation,
+    limits: &Limits,
+) -> Result<Vec<ArmStep>, PlanError> {
+    let mut plans = Vec::with_capacity(planners.len());
+    for (arm, planner) in planners.iter_mut() {
+        planner.reset();
+        let start = Instant::now();
+        let plan = planner.plan(obs)?;
+        plans.push((*arm, plan, start.elapsed().as_secs_f64() * 1e3));
+    }
+    let reference = plans
+        .iter()
+        .position(|(a, _, _)| *a == Arm::Raw)
+        .unwrap_or(0);
+    let reference = plans.get(reference).map(|(_, p, _)| p.poses.clone());
+    Ok(plans
+        .into_iter()
+        .map(|(arm, plan, millis)| {
+            let sample_displacement = plan
+                .info
+                .selected
+                .and_then(|i| plan.info.candidates.get(i))
+                .map(|before| mean_displacement(&plan.poses, before));
+            ArmStep {
+                arm,
+                tfs: plan_tfs(&plan, limits, obs),
+                violations: LimitShares::of(&tfs::plan_violations(
+                    &plan.poses,
+                    plan.dt,
+                    limits,
+                    obs.ego_velocity,
+                )),
+                phi_before: plan.info.phi_before,
+                phi_after: plan.info.phi_after,
+                displacement: reference
+                    .as_deref()
+                    .map_or(0.0, |r| mean_displacement(&plan.poses, r)),
+                sample_displacement,
+                iterations: plan.info.guidance_iterations,
+                millis,
+                fallback: plan.info.fallback,
+            }
+        })
+        .collect())
+}
+
+/// Means over the steps of one arm (means of optional values skip the missing ones; NaN when
+/// none is present).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ArmSummary {
+    pub arm: Arm,
+    /// Number of planning steps.
+    pub windows: usize,
+    pub tfs: f64,
+    /// Share of steps whose plan is entirely feasible (TFS = 1).
+    pub all_feasible: f64,
+    pub violations: LimitShares,
+    pub phi_before: f64,
+    pub phi_after: f64,
+    pub displacement: f64,
+    pub sample_displacement: f64,
+    pub iterations: f64,
+    /// Median wall time of a planning call, milliseconds.
+    pub millis_p50: f64,
+    /// Number of steps that fell back to stopping in place.
+    pub fallbacks: usize,
+}
+
+impl ArmSummary {
+    /// Summarises the steps of `arm` among `steps` (other arms' steps are skipped).
+    pub fn of(arm: Arm, steps: &[ArmStep]) -> Self {
+        let steps: Vec<&ArmStep> = steps.iter().filter(|s| s.arm == arm).collect();
+        let n = steps.len();
+        let mean = |v: &mut dyn Iterator<Item = f64>| {
+            let (sum, count) = v.fold((0.0, 0usize), |(s, c), x| (s + x, c + 1));
+            if count == 0 {
+                f64::NAN
+            } else {
+                sum / count as f64
+            }
+        };
+        let mut shares = [0.0; 6];
+        for s in &steps {
+            for (acc, v) in shares.iter_mut().zip(s.violations.values()) {
+                *acc += v / n as f64;
+            }
+        }
+        let mut millis: Vec<f64> = steps.iter().map(|s| s.millis).collect();
+        millis.sort_by(f64::total_cmp);
+        Self {
+            arm,
+            windows: n,
+            tfs: mean(&mut steps.iter().map(|s| s.tfs)),
+            all_feasible: mean(&mut steps.iter().map(|s| f64::from(u8::from(s.tfs >= 1.0)))),
+            violations: LimitShares::from_values(shares),
+            phi_before: mean(&mut steps.iter().filter_map(|s| s.phi_before)),
+            phi_after: mean(&mut steps.iter().filter_map(|s| s.phi_after)),
+            displacement: mean(&mut steps.iter().map(|s| s.displacement)),
+            sample_displacement: mean(&mut steps.iter().filter_map(|s| s.sample_displacement)),
+            iterations: mean(&mut steps.iter().filter_map(|s| s.iterations.map(|i| i as f64))),
+            millis_p50: millis.get(n / 2).copied().unwrap_or(f64::NAN),
+            fallbacks: steps.iter().filter(|s| s.fallback).count(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::planner::{AgentState, PlanInfo};
+    use crate::se2::Twist2;
+
+    /// A planner that drives straight at a fixed speed, so its TFS is known.
+    struct Straight {
+        speed: f64,
+        resets: usize,
+    }
+
+    impl Planner for Straight {
+        fn name(&self) -> &str {
+            "straight"
+        }
+        fn plan(&mut self, obs: &Observation) -> Result<Plan, PlanError> {
+            let poses = (0..5)
+                .map(|k| Pose2::new(obs.ego.x + self.speed * 0.1 * k as f64, obs.ego.y, 0.0))
+                .collect();
+            Ok(Plan {
+                t0: obs.time,
+                dt: 0.1,
+                poses,
+                info: PlanInfo {
+                    guidance_iterations: Some(3),
+                    ..PlanInfo::default()
+                },
+            })
+        }
+        fn reset(&mut self) {
+            self.resets += 1;
+        }
+    }
+
+    fn observation() -> Observation {
+        Observation {
+            time: 0.0,
+            ego: Pose2::IDENTITY,
+            ego_velocity: Twist2::new(1.0, 0.0, 0.0),
+            goal: [5.0, 0.0],
+            agents: Vec::<AgentState>::new(),
+        }
+    }
+
+    #[test]
+    fn arm_keys_round_trip() {
+        for arm in Arm::ALL {
+            assert_eq!(arm.key().parse::<Arm>(), Ok(arm));
+        }
+        let err = "alg2".parse::<Arm>().unwrap_err();
+        assert!(err.contains("alg2") && err.contains("alg1+qp"), "{err}");
+    }
+
+    #[test]
+    fn arms_switch_only_their_stages() {
+        let base = Human2NavSettings::default();
+        let raw = Arm::Raw.settings(&base);
+        assert!(!raw.guidance.enabled && !raw.projection.enabled);
+        let alg1 = Arm::Alg1.settings(&base);
+        assert!(alg1.guidance.enabled && !alg1.projection.enabled);
+        assert_eq!(alg1.guidance.iterations_m, base.guidance.iterations_m);
+        let qp = Arm::Qp.settings(&base);
+        assert!(qp.guidance.enabled && qp.projection.enabled);
+        assert_eq!(qp.guidance.iterations_m, 0);
+        let both = Arm::Both.settings(&base);
+        assert!(both.guidance.enabled && both.projection.enabled);
+        assert_eq!(both.samples, base.samples);
+        assert_eq!(both.selection, base.selection);
+    }
+
+    #[test]
+    fn steps_measure_each_plan_against_the_raw_one() {
+        let limits = Limits {
+            v_max: 1.5,
+            v_reverse_max: 0.5,
+            a_max: 1.0,
+            omega_max: 2.0,
+            kappa_max: None,
+            lateral_speed_max: 0.05,
+        };
+        let mut slow = Straight {
+            speed: 1.0,
+            resets: 0,
+        };
+        // Twice the speed limit: every waypoint violates it, and the first also accelerates
+        // from 1 m/s to 2·v_max in one step.
+        let mut fast = Straight {
+            speed: 2.0 * limits.v_max,
+            resets: 0,
+        };
+        let obs = observation();
+        let mut arms: [(Arm, &mut dyn Planner); 2] =
+            [(Arm::Raw, &mut slow), (Arm::Alg1, &mut fast)];
+        let steps = ablation_step(&mut arms, &obs, &limits).unwrap();
+        assert_eq!(slow.resets, 1);
+        assert_eq!(fast.resets, 1);
+        assert_eq!(steps[0].tfs, 1.0);
+        assert_eq!(steps[0].displacement, 0.0);
+        assert_eq!(steps[1].tfs, 0.0);
+        assert_eq!(steps[1].violations.speed, 1.0);
+        assert_eq!(steps[1].violations.lateral, 0.0);
+        assert!(steps[1].violations.acceleration > 0.0);
+        // Waypoint k is 0.1·k·(2 v_max − 1) m ahead of the raw plan's: mean of k = 0..4 is 10/5.
+        let gap = 0.1 * (2.0 * limits.v_max - 1.0) * 10.0 / 5.0;
+        assert!((steps[1].displacement - gap).abs() < 1e-12);
+        assert_eq!(steps[1].iterations, Some(3));
+
+        let summary = ArmSummary::of(
+            Arm::Alg1,
+            &[steps[1].clone(), steps[0].clone(), steps[1].clone()],
+        );
+        assert_eq!(summary.windows, 2);
+        assert_eq!(summary.tfs, 0.0);
+        assert_eq!(summary.all_feasible, 0.0);
+        assert_eq!(summary.violations.speed, 1.0);
+        assert_eq!(summary.iterations, 3.0);
+        assert!(summary.phi_before.is_nan());
+        let raw = ArmSummary::of(Arm::Raw, &steps);
+        assert_eq!(raw.all_feasible, 1.0);
+        assert_eq!(ArmSummary::of(Arm::Qp, &steps).windows, 0);
+    }
+
+    #[test]
+    fn displacement_is_the_mean_position_gap() {
+        let a = [Pose2::new(0.0, 0.0, 0.0), Pose2::new(1.0, 0.0, 0.3)];
+        let b = [Pose2::new(0.0, 0.0, 1.0), Pose2::new(1.0, 2.0, 0.0)];
+        assert!((mean_displacement(&a, &b) - 1.0).abs() < 1e-12);
+        assert_eq!(mean_displacement(&a, &[]), 0.0);
+    }
+}

@@ -366,6 +366,9 @@ impl<M: FlowModel> Human2Nav<M> {
         let mut origin: Vec<Source>;
         let mut phi: Vec<(f64, f64)> = first.phi_before.iter().map(|&p| (p, p)).collect();
         let mut notes = Vec::new();
+        let mut guidance_iterations = None;
+        // Which candidates the last-step correction made feasible (empty when it did not run).
+        let mut corrected: Vec<bool> = Vec::new();
         if guidance.enabled {
             let shortlist =
                 self.shortlist(&unguided, goal, &agents, obs.ego_velocity, previous_ego);
@@ -379,6 +382,7 @@ impl<M: FlowModel> Human2Nav<M> {
                 &mut self.workspace,
             )
             .map_err(|e| format!("guidance failed: {e}"))?;
+            guidance_iterations = Some(result.iterations_run);
             candidates = (0..shortlist.len())
                 .map(|j| result.guided_poses(j))
                 .collect();
@@ -409,6 +413,7 @@ impl<M: FlowModel> Human2Nav<M> {
                 origin.push(Source::Previous);
             }
             if self.settings.projection.enabled {
+                corrected.clear();
                 for c in candidates.iter_mut() {
                     match projection::project_with(
                         c,
@@ -418,8 +423,14 @@ impl<M: FlowModel> Human2Nav<M> {
                         &self.settings.projection,
                         &mut self.projection,
                     ) {
-                        Ok(p) => *c = p.poses,
-                        Err(e) => notes.push(format!("last-step correction skipped: {e}")),
+                        Ok(p) => {
+                            *c = p.poses;
+                            corrected.push(true);
+                        }
+                        Err(e) => {
+                            notes.push(format!("last-step correction skipped: {e}"));
+                            corrected.push(false);
+                        }
                     }
                 }
             }
@@ -433,17 +444,10 @@ impl<M: FlowModel> Human2Nav<M> {
         }
 
         // Stage 3: selection.
-        let mut best: Option<(usize, f64)> = None;
-        for (i, c) in candidates.iter().enumerate() {
-            if !c.iter().all(|p| p.is_finite()) {
-                continue;
-            }
-            let s = self.score(c, goal, &agents, obs.ego_velocity, previous_ego, true);
-            if s.is_finite() && best.is_none_or(|(_, b)| s < b) {
-                best = Some((i, s));
-            }
-        }
-        let Some((chosen, _)) = best else {
+        let best = select_best(&candidates, &corrected, |c| {
+            self.score(c, goal, &agents, obs.ego_velocity, previous_ego, true)
+        });
+        let Some(chosen) = best else {
             return Err("every candidate trajectory was non-finite".into());
         };
 
@@ -490,6 +494,7 @@ impl<M: FlowModel> Human2Nav<M> {
             selected: origin[chosen].sample(),
             phi_before,
             phi_after,
+            guidance_iterations,
             fallback: false,
             notes,
         };
@@ -666,6 +671,30 @@ pub fn time_scaled(traj: &[Pose2], scale: f64) -> Vec<Pose2> {
 }
 
 /// "Straight to the goal" in the ego frame: `T` poses at `dt` along the line from the robot to
+/// The candidate with the lowest finite `score` among those whose poses are all finite. When
+/// the last-step correction ran (`corrected` holds one flag per candidate), a candidate it
+/// failed on is eligible only if it failed on every one: an uncorrected plan never wins over a
+/// corrected one, whatever the weight of the score's feasibility term.
+fn select_best(
+    candidates: &[Vec<Pose2>],
+    corrected: &[bool],
+    mut score: impl FnMut(&[Pose2]) -> f64,
+) -> Option<usize> {
+    let any_corrected = corrected.contains(&true);
+    let mut best: Option<(usize, f64)> = None;
+    for (i, c) in candidates.iter().enumerate() {
+        let eligible = !any_corrected || corrected.get(i).copied().unwrap_or(false);
+        if !eligible || !c.iter().all(|p| p.is_finite()) {
+            continue;
+        }
+        let s = score(c);
+        if s.is_finite() && best.is_none_or(|(_, b)| s < b) {
+            best = Some((i, s));
+        }
+    }
+    best.map(|(i, _)| i)
+}
+
 /// `goal`, facing it, at `speed` until the goal and resting there. Not feasible as it stands
 /// (it turns to face the goal at once and starts at `speed`); the last-step correction makes
 /// it so.
@@ -723,5 +752,50 @@ impl<M: FlowModel + Send> Planner for Human2Nav<M> {
         };
         self.previous = (!plan.info.fallback).then(|| plan.clone());
         Ok(plan)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn line(speed: f64) -> Vec<Pose2> {
+        (1..=4)
+            .map(|k| Pose2::new(0.1 * speed * k as f64, 0.0, 0.0))
+            .collect()
+    }
+
+    #[test]
+    fn an_uncorrected_candidate_never_wins_over_a_corrected_one() {
+        // Candidate 0 scores best but the correction failed on it.
+        let candidates = vec![line(1.0), line(2.0), line(3.0)];
+        let score = |c: &[Pose2]| c[0].x;
+        assert_eq!(
+            select_best(&candidates, &[false, true, true], score),
+            Some(1)
+        );
+        // Without the correction, or when it failed on all, the score alone decides.
+        assert_eq!(select_best(&candidates, &[], score), Some(0));
+        assert_eq!(
+            select_best(&candidates, &[false, false, false], score),
+            Some(0)
+        );
+    }
+
+    #[test]
+    fn selection_skips_non_finite_candidates_and_scores() {
+        let mut bad = line(1.0);
+        bad[2].y = f64::NAN;
+        let candidates = vec![bad, line(2.0), line(3.0)];
+        assert_eq!(select_best(&candidates, &[], |c| c[0].x), Some(1));
+        let nan_for_second = |c: &[Pose2]| {
+            if c[0].x > 0.15 && c[0].x < 0.25 {
+                f64::NAN
+            } else {
+                c[0].x
+            }
+        };
+        assert_eq!(select_best(&candidates, &[], nan_for_second), Some(2));
+        assert_eq!(select_best(&candidates[..1], &[], |c| c[0].x), None);
     }
 }

@@ -11,8 +11,10 @@
 //!   or a `/proc` file that reports size 0, cannot exhaust memory either); a larger file is an
 //!   error naming the cap.
 //!
-//! The error is an [`io::Error`] whose message says what was wrong and names the cap; the
-//! callers' error types add the path, as they do for any other read error.
+//! The error is an [`io::Error`] whose message names the kind of file, what was wrong and the
+//! cap (`episode file: expected a regular file, found a FIFO (named pipe)`, `URDF: the file
+//! (20000000 bytes) is larger than the limit of 16 MiB`); the callers' error types add the path,
+//! as they do for any other read error.
 //!
 //! The caps below are generous: each is at least 30 times the largest file of its kind the
 //! project ships or reads (ARCHITECTURE.md, "Input limits").
@@ -58,7 +60,7 @@ pub fn read_user_file(path: &Path, what: &str, max_bytes: u64) -> io::Result<Str
         io::Error::new(
             io::ErrorKind::InvalidData,
             format!(
-                "a {what} must be UTF-8 text (invalid byte at offset {})",
+                "{what}: not UTF-8 text (invalid byte at offset {})",
                 e.utf8_error().valid_up_to()
             ),
         )
@@ -82,7 +84,7 @@ fn too_large(what: &str, max_bytes: u64, len: Option<u64>) -> io::Error {
     io::Error::new(
         io::ErrorKind::InvalidData,
         format!(
-            "the file{size} is larger than the {} limit for a {what}",
+            "{what}: the file{size} is larger than the limit of {}",
             format_bytes(max_bytes)
         ),
     )
@@ -95,7 +97,7 @@ fn check_regular(meta: &std::fs::Metadata, what: &str) -> io::Result<()> {
     Err(io::Error::new(
         io::ErrorKind::InvalidInput,
         format!(
-            "a {what} must be a regular file, this is {}",
+            "{what}: expected a regular file, found {}",
             file_kind(&meta.file_type())
         ),
     ))
@@ -122,7 +124,7 @@ fn file_kind(t: &std::fs::FileType) -> &'static str {
             return "a socket";
         }
     }
-    "not a regular file"
+    "something other than a regular file"
 }
 
 #[cfg(test)]
@@ -143,7 +145,7 @@ mod tests {
         assert_eq!(read_user_file(&p, "test file", 10).unwrap(), "0123456789");
         let e = read_user_file(&p, "test file", 9).unwrap_err().to_string();
         assert!(
-            e.contains("larger than the 9 bytes limit for a test file"),
+            e.contains("test file: the file (10 bytes) is larger than the limit of 9 bytes"),
             "{e}"
         );
         let _ = std::fs::remove_file(&p);
@@ -156,13 +158,13 @@ mod tests {
         let e = read_user_file(&dir, "robot profile", 100).unwrap_err();
         assert!(
             e.to_string()
-                .contains("a robot profile must be a regular file, this is a directory"),
+                .contains("robot profile: expected a regular file, found a directory"),
             "{e}"
         );
         let p = temp("bin");
         std::fs::write(&p, [0xffu8, 0xfe]).unwrap();
         let e = read_user_file(&p, "URDF", 100).unwrap_err();
-        assert!(e.to_string().contains("must be UTF-8 text"), "{e}");
+        assert!(e.to_string().contains("URDF: not UTF-8 text"), "{e}");
     }
 
     #[cfg(unix)]

@@ -607,7 +607,7 @@ fn urdf_naming_a_device_or_fifo_is_refused_without_reading_it() {
             Err(e @ ProfileError::UrdfLoad { .. }) => {
                 let msg = e.to_string();
                 assert!(msg.contains("/dev/zero"), "{msg}");
-                assert!(msg.contains("must be a regular file"), "{msg}");
+                assert!(msg.contains("URDF: expected a regular file"), "{msg}");
                 assert!(msg.contains("character device"), "{msg}");
             }
             other => panic!("{other:?}"),
@@ -661,7 +661,8 @@ fn oversized_profile_and_urdf_are_refused_with_the_cap() {
         Err(e @ ProfileError::Read { .. }) => {
             let msg = e.to_string();
             assert!(msg.contains("robot.toml"), "{msg}");
-            assert!(msg.contains("1 MiB limit for a robot profile"), "{msg}");
+            assert!(msg.contains("robot profile: the file"), "{msg}");
+            assert!(msg.contains("larger than the limit of 1 MiB"), "{msg}");
         }
         other => panic!("{other:?}"),
     }
@@ -673,7 +674,8 @@ fn oversized_profile_and_urdf_are_refused_with_the_cap() {
         Err(e @ ProfileError::UrdfLoad { .. }) => {
             let msg = e.to_string();
             assert!(msg.contains("diablo.urdf"), "{msg}");
-            assert!(msg.contains("16 MiB limit for a URDF"), "{msg}");
+            assert!(msg.contains("URDF: the file (16777217 bytes)"), "{msg}");
+            assert!(msg.contains("larger than the limit of 16 MiB"), "{msg}");
         }
         other => panic!("{other:?}"),
     }

@@ -158,7 +158,7 @@ fn dataset_episode_config_and_cache_files_must_be_regular_files() {
         let e = message(sgan::load(Path::new("/dev/zero"), "zero", "sgan").unwrap_err());
         assert!(e.contains("/dev/zero"), "{e}");
         assert!(
-            e.contains("a dataset file must be a regular file, this is a character device"),
+            e.contains("dataset file: expected a regular file, found a character device"),
             "{e}"
         );
     }
@@ -196,7 +196,7 @@ fn oversized_files_are_refused_with_the_cap() {
     let e = message(eth::load_obsmat(&p, "huge").unwrap_err());
     assert!(e.contains("huge_obsmat.txt"), "{e}");
     assert!(
-        e.contains("larger than the 256 MiB limit for a dataset file"),
+        e.contains("dataset file: the file (268435457 bytes) is larger than the limit of 256 MiB"),
         "{e}"
     );
     let _ = std::fs::remove_file(&p);

@@ -234,10 +234,10 @@ pub struct GuidanceSettings {
     pub variant: GuidanceVariant,
     /// When false, sampling is the plain rollout (the "w/o guidance" ablation).
     pub enabled: bool,
-    /// Number of Euler integration steps `N` (≥ 1).
+    /// Number of Euler integration steps `N` (1 to [`MAX_STEPS_N`]).
     pub steps_n: usize,
     /// Number of optimisation iterations `M`: at most (adaptive) or exactly (paper); 0 disables
-    /// guidance.
+    /// guidance; at most [`MAX_ITERATIONS_M`].
     pub iterations_m: usize,
     /// Initial step size `γ` of the control update (Algorithm 1's γ; not the softplus sharpness
     /// γ of Eq. 8, which is [`GuidanceWeights::gamma`](crate::GuidanceWeights)). Finite, ≥ 0.
@@ -258,6 +258,16 @@ pub struct GuidanceSettings {
     /// The paper variant's `γ`, `β` and clip (validated whichever variant is selected).
     pub paper: PaperSettings,
 }
+
+/// Largest number of Euler integration steps `N` ([`GuidanceSettings::steps_n`]). The planner
+/// uses 5 and the defaults 10; each step costs a network call per iteration, so 1000 already
+/// makes one planning call take minutes. A bound keeps a mistyped value an error instead of a
+/// hang.
+pub const MAX_STEPS_N: usize = 1000;
+
+/// Largest number of guidance iterations `M` ([`GuidanceSettings::iterations_m`]); the planner
+/// uses 3 and the defaults 8. Each iteration costs `2N` network calls (see [`MAX_STEPS_N`]).
+pub const MAX_ITERATIONS_M: usize = 1000;
 
 /// Factor applied to a sample's step size after an accepted update.
 pub const STEP_GROW: f64 = 1.5;
@@ -291,6 +301,21 @@ impl GuidanceSettings {
         };
         if self.steps_n == 0 {
             return bad("steps_n", "must be at least 1".into());
+        }
+        if self.steps_n > MAX_STEPS_N {
+            return bad(
+                "steps_n",
+                format!("{} is more than the limit of {MAX_STEPS_N}", self.steps_n),
+            );
+        }
+        if self.iterations_m > MAX_ITERATIONS_M {
+            return bad(
+                "iterations_m",
+                format!(
+                    "{} is more than the limit of {MAX_ITERATIONS_M}",
+                    self.iterations_m
+                ),
+            );
         }
         if !(self.learning_rate.is_finite() && self.learning_rate >= 0.0) {
             return bad(
@@ -916,10 +941,10 @@ fn start(
     steps_n: usize,
     ws: &mut GuidanceWorkspace,
 ) -> Result<(), GuidanceError> {
-    if steps_n == 0 {
+    if steps_n == 0 || steps_n > MAX_STEPS_N {
         return Err(GuidanceError::InvalidSettings {
             field: "steps_n",
-            message: "must be at least 1".into(),
+            message: format!("{steps_n} must lie in 1 to {MAX_STEPS_N}"),
         });
     }
     let (k, t) = sample_count(model, x0)?;

@@ -96,11 +96,18 @@ impl Default for SelectionWeights {
     }
 }
 
+/// Largest number of sampled candidates `K` ([`Human2NavSettings::samples`]) and of guided
+/// samples ([`Human2NavSettings::guided_samples`]): 64 times the default `K = 16`. The network
+/// runs on the whole batch at every integration step, so a planning call grows linearly with
+/// `K` (about 8 ms at 16 unguided); beyond this it takes seconds, and a mistyped count should be
+/// an error rather than an allocation of gigabytes.
+pub const MAX_SAMPLES: usize = 1024;
+
 /// Settings of the Human2Nav planner (TOML table; every field optional).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Human2NavSettings {
-    /// Number of sampled candidates `K`. Default 16.
+    /// Number of sampled candidates `K` (1 to [`MAX_SAMPLES`]). Default 16.
     pub samples: usize,
     /// Time between plan poses (s); must match the model's training data. Default 0.1.
     pub dt: f64,
@@ -110,9 +117,10 @@ pub struct Human2NavSettings {
     pub seed: u64,
     /// Keep the previous plan as a candidate (warm start). Default true.
     pub warm_start: bool,
-    /// How many of the `K` samples Algorithm 1 runs on (0: all). Default 4: the best by the
-    /// selection score without its feasibility term. Ignored with the paper variant of
-    /// Algorithm 1 (`guidance.variant = "paper"`), which guides all `K`, as the paper does.
+    /// How many of the `K` samples Algorithm 1 runs on (0: all; at most [`MAX_SAMPLES`]).
+    /// Default 4: the best by the selection score without its feasibility term. Ignored with the
+    /// paper variant of Algorithm 1 (`guidance.variant = "paper"`), which guides all `K`, as
+    /// the paper does.
     pub guided_samples: usize,
     /// Each guided candidate is also offered at this fraction of its speed along the same path
     /// (in `(0, 1]`; 1: no slowed copies). Default 0.5.
@@ -160,6 +168,21 @@ impl Human2NavSettings {
         };
         if self.samples == 0 {
             return bad("samples", "must be at least 1");
+        }
+        if self.samples > MAX_SAMPLES {
+            return bad(
+                "samples",
+                &format!("{} is more than the limit of {MAX_SAMPLES}", self.samples),
+            );
+        }
+        if self.guided_samples > MAX_SAMPLES {
+            return bad(
+                "guided_samples",
+                &format!(
+                    "{} is more than the limit of {MAX_SAMPLES}",
+                    self.guided_samples
+                ),
+            );
         }
         if !(self.dt.is_finite() && self.dt > 0.0) {
             return bad("dt", "must be finite and > 0");

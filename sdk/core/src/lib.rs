@@ -3,6 +3,7 @@
 //! * [`se2`]: the SE(2) Lie group used for every pose and trajectory.
 //! * [`trajectory`]: fixed-step pose sequences and their derived speed, acceleration, yaw rate,
 //!   curvature and lateral speed.
+//! * [`input`]: reading user-named files (regular files only, with a size cap).
 //! * [`robot`]: robot profiles (`robot.toml` + URDF) with their [`limits`].
 //! * [`embodiment`]: kinematic models, command saturation and tracking controllers.
 //! * [`constraint`]: constraint terms, the soft-margin penalty of Eq. 8 and Φ of Eq. 9.
@@ -20,6 +21,7 @@ pub mod embodiment;
 pub mod flow;
 pub mod guidance;
 pub mod human2nav;
+pub mod input;
 pub mod limits;
 pub mod planner;
 pub mod projection;

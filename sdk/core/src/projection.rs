@@ -58,6 +58,11 @@ use clarabel::solver::{
 };
 use serde::{Deserialize, Serialize};
 
+/// Largest number of Gauss-Newton iterations of the correction
+/// ([`ProjectionSettings::iterations`]): the planner uses 1 (a second moved plans by under
+/// 1 mm); each costs a QP (about 1 ms) per candidate.
+pub const MAX_PROJECTION_ITERATIONS: usize = 100;
+
 /// Settings of the last-step correction (TOML table `[human2nav.projection]`, every field
 /// optional). Defaults: `enabled = true`, `iterations = 1`, `margin = 0.01`,
 /// `acceleration_margin = 0.1`, `heading_weight = 0.1`, `effort = 0.01`.
@@ -66,7 +71,7 @@ use serde::{Deserialize, Serialize};
 pub struct ProjectionSettings {
     /// Apply the correction after Algorithm 1 (it is never applied without guidance).
     pub enabled: bool,
-    /// Gauss-Newton iterations (≥ 1); each solves one QP. The first one already gives a
+    /// Gauss-Newton iterations (1 to [`MAX_PROJECTION_ITERATIONS`]); each solves one QP. The first one already gives a
     /// feasible plan; later ones only re-linearise (on held-out windows a second one changed the
     /// mean correction by under 1 mm for about 1 ms per candidate, see `planner.toml`).
     pub iterations: usize,
@@ -121,6 +126,12 @@ impl ProjectionSettings {
         };
         if self.iterations == 0 {
             return bad("iterations", "must be at least 1");
+        }
+        if self.iterations > MAX_PROJECTION_ITERATIONS {
+            return bad(
+                "iterations",
+                &format!("must be at most {MAX_PROJECTION_ITERATIONS}"),
+            );
         }
         if !(self.margin.is_finite() && (0.0..0.5).contains(&self.margin)) {
             return bad("margin", "must be in [0, 0.5)");

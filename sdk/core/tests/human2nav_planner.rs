@@ -201,6 +201,33 @@ fn the_shipped_planner_table_parses_and_validates() {
 }
 
 #[test]
+fn huge_counts_in_the_planner_table_are_errors_naming_the_field() {
+    use human2nav_core::human2nav::MAX_SAMPLES;
+    for (text, field) in [
+        ("samples = 100000", "human2nav.samples"),
+        ("guided_samples = 100000", "human2nav.guided_samples"),
+        ("[guidance]\niterations_m = 1000000000", "`iterations_m`"),
+        ("[guidance]\nsteps_n = 5000", "`steps_n`"),
+        ("[projection]\niterations = 1000000", "`iterations`"),
+    ] {
+        let settings: Human2NavSettings = toml::from_str(text).unwrap();
+        match settings.validate() {
+            Err(e) => {
+                let msg = e.to_string();
+                assert!(msg.contains(field), "{text}: {msg}");
+            }
+            Ok(()) => panic!("{text} was accepted"),
+        }
+    }
+    let most = Human2NavSettings {
+        samples: MAX_SAMPLES,
+        guided_samples: MAX_SAMPLES,
+        ..Human2NavSettings::default()
+    };
+    assert!(most.validate().is_ok());
+}
+
+#[test]
 fn same_seed_same_plan_after_reset() {
     let obs = observation();
     let mut p = planner(true);

@@ -551,3 +551,132 @@ fn defaults_apply_when_sections_are_absent() {
     assert_eq!(p.controller_source, Origin::Default);
     assert_eq!(p.guidance.gamma, 10.0);
 }
+
+/// A FIFO at `path` (`mkfifo`); false when it cannot be made (no `mkfifo` on this system).
+#[cfg(unix)]
+fn make_fifo(path: &Path) -> bool {
+    let _ = fs::remove_file(path);
+    matches!(
+        std::process::Command::new("mkfifo").arg(path).status(),
+        Ok(s) if s.success()
+    )
+}
+
+#[test]
+fn deeply_nested_urdf_is_an_error_not_a_stack_overflow() {
+    use human2nav_core::robot::MAX_URDF_DEPTH;
+    let dir = scratch_copy("diablo");
+    let urdf = dir.join("diablo.urdf");
+    let text = fs::read_to_string(&urdf).unwrap();
+    // 100 000 nested elements inside the robot: the XML parser recursed once per level.
+    let n = 100_000;
+    let nested = format!("{}{}", "<a>".repeat(n), "</a>".repeat(n));
+    let deep = text.replacen("</robot>", &format!("{nested}</robot>"), 1);
+    fs::write(&urdf, deep).unwrap();
+    match RobotProfile::load(&dir.join("robot.toml")) {
+        Err(e @ ProfileError::UrdfLoad { .. }) => {
+            let msg = e.to_string();
+            assert!(msg.contains("diablo.urdf"), "{msg}");
+            assert!(
+                msg.contains(&format!("nested more than {MAX_URDF_DEPTH} deep")),
+                "{msg}"
+            );
+        }
+        other => panic!("{other:?}"),
+    }
+    // Nesting up to the limit is left to the parser (here: an unknown element it ignores).
+    let ok = format!(
+        "{}{}",
+        "<a>".repeat(MAX_URDF_DEPTH - 1),
+        "</a>".repeat(MAX_URDF_DEPTH - 1)
+    );
+    fs::write(
+        &urdf,
+        text.replacen("</robot>", &format!("{ok}</robot>"), 1),
+    )
+    .unwrap();
+    assert!(RobotProfile::load(&dir.join("robot.toml")).is_ok());
+}
+
+#[cfg(unix)]
+#[test]
+fn urdf_naming_a_device_or_fifo_is_refused_without_reading_it() {
+    if Path::new("/dev/zero").exists() {
+        let (_, result) = load_edited("diablo", |t| set_line(t, "urdf", "urdf = \"/dev/zero\""));
+        match result {
+            Err(e @ ProfileError::UrdfLoad { .. }) => {
+                let msg = e.to_string();
+                assert!(msg.contains("/dev/zero"), "{msg}");
+                assert!(msg.contains("URDF: expected a regular file"), "{msg}");
+                assert!(msg.contains("character device"), "{msg}");
+            }
+            other => panic!("{other:?}"),
+        }
+    } else {
+        eprintln!("skipping the /dev/zero case: no /dev/zero");
+    }
+    let dir = scratch_copy("diablo");
+    if !make_fifo(&dir.join("pipe.urdf")) {
+        eprintln!("skipping the FIFO case: mkfifo is not available");
+        return;
+    }
+    let toml = dir.join("robot.toml");
+    let text = fs::read_to_string(&toml).unwrap();
+    fs::write(&toml, set_line(&text, "urdf", "urdf = \"pipe.urdf\"")).unwrap();
+    match RobotProfile::load(&toml) {
+        Err(e @ ProfileError::UrdfLoad { .. }) => {
+            let msg = e.to_string();
+            assert!(msg.contains("pipe.urdf"), "{msg}");
+            assert!(msg.contains("a FIFO"), "{msg}");
+        }
+        other => panic!("{other:?}"),
+    }
+    // The profile itself as a FIFO, and as a directory.
+    let fifo = dir.join("fifo.toml");
+    assert!(make_fifo(&fifo));
+    match RobotProfile::load(&fifo) {
+        Err(e @ ProfileError::Read { .. }) => {
+            let msg = e.to_string();
+            assert!(msg.contains("fifo.toml") && msg.contains("a FIFO"), "{msg}");
+        }
+        other => panic!("{other:?}"),
+    }
+    match RobotProfile::load(&dir) {
+        Err(e @ ProfileError::Read { .. }) => {
+            assert!(e.to_string().contains("a directory"), "{e}");
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn oversized_profile_and_urdf_are_refused_with_the_cap() {
+    use human2nav_core::input::{MAX_PROFILE_BYTES, MAX_URDF_BYTES};
+    let dir = scratch_copy("diablo");
+    let toml = dir.join("robot.toml");
+    let text = fs::read_to_string(&toml).unwrap();
+    let padding = "#".repeat(MAX_PROFILE_BYTES as usize);
+    fs::write(&toml, format!("{text}\n{padding}\n")).unwrap();
+    match RobotProfile::load(&toml) {
+        Err(e @ ProfileError::Read { .. }) => {
+            let msg = e.to_string();
+            assert!(msg.contains("robot.toml"), "{msg}");
+            assert!(msg.contains("robot profile: the file"), "{msg}");
+            assert!(msg.contains("larger than the limit of 1 MiB"), "{msg}");
+        }
+        other => panic!("{other:?}"),
+    }
+    fs::write(&toml, &text).unwrap();
+    let urdf = dir.join("diablo.urdf");
+    let file = fs::File::create(&urdf).unwrap();
+    file.set_len(MAX_URDF_BYTES + 1).unwrap();
+    match RobotProfile::load(&toml) {
+        Err(e @ ProfileError::UrdfLoad { .. }) => {
+            let msg = e.to_string();
+            assert!(msg.contains("diablo.urdf"), "{msg}");
+            assert!(msg.contains("URDF: the file (16777217 bytes)"), "{msg}");
+            assert!(msg.contains("larger than the limit of 16 MiB"), "{msg}");
+        }
+        other => panic!("{other:?}"),
+    }
+}

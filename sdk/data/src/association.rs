@@ -166,6 +166,13 @@ impl TrackerOptions {
                 "must be at least 1",
             ));
         }
+        crate::limits::count_at_most(self.frame_step, 1_000_000, "association.frame_step")?;
+        crate::limits::option_in(
+            self.max_missed,
+            0.0,
+            crate::limits::MAX_TIME,
+            "association.max_missed",
+        )?;
         Ok(())
     }
 }

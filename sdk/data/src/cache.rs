@@ -10,9 +10,11 @@
 //! `3·H·W·4` bytes (12 KiB at 32 × 32), the stored one about 0.5 KiB.
 
 use crate::error::DataError;
+use crate::limits::{MAX_CACHE_FILE_BYTES, MAX_MANIFEST_BYTES};
 use crate::scenario::ScenarioClass;
-use crate::tuples::{CompactTuple, Split, TrainingTuple, TupleOptions, TupleStats};
+use crate::tuples::{CompactTuple, MAX_HORIZON, Split, TrainingTuple, TupleOptions, TupleStats};
 use human2nav_core::bev::BevSpec;
+use human2nav_core::input::{read_user_bytes, read_user_file};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rayon::prelude::*;
@@ -205,7 +207,8 @@ impl TupleCache {
     /// Opens a cache directory and checks its manifest version.
     pub fn open(dir: &Path) -> Result<TupleCache, DataError> {
         let mpath = dir.join("manifest.json");
-        let body = std::fs::read_to_string(&mpath).map_err(|e| DataError::io(&mpath, e))?;
+        let body = read_user_file(&mpath, "cache manifest", MAX_MANIFEST_BYTES)
+            .map_err(|e| DataError::io(&mpath, e))?;
         let manifest: Manifest = serde_json::from_str(&body).map_err(|e| DataError::Json {
             path: mpath.clone(),
             source: e,
@@ -223,6 +226,15 @@ impl TupleCache {
             path: mpath.clone(),
             message: e.to_string(),
         })?;
+        if manifest.horizon == 0 || manifest.horizon > MAX_HORIZON {
+            return Err(DataError::Cache {
+                path: mpath,
+                message: format!(
+                    "horizon {} is outside 1..={MAX_HORIZON} (tuples.horizon)",
+                    manifest.horizon
+                ),
+            });
+        }
         Ok(Self {
             dir: dir.to_path_buf(),
             manifest,
@@ -255,7 +267,8 @@ impl TupleCache {
     /// Reads the compact tuples of a split.
     pub fn load_compact(&self, split: Split) -> Result<Vec<CompactTuple>, DataError> {
         let path = file_of(&self.dir, split);
-        let bytes = std::fs::read(&path).map_err(|e| DataError::io(&path, e))?;
+        let bytes = read_user_bytes(&path, "tuple cache file", MAX_CACHE_FILE_BYTES)
+            .map_err(|e| DataError::io(&path, e))?;
         let bad = |message: String| DataError::Cache {
             path: path.clone(),
             message,
@@ -268,12 +281,25 @@ impl TupleCache {
         let (version, horizon) = (word(8), word(12) as usize);
         let mut c = [0u8; 8];
         c.copy_from_slice(&bytes[16..24]);
-        let count = u64::from_le_bytes(c) as usize;
+        let count = u64::from_le_bytes(c);
         if version != CACHE_VERSION || horizon != self.manifest.horizon {
             return Err(bad(format!(
                 "file version {version} / horizon {horizon} do not match the manifest"
             )));
         }
+        // Every tuple takes at least its fixed part and its future poses: a count the file
+        // cannot hold is refused before anything is allocated for it.
+        let least = horizon
+            .checked_mul(12)
+            .and_then(|f| f.checked_add(24))
+            .unwrap_or(usize::MAX) as u64;
+        let room = (bytes.len() - HEADER) as u64 / least.max(1);
+        if count > room {
+            return Err(bad(format!(
+                "the header announces {count} tuples, the file has room for at most {room}"
+            )));
+        }
+        let count = count as usize;
         if self.manifest.counts.get(&split).copied() != Some(count) {
             return Err(bad(format!(
                 "holds {count} tuples, the manifest says {:?}",

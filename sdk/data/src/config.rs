@@ -45,6 +45,10 @@ impl Default for PathsConfig {
     }
 }
 
+/// Largest `sources.synthetic_scenes` (250 times the default of 400; each scene is a crowd of
+/// a minute or so).
+pub const MAX_SYNTHETIC_SCENES: usize = 100_000;
+
 /// Which sources to read.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -61,7 +65,8 @@ pub struct SourcesConfig {
     pub sgan: bool,
     /// Use synthetic social-force scenes when no dataset directory exists. Default true.
     pub synthetic_fallback: bool,
-    /// Number of synthetic scenes for the fallback cache. Default 400.
+    /// Number of synthetic scenes for the fallback cache (at most [`MAX_SYNTHETIC_SCENES`]).
+    /// Default 400.
     pub synthetic_scenes: usize,
     /// Seed of the synthetic fallback.
     pub seed: u64,
@@ -125,9 +130,15 @@ pub struct DataConfig {
 }
 
 impl DataConfig {
-    /// Parses and validates a config file.
+    /// Parses and validates a config file (a regular file of at most
+    /// [`MAX_CONFIG_BYTES`](human2nav_core::input::MAX_CONFIG_BYTES)).
     pub fn load(path: &Path) -> Result<Self, DataError> {
-        let body = std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))?;
+        let body = human2nav_core::input::read_user_file(
+            path,
+            "data configuration",
+            human2nav_core::input::MAX_CONFIG_BYTES,
+        )
+        .map_err(|e| DataError::io(path, e))?;
         Self::parse(&body, path)
     }
 
@@ -154,6 +165,15 @@ impl DataConfig {
         self.episodes.validate()?;
         self.interaction.validate()?;
         self.association.validate()?;
+        if self.sources.synthetic_scenes > MAX_SYNTHETIC_SCENES {
+            return Err(DataError::option(
+                "sources.synthetic_scenes",
+                format!(
+                    "{} is more than the limit of {MAX_SYNTHETIC_SCENES}",
+                    self.sources.synthetic_scenes
+                ),
+            ));
+        }
         if (self.resample.dt - 0.1).abs() > 1e-12 {
             return Err(DataError::option(
                 "resample.dt",

@@ -46,6 +46,19 @@ pub enum DataError {
     },
     #[error("no dataset found: {0}")]
     NoData(String),
+    /// An episode file whose header is unusable (format version, per-class counts).
+    #[error("{path}: {message}")]
+    Episodes { path: PathBuf, message: String },
+    /// One episode of an episode file out of range ([`crate::Episode::validate`]).
+    #[error("{path}: episode {index} (`{id}`): {field}: {message}")]
+    Episode {
+        path: PathBuf,
+        /// 0-based position in the file.
+        index: usize,
+        id: String,
+        field: String,
+        message: String,
+    },
 }
 
 impl DataError {

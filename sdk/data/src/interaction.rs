@@ -170,20 +170,40 @@ impl Default for InteractionOptions {
     }
 }
 
+/// Largest `interaction.shifts_per_path` (the default is 32).
+pub const MAX_SHIFTS_PER_PATH: usize = 10_000;
+
 impl InteractionOptions {
     /// Checks every option is usable; errors name the `interaction.<field>` key.
     pub fn validate(&self) -> Result<(), DataError> {
         let pos = crate::scenario::positive;
         pos(self.reference_radius, "interaction.reference_radius")?;
         pos(self.reference_accel, "interaction.reference_accel")?;
-        for (v, f) in [
-            (self.min_time_shift, "interaction.min_time_shift"),
-            (self.min_track_age, "interaction.min_track_age"),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(DataError::option(f, "must be finite and >= 0"));
-            }
-        }
+        // Upper and lower bounds keep every derived step count within the scene.
+        use crate::limits::{MAX_TIME, count_at_most, option_in};
+        option_in(
+            self.reference_accel,
+            0.01,
+            100.0,
+            "interaction.reference_accel",
+        )?;
+        option_in(
+            self.min_time_shift,
+            0.0,
+            MAX_TIME,
+            "interaction.min_time_shift",
+        )?;
+        option_in(
+            self.min_track_age,
+            0.0,
+            MAX_TIME,
+            "interaction.min_track_age",
+        )?;
+        count_at_most(
+            self.shifts_per_path,
+            MAX_SHIFTS_PER_PATH,
+            "interaction.shifts_per_path",
+        )?;
         if self.shifts_per_path == 0 {
             return Err(DataError::option(
                 "interaction.shifts_per_path",
@@ -199,12 +219,12 @@ impl InteractionOptions {
         if self
             .reference_speeds
             .iter()
-            .any(|v| !(v.is_finite() && *v > 0.0))
+            .any(|v| !(v.is_finite() && (0.01..=100.0).contains(v)))
         {
             return Err(DataError::option(
                 "interaction.reference_speeds",
                 format!(
-                    "every speed must be finite and positive (got {:?})",
+                    "every speed must be in [0.01, 100] m/s (got {:?})",
                     self.reference_speeds
                 ),
             ));
@@ -484,6 +504,10 @@ pub fn try_interaction(
     let dt = scene.dt;
     let distance = dist(path.start, path.goal);
     let budget = geometry.budget(distance);
+    if budget.is_nan() || budget > crate::scenario::MAX_TIME_BUDGET {
+        // No episode file could hold it (Episode::validate).
+        return Err(InteractionReject::OutsideRecording);
+    }
     let steps = (budget / dt - 1e-9).ceil() as i64;
     let (first, last) = scene
         .step_range()
@@ -494,11 +518,16 @@ pub fn try_interaction(
     if start_blocked(scene, index, None, c0, path.start, geometry) {
         return Err(InteractionReject::StartBlocked);
     }
-    let probe = opts
-        .reference(opts.slowest_speed())
-        .path(path.start, path.goal, dt);
-    let n = probe.len().min(steps as usize + 1);
-    let probe = (0..n).map(|k| (c0 + k as i64, probe[k]));
+    // The reference's positions up to its arrival, within the episode's steps.
+    let reference = opts.reference(opts.slowest_speed());
+    let arrival = (reference.arrival_time(distance) / dt - 1e-9)
+        .ceil()
+        .max(0.0);
+    let last_k = arrival.min(steps.max(0) as f64) as i64;
+    let probe = (0..=last_k).map(|k| {
+        let p = reference.position(path.start, path.goal, k as f64 * dt);
+        (c0 + k, p)
+    });
     let relevant = relevant_agents(scene, index, probe, None, geometry.density_radius);
     let density = relevant.len();
     if density < opts.min_density || opts.max_density.is_some_and(|m| density > m) {

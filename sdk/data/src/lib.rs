@@ -10,7 +10,7 @@
 //! [`homography`] maps image to world (Eq. 1), [`synthetic`] generates crowds of the four flow
 //! classes. [`config`] is the `data.toml` schema, [`pipeline`] the parallel,
 //! thread-count-independent jobs behind `human2nav data build | episodes | associate`, and
-//! [`paths`] locates datasets and outputs.
+//! [`paths`] locates datasets and outputs. [`limits`] lists the bounds on what is read.
 
 pub mod association;
 pub mod cache;
@@ -18,6 +18,7 @@ pub mod config;
 pub mod error;
 pub mod homography;
 pub mod interaction;
+pub mod limits;
 pub mod loaders;
 pub mod paths;
 pub mod pipeline;

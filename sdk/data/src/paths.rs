@@ -18,7 +18,12 @@ pub fn find_workspace_root(start: &Path) -> Option<PathBuf> {
     };
     start.ancestors().find_map(|dir| {
         let manifest = dir.join("Cargo.toml");
-        let body = std::fs::read_to_string(&manifest).ok()?;
+        let body = human2nav_core::input::read_user_file(
+            &manifest,
+            "Cargo manifest",
+            human2nav_core::input::MAX_CONFIG_BYTES,
+        )
+        .ok()?;
         body.lines()
             .any(|l| l.trim() == "[workspace]")
             .then(|| dir.to_path_buf())

@@ -31,7 +31,8 @@ pub struct ResampleOptions {
     pub min_duration: f64,
     /// Below this speed (m/s) the heading is held instead of taken from motion (default 0.2).
     pub heading_speed: f64,
-    /// Half-width, in steps, of the displacement used for the heading (default 2, ±0.2 s).
+    /// Half-width, in steps, of the displacement used for the heading (default 2, ±0.2 s; at
+    /// most 1000).
     pub heading_window: usize,
 }
 
@@ -73,6 +74,13 @@ impl ResampleOptions {
                 "must be at least 1",
             ));
         }
+        crate::limits::count_at_most(self.heading_window, 1000, "resample.heading_window")?;
+        crate::limits::option_in(
+            self.min_duration,
+            0.0,
+            crate::limits::MAX_TIME,
+            "resample.min_duration",
+        )?;
         Ok(())
     }
 }

@@ -231,7 +231,86 @@ pub struct Episode {
     pub density: usize,
 }
 
+/// Largest time budget of an episode (s): an hour. The mined ones are 5–20 s; the simulator
+/// keeps every step of a run, so a budget of `1e9` s asked it for tens of gigabytes.
+pub const MAX_TIME_BUDGET: f64 = 3600.0;
+
+/// Smallest step of an episode's agent tracks (s); the datasets give 0.1.
+pub const MIN_EPISODE_DT: f64 = 1e-3;
+
+/// Largest step of an episode's agent tracks (s).
+pub const MAX_EPISODE_DT: f64 = 1.0;
+
 impl Episode {
+    /// Checks every number an episode file can hold, the one rule every reader applies
+    /// ([`EpisodeSuite::load`], [`EpisodeSuite::load_any`], and through them the benchmark and
+    /// `plan --episode`): `dt` in [[`MIN_EPISODE_DT`], [`MAX_EPISODE_DT`]], `time_budget` in
+    /// (0, [`MAX_TIME_BUDGET`]], start, goal and agent positions finite and within
+    /// [`MAX_COORDINATE`](crate::limits::MAX_COORDINATE) m of the origin, agent radii finite and
+    /// ≥ 0, and every agent track starting within [`MAX_TIME`](crate::limits::MAX_TIME) s. The
+    /// error names the field (`agents[3].positions[7]`) and what is wrong with it.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        use crate::limits::{MAX_COORDINATE, MAX_TIME};
+        let field = |f: &str, m: String| Err((f.to_string(), m));
+        if !(self.dt.is_finite() && (MIN_EPISODE_DT..=MAX_EPISODE_DT).contains(&self.dt)) {
+            return field(
+                "dt",
+                format!(
+                    "must be in [{MIN_EPISODE_DT}, {MAX_EPISODE_DT}] s, got {}",
+                    self.dt
+                ),
+            );
+        }
+        if !(self.time_budget.is_finite()
+            && self.time_budget > 0.0
+            && self.time_budget <= MAX_TIME_BUDGET)
+        {
+            return field(
+                "time_budget",
+                format!(
+                    "must be in (0, {MAX_TIME_BUDGET}] s, got {}",
+                    self.time_budget
+                ),
+            );
+        }
+        let in_range = |v: f64| v.is_finite() && v.abs() <= MAX_COORDINATE;
+        let range = format!("must be finite with |v| ≤ {MAX_COORDINATE:e} m");
+        if !(in_range(self.start.x) && in_range(self.start.y) && self.start.theta.is_finite()) {
+            return field("start", format!("{range}, got {:?}", self.start));
+        }
+        if !self.goal.iter().all(|&v| in_range(v)) {
+            return field("goal", format!("{range}, got {:?}", self.goal));
+        }
+        for (i, a) in self.agents.iter().enumerate() {
+            if !(a.radius.is_finite() && a.radius >= 0.0) {
+                return field(
+                    &format!("agents[{i}].radius"),
+                    format!("must be finite and ≥ 0, got {}", a.radius),
+                );
+            }
+            if a.start_step as f64 * self.dt > MAX_TIME {
+                return field(
+                    &format!("agents[{i}].start_step"),
+                    format!(
+                        "{} steps of {} s is later than {MAX_TIME} s",
+                        a.start_step, self.dt
+                    ),
+                );
+            }
+            if let Some(k) = a
+                .positions
+                .iter()
+                .position(|p| !p.iter().all(|&v| in_range(v)))
+            {
+                return field(
+                    &format!("agents[{i}].positions[{k}]"),
+                    format!("{range}, got {:?}", a.positions[k]),
+                );
+            }
+        }
+        Ok(())
+    }
+
     /// Straight-line distance from start to goal, metres.
     pub fn goal_distance(&self) -> f64 {
         (self.goal[0] - self.start.x).hypot(self.goal[1] - self.start.y)
@@ -241,6 +320,15 @@ impl Episode {
     pub fn steps(&self) -> usize {
         (self.time_budget / self.dt - 1e-9).ceil().max(0.0) as usize
     }
+}
+
+fn read_episode_file(path: &Path) -> Result<String, DataError> {
+    human2nav_core::input::read_user_file(
+        path,
+        "episode file",
+        crate::limits::MAX_EPISODE_FILE_BYTES,
+    )
+    .map_err(|e| DataError::io(path, e))
 }
 
 /// Version of the episode file format.
@@ -291,50 +379,72 @@ impl EpisodeSuite {
         std::fs::rename(&tmp, path).map_err(|e| DataError::io(path, e))
     }
 
-    /// Reads a suite and checks its version, counts and every number.
+    /// Reads a suite (a regular file of at most
+    /// [`MAX_EPISODE_FILE_BYTES`](crate::limits::MAX_EPISODE_FILE_BYTES)) and checks its
+    /// version, counts and every episode ([`Episode::validate`]).
     pub fn load(path: &Path) -> Result<Self, DataError> {
-        let body = std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))?;
+        let body = read_episode_file(path)?;
         let suite: Self = serde_json::from_str(&body).map_err(|e| DataError::Json {
             path: path.to_path_buf(),
             source: e,
         })?;
-        let bad = |message: String| DataError::Cache {
+        suite.check(path)?;
+        Ok(suite)
+    }
+
+    /// Reads an episode file holding a suite ([`EpisodeSuite::load`]) or a single [`Episode`]
+    /// (returned as a suite of one, its source the episode's), with the same checks.
+    pub fn load_any(path: &Path) -> Result<Self, DataError> {
+        let body = read_episode_file(path)?;
+        let json = |source| DataError::Json {
+            path: path.to_path_buf(),
+            source,
+        };
+        let value: serde_json::Value = serde_json::from_str(&body).map_err(json)?;
+        let suite = if value.get("episodes").is_some() {
+            serde_json::from_value::<Self>(value).map_err(json)?
+        } else {
+            let episode = serde_json::from_value::<Episode>(value).map_err(json)?;
+            Self::new(episode.source.clone(), vec![episode])
+        };
+        suite.check(path)?;
+        Ok(suite)
+    }
+
+    /// The checks of [`EpisodeSuite::load`] on a suite read from `path`.
+    fn check(&self, path: &Path) -> Result<(), DataError> {
+        let bad = |message: String| DataError::Episodes {
             path: path.to_path_buf(),
             message,
         };
-        if suite.version != EPISODES_VERSION {
+        if self.version != EPISODES_VERSION {
             return Err(bad(format!(
-                "episode format version {} (this build reads {EPISODES_VERSION})",
-                suite.version
+                "version: episode format version {} (this build reads {EPISODES_VERSION})",
+                self.version
             )));
         }
-        for e in &suite.episodes {
-            let finite = e.start.is_finite()
-                && e.goal.iter().all(|v| v.is_finite())
-                && e.dt.is_finite()
-                && e.dt > 0.0
-                && e.time_budget.is_finite()
-                && e.time_budget > 0.0
-                && e.agents.iter().all(|a| {
-                    a.radius.is_finite() && a.positions.iter().flatten().all(|v| v.is_finite())
-                });
-            if !finite {
+        for (index, e) in self.episodes.iter().enumerate() {
+            e.validate()
+                .map_err(|(field, message)| DataError::Episode {
+                    path: path.to_path_buf(),
+                    index,
+                    id: e.id.clone(),
+                    field,
+                    message,
+                })?;
+        }
+        let recount = Self::new(self.source.clone(), Vec::new())
+            .counts
+            .into_keys()
+            .map(|c| (c, self.episodes.iter().filter(|e| e.scenario == c).count()));
+        for (c, n) in recount {
+            if self.counts.get(&c).copied().unwrap_or(0) != n {
                 return Err(bad(format!(
-                    "episode `{}` has a non-finite or non-positive field",
-                    e.id
+                    "counts: the header counts the {n} {c} episodes differently"
                 )));
             }
         }
-        let recount = Self::new(suite.source.clone(), Vec::new())
-            .counts
-            .into_keys()
-            .map(|c| (c, suite.episodes.iter().filter(|e| e.scenario == c).count()));
-        for (c, n) in recount {
-            if suite.counts.get(&c).copied().unwrap_or(0) != n {
-                return Err(bad(format!("header counts {n} {c} episodes differently")));
-            }
-        }
-        Ok(suite)
+        Ok(())
     }
 }
 
@@ -414,6 +524,24 @@ impl MiningOptions {
         if !(self.budget_factor.is_finite() && self.budget_factor >= 1.0) {
             return Err(DataError::option("episodes.budget_factor", "must be >= 1"));
         }
+        // Upper bounds: a mined episode's budget must stay within MAX_TIME_BUDGET and every
+        // step count derived from these within the scene.
+        use crate::limits::{MAX_COORDINATE, MAX_TIME, option_in};
+        option_in(self.budget_factor, 1.0, 100.0, "episodes.budget_factor")?;
+        option_in(
+            self.reference_speed,
+            0.01,
+            100.0,
+            "episodes.reference_speed",
+        )?;
+        option_in(
+            self.goal_distance,
+            0.0,
+            MAX_COORDINATE,
+            "episodes.goal_distance",
+        )?;
+        option_in(self.max_goal_time, 0.0, MAX_TIME, "episodes.max_goal_time")?;
+        option_in(self.start_window, 0.0, MAX_TIME, "episodes.start_window")?;
         for (v, f) in [
             (self.min_start_clearance, "episodes.min_start_clearance"),
             (self.start_window, "episodes.start_window"),
@@ -572,6 +700,10 @@ pub fn try_episode(
     let goal = t.positions[ig];
     let distance = dist(goal, p0);
     let budget = opts.budget(distance);
+    if budget.is_nan() || budget > MAX_TIME_BUDGET {
+        // No episode file could hold it (Episode::validate).
+        return Err(Reject::OutsideRecording);
+    }
     let steps = (budget / dt - 1e-9).ceil() as i64;
     if s0 + steps > last {
         return Err(Reject::OutsideRecording);

@@ -4,9 +4,15 @@
 use crate::error::DataError;
 use std::path::Path;
 
-/// Reads a whole text file.
+/// Reads a whole dataset text file (a regular file of at most
+/// [`MAX_DATASET_FILE_BYTES`](crate::limits::MAX_DATASET_FILE_BYTES)).
 pub(crate) fn read(path: &Path) -> Result<String, DataError> {
-    std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))
+    human2nav_core::input::read_user_file(
+        path,
+        "dataset file",
+        crate::limits::MAX_DATASET_FILE_BYTES,
+    )
+    .map_err(|e| DataError::io(path, e))
 }
 
 /// Parses one finite `f64` token; `field` names the column in the error.

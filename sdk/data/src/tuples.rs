@@ -70,11 +70,14 @@ impl std::fmt::Display for Split {
     }
 }
 
+/// Largest number of future poses per tuple (`tuples.horizon`; the model uses 32).
+pub const MAX_HORIZON: usize = 1000;
+
 /// Options of the tuple builder (module docs).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TupleOptions {
-    /// Future poses per tuple. Default 32.
+    /// Future poses per tuple (1 to [`MAX_HORIZON`]). Default 32.
     pub horizon: usize,
     /// Steps between window starts along one track. Default 5 (0.5 s).
     pub stride: usize,
@@ -107,8 +110,11 @@ impl Default for TupleOptions {
 impl TupleOptions {
     /// Checks every option is usable.
     pub fn validate(&self) -> Result<(), DataError> {
-        if self.horizon == 0 || self.horizon > 1000 {
-            return Err(DataError::option("tuples.horizon", "must be in 1..=1000"));
+        if self.horizon == 0 || self.horizon > MAX_HORIZON {
+            return Err(DataError::option(
+                "tuples.horizon",
+                format!("must be in 1..={MAX_HORIZON}"),
+            ));
         }
         if self.stride == 0 {
             return Err(DataError::option("tuples.stride", "must be at least 1"));
@@ -122,6 +128,12 @@ impl TupleOptions {
                 return Err(DataError::option(f, "must be finite and positive"));
             }
         }
+        crate::limits::option_in(
+            self.goal_horizon,
+            0.0,
+            crate::limits::MAX_TIME,
+            "tuples.goal_horizon",
+        )?;
         if !(self.min_future_displacement.is_finite() && self.min_future_displacement >= 0.0) {
             return Err(DataError::option(
                 "tuples.min_future_displacement",

@@ -40,7 +40,7 @@
 
 use crate::bench::{MethodSpec, Suite, SuiteKind};
 use crate::crowd::{CrowdModel, SocialForce};
-use crate::episode::{Episode, EpisodeSuite, ScenarioClass};
+use crate::episode::{Episode, ScenarioClass};
 use crate::error::SimError;
 use crate::runner::{RobotSetup, SimConfig};
 use human2nav_core::Planner;
@@ -48,6 +48,10 @@ use human2nav_plugin::{PluginHost, RobotContext};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+
+/// Largest `per_class` / `quick_per_class` of a suite: the mined files hold 50 per class, and a
+/// synthetic suite generates this many episodes per class up front.
+pub const MAX_PER_CLASS: usize = 10_000;
 
 /// One benchmarked method as configured.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -83,10 +87,10 @@ pub struct SuiteConfig {
     /// Episode file of a `real` suite (`EpisodeSuite` JSON), relative to the workspace root.
     #[serde(default)]
     pub episodes: Option<PathBuf>,
-    /// Episodes per scenario class. Default 50.
+    /// Episodes per scenario class (1 to [`MAX_PER_CLASS`]). Default 50.
     #[serde(default = "default_per_class")]
     pub per_class: usize,
-    /// Episodes per scenario class with `--quick`. Default 3.
+    /// Episodes per scenario class with `--quick` (1 to [`MAX_PER_CLASS`]). Default 3.
     #[serde(default = "default_quick_per_class")]
     pub quick_per_class: usize,
     /// Seed of the synthetic generator; default: the benchmark seed.
@@ -200,7 +204,12 @@ impl BenchConfig {
         if depth > 8 {
             return Err(parse("more than 8 nested `base` files (a cycle?)".into()));
         }
-        let text = std::fs::read_to_string(path).map_err(|e| SimError::io(path, e))?;
+        let text = human2nav_core::input::read_user_file(
+            path,
+            "benchmark configuration",
+            human2nav_core::input::MAX_CONFIG_BYTES,
+        )
+        .map_err(|e| SimError::io(path, e))?;
         let mut table: toml::Table = text
             .parse()
             .map_err(|e: toml::de::Error| parse(e.to_string()))?;
@@ -287,12 +296,17 @@ impl BenchConfig {
                     "a real suite needs its episode file",
                 ));
             }
-            if s.per_class == 0 || s.quick_per_class == 0 {
-                return Err(SimError::setting(
-                    section,
-                    "per_class",
-                    "episode counts must be ≥ 1",
-                ));
+            for (field, n) in [
+                ("per_class", s.per_class),
+                ("quick_per_class", s.quick_per_class),
+            ] {
+                if n == 0 || n > MAX_PER_CLASS {
+                    return Err(SimError::setting(
+                        section,
+                        field,
+                        format!("episode counts must be in 1..={MAX_PER_CLASS}, got {n}"),
+                    ));
+                }
             }
             match (&s.social_force, s.crowd) {
                 (Some(_), CrowdMode::Replay) => {
@@ -399,19 +413,31 @@ pub fn build_suites(
 ) -> Result<Vec<Suite>, SimError> {
     let mut suites: Vec<Suite> = Vec::new();
     for (i, s) in cfg.suites.iter().enumerate() {
-        let n = if quick {
-            s.quick_per_class
+        let (field, n) = if quick {
+            ("quick_per_class", s.quick_per_class)
         } else {
-            s.per_class
+            ("per_class", s.per_class)
         };
+        // Checked here too: callers may set the count after validation (a scaling run does).
+        if n == 0 || n > MAX_PER_CLASS {
+            return Err(SimError::setting(
+                format!("suites[{i}]"),
+                field,
+                format!("episode counts must be in 1..={MAX_PER_CLASS}, got {n}"),
+            ));
+        }
         let seed = s.seed.unwrap_or(cfg.seed);
         let (kind, episodes, note) = match s.kind {
             SuiteKind::Real => {
                 let file = cfg.resolve(s.episodes.as_deref().unwrap_or(Path::new("")));
-                if file.is_file() {
-                    let loaded = EpisodeSuite::load(&file).map_err(|e| SimError::Episodes {
-                        suite: s.name.clone(),
-                        message: e.to_string(),
+                // Anything at the path is read (a directory or a FIFO is an error naming it);
+                // only a missing file may fall back.
+                if file.exists() {
+                    let loaded = crate::episode::load_episode_file(&file).map_err(|e| {
+                        SimError::Episodes {
+                            suite: s.name.clone(),
+                            message: e.to_string(),
+                        }
                     })?;
                     let episodes = take_per_class(&loaded.episodes, n);
                     let short: Vec<String> = ScenarioClass::ALL
@@ -544,7 +570,7 @@ pub fn ensure_episode_files(
         let Some(file) = s.episodes.as_deref().map(|p| cfg.resolve(p)) else {
             continue;
         };
-        if s.kind != SuiteKind::Real || file.is_file() || written.contains(&file) {
+        if s.kind != SuiteKind::Real || file.exists() || written.contains(&file) {
             continue;
         }
         let Some((kind, _)) = files.iter().find(|(_, p)| *p == file) else {

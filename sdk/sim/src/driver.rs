@@ -30,11 +30,17 @@ pub struct BenchPlan<'a> {
     pub snapshot_method: Option<&'a str>,
     /// How the run was started, for the report.
     pub command: String,
-    /// Worker threads (`None`: rayon's default, one per core).
+    /// Worker threads (`None`: rayon's default, one per core; at most [`MAX_THREADS`]).
     pub threads: Option<usize>,
     /// Failed runs drawn per method (see [`failure_figures`]; 0: none).
     pub failures: usize,
 }
+
+/// Largest number of worker threads of a run (`--threads`). Each thread has its own stack and
+/// runs one episode at a time with its own planner; asking for 100 000 of them brought the
+/// process down before any episode ran. 256 is far more than the cores of any machine the
+/// benchmark runs on.
+pub const MAX_THREADS: usize = 256;
 
 /// What a run produced.
 #[derive(Debug)]
@@ -56,6 +62,13 @@ pub fn run(
     out_dir: &Path,
     progress: &ProgressBar,
 ) -> Result<BenchOutcome, SimError> {
+    if let Some(n) = plan.threads.filter(|&n| n > MAX_THREADS) {
+        return Err(SimError::setting(
+            "bench",
+            "threads",
+            format!("{n} is more than the limit of {MAX_THREADS}"),
+        ));
+    }
     std::fs::create_dir_all(out_dir).map_err(|e| SimError::io(out_dir, e))?;
     let started = Instant::now();
     let bench = || {

@@ -5,6 +5,40 @@
 
 pub use human2nav_data::{AgentTrack, Episode, EpisodeSuite, ScenarioClass};
 
+use crate::error::SimError;
+use human2nav_data::DataError;
+use std::path::Path;
+
+/// Reads an episode file, a suite (`human2nav data episodes`) or a single [`Episode`] as JSON:
+/// the one reader of the benchmark's `real` suites and of `plan --episode`, so both accept
+/// exactly the same files. Every episode goes through [`Episode::validate`] (bounds in
+/// ARCHITECTURE.md, "Input limits"); the error names the file, the episode's index and id, and
+/// the field.
+pub fn load_episode_file(path: &Path) -> Result<EpisodeSuite, SimError> {
+    EpisodeSuite::load_any(path).map_err(|e| match e {
+        DataError::Io { path, source } => SimError::Io { path, source },
+        DataError::Json { path, source } => SimError::Parse {
+            path,
+            message: source.to_string(),
+        },
+        DataError::Episode {
+            path,
+            index,
+            id,
+            field,
+            message,
+        } => SimError::Parse {
+            path,
+            message: format!("episode {index} (`{id}`): {field}: {message}"),
+        },
+        DataError::Episodes { path, message } => SimError::Parse { path, message },
+        other => SimError::Parse {
+            path: path.to_path_buf(),
+            message: other.to_string(),
+        },
+    })
+}
+
 /// Display names of the scenario classes, as the paper writes them.
 pub trait ScenarioTitle {
     /// `Co-Flow`, `Cross-Flow`, `Counter-Flow`, `Multidirection-Flow`.

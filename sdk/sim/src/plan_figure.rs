@@ -25,7 +25,7 @@
 //! * the title: robot, guidance on/off, TFS of the plan (and of the kept sample before
 //!   guidance) and Φ before → after guidance.
 
-use crate::episode::{Episode, EpisodeSuite};
+use crate::episode::Episode;
 use crate::error::SimError;
 use crate::figures::{disc, star};
 use crate::replay::CrowdReplay;
@@ -90,25 +90,11 @@ impl StepOptions {
     }
 }
 
-/// Reads an episode file: an [`EpisodeSuite`] (`human2nav data episodes`) or one [`Episode`]
-/// as JSON.
+/// Reads an episode file: an [`EpisodeSuite`](crate::episode::EpisodeSuite) (`human2nav data
+/// episodes`) or one [`Episode`] as JSON, through the benchmark's reader
+/// ([`crate::episode::load_episode_file`]): the same files are accepted, with the same checks.
 pub fn load_episodes(path: &Path) -> Result<Vec<Episode>, SimError> {
-    let text = std::fs::read_to_string(path).map_err(|e| SimError::io(path, e))?;
-    let value: serde_json::Value = serde_json::from_str(&text).map_err(|e| SimError::Parse {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    })?;
-    let parse_err = |e: serde_json::Error| SimError::Parse {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    };
-    let episodes = if value.get("episodes").is_some() {
-        serde_json::from_value::<EpisodeSuite>(value)
-            .map_err(parse_err)?
-            .episodes
-    } else {
-        vec![serde_json::from_value::<Episode>(value).map_err(parse_err)?]
-    };
+    let episodes = crate::episode::load_episode_file(path)?.episodes;
     if episodes.is_empty() {
         return Err(SimError::Empty(format!(
             "{} holds no episode",
@@ -783,7 +769,7 @@ pub(crate) fn draw_bev_raster<'b>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::episode::{AgentTrack, ScenarioClass};
+    use crate::episode::{AgentTrack, EpisodeSuite, ScenarioClass};
     use approx::assert_relative_eq;
     use human2nav_core::PlanInfo;
 

@@ -26,7 +26,7 @@
 //! minimum time the robot needs in an empty scene (rest-to-cruise at `a_max`, then `v_max`, over
 //! the start-goal distance minus the tolerance, plus turning toward the goal when the start
 //! heading is the episode's), so every robot can reach the goal of every episode in an empty
-//! world within its budget.
+//! world within its budget. The budget is at most [`MAX_BUDGET`] (an hour).
 
 use crate::crowd::{Crowd, CrowdModel};
 use crate::episode::Episode;
@@ -52,11 +52,26 @@ pub enum StartHeading {
     Episode,
 }
 
+/// Smallest simulation step (s): 1 kHz. Every state of a run is kept, so together with
+/// [`MAX_BUDGET`] this bounds a run to 3.6 million steps.
+pub const MIN_SIM_DT: f64 = 1e-3;
+
+/// Largest simulation step (s).
+pub const MAX_SIM_DT: f64 = 1.0;
+
+/// Largest time budget of a run (s), whatever the episode and the budget rule say: an hour,
+/// the bound on an episode's own `time_budget` ([`human2nav_data::scenario::MAX_TIME_BUDGET`])
+/// and on `budget_margin`. The benchmark's budgets are 10–30 s.
+pub const MAX_BUDGET: f64 = human2nav_data::scenario::MAX_TIME_BUDGET;
+
+/// Largest `budget_factor` of the budget rule.
+pub const MAX_BUDGET_FACTOR: f64 = 100.0;
+
 /// Settings of the closed loop. All times in seconds, distances in metres.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SimConfig {
-    /// Simulation step. Default 0.05.
+    /// Simulation step, in [[`MIN_SIM_DT`], [`MAX_SIM_DT`]]. Default 0.05.
     pub dt: f64,
     /// Replanning rate (Hz); `1 / (replan_hz·dt)` must be a whole number. Default 10.
     pub replan_hz: f64,
@@ -66,9 +81,9 @@ pub struct SimConfig {
     pub sensor_range: f64,
     /// Recorded positions per observed pedestrian (at the episode's step). Default 8.
     pub history_len: usize,
-    /// Budget rule factor (see the module docs). Default 1.5.
+    /// Budget rule factor (see the module docs), in [1, [`MAX_BUDGET_FACTOR`]]. Default 1.5.
     pub budget_factor: f64,
-    /// Budget rule margin (s). Default 3.
+    /// Budget rule margin (s), in [0, [`MAX_BUDGET`]]. Default 3.
     pub budget_margin: f64,
     /// Initial heading. Default `face_goal`.
     pub start_heading: StartHeading,
@@ -94,8 +109,11 @@ impl SimConfig {
     pub fn validate(&self) -> Result<(), SimError> {
         let bad = |field: &str, message: String| Err(SimError::setting("sim", field, message));
         let positive = |v: f64| v.is_finite() && v > 0.0;
-        if !positive(self.dt) {
-            return bad("dt", format!("must be finite and > 0, got {}", self.dt));
+        if !(self.dt.is_finite() && (MIN_SIM_DT..=MAX_SIM_DT).contains(&self.dt)) {
+            return bad(
+                "dt",
+                format!("must be in [{MIN_SIM_DT}, {MAX_SIM_DT}] s, got {}", self.dt),
+            );
         }
         if !positive(self.replan_hz) {
             return bad(
@@ -125,16 +143,21 @@ impl SimConfig {
                 format!("must be finite and > 0, got {}", self.sensor_range),
             );
         }
-        if !(self.budget_factor.is_finite() && self.budget_factor >= 1.0) {
+        if !(self.budget_factor.is_finite()
+            && (1.0..=MAX_BUDGET_FACTOR).contains(&self.budget_factor))
+        {
             return bad(
                 "budget_factor",
-                format!("must be finite and ≥ 1, got {}", self.budget_factor),
+                format!(
+                    "must be in [1, {MAX_BUDGET_FACTOR}], got {}",
+                    self.budget_factor
+                ),
             );
         }
-        if !(self.budget_margin.is_finite() && self.budget_margin >= 0.0) {
+        if !(self.budget_margin.is_finite() && (0.0..=MAX_BUDGET).contains(&self.budget_margin)) {
             return bad(
                 "budget_margin",
-                format!("must be finite and ≥ 0, got {}", self.budget_margin),
+                format!("must be in [0, {MAX_BUDGET}] s, got {}", self.budget_margin),
             );
         }
         Ok(())
@@ -204,13 +227,20 @@ impl SimConfig {
         turn + drive
     }
 
-    /// The budget of `episode` for a robot with `limits` (see the module docs).
+    /// The budget of `episode` for a robot with `limits` (see the module docs), at most
+    /// [`MAX_BUDGET`] (a slow robot far from its goal could otherwise ask for years).
     pub fn budget_for(&self, episode: &Episode, limits: &Limits) -> f64 {
         let rule = self.budget_factor * self.empty_world_time(episode, limits) + self.budget_margin;
-        if episode.time_budget.is_finite() {
+        let budget = if episode.time_budget.is_finite() {
             episode.time_budget.max(rule)
         } else {
             rule
+        };
+        // `min` keeps a NaN rule from reaching the step count as NaN.
+        if budget.is_nan() {
+            MAX_BUDGET
+        } else {
+            budget.min(MAX_BUDGET)
         }
     }
 }
@@ -397,6 +427,9 @@ pub fn run_episode_with(
     let budget = cfg.budget_for(episode, &robot.limits);
     // The last step checked is the last one at or before the budget (so duration ≤ budget).
     let max_steps = (budget / dt + 1e-9).floor().max(0.0) as usize;
+    // Reserved up front for a typical run only: a step outside [MIN_SIM_DT, MAX_SIM_DT] (a
+    // settings struct that skipped `validate`) must not turn into one huge allocation.
+    let reserve = max_steps.min(1 << 14);
     let replan_every = cfg.replan_every();
     let emb = robot.embodiment.as_ref();
 
@@ -410,15 +443,13 @@ pub fn run_episode_with(
         budget,
         dt,
         states: vec![state],
-        raw_commands: Vec::with_capacity(max_steps),
-        commands: Vec::with_capacity(max_steps),
-        clearance: Vec::with_capacity(max_steps + 1),
+        raw_commands: Vec::with_capacity(reserve),
+        commands: Vec::with_capacity(reserve),
+        clearance: Vec::with_capacity(reserve + 1),
         plans: Vec::new(),
         planner_errors: Vec::new(),
         contact: None,
-        crowd: crowd
-            .is_reactive()
-            .then(|| Vec::with_capacity(max_steps + 1)),
+        crowd: crowd.is_reactive().then(|| Vec::with_capacity(reserve + 1)),
     };
     planner.reset();
     let mut plan: Option<Plan> = None;

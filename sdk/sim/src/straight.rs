@@ -21,9 +21,12 @@ pub struct StraightConfig {
     pub accel: f64,
     /// Spacing of the plan's poses (s). Default 0.1.
     pub plan_dt: f64,
-    /// Number of poses including `poses[0]`. Default 32.
+    /// Number of poses including `poses[0]` (2 to [`MAX_HORIZON`]). Default 32.
     pub horizon: usize,
 }
+
+/// Largest `horizon` of the straight-line planner: every planning call allocates the plan.
+pub const MAX_HORIZON: usize = 10_000;
 
 impl Default for StraightConfig {
     fn default() -> Self {
@@ -51,11 +54,11 @@ impl StraightConfig {
                 ));
             }
         }
-        if self.horizon < 2 {
+        if !(2..=MAX_HORIZON).contains(&self.horizon) {
             return Err(SimError::setting(
                 "straight",
                 "horizon",
-                format!("must be ≥ 2, got {}", self.horizon),
+                format!("must be in 2..={MAX_HORIZON}, got {}", self.horizon),
             ));
         }
         Ok(())

@@ -596,6 +596,30 @@ fn settings_validate_and_parse() {
 }
 
 #[test]
+fn huge_step_and_iteration_counts_are_errors_naming_the_field() {
+    use crate::guidance::{MAX_ITERATIONS_M, MAX_STEPS_N};
+    for (text, field) in [
+        ("iterations_m = 1000000000", "iterations_m"),
+        ("steps_n = 100000", "steps_n"),
+    ] {
+        match GuidanceSettings::from_toml_str(text) {
+            Err(e @ GuidanceError::InvalidSettings { .. }) => {
+                let msg = e.to_string();
+                assert!(msg.contains(&format!("`{field}`")), "{msg}");
+                assert!(msg.contains("more than the limit of 1000"), "{msg}");
+            }
+            other => panic!("{text}: {other:?}"),
+        }
+    }
+    let at_limit = GuidanceSettings {
+        steps_n: MAX_STEPS_N,
+        iterations_m: MAX_ITERATIONS_M,
+        ..Default::default()
+    };
+    assert!(at_limit.validate().is_ok());
+}
+
+#[test]
 fn shipped_config_holds_the_defaults() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/guidance.toml");
     let text = std::fs::read_to_string(&path).unwrap();

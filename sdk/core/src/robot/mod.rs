@@ -69,9 +69,10 @@ pub mod footprint;
 mod urdf;
 
 pub use crate::embodiment::EmbodimentKind;
-pub use urdf::{SteeringJoint, WheelJoint};
+pub use urdf::{MAX_URDF_DEPTH, SteeringJoint, WheelJoint};
 
 use crate::embodiment::{BuiltinEmbodiment, Embodiment};
+use crate::input::MAX_PROFILE_BYTES;
 use crate::limits::{ControllerGains, GuidanceWeights, Limits};
 use serde::Deserialize;
 use std::fmt;
@@ -446,10 +447,12 @@ fn num(v: f64) -> String {
 impl RobotProfile {
     /// Reads, validates and resolves a `robot.toml` and its URDF.
     pub fn load(path: &Path) -> Result<RobotProfile, ProfileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Read {
-            file: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::input::read_user_file(path, "robot profile", MAX_PROFILE_BYTES).map_err(
+            |source| ProfileError::Read {
+                file: path.to_path_buf(),
+                source,
+            },
+        )?;
         let raw: RawProfile = toml::from_str(&text).map_err(|e| parse_error(path, &text, &e))?;
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
         Self::from_raw(raw, path, &dir)

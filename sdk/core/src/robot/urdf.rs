@@ -6,6 +6,7 @@
 
 use super::ProfileError;
 use super::footprint::FootprintShape;
+use crate::input::MAX_URDF_BYTES;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -13,6 +14,78 @@ use urdf_rs::{Geometry, JointType};
 
 /// A cylinder (or capsule) whose axis is within this angle of vertical counts as upright.
 const UPRIGHT_COS: f64 = 1.0 - 1e-9;
+
+/// Deepest element nesting a URDF may have. A URDF needs five levels
+/// (`robot/link/collision/geometry/box`) and vendor extensions (`<gazebo>` plugins, say) a few
+/// more; the XML parser recurses once per level, so a file nested tens of thousands deep would
+/// overflow the stack. Checked on the text before it is parsed.
+pub const MAX_URDF_DEPTH: usize = 64;
+
+/// The 1-based line of the first element of `xml` nested deeper than `max`, if any.
+///
+/// A lexical scan that follows the parser's view of the nesting: start tags open a level, end
+/// tags close one, empty-element tags (`<a/>`) do neither, and comments, CDATA sections,
+/// processing instructions and declarations (`<!DOCTYPE ...>`, with an internal subset) are
+/// skipped; quoted attribute values may hold `>`. Malformed text is left to the parser.
+fn element_too_deep(xml: &str, max: usize) -> Option<usize> {
+    let b = xml.as_bytes();
+    let skip_past = |from: usize, end: &str| {
+        xml[from..]
+            .find(end)
+            .map_or(b.len(), |k| from + k + end.len())
+    };
+    let mut depth = 0usize;
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] != b'<' {
+            i += 1;
+            continue;
+        }
+        let rest = &b[i..];
+        if rest.starts_with(b"<!--") {
+            i = skip_past(i + 4, "-->");
+        } else if rest.starts_with(b"<![CDATA[") {
+            i = skip_past(i + 9, "]]>");
+        } else if rest.starts_with(b"<?") {
+            i = skip_past(i + 2, "?>");
+        } else if rest.starts_with(b"<!") {
+            // A declaration; `[...]` (a DOCTYPE's internal subset) may hold `>`.
+            let mut brackets = 0usize;
+            let mut j = i + 2;
+            while j < b.len() && !(b[j] == b'>' && brackets == 0) {
+                match b[j] {
+                    b'[' => brackets += 1,
+                    b']' => brackets = brackets.saturating_sub(1),
+                    _ => {}
+                }
+                j += 1;
+            }
+            i = j + 1;
+        } else {
+            let mut quote: Option<u8> = None;
+            let mut j = i + 1;
+            while j < b.len() {
+                match (quote, b[j]) {
+                    (Some(q), c) if c == q => quote = None,
+                    (None, c @ (b'"' | b'\'')) => quote = Some(c),
+                    (None, b'>') => break,
+                    _ => {}
+                }
+                j += 1;
+            }
+            if rest.starts_with(b"</") {
+                depth = depth.saturating_sub(1);
+            } else if !(j < b.len() && b[j - 1] == b'/') {
+                depth += 1;
+                if depth > max {
+                    return Some(xml[..i].matches('\n').count() + 1);
+                }
+            }
+            i = j + 1;
+        }
+    }
+    None
+}
 
 /// A parsed URDF with its links indexed for the questions the profile asks.
 #[derive(Debug)]
@@ -58,7 +131,8 @@ fn pose_to_isometry(p: &urdf_rs::Pose) -> Isometry3<f64> {
 }
 
 impl UrdfModel {
-    /// Reads and parses `path`; `toml` is the profile that names it (for the error).
+    /// Reads and parses `path` (a regular file of at most [`MAX_URDF_BYTES`], elements nested at
+    /// most [`MAX_URDF_DEPTH`] deep); `toml` is the profile that names it (for the error).
     pub(crate) fn load(path: &Path, toml: &Path) -> Result<Self, ProfileError> {
         // One line, whatever the XML parser reports.
         let fail = |message: String| ProfileError::UrdfLoad {
@@ -66,7 +140,13 @@ impl UrdfModel {
             urdf: path.to_path_buf(),
             message: message.split_whitespace().collect::<Vec<_>>().join(" "),
         };
-        let text = std::fs::read_to_string(path).map_err(|e| fail(e.to_string()))?;
+        let text = crate::input::read_user_file(path, "URDF", MAX_URDF_BYTES)
+            .map_err(|e| fail(e.to_string()))?;
+        if let Some(line) = element_too_deep(&text, MAX_URDF_DEPTH) {
+            return Err(fail(format!(
+                "line {line}: elements nested more than {MAX_URDF_DEPTH} deep (the limit of a URDF)"
+            )));
+        }
         let robot = urdf_rs::read_from_string(&text).map_err(|e| fail(e.to_string()))?;
         if robot.links.is_empty() {
             return Err(fail("the URDF has no <link>".into()));
@@ -378,5 +458,27 @@ impl UrdfModel {
             max_angle,
             position: self.joint_in_base(base, joint)?,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::element_too_deep;
+
+    #[test]
+    fn nesting_depth_follows_elements_only() {
+        let nested = |n: usize| format!("{}{}", "<a>".repeat(n), "</a>".repeat(n));
+        assert_eq!(element_too_deep(&nested(3), 3), None);
+        assert_eq!(element_too_deep(&nested(4), 3), Some(1));
+        // Empty elements, comments, CDATA, processing instructions, a DOCTYPE with an internal
+        // subset and `>` inside attribute values open no level.
+        let flat = "<?xml version=\"1.0\"?>\n<!DOCTYPE r [<!ENTITY e \"<a><a>\">]>\n\
+                    <r><!-- <a><a><a> --><![CDATA[<a><a><a>]]><b x=\"<a>\" y='>'/><b/></r>";
+        assert_eq!(element_too_deep(flat, 1), None);
+        // The line of the first element too deep.
+        assert_eq!(
+            element_too_deep("<r>\n<a>\n<b>\n<c/></b></a></r>", 2),
+            Some(3)
+        );
     }
 }

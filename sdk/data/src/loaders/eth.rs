@@ -9,6 +9,7 @@
 use super::modal_step;
 use crate::error::DataError;
 use crate::homography::Homography;
+use crate::limits;
 use crate::text;
 use crate::track::{AgentClass, RawScene, Sample, SourceTiming, group_rows};
 use std::path::Path;
@@ -47,7 +48,7 @@ pub fn load_obsmat(path: &Path, name: &str) -> Result<RawScene, DataError> {
                 "negative frame or pedestrian id",
             ));
         }
-        rows.push((id as u64, frame, [x, y]));
+        rows.push((id as u64, frame, limits::position([x, y], path, ln)?, ln));
     }
     if rows.is_empty() {
         return Err(DataError::NoData(format!(
@@ -57,7 +58,7 @@ pub fn load_obsmat(path: &Path, name: &str) -> Result<RawScene, DataError> {
     }
     // Frame step from the per-pedestrian frame sequences.
     let mut frames: std::collections::BTreeMap<u64, Vec<i64>> = Default::default();
-    for (id, f, _) in &rows {
+    for (id, f, _, _) in &rows {
         frames.entry(*id).or_default().push(*f);
     }
     for v in frames.values_mut() {
@@ -73,17 +74,11 @@ pub fn load_obsmat(path: &Path, name: &str) -> Result<RawScene, DataError> {
     let frame_dt = ANNOTATION_DT / step as f64;
     let samples = rows
         .into_iter()
-        .map(|(id, f, p)| {
-            (
-                id,
-                AgentClass::Pedestrian,
-                Sample {
-                    t: f as f64 * frame_dt,
-                    p,
-                },
-            )
+        .map(|(id, f, p, ln)| {
+            let t = limits::time(f as f64 * frame_dt, path, ln)?;
+            Ok((id, AgentClass::Pedestrian, Sample { t, p }))
         })
-        .collect();
+        .collect::<Result<_, DataError>>()?;
     let (tracks, dup) = group_rows(samples);
     let mut scene = RawScene {
         name: name.to_string(),

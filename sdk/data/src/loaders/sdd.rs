@@ -9,6 +9,7 @@
 
 use crate::error::DataError;
 use crate::homography::Homography;
+use crate::limits::{self, MAX_COORDINATE};
 use crate::text;
 use crate::track::{AgentClass, RawScene, Sample, SourceTiming, group_rows};
 use serde::{Deserialize, Serialize};
@@ -17,6 +18,11 @@ use std::path::Path;
 
 /// SDD video frame rate.
 pub const FPS: f64 = 30.0;
+
+/// Largest meter-per-pixel scale accepted from `estimated_scales.yaml` (the real ones are
+/// 0.03–0.05): with box corners within [`MAX_COORDINATE`] pixels, every world position then
+/// stays within [`MAX_COORDINATE`] metres ([`crate::limits`]).
+pub const MAX_SCALE: f64 = 1.0;
 
 /// Meter-per-pixel scales per video, from `estimated_scales.yaml`.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -75,9 +81,13 @@ impl SddScales {
                 (_, false) => {
                     let v = text::number(value, path, ln, key)?;
                     match key {
-                        "scale" if v > 0.0 => cur.0 = Some(v),
+                        "scale" if v > 0.0 && v <= MAX_SCALE => cur.0 = Some(v),
                         "scale" => {
-                            return Err(DataError::parse(path, ln, "scale must be positive"));
+                            return Err(DataError::parse(
+                                path,
+                                ln,
+                                format!("scale must be in (0, {MAX_SCALE}] m/px, got {v}"),
+                            ));
                         }
                         "certainty" => cur.1 = Some(v),
                         _ => {
@@ -177,6 +187,21 @@ pub fn parse_raw(path: &Path) -> Result<Vec<SddRow>, DataError> {
         if id < 0 || frame < 0 {
             return Err(DataError::parse(path, ln, "negative track id or frame"));
         }
+        limits::time(frame as f64 / FPS, path, ln)?;
+        for (v, f) in [
+            (xmin, "xmin"),
+            (ymin, "ymin"),
+            (xmax, "xmax"),
+            (ymax, "ymax"),
+        ] {
+            if v.abs() > MAX_COORDINATE {
+                return Err(DataError::parse(
+                    path,
+                    ln,
+                    format!("{f} = {v:e} px is out of range (|{f}| ≤ {MAX_COORDINATE:e} px)"),
+                ));
+            }
+        }
         rows.push(SddRow {
             track_id: id as u64,
             center_px: [0.5 * (xmin + xmax), 0.5 * (ymin + ymax)],
@@ -203,9 +228,15 @@ pub fn load_raw(
     name: &str,
     opts: &SddRawOptions,
 ) -> Result<RawScene, DataError> {
-    let h = Homography::scale(scale).ok_or_else(|| {
-        DataError::option("sdd scale", format!("{scale} is not a usable m/px scale"))
-    })?;
+    let h = (scale > 0.0 && scale <= MAX_SCALE)
+        .then(|| Homography::scale(scale))
+        .flatten()
+        .ok_or_else(|| {
+            DataError::option(
+                "sdd scale",
+                format!("{scale} is not a usable m/px scale (0 < scale ≤ {MAX_SCALE})"),
+            )
+        })?;
     let rows = parse_raw(path)?;
     let (mut lost, mut class, mut occluded) = (0, 0, 0);
     let mut kept = Vec::with_capacity(rows.len());
@@ -259,14 +290,11 @@ pub fn load_trajnet(path: &Path, name: &str) -> Result<RawScene, DataError> {
         let Some((frame, id, x, y)) = text::frame_id_xy(line, path, i + 1, "agent_id")? else {
             continue;
         };
-        rows.push((
-            id,
-            AgentClass::Pedestrian,
-            Sample {
-                t: frame as f64 / FPS,
-                p: [x, -y],
-            },
-        ));
+        let sample = Sample {
+            t: limits::time(frame as f64 / FPS, path, i + 1)?,
+            p: limits::position([x, -y], path, i + 1)?,
+        };
+        rows.push((id, AgentClass::Pedestrian, sample));
     }
     if rows.is_empty() {
         return Err(DataError::NoData(format!(

@@ -7,6 +7,7 @@
 //! loader applies the right frame rate from the file name.
 
 use crate::error::DataError;
+use crate::limits;
 use crate::text;
 use crate::track::{AgentClass, RawScene, Sample, SourceTiming, group_rows};
 use std::path::Path;
@@ -30,14 +31,11 @@ pub fn load(path: &Path, name: &str, dataset: &str) -> Result<RawScene, DataErro
         let Some((frame, id, x, y)) = text::frame_id_xy(line, path, i + 1, "ped_id")? else {
             continue;
         };
-        rows.push((
-            id,
-            AgentClass::Pedestrian,
-            Sample {
-                t: frame as f64 / fps,
-                p: [x, y],
-            },
-        ));
+        let sample = Sample {
+            t: limits::time(frame as f64 / fps, path, i + 1)?,
+            p: limits::position([x, y], path, i + 1)?,
+        };
+        rows.push((id, AgentClass::Pedestrian, sample));
     }
     if rows.is_empty() {
         return Err(DataError::NoData(format!(

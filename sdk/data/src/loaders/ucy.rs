@@ -24,6 +24,7 @@
 
 use crate::error::DataError;
 use crate::homography::Homography;
+use crate::limits;
 use crate::text;
 use crate::track::{AgentClass, RawScene, Sample, SourceTiming, group_rows};
 use std::path::{Path, PathBuf};
@@ -86,29 +87,56 @@ pub struct ControlPoint {
     pub y: f64,
     pub frame: i64,
     pub gaze_deg: f64,
+    /// The 1-based line of the file it was read from.
+    pub line: usize,
 }
 
-/// Parses the splines of an `annotation.vsp` file (file units, no homography).
+/// Largest number of splines, and of control points in one spline, a vsp file may declare
+/// (the real ones have at most 434 splines of at most 59 points). A
+/// count must also fit in the lines that follow it: every spline and control point takes one.
+pub const MAX_VSP_COUNT: usize = 1_000_000;
+
+/// Parses the splines of an `annotation.vsp` file (file units, no homography). Counts are
+/// bounded by [`MAX_VSP_COUNT`] and by the lines left in the file, frames by
+/// [`crate::limits::MAX_TIME`].
 pub fn parse_vsp(path: &Path) -> Result<Vec<Vec<ControlPoint>>, DataError> {
     let body = text::read(path)?;
-    let mut lines = body
+    let lines: Vec<(usize, &str)> = body
         .lines()
         .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty());
-    let count = |l: &str, ln: usize, what: &str| -> Result<usize, DataError> {
+        .filter(|(_, l)| !l.trim().is_empty())
+        .collect();
+    // A declared count, checked against the bound and the `left` lines that remain.
+    let count = |l: &str, ln: usize, what: &str, left: usize| -> Result<usize, DataError> {
         let tok = l.split_whitespace().next().unwrap_or("");
-        tok.parse::<usize>().map_err(|_| {
+        let n = tok.parse::<usize>().map_err(|_| {
             DataError::parse(
                 path,
                 ln,
                 format!("expected the number of {what}, found `{tok}`"),
             )
-        })
+        })?;
+        if n > MAX_VSP_COUNT {
+            return Err(DataError::parse(
+                path,
+                ln,
+                format!("{n} {what} is more than the limit of {MAX_VSP_COUNT}"),
+            ));
+        }
+        if n > left {
+            return Err(DataError::parse(
+                path,
+                ln,
+                format!("declares {n} {what} but only {left} non-empty lines follow"),
+            ));
+        }
+        Ok(n)
     };
+    let mut lines = lines.iter().copied();
     let (i0, first) = lines
         .next()
         .ok_or_else(|| DataError::parse(path, 1, "empty file"))?;
-    let n_splines = count(first, i0 + 1, "splines")?;
+    let n_splines = count(first, i0 + 1, "splines", lines.len())?;
     let mut splines = Vec::with_capacity(n_splines);
     for s in 0..n_splines {
         let (i, l) = lines.next().ok_or_else(|| {
@@ -118,7 +146,7 @@ pub fn parse_vsp(path: &Path) -> Result<Vec<Vec<ControlPoint>>, DataError> {
                 format!("file ends before spline {} of {n_splines}", s + 1),
             )
         })?;
-        let k = count(l, i + 1, "control points")?;
+        let k = count(l, i + 1, "control points", lines.len())?;
         let mut pts = Vec::with_capacity(k);
         for _ in 0..k {
             let (j, l) = lines.next().ok_or_else(|| {
@@ -133,11 +161,14 @@ pub fn parse_vsp(path: &Path) -> Result<Vec<Vec<ControlPoint>>, DataError> {
                     "a control point is `x y frame gaze` optionally followed by ` - comment`",
                 ));
             }
+            let frame = text::integer(toks[2], path, ln, "frame")?;
+            limits::time(frame as f64 / FPS, path, ln)?;
             pts.push(ControlPoint {
                 x: text::number(toks[0], path, ln, "x")?,
                 y: text::number(toks[1], path, ln, "y")?,
-                frame: text::integer(toks[2], path, ln, "frame")?,
+                frame,
                 gaze_deg: text::number(toks[3], path, ln, "gaze")?,
+                line: ln,
             });
         }
         splines.push(pts);
@@ -170,7 +201,7 @@ pub fn load_vsp(
                     AgentClass::Pedestrian,
                     Sample {
                         t: cp.frame as f64 / FPS,
-                        p,
+                        p: limits::position(p, path, cp.line)?,
                     },
                 )),
                 None => horizon += 1,

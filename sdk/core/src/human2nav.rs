@@ -492,6 +492,7 @@ impl<M: FlowModel> Human2Nav<M> {
             phi_after,
             fallback: false,
             notes,
+            error: None,
         };
         Ok(Plan {
             t0: obs.time,

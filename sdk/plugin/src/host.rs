@@ -972,11 +972,11 @@ impl PluginHost {
         let exec = match deadline {
             None => ConstraintExec::Direct(core),
             Some(_) => {
-                let worker = Worker::spawn(
-                    format!("h2n-{}", c.name),
-                    move |job: &mut Box<ConstraintJob>| core.run(job),
-                )
-                .map_err(|e| worker_error(&c.label, e))?;
+                let worker =
+                    Worker::spawn(thread_name(&c.name), move |job: &mut Box<ConstraintJob>| {
+                        core.run(job)
+                    })
+                    .map_err(|e| worker_error(&c.label, e))?;
                 ConstraintExec::Worker(Mutex::new(Slot {
                     worker: Some(worker),
                     spare: None,
@@ -1063,7 +1063,7 @@ impl PluginHost {
         let exec = match deadline {
             None => PlannerExec::Direct(core),
             Some(_) => PlannerExec::Worker(Some(
-                Worker::spawn(format!("h2n-{}", c.name), move |job: &mut Box<PlanJob>| {
+                Worker::spawn(thread_name(&c.name), move |job: &mut Box<PlanJob>| {
                     core.run(job)
                 })
                 .map_err(|e| worker_error(&c.label, e))?,
@@ -1093,6 +1093,17 @@ impl PluginHost {
             })
             .collect()
     }
+}
+
+/// A worker thread's name from an instance name the plugin chose: `h2n-` and at most 11 of its
+/// ASCII letters, digits, `-` and `_` (a name with a NUL byte would make the spawn panic).
+fn thread_name(instance: &str) -> String {
+    let tail: String = instance
+        .chars()
+        .filter(|c| c.is_ascii_alphanumeric() || *c == '-' || *c == '_')
+        .take(11)
+        .collect();
+    format!("h2n-{tail}")
 }
 
 fn worker_error(label: &str, e: std::io::Error) -> PluginError {
@@ -2057,6 +2068,12 @@ mod tests {
         .0
         .expect_err("duplicate");
         assert!(err.to_string().contains("repeats constraint `a`"), "{err}");
+    }
+
+    #[test]
+    fn worker_thread_names_keep_only_safe_characters() {
+        assert_eq!(thread_name("personal_space"), "h2n-personal_sp");
+        assert_eq!(thread_name("a\0b c/é"), "h2n-abc");
     }
 
     #[test]

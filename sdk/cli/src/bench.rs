@@ -18,7 +18,7 @@ use human2nav_plugin::PluginHost;
 use human2nav_sim::MethodSpec;
 use human2nav_sim::config::MethodConfig;
 use human2nav_sim::config::{
-    BenchConfig, build_suites, builtin_method, ensure_episode_files, load_robots,
+    BenchConfig, build_suites, builtin_method, ensure_episode_files, load_robots_with,
 };
 use human2nav_sim::driver::{self, BenchPlan};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -92,7 +92,8 @@ fn select<T>(
         .collect())
 }
 
-/// Runs the benchmark; fails when a method misses SR = 1 on an empty-world suite.
+/// Runs the benchmark; fails when a method misses SR = 1 on an empty-world suite or a planner
+/// call failed.
 pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
     let mut cfg = BenchConfig::load(&args.config)
         .with_context(|| format!("loading {}", args.config.display()))?;
@@ -107,8 +108,10 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
             "out/bench"
         }),
     };
-    let robots = select(load_robots(&cfg)?, &args.robots, "robot", |r| &r.name)?;
     let host = Arc::new(PluginHost::new());
+    let robots = select(load_robots_with(&cfg, &host)?, &args.robots, "robot", |r| {
+        &r.name
+    })?;
     let mut methods: Vec<MethodSpec> = Vec::new();
     let configured = select(cfg.methods.clone(), &args.methods, "method", |m| &m.name)?;
     for m in &configured {
@@ -220,8 +223,12 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
     for f in &outcome.figures {
         println!("figure:  {}", f.display());
     }
-    if outcome.empty_world_failures.is_empty() {
-        return Ok(ExitCode::SUCCESS);
+    for f in &outcome.planner_failures {
+        eprintln!(
+            "planner calls FAILED: method `{}` on robot `{}`: {} of {} calls in {} runs ({} runs \
+             where every call failed)",
+            f.method, f.robot, f.failed, f.calls, f.runs, f.runs_all_failed
+        );
     }
     for (m, r, sr) in &outcome.empty_world_failures {
         eprintln!(
@@ -229,7 +236,11 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
             100.0 * sr
         );
     }
-    Ok(ExitCode::FAILURE)
+    if outcome.passed() {
+        Ok(ExitCode::SUCCESS)
+    } else {
+        Ok(ExitCode::FAILURE)
+    }
 }
 
 /// Where stderr is not a terminal (a log file, CI), the progress bar draws nothing: print its

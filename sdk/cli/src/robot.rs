@@ -2,6 +2,7 @@
 
 use clap::Subcommand;
 use human2nav_core::robot::{EmbodimentSpec, Origin, PluginRef, RobotProfile};
+use human2nav_plugin::{PluginHost, RobotResolution};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -21,17 +22,25 @@ pub fn run(cmd: RobotCommand) -> anyhow::Result<ExitCode> {
     }
 }
 
-/// Loads every profile; prints each valid one, and one `error: <file>: <field>: <message>` line
-/// on stderr for each broken one. Fails when any profile is broken.
+/// Loads every profile and resolves its plugins (library, factory, instance with its config,
+/// one call; `PluginHost::resolve_robot`); prints each valid one, and one `error: ...` line on
+/// stderr for each broken one. Fails when any profile is broken.
 fn check(paths: &[PathBuf]) -> ExitCode {
     let mut failed = 0;
+    let host = PluginHost::new();
     for (i, path) in paths.iter().enumerate() {
-        match RobotProfile::load(path) {
-            Ok(profile) => {
+        let resolved = RobotProfile::load(path)
+            .map_err(|e| e.to_string())
+            .and_then(|p| match host.resolve_robot(&p) {
+                Ok(r) => Ok((p, r)),
+                Err(e) => Err(e.to_string()),
+            });
+        match resolved {
+            Ok((profile, resolution)) => {
                 if i > 0 {
                     println!();
                 }
-                print!("{}", describe(&profile));
+                print!("{}", describe(&profile, &resolution));
             }
             Err(err) => {
                 eprintln!("error: {err}");
@@ -69,8 +78,8 @@ fn plugin_line(r: &PluginRef) -> String {
     )
 }
 
-/// The human-readable report of one profile.
-fn describe(p: &RobotProfile) -> String {
+/// The human-readable report of one profile and what resolving its plugins did.
+fn describe(p: &RobotProfile, resolution: &RobotResolution) -> String {
     use std::fmt::Write as _;
     let mut s = String::new();
     let _ = writeln!(s, "robot       {}", p.name);
@@ -175,6 +184,9 @@ fn describe(p: &RobotProfile) -> String {
         for (i, r) in p.constraints.iter().enumerate() {
             let _ = writeln!(s, "constraint  [{i}] {}", plugin_line(r));
         }
+    }
+    for line in resolution.embodiment.iter().chain(&resolution.constraints) {
+        let _ = writeln!(s, "resolved    {line}");
     }
     let _ = writeln!(s, "ok");
     s

@@ -758,6 +758,7 @@ fn closed_loop(
             plugin: None,
             config: method_table,
             replan_hz: human2nav_replan_hz(bcfg),
+            deadline_ms: None,
         },
         bcfg,
     )?;

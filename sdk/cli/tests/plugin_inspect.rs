@@ -92,3 +92,30 @@ fn bad_libraries_give_one_clear_line() {
         Err(e) => panic!("cannot run human2nav: {e}"),
     }
 }
+
+#[test]
+fn inspect_lists_its_checks_and_refuses_broken_tables() {
+    let out = inspect("human2nav_personal_space");
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    for needle in [
+        "checked   ",
+        "ok    file: regular file of",
+        "ok    entry table:",
+        "ok    factory 0 (constraint `personal_space`): create set",
+    ] {
+        assert!(stdout.contains(needle), "`{needle}` missing:\n{stdout}");
+    }
+    // A library whose instance comes with a null required function: before, inspect called it
+    // fine and a profile using it crashed the host.
+    let out = inspect("human2nav_fixture_bad_tables");
+    assert_one_line_error(
+        &out,
+        "the planner vtable of `null_plan` has a null `plan` (a required function)",
+    );
+    assert!(
+        text(&out.stdout).contains("FAIL  constraint `short_vtable` instance"),
+        "{}",
+        text(&out.stdout)
+    );
+}

@@ -85,3 +85,68 @@ fn a_broken_copy_fails_with_one_line() {
     assert!(String::from_utf8_lossy(&out.stdout).contains("robot       go2"));
     let _ = fs::remove_dir_all(&dir);
 }
+
+/// `target/<profile>`, where cargo put the binary and the plugin libraries.
+fn profile_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_human2nav"))
+        .parent()
+        .map(PathBuf::from)
+        .unwrap()
+}
+
+#[test]
+fn plugin_embodiments_are_resolved_and_a_broken_declaration_fails() {
+    let tracked = workspace_root().join("robots/tracked/robot.toml");
+    let out = robot_check(&[tracked.as_path()]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}\n(build the plugins first: cargo build --workspace)",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("resolved    embodiment `skid_steer` from"),
+        "{stdout}"
+    );
+
+    // A copy naming a factory the library does not have: the profile parses, so before this
+    // passed `robot check`.
+    let dir = std::env::temp_dir().join(format!(
+        "human2nav-cli-robot-check-plugin-{}",
+        std::process::id()
+    ));
+    let _ = fs::remove_dir_all(&dir);
+    fs::create_dir_all(&dir).unwrap();
+    let src = workspace_root().join("robots/tracked");
+    fs::copy(src.join("tracked.urdf"), dir.join("tracked.urdf")).unwrap();
+    let libs = profile_dir();
+    let text = fs::read_to_string(src.join("robot.toml"))
+        .unwrap()
+        .replace(
+            "../../target/{profile}/human2nav_skid_steer",
+            &libs.join("human2nav_skid_steer").display().to_string(),
+        )
+        .replace(
+            "../../target/{profile}/human2nav_personal_space",
+            &libs.join("human2nav_personal_space").display().to_string(),
+        )
+        .replace("plugin = \"skid_steer\"", "plugin = \"skid_steering\"");
+    let toml = dir.join("robot.toml");
+    fs::write(&toml, text).unwrap();
+    let out = robot_check(&[toml.as_path()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with(&format!(
+            "error: robot profile {}, [embodiment]: ",
+            toml.display()
+        )),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("has no embodiment factory named `skid_steering`; it provides: skid_steer"),
+        "{stderr}"
+    );
+    let _ = fs::remove_dir_all(&dir);
+}

@@ -520,6 +520,7 @@ impl<M: FlowModel> Human2Nav<M> {
             guidance_iterations,
             fallback: false,
             notes,
+            error: None,
         };
         Ok(Plan {
             t0: obs.time,

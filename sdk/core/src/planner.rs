@@ -57,6 +57,10 @@ pub struct PlanInfo {
     pub fallback: bool,
     /// Free-form notes (why a fallback happened, for instance).
     pub notes: Vec<String>,
+    /// Set when this plan is a substitute because the planner failed (a plugin planner that
+    /// missed its deadline gets the stop-in-place plan with this set): callers count it as a
+    /// failed planner call, not as the planner's own fallback.
+    pub error: Option<String>,
 }
 
 /// A planned trajectory in the world frame: `poses[k]` is the target at `t0 + k·dt`.

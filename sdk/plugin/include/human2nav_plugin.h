@@ -7,7 +7,13 @@
  *
  *  - export `const H2nPluginEntry *human2nav_plugin_entry(void)`; its table starts with
  *    `abi_version`, which the host checks before reading anything else;
- *  - tables are append-only and carry their own size;
+ *  - tables are append-only and carry their own size (the host refuses one smaller than its
+ *    own table or larger than 4096 bytes; the factories of the array are struct_size apart);
+ *  - function pointers may be NULL only in the optional slots: find_factory (not called by
+ *    the Rust host), last_error, name and reset; a NULL required slot makes the host refuse
+ *    the library or instance, naming the file, the table and the slot;
+ *  - counts and lengths are capped by the host: 256 factories, 256-byte names and versions,
+ *    4096-byte descriptions, 10000-pose plans;
  *  - strings are UTF-8 pointer + length; arrays pointer + length (+ shape); the host owns every
  *    output buffer;
  *  - every function returns an H2nStatus; after a failure, `last_error` explains it;

@@ -12,6 +12,15 @@
 //!   else and refuses the library when it differs from [`ABI_VERSION`].
 //! * Every table starts with a `struct_size` (or is versioned by the entry's): tables are
 //!   append-only, so a newer plugin may add fields at the end and an older host ignores them.
+//!   The host refuses a `struct_size` below its own table's or above
+//!   [`crate::validate::MAX_TABLE_BYTES`]. The factories of the entry's array are
+//!   `struct_size` bytes apart, and all have the same `struct_size`.
+//! * Function slots are nullable (`Option<extern "C" fn>`, the layout of a C function pointer).
+//!   Each table says which slots are **required** (the host refuses an instance or library
+//!   with a null one, naming the file, the table and the slot, and calls nothing of it) and
+//!   which are **optional** (`find_factory`, `last_error`, `name`, `reset`).
+//! * Counts and lengths a plugin hands over are capped ([`crate::validate`]): factories,
+//!   names, descriptions, plan lengths, messages.
 //! * Strings are [`H2nStr`] (UTF-8, pointer and length, no terminator required); arrays are
 //!   pointer and length (and shape). The host owns every output buffer; the plugin writes into
 //!   it and reports how much it needed ([`H2nBuffer`]).
@@ -22,7 +31,10 @@
 //!   fields ([`H2N_CONFIG`]).
 //! * Constraint and embodiment instances must tolerate concurrent calls from several threads
 //!   (the Rust traits are `Send + Sync`); a planner instance is only ever called by one thread
-//!   at a time. `destroy` is called exactly once, after the last call.
+//!   at a time. `destroy` is called exactly once, after the last call, on any thread. With a
+//!   deadline ([`crate::deadline`]) a planner's or constraint's calls come from one worker
+//!   thread of the host; an instance that missed its deadline gets no further call but `destroy`,
+//!   once (and if) its late call returns.
 //! * Libraries are never unloaded, so static data may be referenced by the host for ever.
 
 use human2nav_core::{ControllerGains, Limits, Pose2, Twist2};
@@ -37,6 +49,71 @@ pub const ENTRY_SYMBOL: &str = "human2nav_plugin_entry";
 
 /// Signature of [`ENTRY_SYMBOL`]: returns the plugin's entry table (never null for a plugin).
 pub type EntryFn = unsafe extern "C" fn() -> *const H2nPluginEntry;
+
+// Function-pointer slots. Every slot of a table is an `Option` of one of these: a C function
+// pointer may be null, and `Option<extern "C" fn>` has exactly the layout of a nullable C
+// function pointer, so the host can read a table whatever the plugin put in it and check each
+// slot before calling it. Which slots may be null is documented on each table.
+
+/// `H2nPluginEntry::find_factory`.
+pub type FindFactoryFn = unsafe extern "C" fn(kind: u32, name: H2nStr) -> *const H2nFactory;
+/// `H2nFactory::create`.
+pub type CreateFn = unsafe extern "C" fn(
+    args: *const H2nCreateArgs,
+    out: *mut H2nObject,
+    error: *mut H2nBuffer,
+) -> H2nStatus;
+/// `destroy` of every vtable.
+pub type DestroyFn = unsafe extern "C" fn(instance: *mut c_void);
+/// `last_error` of every vtable.
+pub type LastErrorFn = unsafe extern "C" fn(instance: *mut c_void, out: *mut H2nBuffer);
+/// `name` of every vtable.
+pub type NameFn = unsafe extern "C" fn(instance: *mut c_void) -> H2nStr;
+/// `H2nConstraintVTable::evaluate`.
+pub type EvaluateFn = unsafe extern "C" fn(
+    instance: *mut c_void,
+    batch: *const H2nTrajBatch,
+    ctx: *const H2nConstraintContext,
+    cost: H2nF64Out,
+    grad: H2nF64Out,
+) -> H2nStatus;
+/// `H2nEmbodimentVTable::holonomic`.
+pub type HolonomicFn = unsafe extern "C" fn(instance: *mut c_void, out: *mut u32) -> H2nStatus;
+/// `H2nEmbodimentVTable::saturate`.
+pub type SaturateFn = unsafe extern "C" fn(
+    instance: *mut c_void,
+    state: *const H2nRobotState,
+    cmd: *const H2nTwist,
+    dt: f64,
+    out: *mut H2nTwist,
+) -> H2nStatus;
+/// `H2nEmbodimentVTable::step`.
+pub type StepFn = unsafe extern "C" fn(
+    instance: *mut c_void,
+    state: *const H2nRobotState,
+    cmd: *const H2nTwist,
+    dt: f64,
+    out: *mut H2nRobotState,
+) -> H2nStatus;
+/// `H2nEmbodimentVTable::track`.
+pub type TrackFn = unsafe extern "C" fn(
+    instance: *mut c_void,
+    state: *const H2nRobotState,
+    plan: *const H2nPlanView,
+    t: f64,
+    out: *mut H2nTwist,
+) -> H2nStatus;
+/// `H2nPlannerVTable::reset`.
+pub type ResetFn = unsafe extern "C" fn(instance: *mut c_void) -> H2nStatus;
+/// `H2nPlannerVTable::plan`.
+pub type PlanFn = unsafe extern "C" fn(
+    instance: *mut c_void,
+    obs: *const H2nObservation,
+    out: *mut H2nPlanOut,
+) -> H2nStatus;
+/// `H2nPlannerVTable::last_plan`.
+pub type LastPlanFn =
+    unsafe extern "C" fn(instance: *mut c_void, out: *mut H2nPlanOut) -> H2nStatus;
 
 /// Status code returned by every ABI function.
 pub type H2nStatus = i32;
@@ -140,11 +217,14 @@ pub struct H2nPluginEntry {
     pub name: H2nStr,
     /// The plugin's own version (e.g. `0.1.0`).
     pub version: H2nStr,
-    /// What the plugin provides: `factory_count` entries.
+    /// What the plugin provides: `factory_count` entries, each `struct_size` bytes apart (the
+    /// `struct_size` of the first; every factory must have the same one).
     pub factories: *const H2nFactory,
     pub factory_count: usize,
-    /// Factory lookup by kind and name; null when there is none.
-    pub find_factory: unsafe extern "C" fn(kind: u32, name: H2nStr) -> *const H2nFactory,
+    /// Factory lookup by kind and name (returns null when there is none). **Optional** (may be
+    /// null): this host looks factories up in the validated `factories` array and does not call
+    /// it; it stays in the table for hosts that do.
+    pub find_factory: Option<FindFactoryFn>,
 }
 
 // SAFETY: an entry table is immutable static data (string literals, static factory arrays and
@@ -164,12 +244,8 @@ pub struct H2nFactory {
     /// One line for `human2nav plugin inspect`.
     pub description: H2nStr,
     /// Creates an instance. On success writes `out` and returns [`H2N_OK`]; on failure writes a
-    /// message into `error` (host-owned) and returns a status.
-    pub create: unsafe extern "C" fn(
-        args: *const H2nCreateArgs,
-        out: *mut H2nObject,
-        error: *mut H2nBuffer,
-    ) -> H2nStatus,
+    /// message into `error` (host-owned) and returns a status. **Required.**
+    pub create: Option<CreateFn>,
 }
 
 // SAFETY: as for `H2nPluginEntry`: factories are immutable static data.
@@ -303,21 +379,17 @@ pub struct H2nConstraintVTable {
     /// `sizeof(H2nConstraintVTable)` as the plugin was compiled.
     pub struct_size: u32,
     pub reserved: u32,
-    /// Frees the instance. Called exactly once.
-    pub destroy: unsafe extern "C" fn(instance: *mut c_void),
+    /// Frees the instance. Called exactly once. **Required.**
+    pub destroy: Option<DestroyFn>,
     /// Copies the instance's last error message into `out` (`len = 0` when there is none).
-    pub last_error: unsafe extern "C" fn(instance: *mut c_void, out: *mut H2nBuffer),
-    /// The term's name, valid as long as the instance.
-    pub name: unsafe extern "C" fn(instance: *mut c_void) -> H2nStr,
+    /// **Optional**: without it the host reports failures by their status alone.
+    pub last_error: Option<LastErrorFn>,
+    /// The term's name, valid as long as the instance. **Optional**: without it the host uses
+    /// the factory's name.
+    pub name: Option<NameFn>,
     /// Adds the cost of trajectory `b` into `cost.data[b]` (`cost.len == batch`) and its
-    /// gradient into `grad` (`grad.len == batch.len`).
-    pub evaluate: unsafe extern "C" fn(
-        instance: *mut c_void,
-        batch: *const H2nTrajBatch,
-        ctx: *const H2nConstraintContext,
-        cost: H2nF64Out,
-        grad: H2nF64Out,
-    ) -> H2nStatus,
+    /// gradient into `grad` (`grad.len == batch.len`). **Required.**
+    pub evaluate: Option<EvaluateFn>,
 }
 
 /// A robot state: pose and the body-frame velocity executed during the last step.
@@ -345,35 +417,21 @@ pub struct H2nEmbodimentVTable {
     /// `sizeof(H2nEmbodimentVTable)` as the plugin was compiled.
     pub struct_size: u32,
     pub reserved: u32,
-    pub destroy: unsafe extern "C" fn(instance: *mut c_void),
-    pub last_error: unsafe extern "C" fn(instance: *mut c_void, out: *mut H2nBuffer),
-    pub name: unsafe extern "C" fn(instance: *mut c_void) -> H2nStr,
-    /// Writes 1 to `out` when the robot can move sideways, else 0.
-    pub holonomic: unsafe extern "C" fn(instance: *mut c_void, out: *mut u32) -> H2nStatus,
-    /// Clips `cmd` to what the robot can do from `state` within `dt`.
-    pub saturate: unsafe extern "C" fn(
-        instance: *mut c_void,
-        state: *const H2nRobotState,
-        cmd: *const H2nTwist,
-        dt: f64,
-        out: *mut H2nTwist,
-    ) -> H2nStatus,
-    /// Advances the kinematic model by `dt` under an already saturated command.
-    pub step: unsafe extern "C" fn(
-        instance: *mut c_void,
-        state: *const H2nRobotState,
-        cmd: *const H2nTwist,
-        dt: f64,
-        out: *mut H2nRobotState,
-    ) -> H2nStatus,
+    /// **Required** (as in [`H2nConstraintVTable`]).
+    pub destroy: Option<DestroyFn>,
+    /// **Optional** (as in [`H2nConstraintVTable`]).
+    pub last_error: Option<LastErrorFn>,
+    /// **Optional** (as in [`H2nConstraintVTable`]).
+    pub name: Option<NameFn>,
+    /// Writes 1 to `out` when the robot can move sideways, else 0. **Required.**
+    pub holonomic: Option<HolonomicFn>,
+    /// Clips `cmd` to what the robot can do from `state` within `dt`. **Required.**
+    pub saturate: Option<SaturateFn>,
+    /// Advances the kinematic model by `dt` under an already saturated command. **Required.**
+    pub step: Option<StepFn>,
     /// The tracking controller's (unsaturated) command that follows `plan` at time `t`.
-    pub track: unsafe extern "C" fn(
-        instance: *mut c_void,
-        state: *const H2nRobotState,
-        plan: *const H2nPlanView,
-        t: f64,
-        out: *mut H2nTwist,
-    ) -> H2nStatus,
+    /// **Required.**
+    pub track: Option<TrackFn>,
 }
 
 /// What a planner sees at one planning instant ([`human2nav_core::Observation`]).
@@ -416,20 +474,20 @@ pub struct H2nPlannerVTable {
     /// `sizeof(H2nPlannerVTable)` as the plugin was compiled.
     pub struct_size: u32,
     pub reserved: u32,
-    pub destroy: unsafe extern "C" fn(instance: *mut c_void),
-    pub last_error: unsafe extern "C" fn(instance: *mut c_void, out: *mut H2nBuffer),
-    pub name: unsafe extern "C" fn(instance: *mut c_void) -> H2nStr,
-    /// Forgets state carried between calls.
-    pub reset: unsafe extern "C" fn(instance: *mut c_void) -> H2nStatus,
-    /// Plans from one observation into `out`.
-    pub plan: unsafe extern "C" fn(
-        instance: *mut c_void,
-        obs: *const H2nObservation,
-        out: *mut H2nPlanOut,
-    ) -> H2nStatus,
+    /// **Required** (as in [`H2nConstraintVTable`]).
+    pub destroy: Option<DestroyFn>,
+    /// **Optional** (as in [`H2nConstraintVTable`]).
+    pub last_error: Option<LastErrorFn>,
+    /// **Optional** (as in [`H2nConstraintVTable`]).
+    pub name: Option<NameFn>,
+    /// Forgets state carried between calls. **Optional**: a planner without state between
+    /// calls may leave it null.
+    pub reset: Option<ResetFn>,
+    /// Plans from one observation into `out`. **Required.**
+    pub plan: Option<PlanFn>,
     /// Copies the plan of the last successful `plan` call into `out` (after
-    /// [`H2N_BUFFER_TOO_SMALL`]).
-    pub last_plan: unsafe extern "C" fn(instance: *mut c_void, out: *mut H2nPlanOut) -> H2nStatus,
+    /// [`H2N_BUFFER_TOO_SMALL`]). **Required.**
+    pub last_plan: Option<LastPlanFn>,
 }
 
 /// Size and field offsets of one ABI struct.

@@ -101,6 +101,53 @@ pub enum PluginError {
         status: &'static str,
         message: String,
     },
+    /// A required function slot of a table is null.
+    #[error("{path}: the {table} has a null `{slot}` (a required function)")]
+    NullSlot {
+        path: PathBuf,
+        /// `factory table entry 1 (planner `orca`)`, `planner vtable of `orca``, ...
+        table: String,
+        slot: &'static str,
+    },
+    /// A table's `struct_size` is smaller than this ABI's table or larger than the cap
+    /// ([`crate::validate::MAX_TABLE_BYTES`]).
+    #[error(
+        "{path}: the {table} declares {size} bytes (struct_size); this host needs at least {min} and accepts at most {max}"
+    )]
+    TableSize {
+        path: PathBuf,
+        table: String,
+        size: u32,
+        min: usize,
+        max: usize,
+    },
+    /// A count or size from the plugin is above the host's cap ([`crate::validate`]).
+    #[error("{path}: {what} is {value}, more than this host accepts ({cap})")]
+    Cap {
+        path: PathBuf,
+        what: String,
+        value: u64,
+        cap: u64,
+    },
+    /// The instance was created but its first call failed (robot checks).
+    #[error("{path}: {kind} `{name}` was created but its first call failed: {message}")]
+    Probe {
+        path: PathBuf,
+        kind: PluginKind,
+        name: String,
+        message: String,
+    },
+    /// A plugin declared by a robot profile could not be used; `item` names the declaration
+    /// (`[embodiment]`, `[[constraint]] 1`).
+    #[error("robot profile {profile}, {item}: {error}")]
+    Profile {
+        profile: PathBuf,
+        item: String,
+        error: Box<PluginError>,
+    },
+    /// The thread that runs an instance's calls under a deadline could not be started.
+    #[error("{instance}: cannot start its worker thread: {message}")]
+    Worker { instance: String, message: String },
 }
 
 fn provided(names: &[String]) -> String {

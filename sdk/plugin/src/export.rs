@@ -414,10 +414,10 @@ where
         &H2nConstraintVTable {
             struct_size: std::mem::size_of::<H2nConstraintVTable>() as u32,
             reserved: 0,
-            destroy: destroy::<T>,
-            last_error: last_error::<T>,
-            name: name::<T>,
-            evaluate: constraint_evaluate::<T>,
+            destroy: Some(destroy::<T>),
+            last_error: Some(last_error::<T>),
+            name: Some(name::<T>),
+            evaluate: Some(constraint_evaluate::<T>),
         }
     };
     // SAFETY: forwarded contract.
@@ -544,13 +544,13 @@ where
         &H2nEmbodimentVTable {
             struct_size: std::mem::size_of::<H2nEmbodimentVTable>() as u32,
             reserved: 0,
-            destroy: destroy::<T>,
-            last_error: last_error::<T>,
-            name: name::<T>,
-            holonomic: embodiment_holonomic::<T>,
-            saturate: embodiment_saturate::<T>,
-            step: embodiment_step::<T>,
-            track: embodiment_track::<T>,
+            destroy: Some(destroy::<T>),
+            last_error: Some(last_error::<T>),
+            name: Some(name::<T>),
+            holonomic: Some(embodiment_holonomic::<T>),
+            saturate: Some(embodiment_saturate::<T>),
+            step: Some(embodiment_step::<T>),
+            track: Some(embodiment_track::<T>),
         }
     };
     // SAFETY: forwarded contract.
@@ -710,12 +710,12 @@ where
         &H2nPlannerVTable {
             struct_size: std::mem::size_of::<H2nPlannerVTable>() as u32,
             reserved: 0,
-            destroy: destroy::<S<T>>,
-            last_error: last_error::<S<T>>,
-            name: name::<S<T>>,
-            reset: planner_reset::<T>,
-            plan: planner_plan::<T>,
-            last_plan: planner_last_plan::<T>,
+            destroy: Some(destroy::<S<T>>),
+            last_error: Some(last_error::<S<T>>),
+            name: Some(name::<S<T>>),
+            reset: Some(planner_reset::<T>),
+            plan: Some(planner_plan::<T>),
+            last_plan: Some(planner_last_plan::<T>),
         }
     };
     // SAFETY: forwarded contract.
@@ -832,7 +832,7 @@ mod tests {
             len: 0,
         };
         // SAFETY: live instance, host-owned buffer.
-        unsafe { (vtable(obj).last_error)(obj.instance, &mut out) };
+        unsafe { (vtable(obj).last_error.expect("last_error"))(obj.instance, &mut out) };
         String::from_utf8_lossy(&buf[..out.len.min(buf.len())]).into_owned()
     }
 
@@ -904,7 +904,10 @@ mod tests {
         assert_eq!(status, H2N_OK);
         let vt = vtable(&obj);
         // SAFETY: live instance; the returned view lives as long as it.
-        assert_eq!(unsafe { (vt.name)(obj.instance).as_str() }, Ok("sum_x"));
+        assert_eq!(
+            unsafe { (vt.name.expect("name"))(obj.instance).as_str() },
+            Ok("sum_x")
+        );
         let data = [1.0, 0.0, 0.0, 2.0, 0.0, 0.0];
         let good = H2nTrajBatch {
             data: data.as_ptr(),
@@ -930,7 +933,7 @@ mod tests {
                 len: grad.len(),
             };
             // SAFETY: live instance; pointers valid or deliberately null.
-            unsafe { (vt.evaluate)(obj.instance, batch, ctx, c, g) }
+            unsafe { (vt.evaluate.expect("evaluate"))(obj.instance, batch, ctx, c, g) }
         };
         assert_eq!(eval(&good, &ctx, &mut cost, 1, &mut grad), H2N_OK);
         assert_eq!((cost, grad), ([3.0], [1.0, 0.0, 0.0, 1.0, 0.0, 0.0]));
@@ -1009,12 +1012,13 @@ mod tests {
             len: 6,
         };
         // SAFETY: a null instance is part of what the shim must survive.
-        let status = unsafe { (vt.evaluate)(std::ptr::null_mut(), &good, &ctx, c, g) };
+        let status =
+            unsafe { (vt.evaluate.expect("evaluate"))(std::ptr::null_mut(), &good, &ctx, c, g) };
         assert_eq!(status, H2N_INVALID_ARGUMENT);
         // SAFETY: destroyed exactly once; null is a no-op.
         unsafe {
-            (vt.destroy)(obj.instance);
-            (vt.destroy)(std::ptr::null_mut());
+            (vt.destroy.expect("destroy"))(obj.instance);
+            (vt.destroy.expect("destroy"))(std::ptr::null_mut());
         }
     }
 

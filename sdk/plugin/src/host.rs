@@ -6,18 +6,30 @@
 //! [`PluginPlanner`]) implement [`ConstraintTerm`], [`Embodiment`] and [`Planner`]; a planner,
 //! simulator or CLI holding a `Box<dyn ...>` cannot tell them from built-ins.
 //!
-//! A plugin call that panicked marks its instance unusable: later calls fail with an error
-//! naming the original panic (constraints, planners) or return the documented safe value
-//! (embodiments, whose trait methods cannot fail: zero twist, robot halted in place). The
-//! [`PluginHost`] that created an instance lists such failures in [`PluginHost::failures`].
+//! Before the OS loader sees a file, [`crate::libfile`] checks it (a truncated library would
+//! otherwise fault inside `dlopen`); every table, function slot, count and string the plugin
+//! hands over is checked before use ([`crate::validate`]); planner and constraint calls run under
+//! a deadline ([`crate::deadline`]).
+//!
+//! A plugin call that panicked (or missed its deadline) marks its instance unusable: later
+//! calls fail with an error naming the original failure (constraints, planners) or return the
+//! documented safe value (embodiments, whose trait methods cannot fail: zero twist, robot halted
+//! in place). The [`PluginHost`] that created an instance lists such failures in
+//! [`PluginHost::failures`].
 
 use crate::abi::*;
+use crate::deadline::{self, NoAnswer, Worker};
 use crate::error::{PluginError, PluginKind};
 use crate::init::RobotContext;
+use crate::libfile::{self, MAX_LIBRARY_BYTES};
 use crate::resolve::resolve_library_path;
+use crate::validate::{
+    Check, MAX_DESCRIPTION_BYTES, MAX_FACTORIES, MAX_MESSAGE_BYTES, MAX_NAME_BYTES, MAX_PLAN_POSES,
+    MAX_TABLE_BYTES, plugin_str,
+};
 use human2nav_core::constraint::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
 use human2nav_core::embodiment::{Embodiment, RobotState};
-use human2nav_core::{Observation, Plan, PlanError, PlanInfo, Planner, Pose2, Twist2};
+use human2nav_core::{AgentState, Observation, Plan, PlanError, PlanInfo, Planner, Pose2, Twist2};
 use std::collections::HashMap;
 use std::ffi::c_void;
 use std::fmt;
@@ -25,6 +37,7 @@ use std::path::{Path, PathBuf};
 use std::ptr::NonNull;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
+use std::time::Duration;
 
 /// One factory a library provides.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -37,10 +50,14 @@ pub struct FactoryInfo {
 /// A loaded, validated plugin library.
 pub struct PluginLibrary {
     path: PathBuf,
-    entry: &'static H2nPluginEntry,
+    abi_version: u32,
     name: String,
     version: String,
     factories: Vec<FactoryInfo>,
+    /// `create` of each factory, in the order of `factories` (checked non-null).
+    creates: Vec<CreateFn>,
+    /// What was checked when the library was loaded, in order.
+    checks: Vec<Check>,
 }
 
 impl fmt::Debug for PluginLibrary {
@@ -60,116 +77,305 @@ fn registry() -> &'static Mutex<HashMap<PathBuf, Arc<PluginLibrary>>> {
     REGISTRY.get_or_init(|| Mutex::new(HashMap::new()))
 }
 
-/// Reads a static string of the entry table.
-///
-/// # Safety
-/// `s` must be readable for the life of the process (the library is never unloaded).
-unsafe fn static_str(s: H2nStr, path: &Path, what: &str) -> Result<String, PluginError> {
-    // SAFETY: forwarded contract.
-    unsafe { s.as_str() }
-        .map(str::to_owned)
-        .map_err(|e| PluginError::Malformed {
+/// Records a failed check and returns its error.
+fn failed(checks: &mut Vec<Check>, item: &str, e: PluginError) -> PluginError {
+    checks.push(Check::fail(item, e.to_string()));
+    e
+}
+
+/// `Ok` when a table's declared size is between what this ABI needs and [`MAX_TABLE_BYTES`].
+fn table_size(path: &Path, table: &str, size: u32, min: usize) -> Result<(), PluginError> {
+    let s = size as usize;
+    if s < min || s > MAX_TABLE_BYTES {
+        return Err(PluginError::TableSize {
             path: path.to_path_buf(),
-            message: format!("{what} is not UTF-8: {e}"),
-        })
+            table: table.to_owned(),
+            size,
+            min,
+            max: MAX_TABLE_BYTES,
+        });
+    }
+    Ok(())
 }
 
 impl PluginLibrary {
     /// Loads (or returns the already loaded) library at `path`, resolved as described in
-    /// [`crate::resolve`]. Checks the ABI version before reading anything else.
+    /// [`crate::resolve`]. Checks the file before the OS loader maps it and the ABI version
+    /// before reading anything else of the entry table, then every table it hands over.
     pub fn load(path: &Path) -> Result<Arc<PluginLibrary>, PluginError> {
-        let file = resolve_library_path(path)?;
+        Self::load_checked(path).0
+    }
+
+    /// [`PluginLibrary::load`], also returning what was checked (up to and including a failed
+    /// check). A library loaded before returns the checks of its first load.
+    pub fn load_checked(path: &Path) -> (Result<Arc<PluginLibrary>, PluginError>, Vec<Check>) {
+        let mut checks = Vec::new();
+        let file = match resolve_library_path(path) {
+            Ok(f) => f,
+            Err(e) => return (Err(failed(&mut checks, "library path", e.clone())), checks),
+        };
         let canonical = std::fs::canonicalize(&file).unwrap_or(file);
         let mut libs = registry().lock().unwrap_or_else(|e| e.into_inner());
         if let Some(lib) = libs.get(&canonical) {
-            return Ok(Arc::clone(lib));
+            return (Ok(Arc::clone(lib)), lib.checks.clone());
         }
-        let lib = Arc::new(Self::open(&canonical)?);
-        libs.insert(canonical, Arc::clone(&lib));
-        Ok(lib)
+        checks.push(Check::pass(
+            "library path",
+            format!("{} resolves to {}", path.display(), canonical.display()),
+        ));
+        match Self::open(&canonical, &mut checks) {
+            Ok(mut lib) => {
+                lib.checks = checks.clone();
+                let lib = Arc::new(lib);
+                libs.insert(canonical, Arc::clone(&lib));
+                (Ok(lib), checks)
+            }
+            Err(e) => (Err(e), checks),
+        }
     }
 
-    fn open(path: &Path) -> Result<PluginLibrary, PluginError> {
-        let err = |message: String| PluginError::Malformed {
-            path: path.to_path_buf(),
-            message,
-        };
+    fn open(path: &Path, checks: &mut Vec<Check>) -> Result<PluginLibrary, PluginError> {
+        match libfile::check_library_file(path) {
+            Ok(f) => checks.push(Check::pass(
+                "file",
+                format!(
+                    "regular file of {} bytes (limit {MAX_LIBRARY_BYTES}); {}",
+                    f.size, f.format
+                ),
+            )),
+            Err(problem) => {
+                let e = PluginError::Open {
+                    path: path.to_path_buf(),
+                    message: format!("{problem} (refused before loading)"),
+                };
+                return Err(failed(checks, "file", e));
+            }
+        }
         // SAFETY: loading a library runs its initialisers. The user named this library
-        // explicitly as a plugin; running its code is the purpose of loading it.
-        let lib = unsafe { libloading::Library::new(path) }.map_err(|e| PluginError::Open {
-            path: path.to_path_buf(),
-            message: one_line(&e.to_string()),
+        // explicitly as a plugin; running its code is the purpose of loading it. The file
+        // passed the checks above, so the loader maps no page past its end.
+        let lib = unsafe { libloading::Library::new(path) }.map_err(|e| {
+            let e = PluginError::Open {
+                path: path.to_path_buf(),
+                message: one_line(&e.to_string()),
+            };
+            failed(checks, "loader", e)
         })?;
         // Never unloaded: every pointer the plugin hands out stays valid for the process.
         let lib: &'static libloading::Library = Box::leak(Box::new(lib));
         // SAFETY: the symbol, if present, has the `EntryFn` signature by the ABI contract.
         let entry_fn = unsafe { lib.get::<EntryFn>(ENTRY_SYMBOL.as_bytes()) }.map_err(|_| {
-            PluginError::MissingEntry {
+            let e = PluginError::MissingEntry {
                 path: path.to_path_buf(),
                 symbol: ENTRY_SYMBOL,
-            }
+            };
+            failed(checks, "entry symbol", e)
         })?;
         // SAFETY: calling the entry function of a plugin is the ABI's first step; it takes no
         // arguments and returns a pointer to static data.
         let raw = unsafe { entry_fn() };
+        checks.push(Check::pass(
+            "entry symbol",
+            format!("`{ENTRY_SYMBOL}` exported and called"),
+        ));
+        // SAFETY: `raw` is what the library's entry function returned; the library is never
+        // unloaded.
+        unsafe { Self::from_entry(path, raw, checks) }
+    }
+
+    /// Validates an entry table and everything it points to (see [`crate::validate`]).
+    ///
+    /// # Safety
+    /// `raw` is null or points to readable static memory that starts with the ABI version; when
+    /// the version matches, to a v1 entry table whose `struct_size` first bytes are readable,
+    /// whose strings are readable for their (capped) lengths and whose factory array holds
+    /// `factory_count` (capped) factories of the declared stride, all for the life of the
+    /// process.
+    pub(crate) unsafe fn from_entry(
+        path: &Path,
+        raw: *const H2nPluginEntry,
+        checks: &mut Vec<Check>,
+    ) -> Result<PluginLibrary, PluginError> {
+        let malformed = |message: String| PluginError::Malformed {
+            path: path.to_path_buf(),
+            message,
+        };
         if raw.is_null() || !raw.is_aligned() {
-            return Err(err(
-                "the entry function returned a null or misaligned table".into(),
-            ));
+            let e = malformed("the entry function returned a null or misaligned table".into());
+            return Err(failed(checks, "entry table", e));
         }
         // SAFETY: every ABI version starts the entry table with a `u32` ABI version, so this
         // read is valid whatever version the plugin speaks. Nothing else is read before the
         // version is known to match.
         let found = unsafe { raw.cast::<u32>().read() };
         if found != ABI_VERSION {
-            return Err(PluginError::AbiMismatch {
+            let e = PluginError::AbiMismatch {
                 path: path.to_path_buf(),
                 found,
                 expected: ABI_VERSION,
-            });
+            };
+            return Err(failed(checks, "ABI version", e));
         }
-        // SAFETY: the versions match, so `raw` points to a v1 entry table in static memory
-        // of a library that is never unloaded.
+        checks.push(Check::pass(
+            "ABI version",
+            format!("{found} (this host: {ABI_VERSION})"),
+        ));
+        // SAFETY: a v1 entry table starts with two `u32`s (version, size).
+        let size = unsafe { raw.cast::<u32>().add(1).read() };
+        let min = std::mem::size_of::<H2nPluginEntry>();
+        table_size(path, "entry table", size, min).map_err(|e| failed(checks, "entry table", e))?;
+        // SAFETY: the version matches and the table is at least as large as a v1 table, so
+        // `raw` points to a v1 entry table in static memory; every function slot is an
+        // `Option`, valid for any pointer value, null included.
         let entry: &'static H2nPluginEntry = unsafe { &*raw };
-        if (entry.struct_size as usize) < std::mem::size_of::<H2nPluginEntry>() {
-            return Err(err(format!(
-                "entry table is {} bytes, ABI {ABI_VERSION} needs {}",
-                entry.struct_size,
-                std::mem::size_of::<H2nPluginEntry>()
-            )));
-        }
-        // SAFETY: static strings of a never-unloaded library.
-        let name = unsafe { static_str(entry.name, path, "plugin name") }?;
+        // SAFETY: strings of the table, readable for their length (capped by `plugin_str`).
+        let name = unsafe { plugin_str(entry.name, MAX_NAME_BYTES) }
+            .map_err(|m| malformed(format!("the plugin name {m}")))
+            .and_then(|n| {
+                if n.is_empty() {
+                    Err(malformed("the plugin name is empty".into()))
+                } else {
+                    Ok(n.to_owned())
+                }
+            })
+            .map_err(|e| failed(checks, "entry table", e))?;
         // SAFETY: as above.
-        let version = unsafe { static_str(entry.version, path, "plugin version") }?;
-        if entry.factory_count > 0 && (entry.factories.is_null() || !entry.factories.is_aligned()) {
-            return Err(err("factory table is null or misaligned".into()));
+        let version = unsafe { plugin_str(entry.version, MAX_NAME_BYTES) }
+            .map(str::to_owned)
+            .map_err(|m| failed(checks, "entry table", malformed(format!("the version {m}"))))?;
+        checks.push(Check::pass(
+            "entry table",
+            format!(
+                "{size} bytes (this ABI needs {min}, limit {MAX_TABLE_BYTES}); name and version \
+                 UTF-8 within {MAX_NAME_BYTES} bytes; find_factory {} (optional, not called: \
+                 factories are looked up in the checked array)",
+                if entry.find_factory.is_some() {
+                    "set"
+                } else {
+                    "null"
+                }
+            ),
+        ));
+
+        let count = entry.factory_count;
+        if count > MAX_FACTORIES {
+            let e = PluginError::Cap {
+                path: path.to_path_buf(),
+                what: "the factory count".into(),
+                value: count as u64,
+                cap: MAX_FACTORIES as u64,
+            };
+            return Err(failed(checks, "factory table", e));
         }
-        let factories: &'static [H2nFactory] = if entry.factory_count == 0 {
-            &[]
-        } else {
-            // SAFETY: checked non-null and aligned; `factory_count` entries in static memory.
-            unsafe { std::slice::from_raw_parts(entry.factories, entry.factory_count) }
-        };
-        let mut infos = Vec::with_capacity(factories.len());
-        for (i, f) in factories.iter().enumerate() {
-            if (f.struct_size as usize) < std::mem::size_of::<H2nFactory>() {
-                return Err(err(format!("factory {i} is {} bytes", f.struct_size)));
+        let mut factories = Vec::with_capacity(count);
+        let mut creates = Vec::with_capacity(count);
+        if count > 0 {
+            if entry.factories.is_null() || !entry.factories.is_aligned() {
+                let e = malformed("the factory table is null or misaligned".into());
+                return Err(failed(checks, "factory table", e));
             }
-            infos.push(FactoryInfo {
-                kind: PluginKind::from_code(f.kind),
-                // SAFETY: static strings of a never-unloaded library.
-                name: unsafe { static_str(f.name, path, "factory name") }?,
+            // SAFETY: non-null and aligned; every factory starts with its `u32` size.
+            let stride = unsafe { entry.factories.cast::<u32>().read() };
+            let fmin = std::mem::size_of::<H2nFactory>();
+            table_size(path, "factory table entry 0", stride, fmin)
+                .map_err(|e| failed(checks, "factory table", e))?;
+            let stride = stride as usize;
+            if stride % std::mem::align_of::<H2nFactory>() != 0 {
+                let e = malformed(format!(
+                    "factories are {stride} bytes apart, not a multiple of their alignment {}",
+                    std::mem::align_of::<H2nFactory>()
+                ));
+                return Err(failed(checks, "factory table", e));
+            }
+            checks.push(Check::pass(
+                "factory table",
+                format!(
+                    "{count} factories (limit {MAX_FACTORIES}), {stride} bytes apart (this ABI \
+                     needs {fmin})"
+                ),
+            ));
+            for i in 0..count {
+                // SAFETY: within the `count · stride` bytes of the factory array (both capped);
+                // the stride is a multiple of the alignment, so each factory is aligned.
+                let fp = unsafe {
+                    entry
+                        .factories
+                        .cast::<u8>()
+                        .add(i * stride)
+                        .cast::<H2nFactory>()
+                };
+                let item = format!("factory {i}");
+                // SAFETY: as above; a factory starts with its `u32` size.
+                let fsize = unsafe { fp.cast::<u32>().read() };
+                if fsize as usize != stride {
+                    let e = malformed(format!(
+                        "factory {i} is {fsize} bytes, factory 0 is {stride} (the entries of \
+                         one array have one size)"
+                    ));
+                    return Err(failed(checks, &item, e));
+                }
+                // SAFETY: aligned, at least a v1 factory, static; slots are `Option`s.
+                let f: &'static H2nFactory = unsafe { &*fp };
+                let kind = PluginKind::from_code(f.kind);
+                // SAFETY: strings of the factory, readable for their (capped) length.
+                let fname = unsafe { plugin_str(f.name, MAX_NAME_BYTES) }
+                    .map_err(|m| malformed(format!("factory {i}: the name {m}")))
+                    .and_then(|n| {
+                        if n.is_empty() {
+                            Err(malformed(format!("factory {i}: the name is empty")))
+                        } else {
+                            Ok(n.to_owned())
+                        }
+                    })
+                    .map_err(|e| failed(checks, &item, e))?;
+                let item = format!("factory {i} ({kind} `{fname}`)");
                 // SAFETY: as above.
-                description: unsafe { static_str(f.description, path, "factory description") }?,
-            });
+                let description = unsafe { plugin_str(f.description, MAX_DESCRIPTION_BYTES) }
+                    .map(str::to_owned)
+                    .map_err(|m| {
+                        let e = malformed(format!("factory {i}: the description {m}"));
+                        failed(checks, &item, e)
+                    })?;
+                let Some(create) = f.create else {
+                    let e = PluginError::NullSlot {
+                        path: path.to_path_buf(),
+                        table: format!("factory table entry {i} ({kind} `{fname}`)"),
+                        slot: "create",
+                    };
+                    return Err(failed(checks, &item, e));
+                };
+                if factories
+                    .iter()
+                    .any(|o: &FactoryInfo| o.kind == kind && o.name == fname)
+                {
+                    let e = malformed(format!("factory {i} repeats {kind} `{fname}`"));
+                    return Err(failed(checks, &item, e));
+                }
+                checks.push(Check::pass(
+                    item,
+                    format!(
+                        "create set; name and description UTF-8 within {MAX_NAME_BYTES} and \
+                         {MAX_DESCRIPTION_BYTES} bytes"
+                    ),
+                ));
+                factories.push(FactoryInfo {
+                    kind,
+                    name: fname,
+                    description,
+                });
+                creates.push(create);
+            }
+        } else {
+            checks.push(Check::pass("factory table", "no factories"));
         }
         Ok(PluginLibrary {
             path: path.to_path_buf(),
-            entry,
+            abi_version: found,
             name,
             version,
-            factories: infos,
+            factories,
+            creates,
+            checks: Vec::new(),
         })
     }
 
@@ -190,7 +396,7 @@ impl PluginLibrary {
 
     /// The ABI version the library speaks (always [`ABI_VERSION`] once loaded).
     pub fn abi_version(&self) -> u32 {
-        self.entry.abi_version
+        self.abi_version
     }
 
     /// What the library provides.
@@ -198,18 +404,24 @@ impl PluginLibrary {
         &self.factories
     }
 
-    /// Creates an instance through the factory `kind`/`name`.
-    fn create(
+    /// What was checked when the library was loaded.
+    pub fn checks(&self) -> &[Check] {
+        &self.checks
+    }
+
+    /// Creates an instance through the factory `kind`/`name` (looked up in the checked table).
+    pub(crate) fn create(
         &self,
         kind: PluginKind,
         name: &str,
         config: &str,
         robot: Option<&RobotContext>,
     ) -> Result<H2nObject, PluginError> {
-        // SAFETY: `find_factory` is a function of the validated entry table; `name` is readable
-        // for the duration of the call.
-        let factory = unsafe { (self.entry.find_factory)(kind.code(), H2nStr::new(name)) };
-        if factory.is_null() || !factory.is_aligned() {
+        let Some(index) = self
+            .factories
+            .iter()
+            .position(|f| f.kind == kind && f.name == name)
+        else {
             return Err(PluginError::UnknownFactory {
                 path: self.path.clone(),
                 plugin: self.name.clone(),
@@ -222,15 +434,8 @@ impl PluginLibrary {
                     .map(|f| f.name.clone())
                     .collect(),
             });
-        }
-        // SAFETY: non-null, aligned, points into the library's static factory table.
-        let factory: &'static H2nFactory = unsafe { &*factory };
-        if (factory.struct_size as usize) < std::mem::size_of::<H2nFactory>() {
-            return Err(PluginError::Malformed {
-                path: self.path.clone(),
-                message: format!("factory `{name}` is {} bytes", factory.struct_size),
-            });
-        }
+        };
+        let create = self.creates[index];
         let args = H2nCreateArgs {
             struct_size: std::mem::size_of::<H2nCreateArgs>() as u32,
             kind: kind.code(),
@@ -251,9 +456,10 @@ impl PluginLibrary {
             capacity: message.len(),
             len: 0,
         };
-        // SAFETY: every pointer is valid for the duration of the call and the buffers are
-        // host-owned with the stated capacities.
-        let status = unsafe { (factory.create)(&args, &mut out, &mut error) };
+        // SAFETY: `create` is the factory's checked, non-null function; every pointer is valid
+        // for the duration of the call and the buffers are host-owned with the stated
+        // capacities.
+        let status = unsafe { create(&args, &mut out, &mut error) };
         if status != H2N_OK {
             let message = buffer_text(&message, error.len);
             return Err(if status == H2N_CONFIG {
@@ -273,10 +479,10 @@ impl PluginLibrary {
                 }
             });
         }
-        if out.instance.is_null() || out.vtable.is_null() {
+        if out.instance.is_null() {
             return Err(PluginError::Malformed {
                 path: self.path.clone(),
-                message: format!("factory `{name}` reported success but returned a null object"),
+                message: format!("factory `{name}` reported success but returned a null instance"),
             });
         }
         Ok(out)
@@ -300,6 +506,213 @@ fn one_line(s: &str) -> String {
         .filter(|l| !l.is_empty())
         .collect::<Vec<_>>()
         .join(" ")
+}
+
+/// A vtable kind: its slots, for validation.
+pub(crate) trait VTable: Sized + 'static {
+    const KIND: PluginKind;
+    /// `(slot, set, required)` in table order.
+    fn slots(&self) -> Vec<(&'static str, bool, bool)>;
+    fn destroy_fn(&self) -> Option<DestroyFn>;
+    fn last_error_fn(&self) -> Option<LastErrorFn>;
+    fn name_fn(&self) -> Option<NameFn>;
+}
+
+impl VTable for H2nConstraintVTable {
+    const KIND: PluginKind = PluginKind::Constraint;
+    fn slots(&self) -> Vec<(&'static str, bool, bool)> {
+        vec![
+            ("destroy", self.destroy.is_some(), true),
+            ("last_error", self.last_error.is_some(), false),
+            ("name", self.name.is_some(), false),
+            ("evaluate", self.evaluate.is_some(), true),
+        ]
+    }
+    fn destroy_fn(&self) -> Option<DestroyFn> {
+        self.destroy
+    }
+    fn last_error_fn(&self) -> Option<LastErrorFn> {
+        self.last_error
+    }
+    fn name_fn(&self) -> Option<NameFn> {
+        self.name
+    }
+}
+
+impl VTable for H2nEmbodimentVTable {
+    const KIND: PluginKind = PluginKind::Embodiment;
+    fn slots(&self) -> Vec<(&'static str, bool, bool)> {
+        vec![
+            ("destroy", self.destroy.is_some(), true),
+            ("last_error", self.last_error.is_some(), false),
+            ("name", self.name.is_some(), false),
+            ("holonomic", self.holonomic.is_some(), true),
+            ("saturate", self.saturate.is_some(), true),
+            ("step", self.step.is_some(), true),
+            ("track", self.track.is_some(), true),
+        ]
+    }
+    fn destroy_fn(&self) -> Option<DestroyFn> {
+        self.destroy
+    }
+    fn last_error_fn(&self) -> Option<LastErrorFn> {
+        self.last_error
+    }
+    fn name_fn(&self) -> Option<NameFn> {
+        self.name
+    }
+}
+
+impl VTable for H2nPlannerVTable {
+    const KIND: PluginKind = PluginKind::Planner;
+    fn slots(&self) -> Vec<(&'static str, bool, bool)> {
+        vec![
+            ("destroy", self.destroy.is_some(), true),
+            ("last_error", self.last_error.is_some(), false),
+            ("name", self.name.is_some(), false),
+            ("reset", self.reset.is_some(), false),
+            ("plan", self.plan.is_some(), true),
+            ("last_plan", self.last_plan.is_some(), true),
+        ]
+    }
+    fn destroy_fn(&self) -> Option<DestroyFn> {
+        self.destroy
+    }
+    fn last_error_fn(&self) -> Option<LastErrorFn> {
+        self.last_error
+    }
+    fn name_fn(&self) -> Option<NameFn> {
+        self.name
+    }
+}
+
+/// Checks the vtable an instance of factory `factory` came with (see [`crate::validate`]) and
+/// returns it with a description of what was checked. On failure nothing of the table is
+/// called (the instance is leaked: destroying it would call into the broken table).
+///
+/// # Safety
+/// `ptr` is null or points to readable static memory of the library, starting with a `u32`
+/// size, and at least that many bytes when the size is accepted.
+pub(crate) unsafe fn checked_vtable<T: VTable>(
+    lib: &PluginLibrary,
+    factory: &str,
+    ptr: *const c_void,
+) -> Result<(&'static T, String), PluginError> {
+    let table = format!("{} vtable of `{factory}`", T::KIND);
+    if ptr.is_null() || !ptr.cast::<T>().is_aligned() {
+        return Err(PluginError::Malformed {
+            path: lib.path.clone(),
+            message: format!("the {table} is null or misaligned"),
+        });
+    }
+    // SAFETY: non-null and aligned; every vtable starts with its `u32` size.
+    let size = unsafe { ptr.cast::<u32>().read() };
+    let min = std::mem::size_of::<T>();
+    table_size(&lib.path, &table, size, min)?;
+    // SAFETY: at least a v1 table of this kind (the factory's kind), in static memory; its
+    // function slots are `Option`s, valid for any pointer value.
+    let vt: &'static T = unsafe { &*ptr.cast::<T>() };
+    let slots = vt.slots();
+    if let Some((slot, _, _)) = slots.iter().find(|(_, set, required)| *required && !*set) {
+        return Err(PluginError::NullSlot {
+            path: lib.path.clone(),
+            table,
+            slot,
+        });
+    }
+    let list = |required: bool, set: bool| {
+        slots
+            .iter()
+            .filter(|s| s.2 == required && s.1 == set)
+            .map(|s| s.0)
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let (opt_set, opt_null) = (list(false, true), list(false, false));
+    Ok((
+        vt,
+        format!(
+            "{size} bytes (this ABI needs {min}, limit {MAX_TABLE_BYTES}); required {} set; \
+             optional: {}{}",
+            list(true, true),
+            if opt_set.is_empty() {
+                "none set".to_owned()
+            } else {
+                format!("{opt_set} set")
+            },
+            if opt_null.is_empty() {
+                String::new()
+            } else {
+                format!(", {opt_null} null")
+            }
+        ),
+    ))
+}
+
+/// The name an instance reports through its (optional) `name` slot, else `fallback`.
+///
+/// # Safety
+/// `instance` is a live instance of a vtable whose `name` slot is `name`.
+unsafe fn instance_name(
+    name: Option<NameFn>,
+    instance: *mut c_void,
+    fallback: &str,
+) -> Result<String, String> {
+    let Some(name) = name else {
+        return Ok(fallback.to_owned());
+    };
+    // SAFETY: live instance; the returned view lives as long as the instance (capped, copied
+    // immediately).
+    let s = unsafe { name(instance) };
+    // SAFETY: as above.
+    match unsafe { plugin_str(s, MAX_NAME_BYTES) } {
+        Ok("") => Ok(fallback.to_owned()),
+        Ok(n) => Ok(n.to_owned()),
+        Err(m) => Err(format!("the instance name {m}")),
+    }
+}
+
+/// Creates an instance with an empty configuration and no robot, checks its vtable and its
+/// name and destroys it (for `plugin inspect`). `Ok(Ok(what was checked))`, or `Ok(Err(why))`
+/// when the factory declined (it needs a config or a robot; its vtable is then checked when a
+/// profile creates an instance); `Err` when the instance or its vtable is malformed.
+pub(crate) fn probe_factory(
+    lib: &PluginLibrary,
+    info: &FactoryInfo,
+) -> Result<Result<String, String>, PluginError> {
+    fn probe<T: VTable>(
+        lib: &PluginLibrary,
+        info: &FactoryInfo,
+    ) -> Result<Result<String, String>, PluginError> {
+        let obj = match lib.create(T::KIND, &info.name, "", None) {
+            Ok(obj) => obj,
+            Err(e @ PluginError::Malformed { .. }) => return Err(e),
+            Err(e) => return Ok(Err(e.to_string())),
+        };
+        // SAFETY: the factory of this kind returned this vtable; a library is never unloaded.
+        let (vt, detail) = unsafe { checked_vtable::<T>(lib, &info.name, obj.vtable) }?;
+        // SAFETY: a live instance of this vtable.
+        let name = unsafe { instance_name(vt.name_fn(), obj.instance, &info.name) };
+        if let Some(destroy) = vt.destroy_fn() {
+            // SAFETY: the instance is live and destroyed exactly once, here.
+            unsafe { destroy(obj.instance) };
+        }
+        match name {
+            Ok(n) => Ok(Ok(format!("{detail}; instance name `{n}`"))),
+            Err(m) => Err(PluginError::Malformed {
+                path: lib.path.clone(),
+                message: format!("{} `{}`: {m}", T::KIND, info.name),
+            }),
+        }
+    }
+    match info.kind {
+        PluginKind::Constraint => probe::<H2nConstraintVTable>(lib, info),
+        PluginKind::Embodiment => probe::<H2nEmbodimentVTable>(lib, info),
+        PluginKind::Planner => probe::<H2nPlannerVTable>(lib, info),
+        PluginKind::Unknown(c) => Ok(Err(format!(
+            "kind {c} is unknown to this host; not created"
+        ))),
+    }
 }
 
 /// Health of one plugin instance, shared by its proxy and the host that created it.
@@ -338,6 +751,26 @@ impl Health {
             .clone()
             .unwrap_or_default()
     }
+
+    /// Marks the instance dead after a missed deadline, logs it and returns the message.
+    fn timed_out(&self, call: &str, deadline: Duration) -> String {
+        let message = format!(
+            "{} did not return from `{call}` within its deadline of {}; the instance is marked \
+             dead and every later call fails at once",
+            self.label,
+            deadline::describe(deadline)
+        );
+        self.poison(&message);
+        eprintln!("warning: {message}");
+        message
+    }
+
+    /// Marks the instance dead after its worker thread ended (a bug in the host's code).
+    fn worker_gone(&self) -> String {
+        let message = format!("{}: its worker thread ended unexpectedly", self.label);
+        self.poison(&message);
+        message
+    }
 }
 
 /// A plugin instance that became unusable.
@@ -345,22 +778,22 @@ impl Health {
 pub struct PluginFailure {
     /// `<kind> <name> from <library>`.
     pub instance: String,
-    /// The panic (or last error) that made it unusable.
+    /// The panic, last error or missed deadline that made it unusable.
     pub message: String,
 }
 
-/// The instance part shared by the three proxies.
+/// The instance part shared by the three proxies: it destroys the instance when dropped.
 struct Handle {
     instance: NonNull<c_void>,
-    destroy: unsafe extern "C" fn(*mut c_void),
-    last_error: unsafe extern "C" fn(*mut c_void, *mut H2nBuffer),
-    name: String,
+    destroy: DestroyFn,
+    last_error: Option<LastErrorFn>,
     health: Arc<Health>,
     _library: Arc<PluginLibrary>,
 }
 
 // SAFETY: the ABI requires constraint and embodiment instances to accept concurrent calls from
-// any thread; planner proxies only call through `&mut self`, so never concurrently.
+// any thread; a planner's handle is only used through `&mut` (or by its one worker thread), so
+// never concurrently.
 unsafe impl Send for Handle {}
 // SAFETY: as above.
 unsafe impl Sync for Handle {}
@@ -370,8 +803,11 @@ impl Handle {
         self.instance.as_ptr()
     }
 
-    /// The instance's last error message.
+    /// The instance's last error message (empty without a `last_error` slot).
     fn last_error(&self) -> String {
+        let Some(last_error) = self.last_error else {
+            return String::new();
+        };
         let mut buf = vec![0u8; 512];
         for _ in 0..2 {
             let mut out = H2nBuffer {
@@ -380,11 +816,11 @@ impl Handle {
                 len: 0,
             };
             // SAFETY: live instance; host-owned buffer of the stated capacity.
-            unsafe { (self.last_error)(self.ptr(), &mut out) };
+            unsafe { last_error(self.ptr(), &mut out) };
             if out.len <= buf.len() {
                 return buffer_text(&buf, out.len);
             }
-            buf.resize(out.len.min(1 << 16), 0);
+            buf.resize(out.len.min(MAX_MESSAGE_BYTES), 0);
         }
         buffer_text(&buf, buf.len())
     }
@@ -406,7 +842,8 @@ impl Handle {
 
 impl Drop for Handle {
     fn drop(&mut self) {
-        // SAFETY: the instance is live and this is the only place it is destroyed.
+        // SAFETY: the instance is live, no call on it is in progress (the handle is dropped
+        // by its only user), and this is the only place it is destroyed.
         unsafe { (self.destroy)(self.ptr()) };
     }
 }
@@ -414,7 +851,6 @@ impl Drop for Handle {
 impl fmt::Debug for Handle {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.debug_struct("Handle")
-            .field("name", &self.name)
             .field("health", &self.health)
             .finish()
     }
@@ -425,6 +861,14 @@ impl fmt::Debug for Handle {
 #[derive(Debug, Default)]
 pub struct PluginHost {
     instances: Mutex<Vec<Arc<Health>>>,
+}
+
+/// A created instance with its checked vtable.
+struct Created<T: 'static> {
+    handle: Handle,
+    vtable: &'static T,
+    name: String,
+    label: String,
 }
 
 impl PluginHost {
@@ -438,52 +882,56 @@ impl PluginHost {
         PluginLibrary::load(path)
     }
 
-    fn handle(
+    /// Creates an instance of a vtable kind and checks its vtable and name.
+    fn instance<T: VTable>(
         &self,
-        lib: &Arc<PluginLibrary>,
-        kind: PluginKind,
+        library: &Path,
         name: &str,
         config: &str,
         robot: Option<&RobotContext>,
-    ) -> Result<(Handle, *const c_void), PluginError> {
-        let obj = lib.create(kind, name, config, robot)?;
-        let label = format!("{kind} `{name}` from {}", lib.path.display());
-        let health = Health::new(label);
+    ) -> Result<Created<T>, PluginError> {
+        let lib = self.load_library(library)?;
+        let obj = lib.create(T::KIND, name, config, robot)?;
+        // SAFETY: the factory of this kind returned this vtable; the library is never
+        // unloaded. On failure the instance is leaked (see `checked_vtable`).
+        let (vtable, _) = unsafe { checked_vtable::<T>(&lib, name, obj.vtable) }?;
+        let label = format!("{} `{name}` from {}", T::KIND, lib.path.display());
+        let health = Health::new(label.clone());
+        let handle = Handle {
+            // SAFETY: `create` checked it is non-null.
+            instance: unsafe { NonNull::new_unchecked(obj.instance) },
+            destroy: vtable.destroy_fn().ok_or_else(|| PluginError::NullSlot {
+                path: lib.path.clone(),
+                table: format!("{} vtable of `{name}`", T::KIND),
+                slot: "destroy",
+            })?,
+            last_error: vtable.last_error_fn(),
+            health: Arc::clone(&health),
+            _library: Arc::clone(&lib),
+        };
+        // SAFETY: a live instance of this vtable.
+        let instance_name = unsafe { instance_name(vtable.name_fn(), handle.ptr(), name) }
+            .map_err(|m| PluginError::Malformed {
+                path: lib.path.clone(),
+                message: format!("{} `{name}`: {m}", T::KIND),
+            })?;
         {
             let mut instances = self.instances.lock().unwrap_or_else(|e| e.into_inner());
             // Forget healthy instances that were dropped (a benchmark creates one planner per
             // episode); failed ones stay listed for `failures`.
             instances.retain(|h| Arc::strong_count(h) > 1 || h.poisoned());
-            instances.push(Arc::clone(&health));
+            instances.push(health);
         }
-        // The callers replace `destroy` and `last_error` with the kind's vtable entries before
-        // anything can drop the handle.
-        Ok((
-            Handle {
-                // SAFETY: `create` checked it is non-null.
-                instance: unsafe { NonNull::new_unchecked(obj.instance) },
-                destroy: noop_destroy,
-                last_error: noop_last_error,
-                name: name.to_owned(),
-                health,
-                _library: Arc::clone(lib),
-            },
-            obj.vtable,
-        ))
+        Ok(Created {
+            handle,
+            vtable,
+            name: instance_name,
+            label,
+        })
     }
 
-    /// Reads the instance's name through the vtable's `name`.
-    fn instance_name(handle: &Handle, name: unsafe extern "C" fn(*mut c_void) -> H2nStr) -> String {
-        // SAFETY: live instance; the returned view lives as long as the instance, and is
-        // copied immediately.
-        let s = unsafe { name(handle.ptr()) };
-        // SAFETY: as above.
-        unsafe { s.as_str() }
-            .map(str::to_owned)
-            .unwrap_or_else(|_| handle.name.clone())
-    }
-
-    /// Creates a constraint term from `library` (path resolved per [`crate::resolve`]).
+    /// Creates a constraint term from `library` (path resolved per [`crate::resolve`]), whose
+    /// calls run under [`deadline::DEFAULT_DEADLINE`].
     pub fn constraint(
         &self,
         library: &Path,
@@ -491,22 +939,60 @@ impl PluginHost {
         config: &str,
         robot: Option<&RobotContext>,
     ) -> Result<PluginConstraint, PluginError> {
-        let lib = self.load_library(library)?;
-        let (mut handle, vtable) =
-            self.handle(&lib, PluginKind::Constraint, plugin, config, robot)?;
-        // SAFETY: the factory was of kind constraint, so its vtable is a constraint vtable
-        // in the library's static memory.
-        let vt: &'static H2nConstraintVTable = unsafe { &*vtable.cast::<H2nConstraintVTable>() };
-        handle.destroy = vt.destroy;
-        handle.last_error = vt.last_error;
-        if (vt.struct_size as usize) < std::mem::size_of::<H2nConstraintVTable>() {
-            return Err(malformed_vtable(&lib, plugin, vt.struct_size));
-        }
-        handle.name = Self::instance_name(&handle, vt.name);
-        Ok(PluginConstraint { handle, vtable: vt })
+        self.constraint_with_deadline(
+            library,
+            plugin,
+            config,
+            robot,
+            Some(deadline::DEFAULT_DEADLINE),
+        )
     }
 
-    /// Creates an embodiment for a robot with these limits and gains.
+    /// [`PluginHost::constraint`] with a deadline per `evaluate` call (`None`: none, calls run
+    /// on the caller's thread; see [`crate::deadline`]).
+    pub fn constraint_with_deadline(
+        &self,
+        library: &Path,
+        plugin: &str,
+        config: &str,
+        robot: Option<&RobotContext>,
+        deadline: Option<Duration>,
+    ) -> Result<PluginConstraint, PluginError> {
+        let c = self.instance::<H2nConstraintVTable>(library, plugin, config, robot)?;
+        let evaluate = c.vtable.evaluate.ok_or_else(|| PluginError::NullSlot {
+            path: library.to_path_buf(),
+            table: format!("constraint vtable of `{plugin}`"),
+            slot: "evaluate",
+        })?;
+        let health = Arc::clone(&c.handle.health);
+        let core = ConstraintCore {
+            handle: c.handle,
+            evaluate,
+        };
+        let exec = match deadline {
+            None => ConstraintExec::Direct(core),
+            Some(_) => {
+                let worker =
+                    Worker::spawn(thread_name(&c.name), move |job: &mut Box<ConstraintJob>| {
+                        core.run(job)
+                    })
+                    .map_err(|e| worker_error(&c.label, e))?;
+                ConstraintExec::Worker(Mutex::new(Slot {
+                    worker: Some(worker),
+                    spare: None,
+                }))
+            }
+        };
+        Ok(PluginConstraint {
+            name: c.name,
+            health,
+            deadline,
+            exec,
+        })
+    }
+
+    /// Creates an embodiment for a robot with these limits and gains. Embodiment calls have no
+    /// deadline (see [`crate::deadline`]).
     pub fn embodiment(
         &self,
         library: &Path,
@@ -514,21 +1000,27 @@ impl PluginHost {
         config: &str,
         robot: &RobotContext,
     ) -> Result<PluginEmbodiment, PluginError> {
-        let lib = self.load_library(library)?;
-        let (mut handle, vtable) =
-            self.handle(&lib, PluginKind::Embodiment, plugin, config, Some(robot))?;
-        // SAFETY: the factory was of kind embodiment, so its vtable is an embodiment vtable.
-        let vt: &'static H2nEmbodimentVTable = unsafe { &*vtable.cast::<H2nEmbodimentVTable>() };
-        handle.destroy = vt.destroy;
-        handle.last_error = vt.last_error;
-        if (vt.struct_size as usize) < std::mem::size_of::<H2nEmbodimentVTable>() {
-            return Err(malformed_vtable(&lib, plugin, vt.struct_size));
-        }
-        handle.name = Self::instance_name(&handle, vt.name);
-        Ok(PluginEmbodiment { handle, vtable: vt })
+        let c = self.instance::<H2nEmbodimentVTable>(library, plugin, config, Some(robot))?;
+        let null = |slot: &'static str| PluginError::NullSlot {
+            path: library.to_path_buf(),
+            table: format!("embodiment vtable of `{plugin}`"),
+            slot,
+        };
+        let fns = EmbodimentFns {
+            holonomic: c.vtable.holonomic.ok_or_else(|| null("holonomic"))?,
+            saturate: c.vtable.saturate.ok_or_else(|| null("saturate"))?,
+            step: c.vtable.step.ok_or_else(|| null("step"))?,
+            track: c.vtable.track.ok_or_else(|| null("track"))?,
+        };
+        Ok(PluginEmbodiment {
+            handle: c.handle,
+            name: c.name,
+            fns,
+        })
     }
 
-    /// Creates a planner, optionally for a given robot.
+    /// Creates a planner, optionally for a given robot, whose calls run under
+    /// [`deadline::DEFAULT_DEADLINE`].
     pub fn planner(
         &self,
         library: &Path,
@@ -536,24 +1028,59 @@ impl PluginHost {
         config: &str,
         robot: Option<&RobotContext>,
     ) -> Result<PluginPlanner, PluginError> {
-        let lib = self.load_library(library)?;
-        let (mut handle, vtable) = self.handle(&lib, PluginKind::Planner, plugin, config, robot)?;
-        // SAFETY: the factory was of kind planner, so its vtable is a planner vtable.
-        let vt: &'static H2nPlannerVTable = unsafe { &*vtable.cast::<H2nPlannerVTable>() };
-        handle.destroy = vt.destroy;
-        handle.last_error = vt.last_error;
-        if (vt.struct_size as usize) < std::mem::size_of::<H2nPlannerVTable>() {
-            return Err(malformed_vtable(&lib, plugin, vt.struct_size));
-        }
-        handle.name = Self::instance_name(&handle, vt.name);
+        self.planner_with_deadline(
+            library,
+            plugin,
+            config,
+            robot,
+            Some(deadline::DEFAULT_DEADLINE),
+        )
+    }
+
+    /// [`PluginHost::planner`] with a deadline per `plan`/`reset` call (`None`: none, calls run
+    /// on the caller's thread; see [`crate::deadline`]).
+    pub fn planner_with_deadline(
+        &self,
+        library: &Path,
+        plugin: &str,
+        config: &str,
+        robot: Option<&RobotContext>,
+        deadline: Option<Duration>,
+    ) -> Result<PluginPlanner, PluginError> {
+        let c = self.instance::<H2nPlannerVTable>(library, plugin, config, robot)?;
+        let null = |slot: &'static str| PluginError::NullSlot {
+            path: library.to_path_buf(),
+            table: format!("planner vtable of `{plugin}`"),
+            slot,
+        };
+        let mut core = PlannerCore {
+            reset: c.vtable.reset,
+            plan: c.vtable.plan.ok_or_else(|| null("plan"))?,
+            last_plan: c.vtable.last_plan.ok_or_else(|| null("last_plan"))?,
+            handle: c.handle,
+        };
+        let health = Arc::clone(&core.handle.health);
+        let exec = match deadline {
+            None => PlannerExec::Direct(core),
+            Some(_) => PlannerExec::Worker(Some(
+                Worker::spawn(thread_name(&c.name), move |job: &mut Box<PlanJob>| {
+                    core.run(job)
+                })
+                .map_err(|e| worker_error(&c.label, e))?,
+            )),
+        };
         Ok(PluginPlanner {
-            handle,
-            vtable: vt,
-            poses: Vec::new(),
+            name: c.name,
+            health,
+            deadline,
+            exec,
+            spare: None,
+            horizon: human2nav_core::trajectory::DEFAULT_HORIZON,
         })
     }
 
-    /// Instances created by this host that became unusable (a plugin panicked).
+    /// Instances created by this host that became unusable (a plugin panicked or missed its
+    /// deadline).
     pub fn failures(&self) -> Vec<PluginFailure> {
         self.instances
             .lock()
@@ -568,46 +1095,268 @@ impl PluginHost {
     }
 }
 
-/// Placeholder `destroy` until the vtable is known (never called on a live instance: the
-/// handle's functions are replaced before any early return can drop it).
-unsafe extern "C" fn noop_destroy(_: *mut c_void) {}
+/// A worker thread's name from an instance name the plugin chose: `h2n-` and at most 11 of its
+/// ASCII letters, digits, `-` and `_` (a name with a NUL byte would make the spawn panic).
+fn thread_name(instance: &str) -> String {
+    let tail: String = instance
+        .chars()
+        .filter(|c| c.is_ascii_alphanumeric() || *c == '-' || *c == '_')
+        .take(11)
+        .collect();
+    format!("h2n-{tail}")
+}
 
-unsafe extern "C" fn noop_last_error(_: *mut c_void, out: *mut H2nBuffer) {
-    // SAFETY: the host only passes its own valid buffers.
-    if let Some(out) = unsafe { out.as_mut() } {
-        out.len = 0;
+fn worker_error(label: &str, e: std::io::Error) -> PluginError {
+    PluginError::Worker {
+        instance: label.to_owned(),
+        message: e.to_string(),
     }
 }
 
-fn malformed_vtable(lib: &PluginLibrary, plugin: &str, size: u32) -> PluginError {
-    PluginError::Malformed {
-        path: lib.path.clone(),
-        message: format!("vtable of `{plugin}` is {size} bytes, too small for ABI {ABI_VERSION}"),
+/// Copies agents into ABI records (history pointers left null) and their histories into one
+/// flat buffer; [`link_histories`] points the records into it where the call is made.
+fn load_agents(src: &[AgentState], agents: &mut Vec<H2nAgent>, history: &mut Vec<f64>) {
+    agents.clear();
+    history.clear();
+    for a in src {
+        agents.push(H2nAgent {
+            history: std::ptr::null(),
+            ..H2nAgent::borrow(a)
+        });
+        history.extend(a.history.iter().flatten());
     }
 }
 
-/// Converts agents into ABI views borrowing their histories.
-fn agent_views(agents: &[human2nav_core::AgentState]) -> Vec<H2nAgent> {
-    agents.iter().map(H2nAgent::borrow).collect()
+/// Points each agent's `history` into `history` (filled by [`load_agents`]).
+fn link_histories(agents: &mut [H2nAgent], history: &[f64]) {
+    let mut at = 0usize;
+    for a in agents {
+        let n = 2 * a.history_len;
+        a.history = match history.get(at..at + n) {
+            Some(h) if n > 0 => h.as_ptr(),
+            _ => std::ptr::null(),
+        };
+        at += n;
+    }
+}
+
+/// A proxy's worker and the buffers of the call not in flight.
+struct Slot<J> {
+    /// `None` once the instance missed a deadline (the worker was let go).
+    worker: Option<Worker<Box<J>>>,
+    spare: Option<Box<J>>,
+}
+
+/// The functions of a constraint instance, with the instance.
+struct ConstraintCore {
+    handle: Handle,
+    evaluate: EvaluateFn,
+}
+
+/// One `evaluate` call with every buffer the plugin may touch (so a call that outlives its
+/// deadline writes only into memory it owns).
+struct ConstraintJob {
+    data: Vec<f64>,
+    batch: usize,
+    horizon: usize,
+    dt: f64,
+    limits: H2nLimits,
+    initial_velocity: H2nTwist,
+    agents: Vec<H2nAgent>,
+    history: Vec<f64>,
+    cost: Vec<f64>,
+    grad: Vec<f64>,
+    result: Result<(), (H2nStatus, String)>,
+}
+
+// SAFETY: the raw pointers in `agents` are null or point into the job's own `history` (set by
+// `link_histories` on the thread that makes the call); the job moves between threads as a
+// whole and is used by one thread at a time.
+unsafe impl Send for ConstraintJob {}
+
+impl ConstraintJob {
+    fn new() -> Self {
+        Self {
+            data: Vec::new(),
+            batch: 0,
+            horizon: 0,
+            dt: 0.0,
+            limits: H2nLimits::default(),
+            initial_velocity: H2nTwist::default(),
+            agents: Vec::new(),
+            history: Vec::new(),
+            cost: Vec::new(),
+            grad: Vec::new(),
+            result: Ok(()),
+        }
+    }
+}
+
+impl ConstraintCore {
+    /// Calls `evaluate`; on failure the status and the instance's message (read on this
+    /// thread, right after the call).
+    ///
+    /// # Safety
+    /// Every pointer in `batch`, `ctx`, `cost` and `grad` is valid for the call, the outputs
+    /// of their stated lengths and distinct.
+    unsafe fn call(
+        &self,
+        batch: &H2nTrajBatch,
+        ctx: &H2nConstraintContext,
+        cost: H2nF64Out,
+        grad: H2nF64Out,
+    ) -> Result<(), (H2nStatus, String)> {
+        // SAFETY: live instance, checked function; forwarded contract for the pointers.
+        let status = unsafe { (self.evaluate)(self.handle.ptr(), batch, ctx, cost, grad) };
+        if status == H2N_OK {
+            Ok(())
+        } else {
+            Err((status, self.handle.failure(status)))
+        }
+    }
+
+    /// Runs a job on its own buffers (on the worker thread).
+    fn run(&self, job: &mut ConstraintJob) {
+        link_histories(&mut job.agents, &job.history);
+        let batch = H2nTrajBatch {
+            data: job.data.as_ptr(),
+            len: job.data.len(),
+            batch: job.batch,
+            horizon: job.horizon,
+            dim: 3,
+        };
+        let ctx = H2nConstraintContext {
+            struct_size: std::mem::size_of::<H2nConstraintContext>() as u32,
+            reserved: 0,
+            dt: job.dt,
+            limits: job.limits,
+            initial_velocity: job.initial_velocity,
+            agents: job.agents.as_ptr(),
+            agent_count: job.agents.len(),
+        };
+        let cost = H2nF64Out {
+            data: job.cost.as_mut_ptr(),
+            len: job.cost.len(),
+        };
+        let grad = H2nF64Out {
+            data: job.grad.as_mut_ptr(),
+            len: job.grad.len(),
+        };
+        // SAFETY: every pointer points into the job, which this thread owns for the call.
+        job.result = unsafe { self.call(&batch, &ctx, cost, grad) };
+    }
+}
+
+enum ConstraintExec {
+    /// No deadline: calls run on the caller's thread, on the caller's buffers.
+    Direct(ConstraintCore),
+    /// With a deadline: calls run on the instance's worker, one at a time.
+    Worker(Mutex<Slot<ConstraintJob>>),
 }
 
 /// A constraint term living in a plugin library.
-#[derive(Debug)]
 pub struct PluginConstraint {
-    handle: Handle,
-    vtable: &'static H2nConstraintVTable,
+    name: String,
+    health: Arc<Health>,
+    deadline: Option<Duration>,
+    exec: ConstraintExec,
+}
+
+impl fmt::Debug for PluginConstraint {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("PluginConstraint")
+            .field("name", &self.name)
+            .field("health", &self.health)
+            .field("deadline", &self.deadline)
+            .finish()
+    }
 }
 
 impl PluginConstraint {
-    /// True once the plugin panicked; the term then refuses to evaluate.
+    /// True once the plugin panicked or missed its deadline; the term then refuses to evaluate.
     pub fn is_poisoned(&self) -> bool {
-        self.handle.health.poisoned()
+        self.health.poisoned()
+    }
+
+    /// The deadline of each `evaluate` call (`None`: calls run on the caller's thread).
+    pub fn deadline(&self) -> Option<Duration> {
+        self.deadline
+    }
+
+    fn unusable(&self) -> ConstraintError {
+        ConstraintError::Failed {
+            term: self.name.clone(),
+            message: format!(
+                "unusable after an earlier failure: {}",
+                self.health.message()
+            ),
+        }
+    }
+
+    /// Runs the call on the worker with copies of the caller's buffers.
+    fn evaluate_on_worker(
+        &self,
+        slot: &Mutex<Slot<ConstraintJob>>,
+        batch: TrajBatch<'_>,
+        ctx: &ConstraintContext<'_>,
+        cost: &mut [f64],
+        grad: &mut [f64],
+    ) -> Result<Result<(), (H2nStatus, String)>, ConstraintError> {
+        let mut guard = slot.lock().unwrap_or_else(|e| e.into_inner());
+        let slot = &mut *guard;
+        // Another thread may have timed out while this one waited for the lock.
+        if self.health.poisoned() {
+            return Err(self.unusable());
+        }
+        let Some(worker) = slot.worker.as_ref() else {
+            return Err(self.unusable());
+        };
+        let mut job = slot
+            .spare
+            .take()
+            .unwrap_or_else(|| Box::new(ConstraintJob::new()));
+        job.data.clear();
+        job.data.extend_from_slice(batch.data);
+        (job.batch, job.horizon) = (batch.batch, batch.horizon);
+        job.dt = ctx.dt;
+        job.limits = ctx.limits.into();
+        job.initial_velocity = ctx.initial_velocity.into();
+        load_agents(ctx.agents, &mut job.agents, &mut job.history);
+        job.cost.clear();
+        job.cost.extend_from_slice(cost);
+        job.grad.clear();
+        job.grad.extend_from_slice(grad);
+        let deadline = self.deadline.unwrap_or(deadline::DEFAULT_DEADLINE);
+        match worker.call(job, deadline) {
+            Ok(mut job) => {
+                cost.copy_from_slice(&job.cost);
+                grad.copy_from_slice(&job.grad);
+                let result = std::mem::replace(&mut job.result, Ok(()));
+                slot.spare = Some(job);
+                Ok(result)
+            }
+            Err(NoAnswer::TimedOut) => {
+                slot.worker = None;
+                let message = self.health.timed_out("evaluate", deadline);
+                Err(ConstraintError::Failed {
+                    term: self.name.clone(),
+                    message,
+                })
+            }
+            Err(NoAnswer::Gone) => {
+                slot.worker = None;
+                Err(ConstraintError::Failed {
+                    term: self.name.clone(),
+                    message: self.health.worker_gone(),
+                })
+            }
+        }
     }
 }
 
 impl ConstraintTerm for PluginConstraint {
     fn name(&self) -> &str {
-        &self.handle.name
+        &self.name
     }
 
     fn evaluate(
@@ -618,14 +1367,11 @@ impl ConstraintTerm for PluginConstraint {
         grad: &mut [f64],
     ) -> Result<(), ConstraintError> {
         let fail = |message: String| ConstraintError::Failed {
-            term: self.handle.name.clone(),
+            term: self.name.clone(),
             message,
         };
-        if self.handle.health.poisoned() {
-            return Err(fail(format!(
-                "unusable after an earlier panic: {}",
-                self.handle.health.message()
-            )));
+        if self.health.poisoned() {
+            return Err(self.unusable());
         }
         if batch.data.len() != batch.batch * batch.horizon * 3 {
             return Err(ConstraintError::Shape(format!(
@@ -644,45 +1390,42 @@ impl ConstraintTerm for PluginConstraint {
                 batch.horizon
             )));
         }
-        let agents = agent_views(ctx.agents);
-        let abi_batch = H2nTrajBatch {
-            data: batch.data.as_ptr(),
-            len: batch.data.len(),
-            batch: batch.batch,
-            horizon: batch.horizon,
-            dim: 3,
-        };
-        let abi_ctx = H2nConstraintContext {
-            struct_size: std::mem::size_of::<H2nConstraintContext>() as u32,
-            reserved: 0,
-            dt: ctx.dt,
-            limits: ctx.limits.into(),
-            initial_velocity: ctx.initial_velocity.into(),
-            agents: agents.as_ptr(),
-            agent_count: agents.len(),
-        };
-        // SAFETY: live instance; every pointer is valid for the call, output buffers are
-        // distinct host-owned slices of the stated lengths.
-        let status = unsafe {
-            (self.vtable.evaluate)(
-                self.handle.ptr(),
-                &abi_batch,
-                &abi_ctx,
-                H2nF64Out {
+        let result = match &self.exec {
+            ConstraintExec::Direct(core) => {
+                let agents: Vec<H2nAgent> = ctx.agents.iter().map(H2nAgent::borrow).collect();
+                let abi_batch = H2nTrajBatch {
+                    data: batch.data.as_ptr(),
+                    len: batch.data.len(),
+                    batch: batch.batch,
+                    horizon: batch.horizon,
+                    dim: 3,
+                };
+                let abi_ctx = H2nConstraintContext {
+                    struct_size: std::mem::size_of::<H2nConstraintContext>() as u32,
+                    reserved: 0,
+                    dt: ctx.dt,
+                    limits: ctx.limits.into(),
+                    initial_velocity: ctx.initial_velocity.into(),
+                    agents: agents.as_ptr(),
+                    agent_count: agents.len(),
+                };
+                let c = H2nF64Out {
                     data: cost.as_mut_ptr(),
                     len: cost.len(),
-                },
-                H2nF64Out {
+                };
+                let g = H2nF64Out {
                     data: grad.as_mut_ptr(),
                     len: grad.len(),
-                },
-            )
+                };
+                // SAFETY: every pointer is valid for the call; the outputs are distinct
+                // host-owned slices of the stated lengths.
+                unsafe { core.call(&abi_batch, &abi_ctx, c, g) }
+            }
+            ConstraintExec::Worker(slot) => {
+                self.evaluate_on_worker(slot, batch, ctx, cost, grad)?
+            }
         };
-        if status == H2N_OK {
-            return Ok(());
-        }
-        let message = self.handle.failure(status);
-        Err(match status {
+        result.map_err(|(status, message)| match status {
             H2N_INVALID_ARGUMENT => ConstraintError::Shape(message),
             H2N_PANIC => fail(format!("panicked (the term is now unusable): {message}")),
             H2N_POISONED => fail(format!("unusable after an earlier panic: {message}")),
@@ -691,16 +1434,34 @@ impl ConstraintTerm for PluginConstraint {
     }
 }
 
+/// The checked functions of an embodiment.
+#[derive(Clone, Copy)]
+struct EmbodimentFns {
+    holonomic: HolonomicFn,
+    saturate: SaturateFn,
+    step: StepFn,
+    track: TrackFn,
+}
+
 /// An embodiment living in a plugin library.
 ///
 /// The [`Embodiment`] methods cannot return errors; when the plugin fails or panics the proxy
 /// returns the safe value (zero command; robot halted where it is) and records the failure
 /// (see [`PluginEmbodiment::failure`] and [`PluginHost::failures`]). After a panic every call
 /// returns the safe value.
-#[derive(Debug)]
 pub struct PluginEmbodiment {
     handle: Handle,
-    vtable: &'static H2nEmbodimentVTable,
+    name: String,
+    fns: EmbodimentFns,
+}
+
+impl fmt::Debug for PluginEmbodiment {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("PluginEmbodiment")
+            .field("name", &self.name)
+            .field("handle", &self.handle)
+            .finish()
+    }
 }
 
 impl PluginEmbodiment {
@@ -724,7 +1485,7 @@ impl PluginEmbodiment {
 
 impl Embodiment for PluginEmbodiment {
     fn name(&self) -> &str {
-        &self.handle.name
+        &self.name
     }
 
     fn holonomic(&self) -> bool {
@@ -732,8 +1493,8 @@ impl Embodiment for PluginEmbodiment {
             return false;
         }
         let mut out = 0u32;
-        // SAFETY: live instance, valid output pointer.
-        let status = unsafe { (self.vtable.holonomic)(self.handle.ptr(), &mut out) };
+        // SAFETY: live instance, checked function, valid output pointer.
+        let status = unsafe { (self.fns.holonomic)(self.handle.ptr(), &mut out) };
         if status != H2N_OK {
             self.failed(status);
             return false;
@@ -748,8 +1509,8 @@ impl Embodiment for PluginEmbodiment {
         let s = H2nRobotState::from(state);
         let c = H2nTwist::from(cmd);
         let mut out = H2nTwist::default();
-        // SAFETY: live instance, valid pointers for the call.
-        let status = unsafe { (self.vtable.saturate)(self.handle.ptr(), &s, &c, dt, &mut out) };
+        // SAFETY: live instance, checked function, valid pointers for the call.
+        let status = unsafe { (self.fns.saturate)(self.handle.ptr(), &s, &c, dt, &mut out) };
         if status != H2N_OK {
             self.failed(status);
             return Twist2::ZERO;
@@ -768,8 +1529,8 @@ impl Embodiment for PluginEmbodiment {
         let s = H2nRobotState::from(state);
         let c = H2nTwist::from(cmd);
         let mut out = H2nRobotState::default();
-        // SAFETY: live instance, valid pointers for the call.
-        let status = unsafe { (self.vtable.step)(self.handle.ptr(), &s, &c, dt, &mut out) };
+        // SAFETY: live instance, checked function, valid pointers for the call.
+        let status = unsafe { (self.fns.step)(self.handle.ptr(), &s, &c, dt, &mut out) };
         if status != H2N_OK {
             self.failed(status);
             return halted;
@@ -790,8 +1551,8 @@ impl Embodiment for PluginEmbodiment {
         };
         let s = H2nRobotState::from(state);
         let mut out = H2nTwist::default();
-        // SAFETY: live instance, valid pointers for the call.
-        let status = unsafe { (self.vtable.track)(self.handle.ptr(), &s, &view, t, &mut out) };
+        // SAFETY: live instance, checked function, valid pointers for the call.
+        let status = unsafe { (self.fns.track)(self.handle.ptr(), &s, &view, t, &mut out) };
         if status != H2N_OK {
             self.failed(status);
             return Twist2::ZERO;
@@ -800,20 +1561,260 @@ impl Embodiment for PluginEmbodiment {
     }
 }
 
-/// A planner living in a plugin library.
-#[derive(Debug)]
-pub struct PluginPlanner {
+/// The functions of a planner instance, with the instance.
+struct PlannerCore {
     handle: Handle,
-    vtable: &'static H2nPlannerVTable,
-    /// Reused plan buffer (grows to the longest plan seen).
+    reset: Option<ResetFn>,
+    plan: PlanFn,
+    last_plan: LastPlanFn,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum PlanOp {
+    Plan,
+    Reset,
+}
+
+/// One `plan` or `reset` call with every buffer the plugin may touch.
+struct PlanJob {
+    op: PlanOp,
+    time: f64,
+    ego: H2nPose,
+    ego_velocity: H2nTwist,
+    goal: [f64; 2],
+    agents: Vec<H2nAgent>,
+    history: Vec<f64>,
+    /// Plan buffer (grows to the longest plan seen, at most [`MAX_PLAN_POSES`]).
     poses: Vec<H2nPose>,
+    note: Vec<u8>,
+    /// The call's status, with the instance's message when it is not OK.
+    status: H2nStatus,
+    message: String,
+    /// A problem the host found with an OK answer (a plan longer than its buffer or the cap).
+    problem: Option<String>,
+    t0: f64,
+    dt: f64,
+    len: usize,
+    fallback: bool,
+    note_len: usize,
+}
+
+// SAFETY: as for `ConstraintJob`: the pointers in `agents` point into the job's own `history`.
+unsafe impl Send for PlanJob {}
+
+impl PlanJob {
+    fn new() -> Self {
+        Self {
+            op: PlanOp::Plan,
+            time: 0.0,
+            ego: H2nPose::default(),
+            ego_velocity: H2nTwist::default(),
+            goal: [0.0; 2],
+            agents: Vec::new(),
+            history: Vec::new(),
+            poses: Vec::new(),
+            note: Vec::new(),
+            status: H2N_OK,
+            message: String::new(),
+            problem: None,
+            t0: 0.0,
+            dt: 0.0,
+            len: 0,
+            fallback: false,
+            note_len: 0,
+        }
+    }
+}
+
+impl PlannerCore {
+    /// Runs a job on its own buffers (on the worker thread, or the caller's without deadline).
+    fn run(&mut self, job: &mut PlanJob) {
+        job.message.clear();
+        job.problem = None;
+        match job.op {
+            PlanOp::Reset => {
+                job.status = match self.reset {
+                    // SAFETY: live instance (exclusive: one thread at a time), checked function.
+                    Some(reset) => unsafe { reset(self.handle.ptr()) },
+                    None => H2N_OK,
+                };
+                if job.status != H2N_OK {
+                    job.message = self.handle.failure(job.status);
+                }
+            }
+            PlanOp::Plan => self.plan(job),
+        }
+    }
+
+    fn plan(&mut self, job: &mut PlanJob) {
+        link_histories(&mut job.agents, &job.history);
+        let obs = H2nObservation {
+            struct_size: std::mem::size_of::<H2nObservation>() as u32,
+            reserved: 0,
+            time: job.time,
+            ego: job.ego,
+            ego_velocity: job.ego_velocity,
+            goal: job.goal,
+            agents: job.agents.as_ptr(),
+            agent_count: job.agents.len(),
+        };
+        if job.poses.len() < 64 {
+            job.poses.resize(64, H2nPose::default());
+        }
+        if job.note.len() < 256 {
+            job.note.resize(256, 0);
+        }
+        let mut out = plan_out(&mut job.poses, &mut job.note);
+        // SAFETY: live instance (one call at a time), checked function; the observation and the
+        // host-owned buffers live in the job for the whole call.
+        let mut status = unsafe { (self.plan)(self.handle.ptr(), &obs, &mut out) };
+        if status == H2N_BUFFER_TOO_SMALL && out.len > job.poses.len() {
+            if out.len > MAX_PLAN_POSES {
+                job.status = H2N_ERROR;
+                job.problem = Some(format!(
+                    "it returned a plan of {} poses, more than the {MAX_PLAN_POSES} this host \
+                     accepts",
+                    out.len
+                ));
+                return;
+            }
+            job.poses.resize(out.len, H2nPose::default());
+            out = plan_out(&mut job.poses, &mut job.note);
+            // SAFETY: as above.
+            status = unsafe { (self.last_plan)(self.handle.ptr(), &mut out) };
+        }
+        job.status = status;
+        if status != H2N_OK {
+            job.message = self.handle.failure(status);
+            return;
+        }
+        if out.len > out.capacity {
+            job.status = H2N_ERROR;
+            job.problem = Some(format!(
+                "it reported a plan of {} poses in a buffer of {}",
+                out.len, out.capacity
+            ));
+            return;
+        }
+        job.t0 = out.t0;
+        job.dt = out.dt;
+        job.len = out.len;
+        job.fallback = out.fallback != 0;
+        job.note_len = out.note.len;
+    }
+}
+
+fn plan_out(poses: &mut [H2nPose], note: &mut [u8]) -> H2nPlanOut {
+    H2nPlanOut {
+        t0: 0.0,
+        dt: 0.0,
+        poses: poses.as_mut_ptr(),
+        capacity: poses.len(),
+        len: 0,
+        fallback: 0,
+        reserved: 0,
+        note: H2nBuffer {
+            data: note.as_mut_ptr(),
+            capacity: note.len(),
+            len: 0,
+        },
+    }
+}
+
+enum PlannerExec {
+    /// No deadline: calls run on the caller's thread.
+    Direct(PlannerCore),
+    /// With a deadline: calls run on the instance's worker; `None` once it missed one.
+    Worker(Option<Worker<Box<PlanJob>>>),
+}
+
+/// A planner living in a plugin library.
+///
+/// With a deadline ([`PluginHost::planner`] sets [`deadline::DEFAULT_DEADLINE`]) a `plan` call
+/// that does not return in time gives the safe plan (stop in place, flagged as a fallback, with
+/// [`PlanInfo::error`] saying why), logs a line on stderr and marks the planner dead: every
+/// later call fails at once with [`PlanError::Unusable`].
+pub struct PluginPlanner {
+    name: String,
+    health: Arc<Health>,
+    deadline: Option<Duration>,
+    exec: PlannerExec,
+    /// The buffers of the call not in flight.
+    spare: Option<Box<PlanJob>>,
+    /// Length of the last plan (of the safe plan after a missed deadline).
+    horizon: usize,
+}
+
+impl fmt::Debug for PluginPlanner {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("PluginPlanner")
+            .field("name", &self.name)
+            .field("health", &self.health)
+            .field("deadline", &self.deadline)
+            .finish()
+    }
 }
 
 impl PluginPlanner {
-    fn error(&self, status: H2nStatus) -> PlanError {
-        let message = self.handle.failure(status);
-        let planner = self.handle.name.clone();
-        match status {
+    /// The deadline of each call (`None`: calls run on the caller's thread).
+    pub fn deadline(&self) -> Option<Duration> {
+        self.deadline
+    }
+
+    /// True once the planner panicked or missed its deadline.
+    pub fn is_poisoned(&self) -> bool {
+        self.health.poisoned()
+    }
+
+    /// Runs a job; `Err` when the deadline passed (the planner is then dead) or the worker is
+    /// gone.
+    fn execute(&mut self, fill: impl FnOnce(&mut PlanJob)) -> Result<Box<PlanJob>, NoAnswer> {
+        let mut job = self
+            .spare
+            .take()
+            .unwrap_or_else(|| Box::new(PlanJob::new()));
+        fill(&mut job);
+        match &mut self.exec {
+            PlannerExec::Direct(core) => {
+                core.run(&mut job);
+                Ok(job)
+            }
+            PlannerExec::Worker(worker) => {
+                let Some(w) = worker.as_ref() else {
+                    return Err(NoAnswer::Gone);
+                };
+                let answer = w.call(job, self.deadline.unwrap_or(deadline::DEFAULT_DEADLINE));
+                if answer.is_err() {
+                    // Let go of the worker: it ends (and destroys the instance) if the call
+                    // ever returns.
+                    *worker = None;
+                }
+                answer
+            }
+        }
+    }
+
+    /// What a missed deadline or a lost worker means for the instance.
+    fn no_answer(&self, e: NoAnswer, call: &str) -> String {
+        match e {
+            NoAnswer::TimedOut => self
+                .health
+                .timed_out(call, self.deadline.unwrap_or(deadline::DEFAULT_DEADLINE)),
+            NoAnswer::Gone if self.health.poisoned() => self.health.message(),
+            NoAnswer::Gone => self.health.worker_gone(),
+        }
+    }
+
+    fn error(&self, job: &PlanJob) -> PlanError {
+        let planner = self.name.clone();
+        if let Some(problem) = &job.problem {
+            return PlanError::Failed {
+                planner,
+                message: problem.clone(),
+            };
+        }
+        let message = job.message.clone();
+        match job.status {
             H2N_INVALID_ARGUMENT => PlanError::InvalidObservation(message),
             H2N_PANIC => PlanError::Failed {
                 planner,
@@ -827,102 +1828,288 @@ impl PluginPlanner {
 
 impl Planner for PluginPlanner {
     fn name(&self) -> &str {
-        &self.handle.name
+        &self.name
     }
 
     fn reset(&mut self) {
-        if self.handle.health.poisoned() {
+        if self.health.poisoned() {
             return;
         }
-        // SAFETY: live instance, called through `&mut self` (never concurrently).
-        let status = unsafe { (self.vtable.reset)(self.handle.ptr()) };
-        if status != H2N_OK {
-            // The trait's reset cannot fail; the next `plan` reports the unusable planner.
-            let message = self.handle.failure(status);
-            self.handle.health.poison(&message);
+        match self.execute(|job| job.op = PlanOp::Reset) {
+            Ok(job) => {
+                if job.status != H2N_OK {
+                    // The trait's reset cannot fail; the next `plan` reports the unusable
+                    // planner.
+                    self.health.poison(&job.message);
+                }
+                self.spare = Some(job);
+            }
+            Err(e) => {
+                self.no_answer(e, "reset");
+            }
         }
     }
 
     fn plan(&mut self, obs: &Observation) -> Result<Plan, PlanError> {
-        if self.handle.health.poisoned() {
+        if self.health.poisoned() {
             return Err(PlanError::Unusable {
-                planner: self.handle.name.clone(),
-                message: self.handle.health.message(),
+                planner: self.name.clone(),
+                message: self.health.message(),
             });
         }
         obs.validate()?;
-        let agents = agent_views(&obs.agents);
-        let abi_obs = H2nObservation {
-            struct_size: std::mem::size_of::<H2nObservation>() as u32,
-            reserved: 0,
-            time: obs.time,
-            ego: obs.ego.into(),
-            ego_velocity: obs.ego_velocity.into(),
-            goal: obs.goal,
-            agents: agents.as_ptr(),
-            agent_count: agents.len(),
-        };
-        if self.poses.len() < 64 {
-            self.poses.resize(64, H2nPose::default());
-        }
-        let mut note = vec![0u8; 256];
-        let mut out = self.plan_out(&mut note);
-        // SAFETY: live instance (exclusive through `&mut self`); host-owned buffers of the
-        // stated capacities.
-        let mut status = unsafe { (self.vtable.plan)(self.handle.ptr(), &abi_obs, &mut out) };
-        if status == H2N_BUFFER_TOO_SMALL && out.len > self.poses.len() {
-            self.poses.resize(out.len, H2nPose::default());
-            out = self.plan_out(&mut note);
-            // SAFETY: as above.
-            status = unsafe { (self.vtable.last_plan)(self.handle.ptr(), &mut out) };
-        }
-        if status != H2N_OK {
-            return Err(self.error(status));
-        }
-        let n = out.len.min(self.poses.len());
-        let notes = {
-            let text = buffer_text(&note, out.note.len);
-            if text.is_empty() {
-                Vec::new()
-            } else {
-                vec![text]
+        let job = match self.execute(|job| {
+            job.op = PlanOp::Plan;
+            job.time = obs.time;
+            job.ego = obs.ego.into();
+            job.ego_velocity = obs.ego_velocity.into();
+            job.goal = obs.goal;
+            load_agents(&obs.agents, &mut job.agents, &mut job.history);
+        }) {
+            Ok(job) => job,
+            Err(NoAnswer::TimedOut) => {
+                let why = self.no_answer(NoAnswer::TimedOut, "plan");
+                let mut plan = Plan::stop_in_place(
+                    obs,
+                    human2nav_core::trajectory::DEFAULT_DT,
+                    self.horizon,
+                    why.clone(),
+                );
+                plan.info.error = Some(why);
+                return Ok(plan);
+            }
+            Err(e) => {
+                return Err(PlanError::Unusable {
+                    planner: self.name.clone(),
+                    message: self.no_answer(e, "plan"),
+                });
             }
         };
-        let plan = Plan {
-            t0: out.t0,
-            dt: out.dt,
-            poses: self.poses[..n].iter().map(|&p| Pose2::from(p)).collect(),
-            info: PlanInfo {
-                fallback: out.fallback != 0,
-                notes,
-                ..PlanInfo::default()
-            },
+        let result = if job.status != H2N_OK {
+            Err(self.error(&job))
+        } else {
+            let n = job.len.min(job.poses.len());
+            let note = buffer_text(&job.note, job.note_len);
+            let plan = Plan {
+                t0: job.t0,
+                dt: job.dt,
+                poses: job.poses[..n].iter().map(|&p| Pose2::from(p)).collect(),
+                info: PlanInfo {
+                    fallback: job.fallback,
+                    notes: if note.is_empty() {
+                        Vec::new()
+                    } else {
+                        vec![note]
+                    },
+                    ..PlanInfo::default()
+                },
+            };
+            if !plan.is_finite() || plan.poses.is_empty() {
+                Err(PlanError::Failed {
+                    planner: self.name.clone(),
+                    message: "the plugin returned an empty or non-finite plan".into(),
+                })
+            } else {
+                self.horizon = plan.poses.len();
+                Ok(plan)
+            }
         };
-        if !plan.is_finite() || plan.poses.is_empty() {
-            return Err(PlanError::Failed {
-                planner: self.handle.name.clone(),
-                message: "the plugin returned an empty or non-finite plan".into(),
-            });
-        }
-        Ok(plan)
+        self.spare = Some(job);
+        result
     }
 }
 
-impl PluginPlanner {
-    fn plan_out(&mut self, note: &mut [u8]) -> H2nPlanOut {
-        H2nPlanOut {
-            t0: 0.0,
-            dt: 0.0,
-            poses: self.poses.as_mut_ptr(),
-            capacity: self.poses.len(),
-            len: 0,
-            fallback: 0,
-            reserved: 0,
-            note: H2nBuffer {
-                data: note.as_mut_ptr(),
-                capacity: note.len(),
-                len: 0,
+#[cfg(test)]
+mod tests {
+    //! Entry tables a broken plugin could return, validated in-process exactly as after
+    //! `dlopen` (the tables are statics of this test binary instead of a library's).
+
+    use super::*;
+
+    unsafe extern "C" fn create_nothing(
+        _: *const H2nCreateArgs,
+        _: *mut H2nObject,
+        _: *mut H2nBuffer,
+    ) -> H2nStatus {
+        H2N_ERROR
+    }
+
+    fn factory(name: &'static str, create: Option<CreateFn>) -> H2nFactory {
+        H2nFactory {
+            struct_size: std::mem::size_of::<H2nFactory>() as u32,
+            kind: H2N_KIND_CONSTRAINT,
+            name: H2nStr::new(name),
+            description: H2nStr::new("test"),
+            create,
+        }
+    }
+
+    fn entry(factories: &'static [H2nFactory]) -> H2nPluginEntry {
+        H2nPluginEntry {
+            abi_version: ABI_VERSION,
+            struct_size: std::mem::size_of::<H2nPluginEntry>() as u32,
+            name: H2nStr::new("broken"),
+            version: H2nStr::new("0"),
+            factories: factories.as_ptr(),
+            factory_count: factories.len(),
+            find_factory: None,
+        }
+    }
+
+    fn load(e: H2nPluginEntry) -> (Result<PluginLibrary, PluginError>, Vec<Check>) {
+        let e: &'static H2nPluginEntry = Box::leak(Box::new(e));
+        let mut checks = Vec::new();
+        // SAFETY: a leaked (static) table whose fields are as declared or deliberately wrong
+        // in ways the validation must catch before reading out of bounds.
+        let r =
+            unsafe { PluginLibrary::from_entry(Path::new("/lib/libbroken.so"), e, &mut checks) };
+        (r, checks)
+    }
+
+    fn leak(f: Vec<H2nFactory>) -> &'static [H2nFactory] {
+        Box::leak(f.into_boxed_slice())
+    }
+
+    #[test]
+    fn a_valid_table_loads_and_lists_its_checks() {
+        let (r, checks) = load(entry(leak(vec![
+            factory("a", Some(create_nothing)),
+            factory("b", Some(create_nothing)),
+        ])));
+        let lib = r.expect("valid");
+        assert_eq!(lib.factories().len(), 2);
+        assert!(checks.iter().all(Check::passed), "{checks:?}");
+        assert!(
+            checks
+                .iter()
+                .any(|c| c.item == "factory 1 (constraint `b`)")
+        );
+    }
+
+    #[test]
+    fn a_null_create_slot_names_the_file_the_table_and_the_slot() {
+        let (r, checks) = load(entry(leak(vec![
+            factory("a", Some(create_nothing)),
+            factory("b", None),
+        ])));
+        let err = r.expect_err("null create");
+        assert_eq!(
+            err.to_string(),
+            "/lib/libbroken.so: the factory table entry 1 (constraint `b`) has a null `create` \
+             (a required function)"
+        );
+        assert!(checks.last().is_some_and(|c| !c.passed()));
+    }
+
+    #[test]
+    fn an_absurd_factory_count_is_refused_without_allocating() {
+        let mut e = entry(leak(vec![factory("a", Some(create_nothing))]));
+        e.factory_count = 1 << 40;
+        let err = load(e).0.expect_err("count");
+        assert_eq!(
+            err.to_string(),
+            "/lib/libbroken.so: the factory count is 1099511627776, more than this host \
+             accepts (256)"
+        );
+    }
+
+    #[test]
+    fn wrong_table_sizes_are_refused() {
+        let mut e = entry(leak(vec![factory("a", Some(create_nothing))]));
+        e.struct_size = 8;
+        let err = load(e).0.expect_err("entry size");
+        assert!(
+            err.to_string()
+                .contains("the entry table declares 8 bytes (struct_size); this host needs"),
+            "{err}"
+        );
+        let mut f = factory("a", Some(create_nothing));
+        f.struct_size = 1 << 30;
+        let err = load(entry(leak(vec![f]))).0.expect_err("factory size");
+        assert!(
+            err.to_string()
+                .contains("factory table entry 0 declares 1073741824"),
+            "{err}"
+        );
+        // Two factories of different sizes cannot be one array.
+        let mut g = factory("b", Some(create_nothing));
+        g.struct_size += 8;
+        let err = load(entry(leak(vec![factory("a", Some(create_nothing)), g])))
+            .0
+            .expect_err("stride");
+        assert!(err.to_string().contains("factory 1 is"), "{err}");
+    }
+
+    #[test]
+    fn bad_strings_and_duplicates_are_refused() {
+        let mut e = entry(leak(vec![factory("a", Some(create_nothing))]));
+        e.name = H2nStr {
+            ptr: std::ptr::null(),
+            len: 5,
+        };
+        assert!(
+            load(e)
+                .0
+                .expect_err("null name")
+                .to_string()
+                .contains("is null with length 5")
+        );
+        let mut e = entry(leak(vec![factory("a", Some(create_nothing))]));
+        e.version = H2nStr {
+            ptr: "x".as_ptr(),
+            len: 1 << 40,
+        };
+        let err = load(e).0.expect_err("long version");
+        assert!(err.to_string().contains("the limit is 256"), "{err}");
+        let err = load(entry(leak(vec![
+            factory("a", Some(create_nothing)),
+            factory("a", Some(create_nothing)),
+        ])))
+        .0
+        .expect_err("duplicate");
+        assert!(err.to_string().contains("repeats constraint `a`"), "{err}");
+    }
+
+    #[test]
+    fn worker_thread_names_keep_only_safe_characters() {
+        assert_eq!(thread_name("personal_space"), "h2n-personal_sp");
+        assert_eq!(thread_name("a\0b c/é"), "h2n-abc");
+    }
+
+    #[test]
+    fn agent_histories_are_linked_into_the_flat_buffer() {
+        let agents = vec![
+            AgentState {
+                id: 1,
+                position: [0.0, 0.0],
+                velocity: [0.0, 0.0],
+                radius: 0.3,
+                history: vec![[1.0, 2.0], [3.0, 4.0]],
             },
+            AgentState {
+                id: 2,
+                position: [0.0, 0.0],
+                velocity: [0.0, 0.0],
+                radius: 0.3,
+                history: vec![],
+            },
+            AgentState {
+                id: 3,
+                position: [0.0, 0.0],
+                velocity: [0.0, 0.0],
+                radius: 0.3,
+                history: vec![[5.0, 6.0]],
+            },
+        ];
+        let (mut abi, mut flat) = (Vec::new(), Vec::new());
+        load_agents(&agents, &mut abi, &mut flat);
+        link_histories(&mut abi, &flat);
+        assert_eq!(flat, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        assert!(abi[1].history.is_null());
+        // SAFETY: the pointers point into `flat`, which is alive.
+        unsafe {
+            assert_eq!(*abi[0].history, 1.0);
+            assert_eq!(*abi[2].history.add(1), 6.0);
         }
     }
 }

@@ -17,19 +17,28 @@
 //!   (embodiment + plugin constraint terms); [`PluginSpec`] names a plugin in other configs.
 //! * [`resolve`]: how library paths in profiles are resolved (relative to the declaring file,
 //!   optional extension and `lib` prefix, the `{profile}` placeholder).
+//! * [`libfile`]: the library file is checked before the OS loader maps it (a truncated
+//!   library would fault inside `dlopen`); [`validate`]: every table, function slot, count and
+//!   string a plugin hands over is checked before use, against documented caps;
+//!   [`inspect`]: what `human2nav plugin inspect` reports; [`deadline`]: planner and constraint
+//!   calls that do not return in time do not hang the host.
 //!
 //! Why not export Rust trait objects: their layout is not stable across compiler versions, so
 //! a plugin built with another rustc would be undefined behaviour. Only C types cross.
 
 pub mod abi;
+pub mod deadline;
 mod error;
 #[doc(hidden)]
 pub mod export;
 pub mod host;
 pub mod init;
+pub mod inspect;
+pub mod libfile;
 mod macros;
 pub mod resolve;
 pub mod robot;
+pub mod validate;
 
 pub use abi::ABI_VERSION;
 pub use error::{PluginError, PluginKind};
@@ -38,4 +47,6 @@ pub use host::{
     PluginPlanner,
 };
 pub use init::{InitError, PluginInit, RobotContext, parse_config};
-pub use robot::{LoadedRobot, PluginSpec, robot_context};
+pub use inspect::{InspectReport, inspect_library};
+pub use robot::{LoadedRobot, PluginSpec, RobotResolution, robot_context};
+pub use validate::{Check, CheckStatus};

@@ -50,7 +50,7 @@ macro_rules! export_plugin {
                 version: $crate::abi::H2nStr::new($version),
                 factories: FACTORIES.as_ptr(),
                 factory_count: FACTORIES.len(),
-                find_factory,
+                find_factory: ::std::option::Option::Some(find_factory),
             };
 
             /// The plugin's entry table (see `human2nav_plugin::abi`).
@@ -91,7 +91,7 @@ macro_rules! export_plugin {
             kind: $crate::abi::$kind,
             name: $crate::abi::H2nStr::new($fname),
             description: $crate::abi::H2nStr::new($fdesc),
-            create,
+            create: ::std::option::Option::Some(create),
         }
     }};
 }

@@ -6,16 +6,21 @@
 //! nothing is loaded that the profile does not name. Other configuration files (a benchmark's
 //! list of planners, for instance) embed a [`PluginSpec`] and resolve it against their own path.
 
-use crate::error::PluginError;
+use crate::deadline::deadline_from_ms;
+use crate::error::{PluginError, PluginKind};
 use crate::host::{PluginConstraint, PluginEmbodiment, PluginHost, PluginPlanner};
 use crate::init::RobotContext;
 use crate::resolve::resolve_relative;
-use human2nav_core::constraint::{ConstraintError, ConstraintTerm, Phi};
-use human2nav_core::embodiment::Embodiment;
+use human2nav_core::constraint::{
+    ConstraintContext, ConstraintError, ConstraintTerm, Phi, TrajBatch,
+};
+use human2nav_core::embodiment::{Embodiment, RobotState};
 use human2nav_core::robot::{EmbodimentSpec, PluginRef, RobotProfile};
+use human2nav_core::{Plan, PlanInfo, Pose2, Twist2};
 use serde::Deserialize;
 use std::fmt;
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 /// A plugin reference as written in a TOML file other than a robot profile:
 ///
@@ -23,6 +28,8 @@ use std::path::{Path, PathBuf};
 /// library = "../../target/{profile}/human2nav_orca"   # relative to this file
 /// plugin = "orca"                                     # factory name
 /// weight = 1.0                                        # constraint terms only; default 1
+/// deadline_ms = 1000                                  # planners and constraint terms; per
+///                                                     # call; default 1000; 0: none
 /// config = """
 /// time_horizon = 2.0
 /// """
@@ -40,6 +47,9 @@ pub struct PluginSpec {
     /// TOML handed to the plugin verbatim.
     #[serde(default)]
     pub config: String,
+    /// Deadline of each call (planners and constraint terms; see [`crate::deadline`]).
+    #[serde(default)]
+    pub deadline_ms: Option<f64>,
 }
 
 fn default_weight() -> f64 {
@@ -54,6 +64,7 @@ impl PluginSpec {
             plugin: self.plugin.clone(),
             config: self.config.clone(),
             weight: self.weight,
+            deadline_ms: self.deadline_ms,
             declared_in: declared_in.to_path_buf(),
         }
     }
@@ -107,14 +118,26 @@ impl LoadedRobot {
     }
 }
 
+/// The deadline a reference asks for (see [`deadline_from_ms`]); a bad value is a config
+/// error naming the declaring file.
+fn ref_deadline(r: &PluginRef, kind: PluginKind) -> Result<Option<Duration>, PluginError> {
+    deadline_from_ms(r.deadline_ms).map_err(|m| PluginError::Config {
+        path: r.declared_in.clone(),
+        kind,
+        name: r.plugin.clone(),
+        message: format!("deadline_ms: {m}"),
+    })
+}
+
 impl PluginHost {
-    /// A constraint term from a profile's or config's reference.
+    /// A constraint term from a profile's or config's reference, with the reference's deadline.
     pub fn constraint_ref(
         &self,
         r: &PluginRef,
         robot: Option<&RobotContext>,
     ) -> Result<PluginConstraint, PluginError> {
-        self.constraint(&r.library, &r.plugin, &r.config, robot)
+        let deadline = ref_deadline(r, PluginKind::Constraint)?;
+        self.constraint_with_deadline(&r.library, &r.plugin, &r.config, robot, deadline)
     }
 
     /// An embodiment from a reference, for the robot described by `robot`.
@@ -126,13 +149,14 @@ impl PluginHost {
         self.embodiment(&r.library, &r.plugin, &r.config, robot)
     }
 
-    /// A planner from a reference, optionally for a robot.
+    /// A planner from a reference, optionally for a robot, with the reference's deadline.
     pub fn planner_ref(
         &self,
         r: &PluginRef,
         robot: Option<&RobotContext>,
     ) -> Result<PluginPlanner, PluginError> {
-        self.planner(&r.library, &r.plugin, &r.config, robot)
+        let deadline = ref_deadline(r, PluginKind::Planner)?;
+        self.planner_with_deadline(&r.library, &r.plugin, &r.config, robot, deadline)
     }
 
     /// The embodiment a profile describes: built-in, or created from its plugin.
@@ -184,6 +208,122 @@ impl PluginHost {
                 })?;
         }
         Ok(phi)
+    }
+}
+
+/// What [`PluginHost::resolve_robot`] did with each plugin of a profile, one line each.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct RobotResolution {
+    /// `embodiment `skid_steer` from <library>: ...` (empty for a built-in embodiment).
+    pub embodiment: Option<String>,
+    /// One line per `[[constraint]]`, in order.
+    pub constraints: Vec<String>,
+}
+
+impl PluginHost {
+    /// Fully resolves every plugin a profile declares, as a run would use it: loads each
+    /// library (with every check of [`crate::libfile`] and [`crate::validate`]), finds the
+    /// factory, creates the instance for this robot with the declared configuration, and makes
+    /// one cheap call (an embodiment saturates, steps and tracks from rest; a constraint term
+    /// evaluates one two-pose trajectory in an empty world). The error names the profile, the
+    /// declaration and the plugin file. For `human2nav robot check`.
+    pub fn resolve_robot(&self, profile: &RobotProfile) -> Result<RobotResolution, PluginError> {
+        let in_profile = |item: String, error: PluginError| PluginError::Profile {
+            profile: profile.source.clone(),
+            item,
+            error: Box::new(error),
+        };
+        let ctx = robot_context(profile);
+        let mut out = RobotResolution::default();
+        if let EmbodimentSpec::Plugin(r) = &profile.embodiment {
+            let line = self
+                .probe_embodiment(r, &ctx)
+                .map_err(|e| in_profile("[embodiment]".into(), e))?;
+            out.embodiment = Some(line);
+        }
+        for (i, r) in profile.constraints.iter().enumerate() {
+            let line = self
+                .probe_constraint(r, profile)
+                .map_err(|e| in_profile(format!("[[constraint]] {i} (`{}`)", r.plugin), e))?;
+            out.constraints.push(line);
+        }
+        Ok(out)
+    }
+
+    fn probe_embodiment(&self, r: &PluginRef, ctx: &RobotContext) -> Result<String, PluginError> {
+        let e = self.embodiment_ref(r, ctx)?;
+        let probe = |message: String| PluginError::Probe {
+            path: r.library.clone(),
+            kind: PluginKind::Embodiment,
+            name: r.plugin.clone(),
+            message,
+        };
+        let dt = 0.05;
+        let rest = RobotState::default();
+        let holonomic = e.holonomic();
+        let cmd = e.saturate(&rest, Twist2::new(0.5 * ctx.limits.v_max, 0.0, 0.0), dt);
+        let next = e.step(&rest, cmd, dt);
+        let plan = Plan {
+            t0: 0.0,
+            dt: 0.1,
+            poses: vec![Pose2::IDENTITY, Pose2::new(0.05, 0.0, 0.0)],
+            info: PlanInfo::default(),
+        };
+        let track = e.track(&rest, &plan, 0.0);
+        if let Some(failure) = e.failure() {
+            return Err(probe(failure));
+        }
+        let finite = |t: Twist2| t.vx.is_finite() && t.vy.is_finite() && t.omega.is_finite();
+        if !finite(cmd) || !finite(track) || !next.pose.is_finite() || !finite(next.velocity) {
+            return Err(probe(format!(
+                "it returned non-finite values from rest (saturate {cmd:?}, step {next:?}, \
+                 track {track:?})"
+            )));
+        }
+        Ok(format!(
+            "embodiment `{}` from {}: created with its config; holonomic {holonomic}; saturate, \
+             step and track from rest answered",
+            e.name(),
+            r.library.display()
+        ))
+    }
+
+    fn probe_constraint(
+        &self,
+        r: &PluginRef,
+        profile: &RobotProfile,
+    ) -> Result<String, PluginError> {
+        let term = self.constraint_ref(r, Some(&robot_context(profile)))?;
+        let probe = |message: String| PluginError::Probe {
+            path: r.library.clone(),
+            kind: PluginKind::Constraint,
+            name: r.plugin.clone(),
+            message,
+        };
+        let data = [0.0, 0.0, 0.0, 0.05, 0.0, 0.0];
+        let ctx = ConstraintContext {
+            dt: 0.1,
+            limits: &profile.limits,
+            initial_velocity: Twist2::ZERO,
+            agents: &[],
+        };
+        let (mut cost, mut grad) = ([0.0], [0.0; 6]);
+        let batch = TrajBatch::new(&data, 1, 2).map_err(|e| probe(e.to_string()))?;
+        term.evaluate(batch, &ctx, &mut cost, &mut grad)
+            .map_err(|e| probe(e.to_string()))?;
+        if !cost[0].is_finite() || grad.iter().any(|g| !g.is_finite()) {
+            return Err(probe(format!(
+                "it returned a non-finite cost or gradient ({})",
+                cost[0]
+            )));
+        }
+        Ok(format!(
+            "constraint `{}` from {}: created with its config; evaluate answered (deadline {})",
+            term.name(),
+            r.library.display(),
+            term.deadline()
+                .map_or("none".to_owned(), crate::deadline::describe)
+        ))
     }
 }
 

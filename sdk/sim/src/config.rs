@@ -16,6 +16,8 @@
 //! plugin = "orca"                               # factory name in the library
 //! config = { time_horizon = 5.0 }               # passed to the method, kind-specific
 //! replan_hz = 5.0                               # optional: this method's replanning rate
+//! deadline_ms = 1000                            # plugin only: deadline per planner call
+//!                                               # (default 1000; 0: none; human2nav_plugin::deadline)
 //!
 //! [[suites]]
 //! name = "real"
@@ -44,6 +46,7 @@ use crate::episode::{Episode, ScenarioClass};
 use crate::error::SimError;
 use crate::runner::{RobotSetup, SimConfig};
 use human2nav_core::Planner;
+use human2nav_plugin::deadline::deadline_from_ms;
 use human2nav_plugin::{PluginHost, RobotContext};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -75,6 +78,12 @@ pub struct MethodConfig {
     /// whole number of simulation steps per period).
     #[serde(default)]
     pub replan_hz: Option<f64>,
+    /// Deadline of each planner call of a `plugin` method, in milliseconds (default
+    /// [`human2nav_plugin::deadline::DEFAULT_DEADLINE`], 1000 ms; `0`: none). A call past it
+    /// gets the stop-in-place plan, counts as a failed call, and the planner instance is dead
+    /// for the rest of its episode (see [`human2nav_plugin::deadline`]).
+    #[serde(default)]
+    pub deadline_ms: Option<f64>,
 }
 
 /// One suite as configured.
@@ -279,6 +288,15 @@ impl BenchConfig {
                     "a plugin method names its library",
                 ));
             }
+            if m.deadline_ms.is_some() && m.kind != "plugin" {
+                return Err(SimError::setting(
+                    format!("methods[{i}]"),
+                    "deadline_ms",
+                    "only a plugin method has a deadline (built-in planners run in the host)",
+                ));
+            }
+            deadline_from_ms(m.deadline_ms)
+                .map_err(|e| SimError::setting(format!("methods[{i}]"), "deadline_ms", e))?;
         }
         for (i, s) in self.suites.iter().enumerate() {
             let section = format!("suites[{i}]");
@@ -612,11 +630,19 @@ pub fn ensure_episode_files(
     Ok(None)
 }
 
-/// The robots of the configuration (built-in embodiments), in order.
+/// The robots of the configuration, in order; plugin embodiments are created through a fresh
+/// plugin host (see [`load_robots_with`]).
 pub fn load_robots(cfg: &BenchConfig) -> Result<Vec<RobotSetup>, SimError> {
+    load_robots_with(cfg, &PluginHost::new())
+}
+
+/// The robots of the configuration, in order, built-in or plugin embodiments (created through
+/// `host`, which then lists a plugin embodiment that fails during the runs); every plugin a
+/// profile declares is resolved first ([`RobotSetup::load_with`]).
+pub fn load_robots_with(cfg: &BenchConfig, host: &PluginHost) -> Result<Vec<RobotSetup>, SimError> {
     cfg.robots
         .iter()
-        .map(|p| RobotSetup::load(&cfg.resolve(p)))
+        .map(|p| RobotSetup::load_with(&cfg.resolve(p), host))
         .collect()
 }
 
@@ -625,8 +651,9 @@ pub fn load_robots(cfg: &BenchConfig) -> Result<Vec<RobotSetup>, SimError> {
 /// * `straight`: [`MethodSpec::straight`] with the method's `config`;
 /// * `plugin`: a planner from the plugin library `library` (factory `plugin`, default the
 ///   method's name), created per episode through `host` with the robot's limits, gains and
-///   footprint and the method's `config` as its TOML. The library is loaded once here, so a
-///   missing build fails before any episode runs.
+///   footprint and the method's `config` as its TOML, its calls under the method's
+///   `deadline_ms`. The library is loaded once here, so a missing build fails before any
+///   episode runs.
 ///
 /// Either replans at the method's `replan_hz` when it sets one. Returns `Ok(None)` for any
 /// other kind (the caller resolves those, e.g. `human2nav`).
@@ -680,6 +707,8 @@ fn builtin_planner(
                     ),
                 ));
             }
+            let deadline = deadline_from_ms(m.deadline_ms)
+                .map_err(|e| SimError::setting(section(), "deadline_ms", e))?;
             let host = Arc::clone(host);
             Ok(Some(MethodSpec::new(m.name.clone(), move |ctx| {
                 let robot = RobotContext {
@@ -687,7 +716,13 @@ fn builtin_planner(
                     gains: ctx.robot.gains,
                     footprint_radius: ctx.robot.footprint_radius,
                 };
-                let planner = host.planner(&library, &factory, &config, Some(&robot))?;
+                let planner = host.planner_with_deadline(
+                    &library,
+                    &factory,
+                    &config,
+                    Some(&robot),
+                    deadline,
+                )?;
                 Ok(Box::new(planner) as Box<dyn Planner>)
             })))
         }

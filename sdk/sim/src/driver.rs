@@ -7,7 +7,7 @@ use crate::bench::{
 use crate::episode::{Episode, ScenarioClass, ScenarioTitle};
 use crate::error::SimError;
 use crate::figures::{self, Snapshot};
-use crate::report::{self, ReportContext, summarize};
+use crate::report::{self, PlannerFailures, ReportContext, summarize};
 use crate::runner::{RobotSetup, SimConfig};
 use crate::stats::SuiteComposition;
 use human2nav_core::bev::BevSpec;
@@ -51,6 +51,8 @@ pub struct BenchOutcome {
     pub figures: Vec<PathBuf>,
     /// `(method, robot, SR)` on the empty-world suites, where SR < 1.
     pub empty_world_failures: Vec<(String, String, f64)>,
+    /// Every (method, robot) with failed planner calls (report.md lists them at the top).
+    pub planner_failures: Vec<PlannerFailures>,
     pub wall_time: f64,
     /// Thread time per method.
     pub times: MethodTimes,
@@ -213,15 +215,31 @@ pub fn run(
             }
         }
     }
+    let planner_failures = report::planner_failures(&rows);
     Ok(BenchOutcome {
         rows,
         results_csv,
         report_md,
         figures: figure_paths,
         empty_world_failures,
+        planner_failures,
         wall_time,
         times,
     })
+}
+
+impl BenchOutcome {
+    /// True when a planner call failed in any run ([`BenchOutcome::planner_failures`]); the
+    /// CLI then exits with an error.
+    pub fn has_failed_planner_calls(&self) -> bool {
+        !self.planner_failures.is_empty()
+    }
+
+    /// True when the benchmark is usable: no failed planner call and SR = 1 on every
+    /// empty-world suite.
+    pub fn passed(&self) -> bool {
+        self.empty_world_failures.is_empty() && self.planner_failures.is_empty()
+    }
 }
 
 /// The settings table of the report.

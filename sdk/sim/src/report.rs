@@ -116,6 +116,9 @@ pub struct Summary {
     pub mean_jerk: f64,
     /// Fraction of plans that were fallbacks.
     pub fallback_rate: f64,
+    /// Planner calls, and those that failed (see [`PlannerFailures`]).
+    pub planner_calls: usize,
+    pub failed_calls: usize,
 }
 
 fn mean(it: impl Iterator<Item = f64>) -> Option<f64> {
@@ -156,7 +159,94 @@ pub fn summarize<'a>(rows: impl IntoIterator<Item = &'a ResultRow>) -> Summary {
         } else {
             0.0
         },
+        planner_calls: plans,
+        failed_calls: rows.iter().map(|r| r.metrics.planner_errors).sum(),
     }
+}
+
+/// Failed planner calls of one method on one robot, over every suite of a benchmark.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PlannerFailures {
+    pub method: String,
+    pub robot: String,
+    /// Runs of this method on this robot.
+    pub runs: usize,
+    /// Planner calls in those runs.
+    pub calls: usize,
+    /// Calls that failed (error, panic, missed deadline, unusable plan): each was replaced by
+    /// the simulator's stop-in-place plan (or the plugin host's, after a missed deadline).
+    pub failed: usize,
+    /// Runs in which every call failed: the robot only ever followed stop-in-place plans.
+    pub runs_all_failed: usize,
+}
+
+/// Every (method, robot) with at least one failed planner call, in the order the rows first
+/// name them.
+pub fn planner_failures(rows: &[ResultRow]) -> Vec<PlannerFailures> {
+    let mut out: Vec<PlannerFailures> = Vec::new();
+    for r in rows {
+        let i = match out
+            .iter()
+            .position(|f| f.method == r.method && f.robot == r.robot)
+        {
+            Some(i) => i,
+            None => {
+                out.push(PlannerFailures {
+                    method: r.method.clone(),
+                    robot: r.robot.clone(),
+                    runs: 0,
+                    calls: 0,
+                    failed: 0,
+                    runs_all_failed: 0,
+                });
+                out.len() - 1
+            }
+        };
+        let m = &r.metrics;
+        let f = &mut out[i];
+        f.runs += 1;
+        f.calls += m.plans;
+        f.failed += m.planner_errors;
+        if m.plans > 0 && m.planner_errors >= m.plans {
+            f.runs_all_failed += 1;
+        }
+    }
+    out.retain(|f| f.failed > 0);
+    out
+}
+
+/// The report's warning about failed planner calls (empty when there were none).
+fn planner_failure_warning(md: &mut String, rows: &[ResultRow]) {
+    let failures = planner_failures(rows);
+    if failures.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        md,
+        "> **Warning: planner calls failed.** Each failed call (an error, a panic, a missed \
+         deadline or an unusable plan) was replaced by a stop-in-place plan, so where calls \
+         failed the numbers below measure that stand-in, not the method: a robot whose every \
+         call failed never moved, and its TFS of 1.000 scores the stop plans. `human2nav bench` \
+         exits with an error.\n>"
+    );
+    let _ = writeln!(
+        md,
+        "> | method | robot | runs | planner calls | failed calls | runs where every call failed |\n\
+         > |---|---|---|---|---|---|"
+    );
+    for f in &failures {
+        let share = if f.calls > 0 {
+            100.0 * f.failed as f64 / f.calls as f64
+        } else {
+            0.0
+        };
+        let _ = writeln!(
+            md,
+            "> | {} | {} | {} | {} | **{} ({share:.1} %)** | {} |",
+            f.method, f.robot, f.runs, f.calls, f.failed, f.runs_all_failed
+        );
+    }
+    let _ = writeln!(md);
 }
 
 /// What the report says about the run besides the numbers.
@@ -240,6 +330,7 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
             let _ = writeln!(md, "> **Warning** (suite `{name}`):{w}\n");
         }
     }
+    planner_failure_warning(&mut md, rows);
     if let Some(w) = ctx.wall_time {
         let _ = write!(md, "Wall time: {w:.1} s for {} episode runs", rows.len());
         let per: Vec<String> = ctx
@@ -337,7 +428,8 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
         let _ = writeln!(md, "\n### TFS and SR per robot and method (Fig. 7)\n");
         let _ = writeln!(
             md,
-            "| robot | method | n | TFS | TFS plan | TFS executed | SR (%) |\n|---|---|---|---|---|---|---|"
+            "| robot | method | n | TFS | TFS plan | TFS executed | SR (%) | failed planner calls |\n\
+             |---|---|---|---|---|---|---|---|"
         );
         for robot in &ctx.robot_names {
             for m in &methods {
@@ -348,12 +440,17 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
                         .filter(|r| &r.robot == robot && &r.method == m),
                 );
                 if s.n == 0 {
-                    let _ = writeln!(md, "| {robot} | {m} | 0 | – | – | – | – |");
+                    let _ = writeln!(md, "| {robot} | {m} | 0 | – | – | – | – | – |");
                     continue;
                 }
+                let failed = if s.failed_calls == 0 {
+                    "0".to_owned()
+                } else {
+                    format!("**{} of {}**", s.failed_calls, s.planner_calls)
+                };
                 let _ = writeln!(
                     md,
-                    "| {robot} | {m} | {} | {:.3} | {:.3} | {:.3} | {} |",
+                    "| {robot} | {m} | {} | {:.3} | {:.3} | {:.3} | {} | {failed} |",
                     s.n,
                     s.tfs,
                     s.tfs_plan,

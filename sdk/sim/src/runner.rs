@@ -14,7 +14,8 @@
 //! 3. every `replan_every = round(1 / (replan_hz·dt))` steps (default 10 Hz, every 2nd step)
 //!    the planner receives an [`Observation`] (pedestrians within `sensor_range`, with history)
 //!    and returns a plan; a planner error, panic or non-finite plan is recorded and replaced by
-//!    [`Plan::stop_in_place`];
+//!    [`Plan::stop_in_place`]; a plan whose `info.error` is set (the substitute a plugin planner
+//!    that missed its deadline gets) is followed and recorded as a failed call too;
 //! 4. the tracking controller turns the current plan into a command at `t_n` (recorded before
 //!    saturation: the TFS of execution is measured on what the planner asked for), the command
 //!    is saturated to the robot's limits and the kinematic model advances by `dt`.
@@ -33,10 +34,12 @@ use crate::episode::Episode;
 use crate::error::SimError;
 use crate::replay::PedestrianSample;
 use human2nav_core::embodiment::{Embodiment, RobotState};
+use human2nav_core::robot::RobotProfile;
 use human2nav_core::robot::footprint::{self, FootprintShape};
 use human2nav_core::{
     ControllerGains, Limits, Observation, Plan, PlanError, Planner, Pose2, Twist2,
 };
+use human2nav_plugin::PluginHost;
 use serde::{Deserialize, Serialize};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::Arc;
@@ -262,28 +265,44 @@ pub struct RobotSetup {
 }
 
 impl RobotSetup {
-    /// Loads a robot with a built-in embodiment from its profile (`robot.toml` + URDF).
-    /// Plugin embodiments are built by the plugin host and passed in directly instead.
+    /// Loads a robot from its profile (`robot.toml` + URDF): a built-in embodiment, or a plugin
+    /// embodiment created through a fresh [`PluginHost`] (see [`RobotSetup::load_with`]).
     pub fn load(path: &std::path::Path) -> Result<RobotSetup, SimError> {
-        let profile =
-            human2nav_core::robot::RobotProfile::load(path).map_err(|e| SimError::Robot {
-                path: path.to_path_buf(),
-                message: e.to_string(),
-            })?;
-        let embodiment = profile
-            .builtin_embodiment()
-            .ok_or_else(|| SimError::Robot {
-                path: path.to_path_buf(),
-                message: "the embodiment is a plugin; load it through the plugin host".into(),
-            })?;
-        Ok(RobotSetup {
+        Self::load_with(path, &PluginHost::new())
+    }
+
+    /// Loads a robot from its profile, creating a plugin embodiment through `host` (whose
+    /// [`PluginHost::failures`] then lists it if it fails during a run). Every plugin the
+    /// profile declares is resolved first ([`PluginHost::resolve_robot`]: library loaded and
+    /// checked, factory found, instance created with its config, one cheap call), so a broken
+    /// declaration fails here, naming the profile, and not in the middle of a benchmark. A
+    /// plugin embodiment is one instance shared by every run of the robot (instances accept
+    /// concurrent calls); if it fails, the robot stands still for the rest of the benchmark and
+    /// the host lists the failure.
+    pub fn load_with(path: &std::path::Path, host: &PluginHost) -> Result<RobotSetup, SimError> {
+        let fail = |message: String| SimError::Robot {
+            path: path.to_path_buf(),
+            message,
+        };
+        let profile = RobotProfile::load(path).map_err(|e| fail(e.to_string()))?;
+        host.resolve_robot(&profile)
+            .map_err(|e| fail(e.to_string()))?;
+        let embodiment = host
+            .robot_embodiment(&profile)
+            .map_err(|e| fail(e.to_string()))?;
+        Ok(Self::from_profile(&profile, Arc::from(embodiment)))
+    }
+
+    /// A robot from a loaded profile and its embodiment.
+    pub fn from_profile(profile: &RobotProfile, embodiment: Arc<dyn Embodiment>) -> RobotSetup {
+        RobotSetup {
             name: profile.name.clone(),
             footprint_radius: profile.footprint_radius,
             footprint: profile.footprint_shapes.clone(),
             limits: profile.limits,
             gains: profile.controller,
-            embodiment: Arc::from(embodiment),
-        })
+            embodiment,
+        }
     }
 }
 
@@ -351,7 +370,8 @@ pub struct EpisodeRun {
     pub clearance: Vec<f64>,
     /// Every plan, in order.
     pub plans: Vec<PlanSample>,
-    /// Planner failures (errors, panics, non-finite plans), in order, as messages.
+    /// Planner failures (errors, panics, non-finite plans, substitute plans), in order, as
+    /// messages.
     pub planner_errors: Vec<String>,
     /// How the collision happened, when there was one.
     pub contact: Option<Contact>,
@@ -493,7 +513,14 @@ pub fn run_episode_with(
             let horizon = plan.as_ref().map_or(32, |p| p.poses.len());
             let result = catch_unwind(AssertUnwindSafe(|| planner.plan(&obs)));
             let new_plan = match result {
-                Ok(Ok(p)) if p.is_finite() && !p.poses.is_empty() && p.dt > 0.0 => p,
+                Ok(Ok(p)) if p.is_finite() && !p.poses.is_empty() && p.dt > 0.0 => {
+                    // A substitute plan (a plugin planner that missed its deadline) is a
+                    // failed call.
+                    if let Some(e) = &p.info.error {
+                        run.planner_errors.push(e.clone());
+                    }
+                    p
+                }
                 Ok(Ok(_)) => fallback(
                     &obs,
                     horizon,

@@ -32,6 +32,8 @@
 //! plugin = "clearance"
 //! weight = 1.0                     # finite, >= 0; default 1
 //! config = """..."""               # default ""
+//! deadline_ms = 1000               # per evaluate call; default: the plugin host's (1000 ms);
+//!                                  # 0: none; at most 3 600 000 (see human2nav_plugin::deadline)
 //! ```
 //!
 //! Unknown fields are rejected everywhere. Every error names the file and the field (or the
@@ -144,6 +146,9 @@ impl ProfileError {
     }
 }
 
+/// Longest deadline a `[[constraint]]` may set (`deadline_ms`, one hour).
+pub const MAX_PLUGIN_DEADLINE_MS: f64 = 3_600_000.0;
+
 /// A reference to something in a plugin library.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PluginRef {
@@ -156,6 +161,9 @@ pub struct PluginRef {
     pub config: String,
     /// Weight of a constraint term (1 for embodiments).
     pub weight: f64,
+    /// Deadline of each call of a constraint term, in milliseconds, as written (`None`: the
+    /// plugin host's default; `0`: none). Embodiments have none (always `None`).
+    pub deadline_ms: Option<f64>,
     /// The robot.toml that declared this reference.
     pub declared_in: PathBuf,
 }
@@ -352,6 +360,8 @@ struct RawConstraint {
     weight: f64,
     #[serde(default)]
     config: String,
+    #[serde(default)]
+    deadline_ms: Option<f64>,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -508,6 +518,7 @@ impl RobotProfile {
                 plugin: plugin.to_string(),
                 config: e.config.clone().unwrap_or_default(),
                 weight: 1.0,
+                deadline_ms: None,
                 declared_in: path.to_path_buf(),
             })
         } else {
@@ -549,11 +560,22 @@ impl RobotProfile {
             ck.non_empty(&format!("constraint[{i}].library"), &c.library)?;
             ck.non_empty(&format!("constraint[{i}].plugin"), &c.plugin)?;
             let weight = ck.non_negative(&format!("constraint[{i}].weight"), c.weight)?;
+            if let Some(ms) = c.deadline_ms {
+                let field = format!("constraint[{i}].deadline_ms");
+                let ms = ck.non_negative(&field, ms)?;
+                if ms > MAX_PLUGIN_DEADLINE_MS {
+                    return Err(ck.invalid(
+                        &field,
+                        format!("at most {MAX_PLUGIN_DEADLINE_MS} ms (0: no deadline), got {ms}"),
+                    ));
+                }
+            }
             constraints.push(PluginRef {
                 library: resolve(dir, &c.library),
                 plugin: c.plugin.clone(),
                 config: c.config.clone(),
                 weight,
+                deadline_ms: c.deadline_ms,
                 declared_in: path.to_path_buf(),
             });
         }

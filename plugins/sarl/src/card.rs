@@ -4,6 +4,7 @@
 use crate::env::{EnvConfig, RewardConfig};
 use crate::error::SarlError;
 use crate::net::NetConfig;
+use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -96,7 +97,8 @@ pub struct ModelCard {
 impl ModelCard {
     /// Reads and checks a card.
     pub fn load(path: &Path) -> Result<Self, SarlError> {
-        let text = std::fs::read_to_string(path).map_err(|e| SarlError::io(path, e))?;
+        let text = read_user_file(path, "SARL model card", MAX_CONFIG_BYTES)
+            .map_err(|e| SarlError::io(path, e))?;
         let card: ModelCard = toml::from_str(&text).map_err(|e| SarlError::Parse {
             path: path.to_path_buf(),
             message: e.to_string(),

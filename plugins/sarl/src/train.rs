@@ -29,6 +29,7 @@ use crate::eval::{EvalStats, Policy, SeedStream, episode_rng, evaluate, run_epis
 use crate::net::{NetConfig, SarlNet};
 use crate::policy::LookAhead;
 use crate::state::JOINT_DIM;
+use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -206,7 +207,8 @@ impl Default for TrainConfig {
 impl TrainConfig {
     /// Reads and validates a configuration file.
     pub fn load(path: &Path) -> Result<Self, SarlError> {
-        let text = std::fs::read_to_string(path).map_err(|e| SarlError::io(path, e))?;
+        let text = read_user_file(path, "SARL training configuration", MAX_CONFIG_BYTES)
+            .map_err(|e| SarlError::io(path, e))?;
         let cfg: TrainConfig = toml::from_str(&text).map_err(|e| SarlError::Parse {
             path: path.to_path_buf(),
             message: e.to_string(),

@@ -24,6 +24,7 @@ use crate::bench::{ensure_real_episodes, human2nav_method};
 use crate::train::{self, TrainConfig};
 use anyhow::{Context, bail};
 use clap::Args;
+use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use human2nav_data::tuples::Split;
 use human2nav_flow::card::ModelCard;
 use human2nav_flow::model::{CARD_FILE, WEIGHTS_FILE};
@@ -289,7 +290,7 @@ fn stage_style() -> ProgressStyle {
 /// Runs `human2nav scaling`.
 pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
     let started = Instant::now();
-    let text = std::fs::read_to_string(&args.config)
+    let text = read_user_file(&args.config, "configuration", MAX_CONFIG_BYTES)
         .with_context(|| format!("reading {}", args.config.display()))?;
     let cfg: ScalingConfig =
         toml::from_str(&text).with_context(|| format!("parsing {}", args.config.display()))?;
@@ -321,7 +322,7 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
 
     // Training settings.
     let train_path = resolve(&root, &cfg.train);
-    let train_text = std::fs::read_to_string(&train_path)
+    let train_text = read_user_file(&train_path, "training configuration", MAX_CONFIG_BYTES)
         .with_context(|| format!("reading {}", train_path.display()))?;
     let mut tcfg: TrainConfig =
         toml::from_str(&train_text).with_context(|| format!("parsing {}", train_path.display()))?;
@@ -408,7 +409,7 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
         picked
     };
     let planner_path = resolve(&root, &cfg.planner);
-    let planner_text = std::fs::read_to_string(&planner_path)
+    let planner_text = read_user_file(&planner_path, "planner configuration", MAX_CONFIG_BYTES)
         .with_context(|| format!("reading {}", planner_path.display()))?;
     let planner_table: toml::Table = toml::from_str(&planner_text)
         .with_context(|| format!("parsing {}", planner_path.display()))?;

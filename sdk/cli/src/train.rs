@@ -5,6 +5,7 @@
 use anyhow::{Context, bail};
 use clap::Args;
 use human2nav_core::flow::FlowCondition;
+use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use human2nav_core::se2::Pose2;
 use human2nav_data::cache::TupleCache;
 use human2nav_data::tuples::{CompactTuple, Split};
@@ -154,8 +155,9 @@ impl TrainConfig {
         if !(f > 0.0 && f <= 1.0) {
             bail!("data.train_fraction must lie in (0, 1], got {f}");
         }
-        if self.run.threads == 0 {
-            bail!("run.threads must be at least 1");
+        let max = human2nav_flow::planner::MAX_THREADS;
+        if !(1..=max).contains(&self.run.threads) {
+            bail!("run.threads: {} is not in 1..={max}", self.run.threads);
         }
         if self.run.validate_every == 0 || self.run.checkpoint_every == 0 {
             bail!("run.validate_every and run.checkpoint_every must be positive");
@@ -203,7 +205,7 @@ fn resolve(root: &Path, p: &Path) -> PathBuf {
 
 /// Runs `human2nav train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
-    let text = std::fs::read_to_string(&args.config)
+    let text = read_user_file(&args.config, "configuration", MAX_CONFIG_BYTES)
         .with_context(|| format!("reading {}", args.config.display()))?;
     let mut cfg: TrainConfig =
         toml::from_str(&text).with_context(|| format!("parsing {}", args.config.display()))?;

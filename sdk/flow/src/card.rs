@@ -4,6 +4,7 @@
 
 use crate::config::{NetConfig, Normalisation};
 use crate::error::CfmError;
+use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -152,7 +153,8 @@ pub struct PerformanceInfo {
 impl ModelCard {
     /// Reads and checks a card.
     pub fn load(path: &Path) -> Result<Self, CfmError> {
-        let text = std::fs::read_to_string(path).map_err(|e| CfmError::io(path, e))?;
+        let text = read_user_file(path, "model card", MAX_CONFIG_BYTES)
+            .map_err(|e| CfmError::io(path, e))?;
         let card: ModelCard = toml::from_str(&text).map_err(|e| CfmError::Toml {
             path: path.to_path_buf(),
             message: e.to_string(),

@@ -91,6 +91,9 @@ impl NetConfig {
                 ),
             ));
         }
+        if self.n_groups == 0 {
+            return Err(CfmError::option("net.n_groups", "must be positive"));
+        }
         for &d in &self.down_dims {
             if d == 0 || d % self.n_groups != 0 {
                 return Err(CfmError::option(
@@ -121,9 +124,6 @@ impl NetConfig {
         }
         if self.kernel_size == 0 || self.kernel_size % 2 == 0 {
             return Err(CfmError::option("net.kernel_size", "must be odd"));
-        }
-        if self.n_groups == 0 {
-            return Err(CfmError::option("net.n_groups", "must be positive"));
         }
         if self.time_embed_dim < 4 || self.time_embed_dim % 2 != 0 {
             return Err(CfmError::option(
@@ -234,6 +234,18 @@ mod tests {
     fn defaults_validate() {
         NetConfig::default().validate().unwrap();
         Normalisation::default().validate().unwrap();
+    }
+
+    /// `n_groups = 0` is refused by name before any division by it (training and model loading
+    /// both validate the net first).
+    #[test]
+    fn zero_groups_is_an_error_not_a_panic() {
+        let cfg = NetConfig {
+            n_groups: 0,
+            ..NetConfig::default()
+        };
+        let err = cfg.validate().unwrap_err().to_string();
+        assert!(err.contains("net.n_groups"), "{err}");
     }
 
     #[test]

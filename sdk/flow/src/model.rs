@@ -486,11 +486,25 @@ impl FlowModel for CfmModel {
 }
 
 /// Reads every tensor of a safetensors file, mapping failures to [`CfmError`].
+/// Largest weights file read (1 GiB; the shipped model's is 1.5 MB).
+pub const MAX_WEIGHTS_BYTES: u64 = 1 << 30;
+
 pub(crate) fn read_safetensors(path: &Path) -> Result<BTreeMap<String, Tensor>, CfmError> {
-    if !path.is_file() {
+    // libtorch reads the file itself: check first that it is a regular file of sane size (a
+    // FIFO would block, a device would never end).
+    let meta = std::fs::metadata(path).map_err(|e| CfmError::io(path, e))?;
+    if !meta.is_file() || meta.len() > MAX_WEIGHTS_BYTES {
+        let why = if meta.is_file() {
+            format!(
+                "{} bytes, more than the limit of {MAX_WEIGHTS_BYTES}",
+                meta.len()
+            )
+        } else {
+            "not a regular file".to_string()
+        };
         return Err(CfmError::io(
             path,
-            std::io::Error::new(std::io::ErrorKind::NotFound, "weights file not found"),
+            std::io::Error::new(std::io::ErrorKind::InvalidInput, why),
         ));
     }
     let list = Tensor::read_safetensors(path).map_err(|e| CfmError::Corrupt {

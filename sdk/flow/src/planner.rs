@@ -25,6 +25,7 @@ use human2nav_core::bev::BevSpec;
 use human2nav_core::constraint::Phi;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use human2nav_core::human2nav::{Human2Nav, Human2NavSettings, RobotModel};
+use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use human2nav_core::robot::RobotProfile;
 use human2nav_core::{Limits, Observation, PlanError, Planner};
 use human2nav_plugin::PluginHost;
@@ -96,10 +97,10 @@ impl Default for PlannerConfig {
 impl PlannerConfig {
     /// Checks every field; the error names the first offending one.
     pub fn validate(&self) -> Result<(), PlannerError> {
-        if self.threads == 0 {
+        if !(1..=MAX_THREADS).contains(&self.threads) {
             return Err(PlannerError::Setting {
                 field: "threads".into(),
-                message: "must be at least 1".into(),
+                message: format!("{} is not in 1..={MAX_THREADS}", self.threads),
             });
         }
         if self.model.as_os_str().is_empty() {
@@ -125,10 +126,13 @@ impl PlannerConfig {
 
     /// Reads, parses and validates a planner configuration file.
     pub fn load(path: &Path) -> Result<Self, PlannerError> {
-        let text = std::fs::read_to_string(path).map_err(|e| PlannerError::Config {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
+        let text =
+            read_user_file(path, "planner configuration", MAX_CONFIG_BYTES).map_err(|e| {
+                PlannerError::Config {
+                    path: path.to_path_buf(),
+                    message: e.to_string(),
+                }
+            })?;
         Self::from_toml_str(&text, path)
     }
 
@@ -336,6 +340,9 @@ pub fn load_model(dir: &Path, backend: Backend) -> Result<PlannerModel, PlannerE
         source,
     })
 }
+
+/// Largest `threads` accepted (libtorch intra-op threads; a planner is meant to use one).
+pub const MAX_THREADS: usize = 256;
 
 /// A Human2Nav planner for one robot, with what it was built from.
 #[derive(Debug)]
@@ -638,8 +645,10 @@ mod tests {
         assert_eq!(cfg.human2nav.guidance.iterations_m, 3);
         let err = PlannerConfig::from_toml_str("[human2nav]\nsamplez = 8\n", path).unwrap_err();
         assert!(err.to_string().contains("samplez"), "{err}");
-        let err = PlannerConfig::from_toml_str("threads = 0\n", path).unwrap_err();
-        assert!(matches!(err, PlannerError::Setting { ref field, .. } if field == "threads"));
+        for bad in ["threads = 0\n", "threads = 100000\n"] {
+            let err = PlannerConfig::from_toml_str(bad, path).unwrap_err();
+            assert!(matches!(err, PlannerError::Setting { ref field, .. } if field == "threads"));
+        }
         let err = PlannerConfig::from_toml_str("[human2nav]\nsamples = 0\n", path).unwrap_err();
         assert!(err.to_string().contains("samples"), "{err}");
         assert_eq!(

@@ -12,6 +12,7 @@ use crate::error::CfmError;
 use crate::model::{
     CfmModel, normalise_condition, read_safetensors, trajectory_features, write_safetensors,
 };
+use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use human2nav_core::se2::{Pose2, Twist2};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -525,8 +526,8 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
         device: Device,
     ) -> Result<Self, CfmError> {
         let state_path = dir.join("state.toml");
-        let text =
-            std::fs::read_to_string(&state_path).map_err(|e| CfmError::io(&state_path, e))?;
+        let text = read_user_file(&state_path, "training state", MAX_CONFIG_BYTES)
+            .map_err(|e| CfmError::io(&state_path, e))?;
         let state: StateFile = toml::from_str(&text).map_err(|e| CfmError::Toml {
             path: state_path.clone(),
             message: e.to_string(),

@@ -21,6 +21,7 @@ use crate::error::CfmError;
 use crate::io_map::{self, batch_of, check_len};
 use crate::model::{CARD_FILE, CfmModel, normalise_condition};
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
+use human2nav_core::input::read_user_bytes;
 use net::{Net, Pool, Tape, WeightError, Weights};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -372,7 +373,8 @@ fn read_weights(path: &Path) -> Result<Weights, CfmError> {
         path: PathBuf::from(path),
         message,
     };
-    let bytes = std::fs::read(path).map_err(|e| CfmError::io(path, e))?;
+    let bytes = read_user_bytes(path, "weights file", crate::model::MAX_WEIGHTS_BYTES)
+        .map_err(|e| CfmError::io(path, e))?;
     let st = safetensors::SafeTensors::deserialize(&bytes).map_err(|e| corrupt(e.to_string()))?;
     let mut out = Weights::new();
     for (name, view) in st.tensors() {

@@ -254,6 +254,26 @@ fn cli_bench_quick_writes_the_report() {
             "report lacks suite {s}"
         );
     }
+    // The lock is gone after the run, and a folder another live run holds is refused before
+    // anything is written.
+    assert!(!out.join(human2nav_core::lock::LOCK_FILE).exists());
+    let held = human2nav_core::lock::DirLock::acquire(&out, "a test").unwrap();
+    let second = std::process::Command::new(&exe)
+        .current_dir(workspace_root())
+        .args([
+            "bench",
+            "--config",
+            "sdk/configs/bench.toml",
+            "--quick",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&second.stderr);
+    assert!(!second.status.success());
+    assert!(stderr.contains("is being written by process"), "{stderr}");
+    drop(held);
     std::fs::remove_dir_all(&out).unwrap();
 }
 

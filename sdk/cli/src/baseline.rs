@@ -6,6 +6,7 @@
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
+use human2nav_core::lock::DirLock;
 use human2nav_sarl::train::{Observer, TrainConfig, Trainer};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
@@ -101,6 +102,8 @@ fn train_sarl(args: TrainSarlArgs) -> anyhow::Result<ExitCode> {
         &root,
         args.model_dir.as_deref().unwrap_or(&cfg.run.model_dir),
     );
+    let _lock = DirLock::acquire(&out_dir, "human2nav baseline train-sarl")
+        .with_context(|| format!("locking the run directory {}", out_dir.display()))?;
     let mut trainer = if args.resume {
         match Trainer::resume(cfg.clone(), out_dir.clone())? {
             Some(t) => {

@@ -13,6 +13,7 @@ use anyhow::{Context, anyhow, bail};
 use clap::Args;
 use human2nav_core::ablation::Arm;
 use human2nav_core::human2nav::Human2NavSettings;
+use human2nav_core::lock::DirLock;
 use human2nav_flow::planner::{PlannerConfig, PlannerModel, RobotPlanner, load_model};
 use human2nav_plugin::PluginHost;
 use human2nav_sim::MethodSpec;
@@ -108,6 +109,8 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
             "out/bench"
         }),
     };
+    let _lock = DirLock::acquire(&out, "human2nav bench")
+        .with_context(|| format!("locking the output folder {}", out.display()))?;
     let host = Arc::new(PluginHost::new());
     let robots = select(load_robots_with(&cfg, &host)?, &args.robots, "robot", |r| {
         &r.name

@@ -25,6 +25,7 @@ use crate::train::{self, TrainConfig};
 use anyhow::{Context, bail};
 use clap::Args;
 use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
+use human2nav_core::lock::DirLock;
 use human2nav_data::tuples::Split;
 use human2nav_flow::card::ModelCard;
 use human2nav_flow::model::{CARD_FILE, WEIGHTS_FILE};
@@ -318,7 +319,8 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
             "out/scaling"
         }),
     };
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let _lock = DirLock::acquire(&out, "human2nav scaling")
+        .with_context(|| format!("locking the output folder {}", out.display()))?;
 
     // Training settings.
     let train_path = resolve(&root, &cfg.train);

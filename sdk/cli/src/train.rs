@@ -6,6 +6,7 @@ use anyhow::{Context, bail};
 use clap::Args;
 use human2nav_core::flow::FlowCondition;
 use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
+use human2nav_core::lock::DirLock;
 use human2nav_core::se2::Pose2;
 use human2nav_data::cache::TupleCache;
 use human2nav_data::tuples::{CompactTuple, Split};
@@ -242,6 +243,8 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
     let cache = open_cache(&cache_dir, &cfg, &args.config)?;
 
     if !args.eval_only {
+        let _lock = DirLock::acquire(&out_dir, "human2nav train")
+            .with_context(|| format!("locking the run directory {}", out_dir.display()))?;
         train(&cfg, &cache, &out_dir, &model_dir, device, args.fresh)?;
     }
     let mut model = CfmModel::load(&model_dir, device)
@@ -305,9 +308,14 @@ pub(crate) fn train(
     }
 
     let ckpt = out_dir.join("checkpoint");
-    let mut trainer = if !fresh && ckpt.join("state.toml").is_file() {
-        eprintln!("resuming from {}", ckpt.display());
-        Trainer::resume(&ckpt, &cfg.train, &train_set, &val_set, device)?
+    let resume_from = if fresh {
+        None
+    } else {
+        human2nav_flow::train::find_checkpoint(&ckpt)?
+    };
+    let mut trainer = if let Some(set) = resume_from {
+        eprintln!("resuming from {}", set.display());
+        Trainer::resume(&set, &cfg.train, &train_set, &val_set, device)?
     } else {
         let norm = Normalisation::estimate(&train_set, cfg.train.seed)?;
         eprintln!("normalisation: {norm:?}");
@@ -372,7 +380,7 @@ pub(crate) fn train(
             tick = Instant::now();
         }
         if step % cfg.run.checkpoint_every == 0 || step == total {
-            trainer.save_state(&ckpt)?;
+            trainer.save_checkpoint(&ckpt)?;
             if trainer
                 .history()
                 .iter()
@@ -396,7 +404,7 @@ pub(crate) fn train(
         if trainer.history().last().map(|r| r.step) != Some(trainer.step()) {
             trainer.record();
         }
-        trainer.save_state(&ckpt)?;
+        trainer.save_checkpoint(&ckpt)?;
         eprintln!(
             "stopped at step {} after run.max_minutes = {}; run again to resume",
             trainer.step(),

@@ -23,6 +23,7 @@ pub mod guidance;
 pub mod human2nav;
 pub mod input;
 pub mod limits;
+pub mod lock;
 pub mod planner;
 pub mod projection;
 pub mod robot;

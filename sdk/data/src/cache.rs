@@ -63,6 +63,11 @@ pub struct Manifest {
     /// Tuples per split.
     pub counts: BTreeMap<Split, usize>,
     pub stats: TupleStats,
+    /// Size in bytes of each split's file as written with this manifest; a file of another
+    /// size belongs to another (or an interrupted) build. Empty in caches written before the
+    /// sizes were recorded.
+    #[serde(default)]
+    pub file_bytes: BTreeMap<Split, u64>,
 }
 
 impl Manifest {
@@ -156,7 +161,15 @@ impl TupleCache {
         splits: &[(Split, Vec<CompactTuple>)],
     ) -> Result<Self, DataError> {
         std::fs::create_dir_all(dir).map_err(|e| DataError::io(dir, e))?;
+        // The cache is a set: the manifest goes first and comes back last, so an interrupted
+        // build leaves no manifest (the cache does not open) rather than an old manifest over
+        // new files.
+        let mpath = dir.join("manifest.json");
+        if mpath.exists() {
+            std::fs::remove_file(&mpath).map_err(|e| DataError::io(&mpath, e))?;
+        }
         manifest.version = CACHE_VERSION;
+        manifest.file_bytes.clear();
         manifest.counts = Split::ALL.iter().map(|s| (*s, 0)).collect();
         for split in Split::ALL {
             let tuples: &[CompactTuple] = splits
@@ -190,14 +203,20 @@ impl TupleCache {
                 w.write_all(&buf).map_err(|e| DataError::io(&path, e))?;
             }
             w.flush().map_err(|e| DataError::io(&path, e))?;
+            drop(w);
+            let bytes = std::fs::metadata(&path)
+                .map_err(|e| DataError::io(&path, e))?
+                .len();
             manifest.counts.insert(split, tuples.len());
+            manifest.file_bytes.insert(split, bytes);
         }
-        let mpath = dir.join("manifest.json");
         let body = serde_json::to_string_pretty(&manifest).map_err(|e| DataError::Json {
             path: mpath.clone(),
             source: e,
         })?;
-        std::fs::write(&mpath, body).map_err(|e| DataError::io(&mpath, e))?;
+        let tmp = dir.join("manifest.json.partial");
+        std::fs::write(&tmp, body).map_err(|e| DataError::io(&tmp, e))?;
+        std::fs::rename(&tmp, &mpath).map_err(|e| DataError::io(&mpath, e))?;
         Ok(Self {
             dir: dir.to_path_buf(),
             manifest,
@@ -273,6 +292,16 @@ impl TupleCache {
             path: path.clone(),
             message,
         };
+        if let Some(&want) = self.manifest.file_bytes.get(&split)
+            && bytes.len() as u64 != want
+        {
+            return Err(bad(format!(
+                "{} bytes, the manifest says {want}: the file is not the one written with this \
+                 manifest (an interrupted or concurrent build); rebuild the cache with \
+                 `human2nav data build`",
+                bytes.len()
+            )));
+        }
         if bytes.len() < HEADER || &bytes[..8] != MAGIC {
             return Err(bad("not a human2nav tuple file (bad magic)".into()));
         }

@@ -429,6 +429,7 @@ pub fn build_cache(
         scenes: infos,
         counts: BTreeMap::new(),
         stats,
+        file_bytes: BTreeMap::new(),
     };
     let cache = TupleCache::write(&loc.cache_dir, manifest, &splits)?;
     Ok(BuildReport {

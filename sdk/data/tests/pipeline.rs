@@ -196,6 +196,16 @@ fn synthetic_fallback_builds_a_cache_that_round_trips() {
     std::fs::write(&bin, &bytes[..bytes.len() - 3]).unwrap();
     let err = cache.load_compact(Split::Val).unwrap_err();
     assert!(err.to_string().contains("val.bin"), "{err}");
+    assert!(err.to_string().contains("the manifest says"), "{err}");
+    // A file from another build (same header, other length) is refused by the manifest's size.
+    let mut longer = bytes.clone();
+    longer.extend_from_slice(&[0; 7]);
+    std::fs::write(&bin, &longer).unwrap();
+    let err = cache.load_compact(Split::Val).unwrap_err();
+    assert!(err.to_string().contains("human2nav data build"), "{err}");
+    // A build interrupted before its manifest leaves no manifest behind: the cache does not open.
+    std::fs::remove_file(loc.cache_dir.join("manifest.json")).unwrap();
+    assert!(TupleCache::open(&loc.cache_dir).is_err());
 }
 
 #[test]

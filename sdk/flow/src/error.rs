@@ -62,6 +62,10 @@ pub enum CfmError {
     #[error("libtorch: {0}")]
     Torch(#[from] tch::TchError),
 
+    /// A training checkpoint is not a complete set.
+    #[error("checkpoint {path}: {reason}")]
+    Checkpoint { path: PathBuf, reason: String },
+
     /// Drawing a figure failed.
     #[error("plot {path}: {message}")]
     Plot { path: PathBuf, message: String },

@@ -19,7 +19,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use tch::{Device, Kind, Tensor};
 
 /// One training example as the trainer needs it. Implemented for the data crate's tuples and
@@ -574,8 +574,34 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
         Ok(tr)
     }
 
+    /// Writes a checkpoint to `ckpt` as one set (see [`find_checkpoint`]): the files go into
+    /// `<ckpt>.partial`, the manifest (sizes and checksums) last, then the folder replaces
+    /// `ckpt` by two renames (the previous set is kept as `<ckpt>.old` between them). A crash at
+    /// any point leaves a complete set behind: the new one, the old one or `<ckpt>.old`.
+    pub fn save_checkpoint(&self, ckpt: &Path) -> Result<(), CfmError> {
+        let partial = sibling(ckpt, "partial");
+        let old = sibling(ckpt, "old");
+        if partial.exists() {
+            std::fs::remove_dir_all(&partial).map_err(|e| CfmError::io(&partial, e))?;
+        }
+        self.save_state(&partial)?;
+        write_manifest(&partial, self.step)?;
+        if ckpt.exists() {
+            if old.exists() {
+                std::fs::remove_dir_all(&old).map_err(|e| CfmError::io(&old, e))?;
+            }
+            std::fs::rename(ckpt, &old).map_err(|e| CfmError::io(ckpt, e))?;
+        }
+        std::fs::rename(&partial, ckpt).map_err(|e| CfmError::io(ckpt, e))?;
+        if old.exists() {
+            std::fs::remove_dir_all(&old).map_err(|e| CfmError::io(&old, e))?;
+        }
+        Ok(())
+    }
+
     /// Writes weights, EMA weights, AdamW moments (`state.safetensors`) and the step, options
-    /// and history (`state.toml`) into `dir`.
+    /// and history (`state.toml`) into `dir` (no manifest: use [`Self::save_checkpoint`] for a
+    /// checkpoint that is detected as complete or not).
     pub fn save_state(&self, dir: &Path) -> Result<(), CfmError> {
         std::fs::create_dir_all(dir).map_err(|e| CfmError::io(dir, e))?;
         let mut tensors = self.model.named_tensors("param.");
@@ -839,10 +865,154 @@ pub fn evaluate_loss<S: TrainingSample>(
     Ok(sum / count as f64)
 }
 
+/// Files of a checkpoint, all listed in its manifest.
+const CHECKPOINT_FILES: [&str; 2] = ["state.safetensors", "state.toml"];
+/// The manifest of a checkpoint, written after every other file.
+pub const MANIFEST_FILE: &str = "manifest.toml";
+
+fn sibling(dir: &Path, suffix: &str) -> PathBuf {
+    let mut name = dir
+        .file_name()
+        .map(|n| n.to_os_string())
+        .unwrap_or_default();
+    name.push(format!(".{suffix}"));
+    dir.with_file_name(name)
+}
+
+/// FNV-1a, 64 bit: detects a truncated or altered file (not tampering).
+fn fnv64(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct ManifestEntry {
+    bytes: u64,
+    fnv64: String,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct Manifest {
+    step: u64,
+    files: std::collections::BTreeMap<String, ManifestEntry>,
+}
+
+fn file_entry(path: &Path) -> Result<ManifestEntry, CfmError> {
+    let bytes = std::fs::read(path).map_err(|e| CfmError::io(path, e))?;
+    Ok(ManifestEntry {
+        bytes: bytes.len() as u64,
+        fnv64: format!("{:016x}", fnv64(&bytes)),
+    })
+}
+
+fn write_manifest(dir: &Path, step: u64) -> Result<(), CfmError> {
+    let mut files = std::collections::BTreeMap::new();
+    for name in CHECKPOINT_FILES {
+        files.insert(name.to_string(), file_entry(&dir.join(name))?);
+    }
+    let path = dir.join(MANIFEST_FILE);
+    let text = toml::to_string_pretty(&Manifest { step, files }).map_err(|e| CfmError::Toml {
+        path: path.clone(),
+        message: e.to_string(),
+    })?;
+    std::fs::write(&path, text).map_err(|e| CfmError::io(&path, e))
+}
+
+/// Why the set in `dir` is not complete (`None` when it is).
+fn incomplete(dir: &Path) -> Result<Option<String>, CfmError> {
+    let path = dir.join(MANIFEST_FILE);
+    let text = read_user_file(&path, "checkpoint manifest", MAX_CONFIG_BYTES)
+        .map_err(|e| CfmError::io(&path, e))?;
+    let manifest: Manifest = toml::from_str(&text).map_err(|e| CfmError::Toml {
+        path: path.clone(),
+        message: e.to_string(),
+    })?;
+    for name in CHECKPOINT_FILES {
+        let Some(want) = manifest.files.get(name) else {
+            return Ok(Some(format!("{MANIFEST_FILE} does not list {name}")));
+        };
+        let file = dir.join(name);
+        if !file.is_file() {
+            return Ok(Some(format!("{name} is missing")));
+        }
+        let have = file_entry(&file)?;
+        if have.bytes != want.bytes || have.fnv64 != want.fnv64 {
+            return Ok(Some(format!(
+                "{name} has {} bytes (checksum {}), the manifest says {} bytes ({})",
+                have.bytes, have.fnv64, want.bytes, want.fnv64
+            )));
+        }
+    }
+    Ok(None)
+}
+
+/// The complete checkpoint set to resume from at `ckpt`, if any.
+///
+/// * `ckpt` with a manifest that matches its files: that set;
+/// * otherwise `<ckpt>.old` with a matching manifest (a save was interrupted between its two
+///   renames): that set;
+/// * `ckpt` without a manifest but with both files (written before checkpoints had
+///   manifests): that set, unverified;
+/// * no `ckpt` folder (or an empty one): `None`, a fresh start;
+/// * anything else (a file missing, sizes or checksums that disagree): an error naming the
+///   folder and what is wrong. Training never restarts from step 0 on its own.
+pub fn find_checkpoint(ckpt: &Path) -> Result<Option<PathBuf>, CfmError> {
+    let complaint = |reason: String| CfmError::Checkpoint {
+        path: ckpt.to_path_buf(),
+        reason: format!("{reason}; the set is incomplete (restore it, or start over with --fresh)"),
+    };
+    let has_manifest = ckpt.join(MANIFEST_FILE).is_file();
+    let ckpt_problem = if has_manifest {
+        match incomplete(ckpt)? {
+            None => return Ok(Some(ckpt.to_path_buf())),
+            Some(why) => Some(why),
+        }
+    } else {
+        None
+    };
+    let old = sibling(ckpt, "old");
+    if old.join(MANIFEST_FILE).is_file() && incomplete(&old)?.is_none() {
+        return Ok(Some(old));
+    }
+    if let Some(why) = ckpt_problem {
+        return Err(complaint(why));
+    }
+    let present: Vec<&str> = CHECKPOINT_FILES
+        .into_iter()
+        .filter(|n| ckpt.join(n).exists())
+        .collect();
+    match present.len() {
+        0 => {
+            let empty = std::fs::read_dir(ckpt).map_or(true, |mut d| d.next().is_none());
+            if empty {
+                Ok(None)
+            } else {
+                Err(complaint(format!(
+                    "no {} in a non-empty folder",
+                    CHECKPOINT_FILES.join(" or ")
+                )))
+            }
+        }
+        n if n == CHECKPOINT_FILES.len() => Ok(Some(ckpt.to_path_buf())),
+        _ => {
+            let missing: Vec<&str> = CHECKPOINT_FILES
+                .into_iter()
+                .filter(|n| !present.contains(n))
+                .collect();
+            Err(complaint(format!("{} is missing", missing.join(" and "))))
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+
+    /// libtorch's generator is global and `Trainer::new` seeds it: tests that train must not
+    /// interleave, or their weights depend on each other's draws.
+    static TRAINING: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
     fn tiny_net() -> NetConfig {
         NetConfig {
@@ -916,8 +1086,72 @@ mod tests {
     /// Three steps, a checkpoint, a resume and three more steps give the same weights as six
     /// uninterrupted steps (batch order and noise derive from (seed, step); AdamW moments and
     /// EMA are checkpointed).
+    /// A checkpoint is a set: a missing or altered file is an error naming it, never a silent
+    /// restart; a save interrupted between its renames resumes from the previous set.
+    #[test]
+    fn incomplete_checkpoints_are_detected() {
+        let _serial = TRAINING.lock().unwrap_or_else(|e| e.into_inner());
+        let d = data(8);
+        let net = tiny_net();
+        let norm = Normalisation::estimate(&d, 0).unwrap();
+        let opts = TrainOptions {
+            batch_size: 4,
+            steps: 4,
+            warmup_steps: 1,
+            ..TrainOptions::default()
+        };
+        let root = std::env::temp_dir().join(format!("h2n-flow-ckpt-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let ckpt = root.join("checkpoint");
+        let mut tr = Trainer::new(&net, &norm, &opts, &d, &d[..2], Device::Cpu).unwrap();
+        tr.train_step().unwrap();
+        tr.save_checkpoint(&ckpt).unwrap();
+        tr.train_step().unwrap();
+        tr.save_checkpoint(&ckpt).unwrap();
+        assert!(!sibling(&ckpt, "old").exists() && !sibling(&ckpt, "partial").exists());
+        let err = |dir: &Path| find_checkpoint(dir).unwrap_err().to_string();
+
+        // A truncated tensor file.
+        let tensors = ckpt.join("state.safetensors");
+        let bytes = std::fs::read(&tensors).unwrap();
+        std::fs::write(&tensors, &bytes[..bytes.len() / 2]).unwrap();
+        let e = err(&ckpt);
+        assert!(
+            e.contains("state.safetensors has") && e.contains("--fresh"),
+            "{e}"
+        );
+        std::fs::write(&tensors, &bytes).unwrap();
+        assert_eq!(find_checkpoint(&ckpt).unwrap(), Some(ckpt.clone()));
+
+        // state.toml gone (before, training restarted at step 0 without a word).
+        let state = std::fs::read(ckpt.join("state.toml")).unwrap();
+        std::fs::remove_file(ckpt.join("state.toml")).unwrap();
+        assert!(err(&ckpt).contains("state.toml is missing"));
+        std::fs::remove_file(ckpt.join(MANIFEST_FILE)).unwrap();
+        assert!(err(&ckpt).contains("state.toml is missing"));
+        // Both files without a manifest: a set written before manifests existed.
+        std::fs::write(ckpt.join("state.toml"), &state).unwrap();
+        assert_eq!(find_checkpoint(&ckpt).unwrap(), Some(ckpt.clone()));
+
+        // Interrupted between the two renames: only `<ckpt>.old` is complete.
+        write_manifest(&ckpt, tr.step()).unwrap();
+        let old = sibling(&ckpt, "old");
+        std::fs::rename(&ckpt, &old).unwrap();
+        std::fs::create_dir_all(&ckpt).unwrap();
+        std::fs::write(ckpt.join("state.toml"), "half").unwrap();
+        assert_eq!(find_checkpoint(&ckpt).unwrap(), Some(old.clone()));
+        let resumed = Trainer::resume(&old, &opts, &d, &d[..2], Device::Cpu).unwrap();
+        assert_eq!(resumed.step(), 2);
+        // The next save cleans up.
+        resumed.save_checkpoint(&ckpt).unwrap();
+        assert!(!old.exists());
+        assert_eq!(find_checkpoint(&ckpt).unwrap(), Some(ckpt.clone()));
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
     #[test]
     fn resume_continues_exactly() {
+        let _serial = TRAINING.lock().unwrap_or_else(|e| e.into_inner());
         let d = data(12);
         let net = tiny_net();
         let norm = Normalisation::estimate(&d, 0).unwrap();
@@ -938,7 +1172,9 @@ mod tests {
             first.train_step().unwrap();
         }
         first.record();
-        first.save_state(&dir).unwrap();
+        assert_eq!(find_checkpoint(&dir).unwrap(), None);
+        first.save_checkpoint(&dir).unwrap();
+        assert_eq!(find_checkpoint(&dir).unwrap(), Some(dir.clone()));
         let mut resumed = Trainer::resume(&dir, &opts, &d, &d[..4], Device::Cpu).unwrap();
         assert_eq!(resumed.step(), 3);
         assert_eq!(resumed.history().len(), 1);

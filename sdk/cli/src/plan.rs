@@ -297,6 +297,7 @@ fn describe_bev(rp: &RobotPlanner) -> String {
         rp.bev.resolution,
         match rp.bev_origin {
             BevOrigin::Card => "from the model card",
+            BevOrigin::Record => "from the model card's training record",
             BevOrigin::Default =>
                 "cell size not recorded in the model card: the data pipeline's default",
         }

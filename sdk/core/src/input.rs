@@ -31,6 +31,14 @@ pub const MAX_URDF_BYTES: u64 = 16 << 20;
 /// shipped ones are under 11 KB).
 pub const MAX_CONFIG_BYTES: u64 = 4 << 20;
 
+/// FNV-1a, 64 bit, of `bytes`: the checksum model cards and checkpoint manifests record of
+/// their files. It detects a truncated, swapped or altered file, not deliberate tampering.
+pub fn fnv1a64(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
 /// Reads the whole of a regular file of at most `max_bytes` bytes; `what` names the kind of file
 /// in the error ("robot profile", "URDF", ...). See the module docs.
 pub fn read_user_bytes(path: &Path, what: &str, max_bytes: u64) -> io::Result<Vec<u8>> {

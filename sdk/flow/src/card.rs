@@ -4,7 +4,7 @@
 
 use crate::config::{NetConfig, Normalisation};
 use crate::error::CfmError;
-use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
+use human2nav_core::input::{MAX_CONFIG_BYTES, fnv1a64, read_user_file};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -24,6 +24,10 @@ pub struct ModelCard {
     pub description: String,
     /// File name of the weights beside the card.
     pub weights: String,
+    /// FNV-1a 64 checksum (hex) of the weights file, written with the weights; a file that
+    /// does not match is refused. Absent in cards written before checksums were recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weights_fnv64: Option<String>,
     /// Architecture hyper-parameters.
     pub net: NetConfig,
     /// Metric ↔ network normalisation.
@@ -170,7 +174,41 @@ impl ModelCard {
         }
         card.net.validate()?;
         card.normalisation.validate()?;
+        if let Some(bev) = &card.bev {
+            bev.validate().map_err(|e| CfmError::Toml {
+                path: path.to_path_buf(),
+                message: format!("[bev]: {e}"),
+            })?;
+            if bev.cells != card.net.bev_cells {
+                return Err(CfmError::Toml {
+                    path: path.to_path_buf(),
+                    message: format!(
+                        "[bev] cells = {} but the network takes net.bev_cells = {}: the card \
+                         does not describe these weights",
+                        bev.cells, card.net.bev_cells
+                    ),
+                });
+            }
+        }
         Ok(card)
+    }
+
+    /// The checksum a card records for `bytes` (see [`Self::weights_fnv64`]).
+    pub fn checksum(bytes: &[u8]) -> String {
+        format!("{:016x}", fnv1a64(bytes))
+    }
+
+    /// Checks the weights file's bytes against the card's checksum, when it has one.
+    pub fn verify_weights(&self, path: &Path, bytes: &[u8]) -> Result<(), CfmError> {
+        match &self.weights_fnv64 {
+            Some(want) if *want != Self::checksum(bytes) => Err(CfmError::WeightsChecksum {
+                path: path.to_path_buf(),
+                found: Self::checksum(bytes),
+                expected: want.clone(),
+                bytes: bytes.len(),
+            }),
+            _ => Ok(()),
+        }
     }
 
     /// Writes the card as TOML.

@@ -62,6 +62,18 @@ pub enum CfmError {
     #[error("libtorch: {0}")]
     Torch(#[from] tch::TchError),
 
+    /// The weights file is not the one the model card was written with.
+    #[error(
+        "{path}: checksum {found} ({bytes} bytes) differs from the model card's weights_fnv64 = \
+         {expected}: these are not the weights the card was written with"
+    )]
+    WeightsChecksum {
+        path: PathBuf,
+        found: String,
+        expected: String,
+        bytes: usize,
+    },
+
     /// A training checkpoint is not a complete set.
     #[error("checkpoint {path}: {reason}")]
     Checkpoint { path: PathBuf, reason: String },

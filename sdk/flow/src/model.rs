@@ -13,6 +13,7 @@ use crate::error::CfmError;
 use crate::io_map::{self, check_len};
 use crate::net::{CondUnet1d, Film, store_kind};
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
+use human2nav_core::input::read_user_bytes;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -149,6 +150,11 @@ impl CfmModel {
             .map(Path::to_path_buf)
             .unwrap_or_default();
         let weights = dir.join(&card.weights);
+        if card.weights_fnv64.is_some() {
+            let bytes = read_user_bytes(&weights, "weights file", MAX_WEIGHTS_BYTES)
+                .map_err(|e| CfmError::io(&weights, e))?;
+            card.verify_weights(&weights, &bytes)?;
+        }
         let model = Self::from_card(card, device);
         model.load_weights(&weights, "")?;
         Ok(model)
@@ -203,12 +209,18 @@ impl CfmModel {
         Ok(())
     }
 
-    /// Writes the weights (float32) and the card into `dir` (created if needed).
+    /// Writes the weights (float32) and the card, with the weights' checksum, into `dir`
+    /// (created if needed).
+    /// The written card is this model's card with `weights_fnv64` set; the weights are written
+    /// in a fixed order, so the same weights always get the same checksum.
     pub fn save(&self, dir: &Path) -> Result<(), CfmError> {
         std::fs::create_dir_all(dir).map_err(|e| CfmError::io(dir, e))?;
         let weights = dir.join(&self.card.weights);
         write_safetensors(&weights, &self.named_tensors(""))?;
-        self.card.save(&dir.join(CARD_FILE))
+        let bytes = std::fs::read(&weights).map_err(|e| CfmError::io(&weights, e))?;
+        let mut card = self.card.clone();
+        card.weights_fnv64 = Some(ModelCard::checksum(&bytes));
+        card.save(&dir.join(CARD_FILE))
     }
 
     /// The variables as `(prefix + name, float32 CPU tensor)`, sorted by name.
@@ -712,7 +724,11 @@ mod tests {
         let model = CfmModel::new(&cfg, &norm(), Device::Cpu).unwrap();
         model.save(&dir).unwrap();
         let loaded = CfmModel::load(&dir, Device::Cpu).unwrap();
-        assert_eq!(loaded.card(), model.card());
+        // The written card records the weights' checksum; otherwise it is the model's card.
+        let weights = std::fs::read(dir.join(WEIGHTS_FILE)).unwrap();
+        let mut expected = model.card().clone();
+        expected.weights_fnv64 = Some(ModelCard::checksum(&weights));
+        assert_eq!(loaded.card(), &expected);
         let cond = condition(&cfg, 5);
         let x = poses(2, cfg.horizon);
         let (mut a, mut b) = (vec![0.0; x.len()], vec![0.0; x.len()]);
@@ -742,13 +758,27 @@ mod tests {
             Tensor::zeros([2], (Kind::Float, Device::Cpu)),
         ));
         write_safetensors(&dir.join(WEIGHTS_FILE), &named).unwrap();
+        // Other weights than the card was written with: refused by the checksum, naming both.
+        for load in [
+            |d: &Path| CfmModel::load(d, Device::Cpu).map(|_| ()),
+            |d: &Path| crate::NativeCfm::load(d).map(|_| ()),
+        ] {
+            let err = load(&dir).unwrap_err();
+            assert!(matches!(err, CfmError::WeightsChecksum { .. }), "{err}");
+            assert!(err.to_string().contains("weights_fnv64"), "{err}");
+        }
+        card.weights_fnv64 = None;
+        card.save(&dir.join(CARD_FILE)).unwrap();
         let err = CfmModel::load(&dir, Device::Cpu).unwrap_err();
         assert!(matches!(err, CfmError::UnexpectedTensor { .. }), "{err}");
 
-        // A truncated file: corrupt.
+        // A truncated file: refused by the checksum, and corrupt when the card has none.
         model.save(&dir).unwrap();
         let bytes = std::fs::read(dir.join(WEIGHTS_FILE)).unwrap();
         std::fs::write(dir.join(WEIGHTS_FILE), &bytes[..bytes.len() / 2]).unwrap();
+        let err = CfmModel::load(&dir, Device::Cpu).unwrap_err();
+        assert!(matches!(err, CfmError::WeightsChecksum { .. }), "{err}");
+        model.card().save(&dir.join(CARD_FILE)).unwrap();
         let err = CfmModel::load(&dir, Device::Cpu).unwrap_err();
         assert!(matches!(err, CfmError::Corrupt { .. }), "{err}");
 
@@ -758,6 +788,20 @@ mod tests {
         std::fs::write(dir.join(CARD_FILE), format!("bogus = 1\n{text}")).unwrap();
         let err = CfmModel::load(&dir, Device::Cpu).unwrap_err();
         assert!(matches!(err, CfmError::Toml { .. }), "{err}");
+
+        // A [bev] table that disagrees with the network's input size.
+        model.save(&dir).unwrap();
+        let mut card = ModelCard::load(&dir.join(CARD_FILE)).unwrap();
+        card.bev = Some(human2nav_core::bev::BevSpec {
+            cells: cfg.bev_cells + 2,
+            resolution: 0.3,
+        });
+        card.save(&dir.join(CARD_FILE)).unwrap();
+        let err = CfmModel::load(&dir, Device::Cpu).unwrap_err().to_string();
+        assert!(
+            err.contains("[bev] cells") && err.contains("net.bev_cells"),
+            "{err}"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

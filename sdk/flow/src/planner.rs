@@ -255,29 +255,33 @@ impl FlowModel for PlannerModel {
     }
 }
 
-/// Where a planner's BEV cell size came from.
+/// Where a planner's BEV raster came from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BevOrigin {
-    /// The model card's training record.
+    /// The model card's `[bev]` table (written by `human2nav train`; its cells are checked
+    /// against the network's input size when the card is loaded).
     Card,
-    /// The card has no training record (an untrained model): the data pipeline's default.
+    /// A card without `[bev]` (written before the table existed): the cell size is read from
+    /// its training record.
+    Record,
+    /// Neither (an untrained model): the data pipeline's default cell size.
     Default,
 }
 
-/// The BEV raster the model was trained on.
-///
-/// The number of cells is the network's input size, `card.net.bev_cells`. The cell size is
-/// read from the card's training record, which `human2nav train` writes as
-/// `"… BEV 32×32 cells of 0.3 m …"` in `training.data`; a card without that record (a freshly
-/// initialised model) gets [`BevSpec::default`]'s resolution, the data pipeline's default.
+/// The BEV raster the model was trained on: the card's `[bev]` table; for older cards the
+/// network's input size `card.net.bev_cells` with the cell size of the training record
+/// ("... cells of 0.3 m ..."), or the data pipeline's default when there is none.
 pub fn bev_spec(card: &ModelCard) -> (BevSpec, BevOrigin) {
+    if let Some(bev) = card.bev {
+        return (bev, BevOrigin::Card);
+    }
     let cells = card.net.bev_cells;
-    let from_card = card
+    let from_record = card
         .training
         .as_ref()
         .and_then(|t| resolution_from_record(&t.data));
-    match from_card {
-        Some(resolution) => (BevSpec { cells, resolution }, BevOrigin::Card),
+    match from_record {
+        Some(resolution) => (BevSpec { cells, resolution }, BevOrigin::Record),
         None => (
             BevSpec {
                 cells,
@@ -605,7 +609,7 @@ mod tests {
     use human2nav_core::ablation::{Arm, ablation_step};
 
     #[test]
-    fn bev_resolution_comes_from_the_training_record() {
+    fn bev_raster_comes_from_the_card_table_or_the_training_record() {
         let mut card = ModelCard::default();
         card.net.bev_cells = 24;
         let (spec, origin) = bev_spec(&card);
@@ -620,9 +624,16 @@ mod tests {
             ..TrainingInfo::default()
         });
         let (spec, origin) = bev_spec(&card);
-        assert_eq!(origin, BevOrigin::Card);
+        assert_eq!(origin, BevOrigin::Record);
         assert_eq!(spec.cells, 24);
         assert_relative_eq!(spec.resolution, 0.25, epsilon = 1e-15);
+
+        // The card's [bev] table wins over the record.
+        card.bev = Some(BevSpec {
+            cells: 24,
+            resolution: 0.4,
+        });
+        assert_eq!(bev_spec(&card), (card.bev.unwrap(), BevOrigin::Card));
 
         // A record without a usable length falls back to the default.
         for data in ["BEV cells of x m", "cells of -1 m", "no raster here"] {

@@ -12,7 +12,7 @@ use crate::error::CfmError;
 use crate::model::{
     CfmModel, normalise_condition, read_safetensors, trajectory_features, write_safetensors,
 };
-use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
+use human2nav_core::input::{MAX_CONFIG_BYTES, fnv1a64, read_user_file};
 use human2nav_core::se2::{Pose2, Twist2};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -879,13 +879,6 @@ fn sibling(dir: &Path, suffix: &str) -> PathBuf {
     dir.with_file_name(name)
 }
 
-/// FNV-1a, 64 bit: detects a truncated or altered file (not tampering).
-fn fnv64(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
-        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
-    })
-}
-
 #[derive(Debug, Serialize, Deserialize)]
 struct ManifestEntry {
     bytes: u64,
@@ -902,7 +895,7 @@ fn file_entry(path: &Path) -> Result<ManifestEntry, CfmError> {
     let bytes = std::fs::read(path).map_err(|e| CfmError::io(path, e))?;
     Ok(ManifestEntry {
         bytes: bytes.len() as u64,
-        fnv64: format!("{:016x}", fnv64(&bytes)),
+        fnv64: format!("{:016x}", fnv1a64(&bytes)),
     })
 }
 

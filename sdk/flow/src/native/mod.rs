@@ -101,7 +101,7 @@ impl NativeCfm {
             .map(Path::to_path_buf)
             .unwrap_or_default();
         let weights_path = dir.join(&card.weights);
-        let weights = read_weights(&weights_path)?;
+        let weights = read_weights(&weights_path, &card)?;
         Self::from_weights(card, weights, &weights_path)
     }
 
@@ -368,13 +368,14 @@ fn weight_error(path: &Path, e: WeightError) -> CfmError {
 }
 
 /// Reads every tensor of a safetensors file as flat `f32` (stored as F32 or F64).
-fn read_weights(path: &Path) -> Result<Weights, CfmError> {
+fn read_weights(path: &Path, card: &ModelCard) -> Result<Weights, CfmError> {
     let corrupt = |message: String| CfmError::Corrupt {
         path: PathBuf::from(path),
         message,
     };
     let bytes = read_user_bytes(path, "weights file", crate::model::MAX_WEIGHTS_BYTES)
         .map_err(|e| CfmError::io(path, e))?;
+    card.verify_weights(path, &bytes)?;
     let st = safetensors::SafeTensors::deserialize(&bytes).map_err(|e| corrupt(e.to_string()))?;
     let mut out = Weights::new();
     for (name, view) in st.tensors() {

@@ -188,6 +188,7 @@ fn load_reads_the_folder_and_rejects_mismatched_weights() {
     let err = NativeCfm::load(&dir).expect_err("missing tensor");
     assert!(matches!(err, CfmError::MissingTensor { .. }), "{err}");
     card.net.down_dims = vec![8, 16, 16];
+    card.weights_fnv64 = None;
     card.save(&card_path).expect("save card");
     let mut named = torch.named_tensors("");
     named.push((
@@ -203,6 +204,12 @@ fn load_reads_the_folder_and_rejects_mismatched_weights() {
     let w = dir.join(&torch.card().weights);
     let bytes = std::fs::read(&w).expect("read");
     std::fs::write(&w, &bytes[..bytes.len() / 2]).expect("write");
+    let err = NativeCfm::load(&dir).expect_err("truncated");
+    assert!(matches!(err, CfmError::WeightsChecksum { .. }), "{err}");
+    torch
+        .card()
+        .save(&card_path)
+        .expect("a card without a checksum");
     let err = NativeCfm::load(&dir).expect_err("truncated");
     assert!(matches!(err, CfmError::Corrupt { .. }), "{err}");
     let _ = std::fs::remove_dir_all(&dir);

@@ -9,8 +9,9 @@
 use crate::train::cache_windows;
 use anyhow::{Context, bail};
 use clap::Args;
-use human2nav_core::ablation::{Arm, ArmSummary, LimitShares, ablation_step};
+use human2nav_core::ablation::{Arm, ArmSummary, ablation_step};
 use human2nav_core::human2nav::{Human2Nav, Human2NavSettings};
+use human2nav_core::tfs::Violations;
 use human2nav_core::{Observation, Planner};
 use human2nav_data::ScenarioClass;
 use human2nav_data::cache::TupleCache;
@@ -420,15 +421,10 @@ fn eval(
         );
     }
     println!();
-    println!("| robot | arm | {} |", LimitShares::NAMES.join(" | "));
-    println!("|---|---|{}", "---|".repeat(LimitShares::NAMES.len()));
+    println!("| robot | arm | {} |", Violations::NAMES.join(" | "));
+    println!("|---|---|{}", "---|".repeat(Violations::NAMES.len()));
     for (name, s) in &rows {
-        let shares: Vec<String> = s
-            .violations
-            .values()
-            .iter()
-            .map(|v| format!("{v:.3}"))
-            .collect();
+        let shares: Vec<String> = s.violations.iter().map(|v| format!("{v:.3}")).collect();
         println!("| {name} | {} | {} |", s.arm.label(), shares.join(" | "));
     }
     println!();

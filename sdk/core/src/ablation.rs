@@ -102,65 +102,11 @@ impl std::fmt::Display for Arm {
     }
 }
 
-/// Share of a plan's waypoints that violate each hard limit (a waypoint may violate several).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct LimitShares {
-    pub speed: f64,
-    pub reverse: f64,
-    pub acceleration: f64,
-    pub yaw_rate: f64,
-    pub curvature: f64,
-    pub lateral: f64,
-}
-
-impl LimitShares {
-    /// Column names, in the order of [`Self::values`].
-    pub const NAMES: [&'static str; 6] = [
-        "speed",
-        "reverse",
-        "acceleration",
-        "yaw rate",
-        "curvature",
-        "lateral",
-    ];
-
-    /// The shares of `violations` (all zero for an empty slice).
-    pub fn of(violations: &[Violations]) -> Self {
-        let n = violations.len().max(1) as f64;
-        let share =
-            |f: fn(&Violations) -> bool| violations.iter().filter(|v| f(v)).count() as f64 / n;
-        Self {
-            speed: share(|v| v.speed),
-            reverse: share(|v| v.reverse),
-            acceleration: share(|v| v.acceleration),
-            yaw_rate: share(|v| v.yaw_rate),
-            curvature: share(|v| v.curvature),
-            lateral: share(|v| v.lateral),
-        }
-    }
-
-    /// The shares in the order of [`Self::NAMES`].
-    pub fn values(&self) -> [f64; 6] {
-        [
-            self.speed,
-            self.reverse,
-            self.acceleration,
-            self.yaw_rate,
-            self.curvature,
-            self.lateral,
-        ]
-    }
-
-    fn from_values(v: [f64; 6]) -> Self {
-        Self {
-            speed: v[0],
-            reverse: v[1],
-            acceleration: v[2],
-            yaw_rate: v[3],
-            curvature: v[4],
-            lateral: v[5],
-        }
-    }
+/// Share of `violations` that break each limit, in the order of [`Violations::NAMES`] (all
+/// zero for an empty slice).
+pub fn limit_shares(violations: &[Violations]) -> [f64; 6] {
+    let n = violations.len().max(1) as f64;
+    Violations::count(violations).map(|c| c as f64 / n)
 }
 
 /// One arm's plan of one observation.
@@ -169,8 +115,8 @@ pub struct ArmStep {
     pub arm: Arm,
     /// Plan TFS ([`tfs::tfs_plan`]; pose 0 is the robot with its current velocity).
     pub tfs: f64,
-    /// Which limits the plan's waypoints violate.
-    pub violations: LimitShares,
+    /// Share of the plan's waypoints that violate each limit ([`Violations::NAMES`] order).
+    pub violations: [f64; 6],
     /// Φ of the kept sample before and after Algorithm 1 (`None` when the plan follows no
     /// sample, e.g. braking to a stop).
     pub phi_before: Option<f64>,
@@ -236,7 +182,7 @@ pub fn ablation_step<P: Planner + ?Sized>(
             ArmStep {
                 arm,
                 tfs: plan_tfs(&plan, limits, obs),
-                violations: LimitShares::of(&tfs::plan_violations(
+                violations: limit_shares(&tfs::plan_violations(
                     &plan.poses,
                     plan.dt,
                     limits,
@@ -266,7 +212,8 @@ pub struct ArmSummary {
     pub tfs: f64,
     /// Share of steps whose plan is entirely feasible (TFS = 1).
     pub all_feasible: f64,
-    pub violations: LimitShares,
+    /// Mean share of waypoints violating each limit ([`Violations::NAMES`] order).
+    pub violations: [f64; 6],
     pub phi_before: f64,
     pub phi_after: f64,
     pub displacement: f64,
@@ -293,7 +240,7 @@ impl ArmSummary {
         };
         let mut shares = [0.0; 6];
         for s in &steps {
-            for (acc, v) in shares.iter_mut().zip(s.violations.values()) {
+            for (acc, v) in shares.iter_mut().zip(s.violations) {
                 *acc += v / n as f64;
             }
         }
@@ -304,7 +251,7 @@ impl ArmSummary {
             windows: n,
             tfs: mean(&mut steps.iter().map(|s| s.tfs)),
             all_feasible: mean(&mut steps.iter().map(|s| f64::from(u8::from(s.tfs >= 1.0)))),
-            violations: LimitShares::from_values(shares),
+            violations: shares,
             phi_before: mean(&mut steps.iter().filter_map(|s| s.phi_before)),
             phi_after: mean(&mut steps.iter().filter_map(|s| s.phi_after)),
             displacement: mean(&mut steps.iter().map(|s| s.displacement)),
@@ -416,9 +363,11 @@ mod tests {
         assert_eq!(steps[0].tfs, 1.0);
         assert_eq!(steps[0].displacement, 0.0);
         assert_eq!(steps[1].tfs, 0.0);
-        assert_eq!(steps[1].violations.speed, 1.0);
-        assert_eq!(steps[1].violations.lateral, 0.0);
-        assert!(steps[1].violations.acceleration > 0.0);
+        let share =
+            |name: &str, v: [f64; 6]| v[Violations::NAMES.iter().position(|n| *n == name).unwrap()];
+        assert_eq!(share("speed", steps[1].violations), 1.0);
+        assert_eq!(share("lateral", steps[1].violations), 0.0);
+        assert!(share("acceleration", steps[1].violations) > 0.0);
         // Waypoint k is 0.1·k·(2 v_max − 1) m ahead of the raw plan's: mean of k = 0..4 is 10/5.
         let gap = 0.1 * (2.0 * limits.v_max - 1.0) * 10.0 / 5.0;
         assert!((steps[1].displacement - gap).abs() < 1e-12);
@@ -431,7 +380,7 @@ mod tests {
         assert_eq!(summary.windows, 2);
         assert_eq!(summary.tfs, 0.0);
         assert_eq!(summary.all_feasible, 0.0);
-        assert_eq!(summary.violations.speed, 1.0);
+        assert_eq!(share("speed", summary.violations), 1.0);
         assert_eq!(summary.iterations, 3.0);
         assert!(summary.phi_before.is_nan());
         let raw = ArmSummary::of(Arm::Raw, &steps);

@@ -48,6 +48,39 @@ pub struct Violations {
 }
 
 impl Violations {
+    /// The limits' names, in the order of [`Self::flags`] and [`Self::count`].
+    pub const NAMES: [&'static str; 6] = [
+        "speed",
+        "reverse",
+        "acceleration",
+        "yaw_rate",
+        "curvature",
+        "lateral",
+    ];
+
+    /// Which limits are violated, in the order of [`Self::NAMES`].
+    pub fn flags(&self) -> [bool; 6] {
+        [
+            self.speed,
+            self.reverse,
+            self.acceleration,
+            self.yaw_rate,
+            self.curvature,
+            self.lateral,
+        ]
+    }
+
+    /// How many of `violations` break each limit, in the order of [`Self::NAMES`].
+    pub fn count(violations: &[Violations]) -> [usize; 6] {
+        let mut out = [0; 6];
+        for v in violations {
+            for (n, f) in out.iter_mut().zip(v.flags()) {
+                *n += usize::from(f);
+            }
+        }
+        out
+    }
+
     /// True when no limit is violated.
     pub fn feasible(&self) -> bool {
         !(self.speed

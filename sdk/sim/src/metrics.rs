@@ -82,26 +82,20 @@ pub struct LimitCounts {
 
 impl LimitCounts {
     /// The names of the limits, in the order of [`LimitCounts::per_limit`].
-    pub const NAMES: [&'static str; 6] = [
-        "speed",
-        "reverse",
-        "acceleration",
-        "yaw_rate",
-        "curvature",
-        "lateral",
-    ];
+    pub const NAMES: [&'static str; 6] = tfs::Violations::NAMES;
 
     /// Counts the violations of each limit.
     pub fn of(violations: &[tfs::Violations]) -> Self {
-        let n = |f: fn(&tfs::Violations) -> bool| violations.iter().filter(|v| f(v)).count();
+        let [speed, reverse, acceleration, yaw_rate, curvature, lateral] =
+            tfs::Violations::count(violations);
         Self {
             commands: violations.len(),
-            speed: n(|v| v.speed),
-            reverse: n(|v| v.reverse),
-            acceleration: n(|v| v.acceleration),
-            yaw_rate: n(|v| v.yaw_rate),
-            curvature: n(|v| v.curvature),
-            lateral: n(|v| v.lateral),
+            speed,
+            reverse,
+            acceleration,
+            yaw_rate,
+            curvature,
+            lateral,
         }
     }
 

@@ -471,6 +471,7 @@ fn export<S: human2nav_flow::train::TrainingSample>(
             "t = s·(1 − u), u ~ Beta({}, {}), s = {}",
             cfg.train.time.alpha, cfg.train.time.beta, cfg.train.time.s
         ),
+        path_sigma: cfg.train.path_sigma,
         optimiser: cfg.train.describe_optimiser(),
         wall_time_s: wall,
         threads: cfg.run.threads,

@@ -95,6 +95,10 @@ pub struct TrainingInfo {
     pub seed: u64,
     /// Flow-time distribution during training (see [`crate::cfm::TimeDistribution`]).
     pub time_distribution: String,
+    /// `σ` of Eq. 3's probability path, normalised units (0: the deterministic geodesic; cards
+    /// written before the option existed are 0).
+    #[serde(default)]
+    pub path_sigma: f64,
     /// Optimiser and schedule, in words.
     pub optimiser: String,
     /// Wall time of training in seconds, and threads used.

@@ -209,6 +209,12 @@ pub struct TrainOptions {
     /// Also train on the left-right mirror image of each example with probability 1/2
     /// (erases any side preference of walkers). Default false.
     pub mirror: bool,
+    /// `σ` of Eq. 3's probability path `N(x0·exp(t·log(x0⁻¹x1)), σ)`: each `x_t` is moved by
+    /// `exp(σ·ε)`, `ε ~ N(0, I)` in se(2), in the network's normalised units; the target stays
+    /// the path's velocity `log(x0⁻¹x1)` (as in independent conditional flow matching). Default
+    /// 0, the deterministic geodesic: no noise is drawn, so batches are exactly those of
+    /// earlier versions.
+    pub path_sigma: f64,
 }
 
 impl Default for TrainOptions {
@@ -228,6 +234,7 @@ impl Default for TrainOptions {
             ema_decay: 0.999,
             time: TimeDistribution::default(),
             mirror: false,
+            path_sigma: 0.0,
         }
     }
 }
@@ -264,6 +271,12 @@ impl TrainOptions {
         }
         if self.grad_clip.is_nan() || self.grad_clip <= 0.0 {
             return Err(CfmError::option("train.grad_clip", "must be > 0"));
+        }
+        if !(self.path_sigma.is_finite() && (0.0..=1.0).contains(&self.path_sigma)) {
+            return Err(CfmError::option(
+                "train.path_sigma",
+                format!("{} must lie in [0, 1] (normalised units)", self.path_sigma),
+            ));
         }
         self.time.validate()
     }
@@ -320,6 +333,25 @@ struct Batch {
     target: Tensor,
 }
 
+/// Eq. 3's path noise: `σ` and its own generator, so that the source draws, flow times and
+/// targets of a batch are the same with or without it.
+struct PathNoise {
+    sigma: f64,
+    rng: ChaCha8Rng,
+}
+
+impl PathNoise {
+    /// The noise of batch `stream` of a run seeded `seed` (`None` when `sigma` is 0).
+    fn new(sigma: f64, seed: u64, stream: u64) -> Option<Self> {
+        (sigma > 0.0).then(|| {
+            // A seed of its own: the batch generator is seeded with `seed` itself.
+            let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x9e37_79b9_7f4a_7c15);
+            rng.set_stream(stream);
+            Self { sigma, rng }
+        })
+    }
+}
+
 /// Builds the batch of examples `idx` with noise from `rng`: features of `x_t`, flow times,
 /// normalised conditions and standardised targets `ξ/σ`.
 fn build_batch<S: TrainingSample, R: Rng + ?Sized>(
@@ -329,9 +361,11 @@ fn build_batch<S: TrainingSample, R: Rng + ?Sized>(
     norm: &Normalisation,
     time: &TimeSampler,
     mirror: bool,
+    path: Option<&mut PathNoise>,
     rng: &mut R,
     device: Device,
 ) -> Batch {
+    let mut path = path.filter(|p| p.sigma > 0.0);
     let b = idx.len();
     let t_len = net.horizon;
     let bev_len = net.bev_len();
@@ -357,7 +391,10 @@ fn build_batch<S: TrainingSample, R: Rng + ?Sized>(
             }
             let x0 = Pose2::exp(unit_normal_twist(rng));
             let xi = target_velocity(x0, p1);
-            let xt = geodesic_point(x0, xi, t);
+            let mut xt = geodesic_point(x0, xi, t);
+            if let Some(p) = path.as_deref_mut() {
+                xt = xt.compose(Pose2::exp(unit_normal_twist(&mut p.rng).scale(p.sigma)));
+            }
             poses[3 * j..3 * j + 3].copy_from_slice(&xt.to_array());
             let xi = xi.to_array();
             for c in 0..3 {
@@ -709,6 +746,7 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
             &card.normalisation,
             &self.time,
             self.opts.mirror,
+            PathNoise::new(self.opts.path_sigma, self.opts.seed, step).as_mut(),
             &mut rng,
             self.model.device(),
         );
@@ -777,6 +815,7 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
         }
         let n = self.val.len().min(VAL_MAX);
         let mut rng = ChaCha8Rng::seed_from_u64(self.opts.seed ^ 0x0007_a11d);
+        let mut path = PathNoise::new(self.opts.path_sigma, self.opts.seed, u64::MAX);
         let card = self.ema.card();
         let (mut sum, mut count) = (0.0, 0usize);
         let bs = self.opts.batch_size.max(64);
@@ -790,6 +829,7 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
                 &card.normalisation,
                 &self.time,
                 false,
+                path.as_mut(),
                 &mut rng,
                 self.ema.device(),
             );
@@ -830,7 +870,8 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
     }
 }
 
-/// Per-batch CFM loss of a model on `data` with a fixed seed (for tests and reports).
+/// Per-batch CFM loss of a model on `data` with a fixed seed (for tests and reports), on the
+/// deterministic geodesic path (`σ = 0`).
 pub fn evaluate_loss<S: TrainingSample>(
     model: &CfmModel,
     data: &[S],
@@ -856,6 +897,7 @@ pub fn evaluate_loss<S: TrainingSample>(
             &card.normalisation,
             &sampler,
             false,
+            None,
             &mut rng,
             model.device(),
         );
@@ -1079,6 +1121,45 @@ mod tests {
     /// Three steps, a checkpoint, a resume and three more steps give the same weights as six
     /// uninterrupted steps (batch order and noise derive from (seed, step); AdamW moments and
     /// EMA are checkpointed).
+    /// Eq. 3's path noise moves the network's input `x_t` and nothing else; `σ = 0` draws no
+    /// noise, so batches are those of the deterministic path.
+    #[test]
+    fn path_noise_moves_the_input_not_the_target() {
+        let d = data(6);
+        let net = tiny_net();
+        let norm = Normalisation::estimate(&d, 0).unwrap();
+        let time = TimeDistribution::default().sampler().unwrap();
+        let idx = [0, 3, 5];
+        let batch = |sigma: f64| {
+            let mut rng = ChaCha8Rng::seed_from_u64(4);
+            let mut path = PathNoise::new(sigma, 4, 0);
+            build_batch(
+                &d,
+                &idx,
+                &net,
+                &norm,
+                &time,
+                false,
+                path.as_mut(),
+                &mut rng,
+                Device::Cpu,
+            )
+        };
+        let same = |a: &Tensor, b: &Tensor| (a - b).abs().max().double_value(&[]) == 0.0;
+        let (plain, again, noisy) = (batch(0.0), batch(0.0), batch(0.2));
+        assert!(same(&plain.x, &again.x));
+        assert!(same(&plain.target, &noisy.target));
+        assert!(same(&plain.t, &noisy.t));
+        assert!(!same(&plain.x, &noisy.x));
+        for bad in [-0.1, 1.5, f64::NAN] {
+            let opts = TrainOptions {
+                path_sigma: bad,
+                ..TrainOptions::default()
+            };
+            assert!(opts.validate().is_err(), "{bad}");
+        }
+    }
+
     /// A checkpoint is a set: a missing or altered file is an error naming it, never a silent
     /// restart; a save interrupted between its renames resumes from the previous set.
     #[test]

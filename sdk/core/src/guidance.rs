@@ -108,7 +108,8 @@
 //! the speed term. Measured on the analytic fields of the tests, no fixed step removes a speed,
 //! yaw-rate or lateral violation in 8 iterations; large steps diverge.
 //!
-//! **Preconditioned direction** (`precondition = true`, the default) adds two changes that keep
+//! **Preconditioned direction** (`precondition = true`; off by default, as it does not descend
+//! on the trained model) adds two changes that keep
 //! the algorithm's structure (forward pass, terminal gradient, adjoint, control update):
 //!
 //! 1. *Twist-space terminal co-state*: `μ_N = s·J·W·S·Jᵀ·clip(∇Φ)`, with `J` the Jacobian of the
@@ -219,12 +220,14 @@ impl Default for PaperSettings {
 
 /// Parameters of Algorithm 1 (TOML table, every field optional).
 ///
-/// Defaults: `variant = "adaptive"`, `enabled = true`, `steps_n = 10`, `iterations_m = 8`,
-/// `learning_rate = 0.03`, `momentum = 1.0`, `clip = 10.0`, `tolerance = 0.01`,
-/// `precondition = true`, `adaptive_step = true`, and the [`PaperSettings`] defaults. See the
-/// module docs for what each does; the step and tolerance were chosen on the analytic fields of
-/// the tests (a unit-less step: with preconditioning, 1 would move each violated twist component
-/// by about its own limit per iteration). `enabled`, `steps_n` and `iterations_m` apply to both
+/// Defaults: the shipped planner's (`sdk/configs/planner.toml`, where the measurements behind
+/// them are): `variant = "adaptive"`, `enabled = true`, `steps_n = 5`, `iterations_m = 3`,
+/// `learning_rate = 0.1`, `momentum = 1.0`, `clip = 10.0`, `tolerance = 0.01`,
+/// `precondition = false` (on the trained model every preconditioned update raised Φ),
+/// `adaptive_step = true`, and the [`PaperSettings`] defaults. See the module docs for what
+/// each does. The analytic tests of the preconditioned direction use `steps_n = 10`,
+/// `iterations_m = 8`, `learning_rate = 0.03` (a unit-less step there: 1 would move each
+/// violated twist component by about its own limit per iteration). `enabled`, `steps_n` and `iterations_m` apply to both
 /// variants; `learning_rate` to `adaptive_step` to the adaptive variant only, `paper` to the
 /// paper variant only.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -260,13 +263,13 @@ pub struct GuidanceSettings {
 }
 
 /// Largest number of Euler integration steps `N` ([`GuidanceSettings::steps_n`]). The planner
-/// uses 5 and the defaults 10; each step costs a network call per iteration, so 1000 already
+/// uses 5 (the default); each step costs a network call per iteration, so 1000 already
 /// makes one planning call take minutes. A bound keeps a mistyped value an error instead of a
 /// hang.
 pub const MAX_STEPS_N: usize = 1000;
 
 /// Largest number of guidance iterations `M` ([`GuidanceSettings::iterations_m`]); the planner
-/// uses 3 and the defaults 8. Each iteration costs `2N` network calls (see [`MAX_STEPS_N`]).
+/// uses 3 (the default). Each iteration costs `2N` network calls (see [`MAX_STEPS_N`]).
 pub const MAX_ITERATIONS_M: usize = 1000;
 
 /// Factor applied to a sample's step size after an accepted update.
@@ -280,13 +283,13 @@ impl Default for GuidanceSettings {
         Self {
             variant: GuidanceVariant::default(),
             enabled: true,
-            steps_n: 10,
-            iterations_m: 8,
-            learning_rate: 0.03,
+            steps_n: 5,
+            iterations_m: 3,
+            learning_rate: 0.1,
             momentum: 1.0,
             clip: 10.0,
             tolerance: 1e-2,
-            precondition: true,
+            precondition: false,
             adaptive_step: true,
             paper: PaperSettings::default(),
         }

@@ -87,7 +87,7 @@ pub struct SelectionWeights {
 impl Default for SelectionWeights {
     fn default() -> Self {
         Self {
-            feasibility: 4.0,
+            feasibility: 0.0,
             goal: 1.0,
             clearance: 2.0,
             consistency: 0.1,

@@ -252,9 +252,21 @@ fn geodesic_target_rollout_lands_on_the_target() {
     }
 }
 
+/// The preconditioned variant at the settings its analytic measurements were made with (the
+/// defaults before the defaults became the shipped planner's).
+fn preconditioned() -> GuidanceSettings {
+    GuidanceSettings {
+        steps_n: 10,
+        iterations_m: 8,
+        learning_rate: 0.03,
+        precondition: true,
+        ..GuidanceSettings::default()
+    }
+}
+
 #[test]
 fn guidance_removes_speed_reverse_acceleration_and_lateral_violations() {
-    let settings = GuidanceSettings::default();
+    let settings = preconditioned();
     for (name, twists, v0, kappa) in violation_cases() {
         if !matches!(name, "speed" | "reverse" | "accel" | "lateral") {
             continue;
@@ -288,7 +300,7 @@ fn guidance_reduces_yaw_rate_and_curvature_violations() {
     // The documented limit: rotations of the remaining plan are linearised, so these are
     // reduced rather than removed (measured over 4 samples: yaw-rate Φ 0.45 → 0.17-0.20 with
     // TFS 0 → 0.81 on three of them, curvature Φ 0.66 → 0.10-0.27 with TFS 0 → 0.81-0.94).
-    let settings = GuidanceSettings::default();
+    let settings = preconditioned();
     for (name, twists, v0, kappa) in violation_cases() {
         let bound = match name {
             "yaw" => 0.5,
@@ -398,10 +410,12 @@ fn disabled_guidance_is_the_plain_rollout() {
     for s in [
         GuidanceSettings {
             enabled: false,
+            steps_n: 10,
             ..Default::default()
         },
         GuidanceSettings {
             iterations_m: 0,
+            steps_n: 10,
             ..Default::default()
         },
     ] {

@@ -762,6 +762,7 @@ fn closed_loop(
             config: method_table,
             replan_hz: human2nav_replan_hz(bcfg),
             deadline_ms: None,
+            isolation: Default::default(),
         },
         bcfg,
     )?;

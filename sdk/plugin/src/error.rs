@@ -148,6 +148,10 @@ pub enum PluginError {
     /// The thread that runs an instance's calls under a deadline could not be started.
     #[error("{instance}: cannot start its worker thread: {message}")]
     Worker { instance: String, message: String },
+    /// An instance declared with `isolation = "process"` could not be started in its helper
+    /// process (see [`crate::process`]).
+    #[error("{instance} (in its own process): {message}")]
+    Process { instance: String, message: String },
 }
 
 fn provided(names: &[String]) -> String {

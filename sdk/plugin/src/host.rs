@@ -22,6 +22,7 @@ use crate::deadline::{self, NoAnswer, Worker};
 use crate::error::{PluginError, PluginKind};
 use crate::init::RobotContext;
 use crate::libfile::{self, MAX_LIBRARY_BYTES};
+use crate::process::{self as proc_host, ProcessClient};
 use crate::resolve::resolve_library_path;
 use crate::validate::{
     Check, MAX_DESCRIPTION_BYTES, MAX_FACTORIES, MAX_MESSAGE_BYTES, MAX_NAME_BYTES, MAX_PLAN_POSES,
@@ -29,6 +30,7 @@ use crate::validate::{
 };
 use human2nav_core::constraint::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
 use human2nav_core::embodiment::{Embodiment, RobotState};
+use human2nav_core::robot::PluginIsolation;
 use human2nav_core::{AgentState, Observation, Plan, PlanError, PlanInfo, Planner, Pose2, Twist2};
 use std::collections::HashMap;
 use std::ffi::c_void;
@@ -861,6 +863,9 @@ impl fmt::Debug for Handle {
 #[derive(Debug, Default)]
 pub struct PluginHost {
     instances: Mutex<Vec<Arc<Health>>>,
+    /// The helper executable for out-of-process instances (`None`: found as described in
+    /// [`crate::process`]).
+    helper: Option<PathBuf>,
 }
 
 /// A created instance with its checked vtable.
@@ -875,6 +880,49 @@ impl PluginHost {
     /// A host with no instances yet.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// This host, starting out-of-process instances with the helper executable at `path`
+    /// instead of looking for it (see [`crate::process`]).
+    pub fn with_process_helper(mut self, path: impl Into<PathBuf>) -> Self {
+        self.helper = Some(path.into());
+        self
+    }
+
+    /// Lists an instance's health for [`PluginHost::failures`].
+    fn register(&self, health: Arc<Health>) {
+        let mut instances = self.instances.lock().unwrap_or_else(|e| e.into_inner());
+        // Forget healthy instances that were dropped (a benchmark creates one planner per
+        // episode); failed ones stay listed for `failures`.
+        instances.retain(|h| Arc::strong_count(h) > 1 || h.poisoned());
+        instances.push(health);
+    }
+
+    /// Starts an out-of-process instance (see [`crate::process`]).
+    fn process_instance(
+        &self,
+        kind: PluginKind,
+        library: &Path,
+        plugin: &str,
+        config: &str,
+        robot: Option<&RobotContext>,
+        deadline: Option<Duration>,
+    ) -> Result<(ProcessClient, String, Arc<Health>), PluginError> {
+        let (client, name) = proc_host::start_instance(
+            self.helper.as_deref(),
+            kind,
+            library,
+            plugin,
+            config,
+            robot,
+            deadline,
+        )?;
+        let health = Health::new(format!(
+            "{kind} `{name}` from {} (in its own process)",
+            library.display()
+        ));
+        self.register(Arc::clone(&health));
+        Ok((client, name, health))
     }
 
     /// Loads a library (see [`PluginLibrary::load`]).
@@ -915,13 +963,7 @@ impl PluginHost {
                 path: lib.path.clone(),
                 message: format!("{} `{name}`: {m}", T::KIND),
             })?;
-        {
-            let mut instances = self.instances.lock().unwrap_or_else(|e| e.into_inner());
-            // Forget healthy instances that were dropped (a benchmark creates one planner per
-            // episode); failed ones stay listed for `failures`.
-            instances.retain(|h| Arc::strong_count(h) > 1 || h.poisoned());
-            instances.push(health);
-        }
+        self.register(health);
         Ok(Created {
             handle,
             vtable,
@@ -958,6 +1000,43 @@ impl PluginHost {
         robot: Option<&RobotContext>,
         deadline: Option<Duration>,
     ) -> Result<PluginConstraint, PluginError> {
+        self.constraint_with_options(
+            library,
+            plugin,
+            config,
+            robot,
+            deadline,
+            PluginIsolation::InProcess,
+        )
+    }
+
+    /// [`PluginHost::constraint_with_deadline`], in the host process or in a helper process of
+    /// its own ([`PluginIsolation::Process`], see [`crate::process`]).
+    pub fn constraint_with_options(
+        &self,
+        library: &Path,
+        plugin: &str,
+        config: &str,
+        robot: Option<&RobotContext>,
+        deadline: Option<Duration>,
+        isolation: PluginIsolation,
+    ) -> Result<PluginConstraint, PluginError> {
+        if isolation == PluginIsolation::Process {
+            let (client, name, health) = self.process_instance(
+                PluginKind::Constraint,
+                library,
+                plugin,
+                config,
+                robot,
+                deadline,
+            )?;
+            return Ok(PluginConstraint {
+                name,
+                health,
+                deadline,
+                exec: ConstraintExec::Process(Mutex::new(client)),
+            });
+        }
         let c = self.instance::<H2nConstraintVTable>(library, plugin, config, robot)?;
         let evaluate = c.vtable.evaluate.ok_or_else(|| PluginError::NullSlot {
             path: library.to_path_buf(),
@@ -1047,6 +1126,45 @@ impl PluginHost {
         robot: Option<&RobotContext>,
         deadline: Option<Duration>,
     ) -> Result<PluginPlanner, PluginError> {
+        self.planner_with_options(
+            library,
+            plugin,
+            config,
+            robot,
+            deadline,
+            PluginIsolation::InProcess,
+        )
+    }
+
+    /// [`PluginHost::planner_with_deadline`], in the host process or in a helper process of its
+    /// own ([`PluginIsolation::Process`], see [`crate::process`]).
+    pub fn planner_with_options(
+        &self,
+        library: &Path,
+        plugin: &str,
+        config: &str,
+        robot: Option<&RobotContext>,
+        deadline: Option<Duration>,
+        isolation: PluginIsolation,
+    ) -> Result<PluginPlanner, PluginError> {
+        if isolation == PluginIsolation::Process {
+            let (client, name, health) = self.process_instance(
+                PluginKind::Planner,
+                library,
+                plugin,
+                config,
+                robot,
+                deadline,
+            )?;
+            return Ok(PluginPlanner {
+                name,
+                health,
+                deadline,
+                exec: PlannerExec::Process(client),
+                spare: None,
+                horizon: human2nav_core::trajectory::DEFAULT_HORIZON,
+            });
+        }
         let c = self.instance::<H2nPlannerVTable>(library, plugin, config, robot)?;
         let null = |slot: &'static str| PluginError::NullSlot {
             path: library.to_path_buf(),
@@ -1252,6 +1370,8 @@ enum ConstraintExec {
     Direct(ConstraintCore),
     /// With a deadline: calls run on the instance's worker, one at a time.
     Worker(Mutex<Slot<ConstraintJob>>),
+    /// In a helper process of its own, one call at a time.
+    Process(Mutex<ProcessClient>),
 }
 
 /// A constraint term living in a plugin library.
@@ -1423,6 +1543,18 @@ impl ConstraintTerm for PluginConstraint {
             }
             ConstraintExec::Worker(slot) => {
                 self.evaluate_on_worker(slot, batch, ctx, cost, grad)?
+            }
+            ConstraintExec::Process(client) => {
+                let mut client = client.lock().unwrap_or_else(|e| e.into_inner());
+                return match client.evaluate(batch, ctx, cost, grad) {
+                    Ok(answer) => answer,
+                    Err(message) => {
+                        if client.dead().is_some() {
+                            self.health.poison(&message);
+                        }
+                        Err(fail(message))
+                    }
+                };
             }
         };
         result.map_err(|(status, message)| match status {
@@ -1726,6 +1858,8 @@ enum PlannerExec {
     Direct(PlannerCore),
     /// With a deadline: calls run on the instance's worker; `None` once it missed one.
     Worker(Option<Worker<Box<PlanJob>>>),
+    /// In a helper process of its own.
+    Process(ProcessClient),
 }
 
 /// A planner living in a plugin library.
@@ -1791,6 +1925,47 @@ impl PluginPlanner {
                 }
                 answer
             }
+            // Process calls never come here (see `plan` and `reset`).
+            PlannerExec::Process(_) => Err(NoAnswer::Gone),
+        }
+    }
+
+    /// Restarts of the helper process so far (`None` for an instance in the host process).
+    pub fn process_restarts(&self) -> Option<u32> {
+        match &self.exec {
+            PlannerExec::Process(c) => Some(c.restarts()),
+            _ => None,
+        }
+    }
+
+    /// `plan` in the helper process: a dead or hung process gives the stop-in-place plan with
+    /// [`PlanInfo::error`] set; after the last restart the planner is unusable.
+    fn plan_in_process(&mut self, obs: &Observation) -> Result<Plan, PlanError> {
+        let PlannerExec::Process(client) = &mut self.exec else {
+            return Err(PlanError::Unusable {
+                planner: self.name.clone(),
+                message: "not an out-of-process planner".into(),
+            });
+        };
+        match client.plan(obs) {
+            Ok(Ok(plan)) => {
+                self.horizon = plan.poses.len().max(1);
+                Ok(plan)
+            }
+            Ok(Err(e)) => Err(e),
+            Err(why) => {
+                if client.dead().is_some() {
+                    self.health.poison(&why);
+                }
+                let mut plan = Plan::stop_in_place(
+                    obs,
+                    human2nav_core::trajectory::DEFAULT_DT,
+                    self.horizon,
+                    why.clone(),
+                );
+                plan.info.error = Some(why);
+                Ok(plan)
+            }
         }
     }
 
@@ -1835,6 +2010,16 @@ impl Planner for PluginPlanner {
         if self.health.poisoned() {
             return;
         }
+        if let PlannerExec::Process(client) = &mut self.exec {
+            // The trait's reset cannot fail: a failure is recorded and the next call restarts
+            // the process (or reports the dead instance).
+            if let Err(why) = client.reset() {
+                if client.dead().is_some() {
+                    self.health.poison(&why);
+                }
+            }
+            return;
+        }
         match self.execute(|job| job.op = PlanOp::Reset) {
             Ok(job) => {
                 if job.status != H2N_OK {
@@ -1858,6 +2043,9 @@ impl Planner for PluginPlanner {
             });
         }
         obs.validate()?;
+        if matches!(self.exec, PlannerExec::Process(_)) {
+            return self.plan_in_process(obs);
+        }
         let job = match self.execute(|job| {
             job.op = PlanOp::Plan;
             job.time = obs.time;

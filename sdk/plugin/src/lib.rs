@@ -21,7 +21,9 @@
 //!   library would fault inside `dlopen`); [`validate`]: every table, function slot, count and
 //!   string a plugin hands over is checked before use, against documented caps;
 //!   [`inspect`]: what `human2nav plugin inspect` reports; [`deadline`]: planner and constraint
-//!   calls that do not return in time do not hang the host.
+//!   calls that do not return in time do not hang the host; [`process`]: planners and
+//!   constraint terms declared with `isolation = "process"` run in a helper process that is
+//!   restarted when the plugin aborts, segfaults or hangs.
 //!
 //! Why not export Rust trait objects: their layout is not stable across compiler versions, so
 //! a plugin built with another rustc would be undefined behaviour. Only C types cross.
@@ -36,6 +38,7 @@ pub mod init;
 pub mod inspect;
 pub mod libfile;
 mod macros;
+pub mod process;
 pub mod resolve;
 pub mod robot;
 pub mod validate;
@@ -46,6 +49,7 @@ pub use host::{
     FactoryInfo, PluginConstraint, PluginEmbodiment, PluginFailure, PluginHost, PluginLibrary,
     PluginPlanner,
 };
+pub use human2nav_core::robot::PluginIsolation;
 pub use init::{InitError, PluginInit, RobotContext, parse_config};
 pub use inspect::{InspectReport, inspect_library};
 pub use robot::{LoadedRobot, PluginSpec, RobotResolution, robot_context};

@@ -15,7 +15,7 @@ use human2nav_core::constraint::{
     ConstraintContext, ConstraintError, ConstraintTerm, Phi, TrajBatch,
 };
 use human2nav_core::embodiment::{Embodiment, RobotState};
-use human2nav_core::robot::{EmbodimentSpec, PluginRef, RobotProfile};
+use human2nav_core::robot::{EmbodimentSpec, PluginIsolation, PluginRef, RobotProfile};
 use human2nav_core::{Plan, PlanInfo, Pose2, Twist2};
 use serde::Deserialize;
 use std::fmt;
@@ -30,6 +30,8 @@ use std::time::Duration;
 /// weight = 1.0                                        # constraint terms only; default 1
 /// deadline_ms = 1000                                  # planners and constraint terms; per
 ///                                                     # call; default 1000; 0: none
+/// isolation = "in_process"                            # or "process": planners and constraint
+///                                                     # terms in a helper process (crate::process)
 /// config = """
 /// time_horizon = 2.0
 /// """
@@ -50,6 +52,9 @@ pub struct PluginSpec {
     /// Deadline of each call (planners and constraint terms; see [`crate::deadline`]).
     #[serde(default)]
     pub deadline_ms: Option<f64>,
+    /// Where the instance runs (planners and constraint terms; see [`crate::process`]).
+    #[serde(default)]
+    pub isolation: PluginIsolation,
 }
 
 fn default_weight() -> f64 {
@@ -65,6 +70,7 @@ impl PluginSpec {
             config: self.config.clone(),
             weight: self.weight,
             deadline_ms: self.deadline_ms,
+            isolation: self.isolation,
             declared_in: declared_in.to_path_buf(),
         }
     }
@@ -130,14 +136,22 @@ fn ref_deadline(r: &PluginRef, kind: PluginKind) -> Result<Option<Duration>, Plu
 }
 
 impl PluginHost {
-    /// A constraint term from a profile's or config's reference, with the reference's deadline.
+    /// A constraint term from a profile's or config's reference, with the reference's deadline
+    /// and isolation.
     pub fn constraint_ref(
         &self,
         r: &PluginRef,
         robot: Option<&RobotContext>,
     ) -> Result<PluginConstraint, PluginError> {
         let deadline = ref_deadline(r, PluginKind::Constraint)?;
-        self.constraint_with_deadline(&r.library, &r.plugin, &r.config, robot, deadline)
+        self.constraint_with_options(
+            &r.library,
+            &r.plugin,
+            &r.config,
+            robot,
+            deadline,
+            r.isolation,
+        )
     }
 
     /// An embodiment from a reference, for the robot described by `robot`.
@@ -149,14 +163,22 @@ impl PluginHost {
         self.embodiment(&r.library, &r.plugin, &r.config, robot)
     }
 
-    /// A planner from a reference, optionally for a robot, with the reference's deadline.
+    /// A planner from a reference, optionally for a robot, with the reference's deadline and
+    /// isolation.
     pub fn planner_ref(
         &self,
         r: &PluginRef,
         robot: Option<&RobotContext>,
     ) -> Result<PluginPlanner, PluginError> {
         let deadline = ref_deadline(r, PluginKind::Planner)?;
-        self.planner_with_deadline(&r.library, &r.plugin, &r.config, robot, deadline)
+        self.planner_with_options(
+            &r.library,
+            &r.plugin,
+            &r.config,
+            robot,
+            deadline,
+            r.isolation,
+        )
     }
 
     /// The embodiment a profile describes: built-in, or created from its plugin.

@@ -18,6 +18,10 @@
 //! replan_hz = 5.0                               # optional: this method's replanning rate
 //! deadline_ms = 1000                            # plugin only: deadline per planner call
 //!                                               # (default 1000; 0: none; human2nav_plugin::deadline)
+//! isolation = "in_process"                      # plugin only: in_process (default) | process:
+//!                                               # the planner runs in a helper process, restarted
+//!                                               # when it aborts, segfaults or hangs
+//!                                               # (human2nav_plugin::process)
 //!
 //! [[suites]]
 //! name = "real"
@@ -47,7 +51,7 @@ use crate::error::SimError;
 use crate::runner::{RobotSetup, SimConfig};
 use human2nav_core::Planner;
 use human2nav_plugin::deadline::deadline_from_ms;
-use human2nav_plugin::{PluginHost, RobotContext};
+use human2nav_plugin::{PluginHost, PluginIsolation, RobotContext};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -84,6 +88,11 @@ pub struct MethodConfig {
     /// for the rest of its episode (see [`human2nav_plugin::deadline`]).
     #[serde(default)]
     pub deadline_ms: Option<f64>,
+    /// Where a `plugin` method's planner runs: in the host process (default) or in a helper
+    /// process of its own, restarted when it aborts, segfaults or hangs (a failed call gets the
+    /// stop-in-place plan and counts as failed; see [`human2nav_plugin::process`]).
+    #[serde(default)]
+    pub isolation: PluginIsolation,
 }
 
 /// One suite as configured.
@@ -297,6 +306,14 @@ impl BenchConfig {
             }
             deadline_from_ms(m.deadline_ms)
                 .map_err(|e| SimError::setting(format!("methods[{i}]"), "deadline_ms", e))?;
+            if m.isolation != PluginIsolation::InProcess && m.kind != "plugin" {
+                return Err(SimError::setting(
+                    format!("methods[{i}]"),
+                    "isolation",
+                    "only a plugin method can run in its own process (built-in planners run in \
+                     the host)",
+                ));
+            }
         }
         for (i, s) in self.suites.iter().enumerate() {
             let section = format!("suites[{i}]");
@@ -652,7 +669,8 @@ pub fn load_robots_with(cfg: &BenchConfig, host: &PluginHost) -> Result<Vec<Robo
 /// * `plugin`: a planner from the plugin library `library` (factory `plugin`, default the
 ///   method's name), created per episode through `host` with the robot's limits, gains and
 ///   footprint and the method's `config` as its TOML, its calls under the method's
-///   `deadline_ms`. The library is loaded once here, so a missing build fails before any
+///   `deadline_ms`, in the host process or (`isolation = "process"`) in a helper process. The
+///   library is loaded once here, so a missing build fails before any
 ///   episode runs.
 ///
 /// Either replans at the method's `replan_hz` when it sets one. Returns `Ok(None)` for any
@@ -709,6 +727,7 @@ fn builtin_planner(
             }
             let deadline = deadline_from_ms(m.deadline_ms)
                 .map_err(|e| SimError::setting(section(), "deadline_ms", e))?;
+            let isolation = m.isolation;
             let host = Arc::clone(host);
             Ok(Some(MethodSpec::new(m.name.clone(), move |ctx| {
                 let robot = RobotContext {
@@ -716,16 +735,38 @@ fn builtin_planner(
                     gains: ctx.robot.gains,
                     footprint_radius: ctx.robot.footprint_radius,
                 };
-                let planner = host.planner_with_deadline(
+                let planner = host.planner_with_options(
                     &library,
                     &factory,
                     &config,
                     Some(&robot),
                     deadline,
+                    isolation,
                 )?;
                 Ok(Box::new(planner) as Box<dyn Planner>)
             })))
         }
         _ => Ok(None),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_plugin_method_may_ask_for_its_own_process() {
+        let m: MethodConfig = toml::from_str(
+            "name = \"orca\"\nkind = \"plugin\"\nlibrary = \"x\"\nisolation = \"process\"",
+        )
+        .expect("parses");
+        assert_eq!(m.isolation, PluginIsolation::Process);
+        let m: MethodConfig =
+            toml::from_str("name = \"orca\"\nkind = \"plugin\"\nlibrary = \"x\"").expect("parses");
+        assert_eq!(m.isolation, PluginIsolation::InProcess);
+        assert!(
+            toml::from_str::<MethodConfig>("name = \"a\"\nkind = \"plugin\"\nisolation = \"fork\"")
+                .is_err()
+        );
     }
 }

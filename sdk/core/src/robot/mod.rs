@@ -34,6 +34,8 @@
 //! config = """..."""               # default ""
 //! deadline_ms = 1000               # per evaluate call; default: the plugin host's (1000 ms);
 //!                                  # 0: none; at most 3 600 000 (see human2nav_plugin::deadline)
+//! isolation = "in_process"         # in_process (default) | process: run the term in its own
+//!                                  # helper process (see human2nav_plugin::process)
 //! ```
 //!
 //! Unknown fields are rejected everywhere. Every error names the file and the field (or the
@@ -149,6 +151,19 @@ impl ProfileError {
 /// Longest deadline a `[[constraint]]` may set (`deadline_ms`, one hour).
 pub const MAX_PLUGIN_DEADLINE_MS: f64 = 3_600_000.0;
 
+/// Where a plugin instance runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PluginIsolation {
+    /// In the host process (the default): fastest, but a plugin that aborts or segfaults takes
+    /// the host down with it.
+    #[default]
+    InProcess,
+    /// In a helper process of its own, restarted when it dies or hangs (planners and constraint
+    /// terms; see `human2nav_plugin::process`).
+    Process,
+}
+
 /// A reference to something in a plugin library.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PluginRef {
@@ -164,6 +179,9 @@ pub struct PluginRef {
     /// Deadline of each call of a constraint term, in milliseconds, as written (`None`: the
     /// plugin host's default; `0`: none). Embodiments have none (always `None`).
     pub deadline_ms: Option<f64>,
+    /// Where the instance runs (constraint terms and planners; embodiments always run in the
+    /// host process).
+    pub isolation: PluginIsolation,
     /// The robot.toml that declared this reference.
     pub declared_in: PathBuf,
 }
@@ -362,6 +380,8 @@ struct RawConstraint {
     config: String,
     #[serde(default)]
     deadline_ms: Option<f64>,
+    #[serde(default)]
+    isolation: PluginIsolation,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -519,6 +539,7 @@ impl RobotProfile {
                 config: e.config.clone().unwrap_or_default(),
                 weight: 1.0,
                 deadline_ms: None,
+                isolation: PluginIsolation::InProcess,
                 declared_in: path.to_path_buf(),
             })
         } else {
@@ -576,6 +597,7 @@ impl RobotProfile {
                 config: c.config.clone(),
                 weight,
                 deadline_ms: c.deadline_ms,
+                isolation: c.isolation,
                 declared_in: path.to_path_buf(),
             });
         }

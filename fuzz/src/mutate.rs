@@ -107,7 +107,7 @@ fn mutate_once(rng: &mut ChaCha8Rng, b: &mut Vec<u8>, others: &[Vec<u8>]) {
             let i = pos(rng, b);
             b.truncate(i);
         }
-        5 | 6 | 7 => replace_number(rng, b),
+        5..=7 => replace_number(rng, b),
         8 => replace_value(rng, b),
         9 => duplicate_line(rng, b),
         10 => drop_or_swap_line(rng, b),
@@ -115,7 +115,7 @@ fn mutate_once(rng: &mut ChaCha8Rng, b: &mut Vec<u8>, others: &[Vec<u8>]) {
         12 => {
             let i = pos(rng, b);
             let n = *pick(rng, &[256usize, 4096, 70_000, 300_000]);
-            let c = *pick(rng, &[b'a', b'9', b' ', b'"', b'\n', b'\t']);
+            let c = *pick(rng, b"a9 \"\n\t");
             b.splice(i..i, std::iter::repeat_n(c, n));
         }
         13 if !others.is_empty() => {

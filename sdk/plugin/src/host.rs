@@ -2107,6 +2107,72 @@ impl Planner for PluginPlanner {
     }
 }
 
+/// The host's table validation on tables built in memory, for the fuzz harness
+/// (`human2nav-fuzz`); not part of the API.
+#[doc(hidden)]
+pub mod fuzzing {
+    use super::*;
+
+    /// Validates an entry table exactly as after `dlopen` ([`PluginLibrary::from_entry`]) and
+    /// returns the factories it declares, with the checks.
+    ///
+    /// # Safety
+    /// As for `from_entry`, except that the memory need only stay valid for this call (nothing
+    /// of the table is kept: names are copied and no `create` is called).
+    pub unsafe fn check_entry_table(
+        raw: *const H2nPluginEntry,
+    ) -> (Result<Vec<FactoryInfo>, PluginError>, Vec<Check>) {
+        let mut checks = Vec::new();
+        // SAFETY: the caller's contract.
+        let r = unsafe { PluginLibrary::from_entry(Path::new("fuzz.so"), raw, &mut checks) };
+        (r.map(|lib| lib.factories), checks)
+    }
+
+    /// Validates a vtable of `kind` ([`checked_vtable`]); an unknown kind is an error.
+    ///
+    /// # Safety
+    /// As for `checked_vtable`, except that the memory need only stay valid for this call.
+    pub unsafe fn check_vtable(
+        kind: PluginKind,
+        raw: *const c_void,
+    ) -> Result<String, PluginError> {
+        let lib = PluginLibrary {
+            path: PathBuf::from("fuzz.so"),
+            abi_version: ABI_VERSION,
+            name: "fuzz".into(),
+            version: String::new(),
+            factories: Vec::new(),
+            creates: Vec::new(),
+            checks: Vec::new(),
+        };
+        // SAFETY (all three): the caller's contract; the returned reference is dropped here.
+        match kind {
+            PluginKind::Constraint => unsafe {
+                checked_vtable::<H2nConstraintVTable>(&lib, "fuzz", raw).map(|r| r.1)
+            },
+            PluginKind::Embodiment => unsafe {
+                checked_vtable::<H2nEmbodimentVTable>(&lib, "fuzz", raw).map(|r| r.1)
+            },
+            PluginKind::Planner => unsafe {
+                checked_vtable::<H2nPlannerVTable>(&lib, "fuzz", raw).map(|r| r.1)
+            },
+            PluginKind::Unknown(c) => Err(PluginError::Malformed {
+                path: lib.path.clone(),
+                message: format!("unknown kind {c}"),
+            }),
+        }
+    }
+
+    /// Reads a plugin string as the host does ([`crate::validate`]'s caps), copied.
+    ///
+    /// # Safety
+    /// As for `plugin_str`, for the duration of the call.
+    pub unsafe fn read_plugin_str(s: H2nStr, cap: usize) -> Result<String, String> {
+        // SAFETY: the caller's contract.
+        unsafe { plugin_str(s, cap) }.map(str::to_owned)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     //! Entry tables a broken plugin could return, validated in-process exactly as after

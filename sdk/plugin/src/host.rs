@@ -520,6 +520,22 @@ pub(crate) trait VTable: Sized + 'static {
     fn name_fn(&self) -> Option<NameFn>;
 }
 
+/// The slots every vtable kind starts with (`destroy`, `last_error`, `name`), read the same
+/// way for each.
+macro_rules! common_slots {
+    () => {
+        fn destroy_fn(&self) -> Option<DestroyFn> {
+            self.destroy
+        }
+        fn last_error_fn(&self) -> Option<LastErrorFn> {
+            self.last_error
+        }
+        fn name_fn(&self) -> Option<NameFn> {
+            self.name
+        }
+    };
+}
+
 impl VTable for H2nConstraintVTable {
     const KIND: PluginKind = PluginKind::Constraint;
     fn slots(&self) -> Vec<(&'static str, bool, bool)> {
@@ -530,15 +546,7 @@ impl VTable for H2nConstraintVTable {
             ("evaluate", self.evaluate.is_some(), true),
         ]
     }
-    fn destroy_fn(&self) -> Option<DestroyFn> {
-        self.destroy
-    }
-    fn last_error_fn(&self) -> Option<LastErrorFn> {
-        self.last_error
-    }
-    fn name_fn(&self) -> Option<NameFn> {
-        self.name
-    }
+    common_slots!();
 }
 
 impl VTable for H2nEmbodimentVTable {
@@ -554,15 +562,7 @@ impl VTable for H2nEmbodimentVTable {
             ("track", self.track.is_some(), true),
         ]
     }
-    fn destroy_fn(&self) -> Option<DestroyFn> {
-        self.destroy
-    }
-    fn last_error_fn(&self) -> Option<LastErrorFn> {
-        self.last_error
-    }
-    fn name_fn(&self) -> Option<NameFn> {
-        self.name
-    }
+    common_slots!();
 }
 
 impl VTable for H2nPlannerVTable {
@@ -577,15 +577,7 @@ impl VTable for H2nPlannerVTable {
             ("last_plan", self.last_plan.is_some(), true),
         ]
     }
-    fn destroy_fn(&self) -> Option<DestroyFn> {
-        self.destroy
-    }
-    fn last_error_fn(&self) -> Option<LastErrorFn> {
-        self.last_error
-    }
-    fn name_fn(&self) -> Option<NameFn> {
-        self.name
-    }
+    common_slots!();
 }
 
 /// Checks the vtable an instance of factory `factory` came with (see [`crate::validate`]) and

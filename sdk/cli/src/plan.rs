@@ -164,14 +164,15 @@ pub fn run(args: PlanArgs) -> anyhow::Result<ExitCode> {
     };
 
     if args.eval {
+        let model = load_model(&model_dir, cfg.backend)?;
         if let Some(n) = args.human {
             let cache = args
                 .cache
                 .clone()
                 .unwrap_or_else(|| workspace.join("out/data/cache"));
-            human_windows(&args, &cfg, &model_dir, &cache, n)?;
+            human_windows(&args, &cfg, &model, &cache, n)?;
         }
-        return eval(&args, &cfg, &model_dir, &episodes, &step);
+        return eval(&args, &cfg, &model, &model_dir, &episodes, &step);
     }
     if let Some(calls) = args.bench {
         return bench(&args, &cfg, &model_dir, &episodes, &step, calls);
@@ -350,6 +351,7 @@ fn bar(len: usize, what: &str) -> ProgressBar {
 fn eval(
     args: &PlanArgs,
     cfg: &PlannerConfig,
+    model: &PlannerModel,
     model_dir: &Path,
     episodes: &[Episode],
     step: &StepOptions,
@@ -377,7 +379,11 @@ fn eval(
         let mut planners = Arm::ALL
             .iter()
             .map(|&arm| {
-                let model = load_model(model_dir, cfg.backend)?;
+                // Native weights are read once and shared; libtorch loads its own copy.
+                let model = match model.try_share() {
+                    Some(m) => m,
+                    None => load_model(model_dir, cfg.backend)?,
+                };
                 RobotPlanner::new(profile.clone(), model, arm.settings(&cfg.human2nav))
                     .map(|p| (arm, p))
             })
@@ -445,7 +451,7 @@ fn eval(
 fn human_windows(
     args: &PlanArgs,
     cfg: &PlannerConfig,
-    model_dir: &Path,
+    model: &PlannerModel,
     cache_dir: &Path,
     n: usize,
 ) -> anyhow::Result<()> {
@@ -457,7 +463,6 @@ fn human_windows(
     })?;
     let seed = cfg.human2nav.seed;
     let windows = cache_windows(&cache, Split::Val, n, seed)?;
-    let model = load_model(model_dir, cfg.backend)?;
     let mut guidance = cfg.human2nav.guidance;
     guidance.enabled = true;
     let opts = EvalOptions {
@@ -483,7 +488,7 @@ fn human_windows(
         let phi = robot_phi(&profile)?;
         let pb = bar(windows.len(), &format!("human windows ({})", profile.name));
         let m = guided_windows(
-            &model,
+            model,
             &windows,
             &phi,
             &profile.limits,

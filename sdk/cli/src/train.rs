@@ -10,9 +10,9 @@ use human2nav_core::lock::DirLock;
 use human2nav_core::se2::Pose2;
 use human2nav_data::cache::TupleCache;
 use human2nav_data::tuples::{CompactTuple, Split};
-use human2nav_flow::card::{ComplexityInfo, EvaluationInfo, ModelCard, TrainingInfo};
+use human2nav_flow::card::{ComplexityInfo, EvaluationInfo, TrainingInfo};
 use human2nav_flow::eval::{EvalOptions, EvalWindow, evaluate};
-use human2nav_flow::model::{CARD_FILE, WEIGHTS_FILE};
+use human2nav_flow::model::CARD_FILE;
 use human2nav_flow::net::{Complexity, parameter_count};
 use human2nav_flow::tch;
 use human2nav_flow::train::{TrainOptions, Trainer};
@@ -498,11 +498,8 @@ fn export<S: human2nav_flow::train::TrainingSample>(
     card.source.steps = cfg.eval.steps;
     let cx = Complexity::of(&card.net);
     let params = parameter_count(model.var_store());
-    model.save(model_dir)?;
-    let weights = std::fs::read(model_dir.join(WEIGHTS_FILE))
-        .with_context(|| format!("reading back {}", model_dir.join(WEIGHTS_FILE).display()))?;
-    let bytes = weights.len() as u64;
-    model.card_mut().weights_fnv64 = Some(ModelCard::checksum(&weights));
+    let (checksum, bytes) = model.save(model_dir)?;
+    model.card_mut().weights_fnv64 = Some(checksum);
     model.card_mut().complexity = Some(ComplexityInfo {
         parameters: params,
         unet_flops_per_trajectory: 2 * cx.unet_macs,

@@ -210,17 +210,19 @@ impl CfmModel {
     }
 
     /// Writes the weights (float32) and the card, with the weights' checksum, into `dir`
-    /// (created if needed).
+    /// (created if needed), and returns that checksum and the weights file's size.
     /// The written card is this model's card with `weights_fnv64` set; the weights are written
     /// in a fixed order, so the same weights always get the same checksum.
-    pub fn save(&self, dir: &Path) -> Result<(), CfmError> {
+    pub fn save(&self, dir: &Path) -> Result<(String, u64), CfmError> {
         std::fs::create_dir_all(dir).map_err(|e| CfmError::io(dir, e))?;
         let weights = dir.join(&self.card.weights);
         write_safetensors(&weights, &self.named_tensors(""))?;
         let bytes = std::fs::read(&weights).map_err(|e| CfmError::io(&weights, e))?;
+        let checksum = ModelCard::checksum(&bytes);
         let mut card = self.card.clone();
-        card.weights_fnv64 = Some(ModelCard::checksum(&bytes));
-        card.save(&dir.join(CARD_FILE))
+        card.weights_fnv64 = Some(checksum.clone());
+        card.save(&dir.join(CARD_FILE))?;
+        Ok((checksum, bytes.len() as u64))
     }
 
     /// The variables as `(prefix + name, float32 CPU tensor)`, sorted by name.

@@ -194,6 +194,15 @@ impl std::str::FromStr for Backend {
 }
 
 impl PlannerModel {
+    /// Another planner's handle on the same weights, with caches of its own: free for the
+    /// native backend (the weights are shared), `None` for libtorch (load it again).
+    pub fn try_share(&self) -> Option<Self> {
+        match self {
+            Self::Native(m) => Some(Self::Native(m.clone())),
+            Self::Torch(_) => None,
+        }
+    }
+
     /// The model card.
     pub fn card(&self) -> &ModelCard {
         match self {

@@ -513,11 +513,23 @@ fn one_line(s: &str) -> String {
 /// A vtable kind: its slots, for validation.
 pub(crate) trait VTable: Sized + 'static {
     const KIND: PluginKind;
-    /// `(slot, set, required)` in table order.
-    fn slots(&self) -> Vec<(&'static str, bool, bool)>;
+    /// `(slot, set, required)` of the slots after the common three, in table order.
+    fn own_slots(&self) -> Vec<(&'static str, bool, bool)>;
     fn destroy_fn(&self) -> Option<DestroyFn>;
     fn last_error_fn(&self) -> Option<LastErrorFn>;
     fn name_fn(&self) -> Option<NameFn>;
+
+    /// `(slot, set, required)` in table order: `destroy` (required), `last_error` and `name`
+    /// (optional), then the kind's own.
+    fn slots(&self) -> Vec<(&'static str, bool, bool)> {
+        let mut slots = vec![
+            ("destroy", self.destroy_fn().is_some(), true),
+            ("last_error", self.last_error_fn().is_some(), false),
+            ("name", self.name_fn().is_some(), false),
+        ];
+        slots.extend(self.own_slots());
+        slots
+    }
 }
 
 /// The slots every vtable kind starts with (`destroy`, `last_error`, `name`), read the same
@@ -538,24 +550,16 @@ macro_rules! common_slots {
 
 impl VTable for H2nConstraintVTable {
     const KIND: PluginKind = PluginKind::Constraint;
-    fn slots(&self) -> Vec<(&'static str, bool, bool)> {
-        vec![
-            ("destroy", self.destroy.is_some(), true),
-            ("last_error", self.last_error.is_some(), false),
-            ("name", self.name.is_some(), false),
-            ("evaluate", self.evaluate.is_some(), true),
-        ]
+    fn own_slots(&self) -> Vec<(&'static str, bool, bool)> {
+        vec![("evaluate", self.evaluate.is_some(), true)]
     }
     common_slots!();
 }
 
 impl VTable for H2nEmbodimentVTable {
     const KIND: PluginKind = PluginKind::Embodiment;
-    fn slots(&self) -> Vec<(&'static str, bool, bool)> {
+    fn own_slots(&self) -> Vec<(&'static str, bool, bool)> {
         vec![
-            ("destroy", self.destroy.is_some(), true),
-            ("last_error", self.last_error.is_some(), false),
-            ("name", self.name.is_some(), false),
             ("holonomic", self.holonomic.is_some(), true),
             ("saturate", self.saturate.is_some(), true),
             ("step", self.step.is_some(), true),
@@ -567,11 +571,8 @@ impl VTable for H2nEmbodimentVTable {
 
 impl VTable for H2nPlannerVTable {
     const KIND: PluginKind = PluginKind::Planner;
-    fn slots(&self) -> Vec<(&'static str, bool, bool)> {
+    fn own_slots(&self) -> Vec<(&'static str, bool, bool)> {
         vec![
-            ("destroy", self.destroy.is_some(), true),
-            ("last_error", self.last_error.is_some(), false),
-            ("name", self.name.is_some(), false),
             ("reset", self.reset.is_some(), false),
             ("plan", self.plan.is_some(), true),
             ("last_plan", self.last_plan.is_some(), true),

@@ -9,69 +9,20 @@
 //! (`target/release/`).
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use human2nav_core::Twist2;
 use human2nav_core::constraint::{ConstraintContext, ConstraintTerm, TrajBatch};
-use human2nav_core::{AgentState, Limits, Twist2};
 use human2nav_personal_space::{PersonalSpace, PersonalSpaceConfig};
 use human2nav_plugin::PluginHost;
 use std::hint::black_box;
-use std::path::PathBuf;
 use std::time::Instant;
 
+mod common;
+use common::{HORIZON, agents, library, limits, trajectories};
+
 const BATCH: usize = 64;
-const HORIZON: usize = 32;
-
-fn trajectories() -> Vec<f64> {
-    let mut data = Vec::with_capacity(BATCH * HORIZON * 3);
-    for b in 0..BATCH {
-        let bend = (b as f64 - BATCH as f64 / 2.0) * 0.02;
-        for k in 0..HORIZON {
-            let s = k as f64 * 0.1;
-            data.extend_from_slice(&[1.2 * s, bend * s * s, 2.0 * bend * s]);
-        }
-    }
-    data
-}
-
-fn agents() -> Vec<AgentState> {
-    (0..8)
-        .map(|j| {
-            let a = j as f64 * 0.785;
-            AgentState {
-                id: j,
-                position: [2.0 + 1.5 * a.cos(), 1.5 * a.sin()],
-                velocity: [-0.8 * a.cos(), 0.6 * a.sin()],
-                radius: 0.3,
-                history: vec![[0.0, 0.0]; 8],
-            }
-        })
-        .collect()
-}
-
-/// The plugin library: next to this benchmark (cargo builds dev-dependencies' cdylibs into
-/// `deps/`), else in the profile directory above it.
-fn library() -> PathBuf {
-    let deps = std::env::current_exe()
-        .ok()
-        .and_then(|exe| exe.parent().map(PathBuf::from))
-        .unwrap_or_else(|| PathBuf::from("target/release/deps"));
-    let here = deps.join("human2nav_personal_space");
-    if human2nav_plugin::resolve::resolve_library_path(&here).is_ok() {
-        return here;
-    }
-    deps.parent()
-        .unwrap_or(&deps)
-        .join("human2nav_personal_space")
-}
 
 fn boundary(c: &mut Criterion) {
-    let limits = Limits {
-        v_max: 1.2,
-        v_reverse_max: 0.4,
-        a_max: 1.0,
-        omega_max: 1.5,
-        kappa_max: None,
-        lateral_speed_max: 0.05,
-    };
+    let limits = limits();
     let agents = agents();
     let ctx = ConstraintContext {
         dt: 0.1,
@@ -79,13 +30,13 @@ fn boundary(c: &mut Criterion) {
         initial_velocity: Twist2::ZERO,
         agents: &agents,
     };
-    let data = trajectories();
+    let data = trajectories(BATCH);
     let direct = match PersonalSpace::new(&PersonalSpaceConfig::default(), Some(0.3)) {
         Ok(t) => t,
         Err(e) => panic!("default config must be valid: {e}"),
     };
     let host = PluginHost::new();
-    let library = library();
+    let library = library("human2nav_personal_space");
     // Without a deadline: the call runs on this thread, as the direct one does (the deadline's
     // hand-off to a worker is measured by the `deadline` benchmark).
     let plugin = match host.constraint_with_deadline(

@@ -14,68 +14,21 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use human2nav_core::constraint::{ConstraintContext, ConstraintTerm, TrajBatch};
-use human2nav_core::{AgentState, Limits, Observation, Planner, Pose2, Twist2};
+use human2nav_core::{Observation, Planner, Pose2, Twist2};
 use human2nav_plugin::{PluginHost, deadline::DEFAULT_DEADLINE};
 use std::hint::black_box;
-use std::path::PathBuf;
-use std::time::Instant;
 
-const HORIZON: usize = 32;
+mod common;
+use common::{HORIZON, Paired, agents, library, limits, trajectories};
 
-/// A cdylib of this benchmark's dev-dependencies (see the module docs).
-fn library(name: &str) -> PathBuf {
-    let deps = std::env::current_exe()
-        .ok()
-        .and_then(|exe| exe.parent().map(PathBuf::from))
-        .unwrap_or_else(|| PathBuf::from("target/release/deps"));
-    let here = deps.join(name);
-    if human2nav_plugin::resolve::resolve_library_path(&here).is_ok() {
-        return here;
-    }
-    deps.parent().unwrap_or(&deps).join(name)
-}
-
-fn agents() -> Vec<AgentState> {
-    (0..8)
-        .map(|j| {
-            let a = j as f64 * 0.785;
-            AgentState {
-                id: j,
-                position: [2.0 + 1.5 * a.cos(), 1.5 * a.sin()],
-                velocity: [-0.8 * a.cos(), 0.6 * a.sin()],
-                radius: 0.3,
-                history: vec![[0.0, 0.0]; 8],
-            }
-        })
-        .collect()
-}
-
-fn trajectories(batch: usize) -> Vec<f64> {
-    let mut data = Vec::with_capacity(batch * HORIZON * 3);
-    for b in 0..batch {
-        let bend = (b as f64 - batch as f64 / 2.0) * 0.02;
-        for k in 0..HORIZON {
-            let s = k as f64 * 0.1;
-            data.extend_from_slice(&[1.2 * s, bend * s * s, 2.0 * bend * s]);
-        }
-    }
-    data
-}
-
-/// Median over `n` alternating pairs of (time of `b`) − (time of `a`), in µs.
-fn paired_difference(n: usize, mut a: impl FnMut(), mut b: impl FnMut()) -> (f64, f64, f64) {
-    let mut d: Vec<f64> = (0..n)
-        .map(|_| {
-            let t0 = Instant::now();
-            a();
-            let t1 = Instant::now();
-            b();
-            let t2 = Instant::now();
-            ((t2 - t1).as_secs_f64() - (t1 - t0).as_secs_f64()) * 1e6
-        })
-        .collect();
-    d.sort_by(f64::total_cmp);
-    (d[n / 2], d[n / 4], d[3 * n / 4])
+/// Median and quartiles over `n` alternating pairs of (time of `b`) − (time of `a`), in µs.
+fn paired_difference(n: usize, a: impl FnMut(), b: impl FnMut()) -> (f64, f64, f64) {
+    let d = Paired::run(n, a, b).diff;
+    (
+        Paired::at(&d, 1, 2),
+        Paired::at(&d, 1, 4),
+        Paired::at(&d, 3, 4),
+    )
 }
 
 fn planner(c: &mut Criterion) {
@@ -139,14 +92,7 @@ fn constraint(c: &mut Criterion) {
         Err(e) => panic!("{e} (build it with `cargo build --release -p human2nav-personal-space`)"),
     };
     let (direct, guarded) = (make(None), make(Some(DEFAULT_DEADLINE)));
-    let limits = Limits {
-        v_max: 1.2,
-        v_reverse_max: 0.4,
-        a_max: 1.0,
-        omega_max: 1.5,
-        kappa_max: None,
-        lateral_speed_max: 0.05,
-    };
+    let limits = limits();
     let agents = agents();
     let ctx = ConstraintContext {
         dt: 0.1,

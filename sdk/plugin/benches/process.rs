@@ -14,80 +14,30 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use human2nav_core::constraint::{ConstraintContext, ConstraintTerm, TrajBatch};
-use human2nav_core::{AgentState, Limits, Observation, Planner, Pose2, Twist2};
+use human2nav_core::{Observation, Planner, Pose2, Twist2};
 use human2nav_plugin::deadline::DEFAULT_DEADLINE;
 use human2nav_plugin::{PluginHost, PluginIsolation};
 use std::hint::black_box;
-use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-const HORIZON: usize = 32;
-const PAIRS: usize = 3000;
-
-/// A cdylib of this benchmark's dev-dependencies (next to the benchmark, else one level up).
-fn library(name: &str) -> PathBuf {
-    let deps = std::env::current_exe()
-        .ok()
-        .and_then(|exe| exe.parent().map(PathBuf::from))
-        .unwrap_or_else(|| PathBuf::from("target/release/deps"));
-    let here = deps.join(name);
-    if human2nav_plugin::resolve::resolve_library_path(&here).is_ok() {
-        return here;
-    }
-    deps.parent().unwrap_or(&deps).join(name)
-}
-
-fn host() -> PluginHost {
-    PluginHost::new().with_process_helper(env!("CARGO_BIN_EXE_human2nav-plugin-host"))
-}
-
-fn agents() -> Vec<AgentState> {
-    (0..8)
-        .map(|j| {
-            let a = j as f64 * 0.785;
-            AgentState {
-                id: j,
-                position: [2.0 + 1.5 * a.cos(), 1.5 * a.sin()],
-                velocity: [-0.8 * a.cos(), 0.6 * a.sin()],
-                radius: 0.3,
-                history: vec![[0.0, 0.0]; 8],
-            }
-        })
-        .collect()
-}
-
-fn trajectories(batch: usize) -> Vec<f64> {
-    let mut data = Vec::with_capacity(batch * HORIZON * 3);
-    for b in 0..batch {
-        let bend = (b as f64 - batch as f64 / 2.0) * 0.02;
-        for k in 0..HORIZON {
-            let s = k as f64 * 0.1;
-            data.extend_from_slice(&[1.2 * s, bend * s * s, 2.0 * bend * s]);
-        }
-    }
-    data
-}
+mod common;
+use common::{HORIZON, Paired, agents, library, limits, trajectories};
 
 /// Medians (µs) of `a`'s and `b`'s time per call over `n` alternating calls, and the median
 /// of their per-pair difference.
-fn paired(n: usize, mut a: impl FnMut(), mut b: impl FnMut()) -> (f64, f64, f64) {
-    let (mut ta, mut tb, mut d) = (Vec::new(), Vec::new(), Vec::new());
-    for _ in 0..n {
-        let t0 = Instant::now();
-        a();
-        let t1 = Instant::now();
-        b();
-        let t2 = Instant::now();
-        let (x, y) = ((t1 - t0).as_secs_f64() * 1e6, (t2 - t1).as_secs_f64() * 1e6);
-        ta.push(x);
-        tb.push(y);
-        d.push(y - x);
-    }
-    let median = |v: &mut Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
-    (median(&mut ta), median(&mut tb), median(&mut d))
+fn paired(n: usize, a: impl FnMut(), b: impl FnMut()) -> (f64, f64, f64) {
+    let p = Paired::run(n, a, b);
+    (
+        Paired::at(&p.a, 1, 2),
+        Paired::at(&p.b, 1, 2),
+        Paired::at(&p.diff, 1, 2),
+    )
+}
+
+const PAIRS: usize = 3000;
+
+fn host() -> PluginHost {
+    PluginHost::new().with_process_helper(env!("CARGO_BIN_EXE_human2nav-plugin-host"))
 }
 
 fn planner(c: &mut Criterion) {
@@ -156,14 +106,7 @@ fn constraint(c: &mut Criterion) {
         make(PluginIsolation::InProcess),
         make(PluginIsolation::Process),
     );
-    let limits = Limits {
-        v_max: 1.2,
-        v_reverse_max: 0.4,
-        a_max: 1.0,
-        omega_max: 1.5,
-        kappa_max: None,
-        lateral_speed_max: 0.05,
-    };
+    let limits = limits();
     let agents = agents();
     let ctx = ConstraintContext {
         dt: 0.1,

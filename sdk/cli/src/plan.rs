@@ -11,8 +11,8 @@ use anyhow::{Context, bail};
 use clap::Args;
 use human2nav_core::ablation::{Arm, ArmSummary, ablation_step};
 use human2nav_core::human2nav::{Human2Nav, Human2NavSettings};
-use human2nav_core::tfs::Violations;
-use human2nav_core::{Observation, Planner};
+use human2nav_core::tfs::{self, Violations};
+use human2nav_core::{Observation, Planner, Stage, Stages};
 use human2nav_data::ScenarioClass;
 use human2nav_data::cache::TupleCache;
 use human2nav_data::paths::find_workspace_root;
@@ -85,6 +85,11 @@ pub struct PlanArgs {
     /// windows of the episode file (p50/p95 and where the time goes).
     #[arg(long, value_name = "CALLS")]
     pub bench: Option<usize>,
+    /// Planning budget of a call in milliseconds (overrides the configuration's `budget_ms`):
+    /// the call returns the best plan found by then. With `--bench`, also reports how late the
+    /// calls return and how far each stage got.
+    #[arg(long, value_name = "MS")]
+    pub budget_ms: Option<f64>,
     /// Compare guided and unguided plans on `--windows` windows per robot and print a table.
     #[arg(long)]
     pub eval: bool,
@@ -133,6 +138,9 @@ pub fn run(args: PlanArgs) -> anyhow::Result<ExitCode> {
     }
     if args.no_guidance {
         cfg.human2nav.guidance.enabled = false;
+    }
+    if let Some(b) = args.budget_ms {
+        cfg.human2nav.budget_ms = b;
     }
     cfg.validate()?;
     let model_dir = args
@@ -246,6 +254,9 @@ fn plan_one(
     );
     if plan.info.fallback {
         println!("FALLBACK (stop in place): {}", plan.info.notes.join("; "));
+    }
+    if let Some(stages) = &plan.info.stages {
+        println!("stages: {}", describe_stages(stages));
     }
     println!(
         "TFS {:.3} ({} of {} waypoints feasible){}; Φ {} → {}",
@@ -647,7 +658,91 @@ fn bench(
          network's convolutions (a VJP is its forward pass plus the transposed products); limit = MFLOP/call at \
          the SGEMM rate above, so p50 / limit is how far a call is from the machine's arithmetic bound."
     );
+    if cfg.human2nav.budget_ms > 0.0 {
+        let mut settings = cfg.human2nav;
+        settings.guidance.enabled = true;
+        budget_table(robot, model_dir, &backends, settings, &wins, calls)?;
+    }
     Ok(ExitCode::SUCCESS)
+}
+
+/// One line on how far each stage of a planning call got.
+fn describe_stages(s: &Stages) -> String {
+    format!(
+        "sampling {}/{} steps, guidance {}/{} iterations, correction {}/{} candidates; {}",
+        s.sampling.done,
+        s.sampling.planned,
+        s.guidance.done,
+        s.guidance.planned,
+        s.correction.done,
+        s.correction.planned,
+        s.cut_short
+            .map_or("no stage cut short".into(), |st| format!(
+                "the deadline cut {st} short"
+            ))
+    )
+}
+
+/// `plan --bench` with a budget: per guided call, how long after the deadline it returned and
+/// which stage the deadline cut, and the TFS of the plans (the anytime planner must still
+/// return feasible plans).
+fn budget_table(
+    robot: &Path,
+    model_dir: &Path,
+    backends: &[Backend],
+    settings: Human2NavSettings,
+    wins: &[Observation],
+    calls: usize,
+) -> anyhow::Result<()> {
+    let budget = settings.budget_ms;
+    let limits = load_profile(robot)?.limits;
+    println!();
+    println!("guided calls under a budget of {budget} ms (overshoot = call time − budget):");
+    println!(
+        "| backend | calls | p50 (ms) | max (ms) | overshoot p50 / p95 / max (ms) | cut in sampling / guidance / correction | fallbacks | mean TFS |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for &backend in backends {
+        let (mut planner, _) = timed_planner(robot, model_dir, backend, settings)?;
+        let pb = bar(calls, &format!("calls under {budget} ms ({backend})"));
+        let (mut ms, mut cut, mut fallbacks, mut tfs_sum) = (Vec::new(), [0usize; 3], 0, 0.0);
+        for obs in wins.iter().cycle().take(calls) {
+            planner.reset();
+            let start = std::time::Instant::now();
+            let plan = planner.plan(obs)?;
+            ms.push(start.elapsed().as_secs_f64() * 1e3);
+            let stage = plan.info.stages.and_then(|s| s.cut_short);
+            for (slot, st) in
+                cut.iter_mut()
+                    .zip([Stage::Sampling, Stage::Guidance, Stage::Correction])
+            {
+                *slot += usize::from(stage == Some(st));
+            }
+            fallbacks += usize::from(plan.info.fallback);
+            let ego: Vec<_> = plan.poses.iter().map(|p| obs.ego.between(*p)).collect();
+            tfs_sum += tfs::tfs_plan(&ego, plan.dt, &limits, obs.ego_velocity);
+            pb.inc(1);
+        }
+        pb.finish_and_clear();
+        let lat = LatencyStats::of(&ms);
+        let over: Vec<f64> = ms.iter().map(|m| m - budget).collect();
+        let over = LatencyStats::of(&over);
+        let share = |c: usize| 100.0 * c as f64 / ms.len().max(1) as f64;
+        println!(
+            "| {backend} | {} | {:.2} | {:.2} | {:.2} / {:.2} / {:.2} | {:.0} / {:.0} / {:.0} % | {fallbacks} | {:.3} |",
+            lat.calls,
+            lat.p50_ms,
+            lat.max_ms,
+            over.p50_ms,
+            over.p95_ms,
+            over.max_ms,
+            share(cut[0]),
+            share(cut[1]),
+            share(cut[2]),
+            tfs_sum / ms.len().max(1) as f64
+        );
+    }
+    Ok(())
 }
 
 /// libtorch's single-thread SGEMM rate on `n × n` matrices (median of `repeats`), GFLOP/s.

@@ -151,11 +151,22 @@
 //!
 //! All buffers live in a reusable [`GuidanceWorkspace`]; once it has seen a batch of a given
 //! shape, guidance allocates nothing but its result.
+//!
+//! # Deadlines
+//!
+//! [`sample_guided_until`] and [`guide_subset_until`] take a [`Deadline`] and check it before
+//! every network call, so a call ends at most one network call after it. A rollout cut short
+//! after `i ≥ 1` steps continues the remaining `N − i` steps at each waypoint's last velocity
+//! `w_{i−1}` (no network call: the one-jump estimate of the endpoint that flow matching
+//! allows); a rollout cut before its first step is [`GuidanceError::DeadlineBeforeSampling`].
+//! An iteration of Algorithm 1 cut short is undone, so the result is the last completed
+//! iterate. [`GuidanceResult::steps_run`] and [`GuidanceResult::cut_short`] say what happened.
 
 pub mod analytic;
 
 use crate::constraint::{ConstraintContext, ConstraintError, Phi, PhiScratch, TrajBatch};
 use crate::flow::{FlowCondition, FlowError, FlowModel};
+use crate::planner::Deadline;
 use crate::se2::{Jacobian3, Pose2, Twist2, euler_step_jacobians, transpose_apply};
 use serde::{Deserialize, Serialize};
 
@@ -389,6 +400,9 @@ pub enum GuidanceError {
         stage: &'static str,
         iteration: usize,
     },
+    /// The deadline had passed before the first integration step, so there is no sample.
+    #[error("the deadline passed before the first integration step")]
+    DeadlineBeforeSampling,
 }
 
 /// What [`sample_guided`] returns. Trajectories are flat `[K, T, 3]` in the ego frame, without
@@ -409,6 +423,11 @@ pub struct GuidanceResult {
     pub phi_after: Vec<f64>,
     /// Number of control updates made (≤ `iterations_m`).
     pub iterations_run: usize,
+    /// Integration steps of the plain rollout that called the network: `steps_n` unless the
+    /// deadline cut sampling short (the remaining steps then continued at the last velocity).
+    pub steps_run: usize,
+    /// True when the deadline ended sampling or guidance early.
+    pub cut_short: bool,
 }
 
 impl GuidanceResult {
@@ -523,28 +542,40 @@ impl GuidanceWorkspace {
     /// Per active sample: keep the new iterate and grow the step when Φ did not rise, else
     /// restore the saved iterate and shrink the step.
     fn accept_or_restore(&mut self) {
-        let m = self.size();
-        let per = self.horizon * 3;
-        let per_ext = (self.horizon + 1) * 3;
         for b in 0..self.samples {
             if !self.active[b] {
                 continue;
             }
             if self.phi[b] <= self.saved_phi[b] {
                 self.step[b] *= STEP_GROW;
-                continue;
+            } else {
+                self.step[b] *= STEP_SHRINK;
+                self.restore(b);
             }
-            self.step[b] *= STEP_SHRINK;
-            self.phi[b] = self.saved_phi[b];
-            let e = b * per_ext..(b + 1) * per_ext;
-            self.ext_grad[e.clone()].copy_from_slice(&self.saved_ext_grad[e]);
-            for i in 0..=self.steps {
-                let r = i * m + b * per..i * m + (b + 1) * per;
-                self.xs[r.clone()].copy_from_slice(&self.saved_xs[r.clone()]);
-                if i < self.steps {
-                    self.ws[r.clone()].copy_from_slice(&self.saved_ws[r.clone()]);
-                    self.u[r.clone()].copy_from_slice(&self.saved_u[r]);
-                }
+        }
+    }
+
+    /// Every sample back to the saved iterate (an iteration the deadline cut short).
+    fn restore_all(&mut self) {
+        for b in 0..self.samples {
+            self.restore(b);
+        }
+    }
+
+    /// Sample `b`'s states, velocities, controls, Φ and ∇Φ back to the saved iterate.
+    fn restore(&mut self, b: usize) {
+        let m = self.size();
+        let per = self.horizon * 3;
+        let per_ext = (self.horizon + 1) * 3;
+        self.phi[b] = self.saved_phi[b];
+        let e = b * per_ext..(b + 1) * per_ext;
+        self.ext_grad[e.clone()].copy_from_slice(&self.saved_ext_grad[e]);
+        for i in 0..=self.steps {
+            let r = i * m + b * per..i * m + (b + 1) * per;
+            self.xs[r.clone()].copy_from_slice(&self.saved_xs[r.clone()]);
+            if i < self.steps {
+                self.ws[r.clone()].copy_from_slice(&self.saved_ws[r.clone()]);
+                self.u[r.clone()].copy_from_slice(&self.saved_u[r]);
             }
         }
     }
@@ -592,17 +623,22 @@ fn clip3(v: &mut [f64], max: f64) {
 }
 
 /// Forward rollout `x_{i+1} = x_i·exp(Δt·(f(x_i, t_i) + u_i))`, filling `xs` and `ws`.
-/// `xs[0..m]` must already hold `x_0`.
+/// `xs[0..m]` must already hold `x_0`. Returns the number of steps taken: `N`, or fewer when
+/// `deadline` passed before a step's network call (the later states are then stale).
 fn forward(
     model: &(impl FlowModel + ?Sized),
     cond: &FlowCondition,
     ws: &mut GuidanceWorkspace,
     iteration: usize,
-) -> Result<(), GuidanceError> {
+    deadline: &Deadline,
+) -> Result<usize, GuidanceError> {
     let m = ws.size();
     let n = ws.steps;
     let dt = 1.0 / n as f64;
     for i in 0..n {
+        if deadline.passed() {
+            return Ok(i);
+        }
         let t = i as f64 * dt;
         let (done, rest) = ws.xs.split_at_mut((i + 1) * m);
         let x = &done[i * m..];
@@ -634,7 +670,29 @@ fn forward(
             });
         }
     }
-    Ok(())
+    Ok(n)
+}
+
+/// Completes a rollout cut short after `from ≥ 1` steps: the steps `from … N − 1` continue at
+/// each waypoint's last velocity `w_{from−1}` (no network call).
+fn extrapolate(ws: &mut GuidanceWorkspace, from: usize) {
+    let m = ws.size();
+    let n = ws.steps;
+    let dt = 1.0 / n as f64;
+    for i in from..n {
+        ws.ws.copy_within((from - 1) * m..from * m, i * m);
+        let (done, rest) = ws.xs.split_at_mut((i + 1) * m);
+        let x = &done[i * m..];
+        let w = &ws.ws[i * m..(i + 1) * m];
+        for ((p, v), o) in x
+            .chunks_exact(3)
+            .zip(w.chunks_exact(3))
+            .zip(rest[..m].chunks_exact_mut(3))
+        {
+            let q = Pose2::from_slice(p).euler_step(Twist2::from_slice(v), dt);
+            o.copy_from_slice(&q.to_array());
+        }
+    }
 }
 
 /// Φ and ∇Φ of the final state with the identity prepended; fills `phi` and `ext_grad`.
@@ -809,6 +867,7 @@ enum Direction<'a> {
 
 /// Adjoint backward pass (Alg. 1 lines 6-11): `μ_N = clip(∇_{x_N} Φ)`, then per step
 /// `μ_i = clip(S_xᵀ·μ_{i+1} + (∂f/∂x)ᵀ·S_wᵀ·μ_{i+1})`, filling `dir` as `direction` says.
+/// Returns false, with `dir` incomplete, when `deadline` passed before a network call.
 fn backward(
     model: &(impl FlowModel + ?Sized),
     cond: &FlowCondition,
@@ -816,7 +875,8 @@ fn backward(
     clip: f64,
     direction: Direction<'_>,
     iteration: usize,
-) -> Result<(), GuidanceError> {
+    deadline: &Deadline,
+) -> Result<bool, GuidanceError> {
     let (k, t) = (ws.samples, ws.horizon);
     let m = ws.size();
     let n = ws.steps;
@@ -842,6 +902,9 @@ fn backward(
         pull_back_step(ws, i, dt, direction);
         if i == 0 && !paper {
             break;
+        }
+        if deadline.passed() {
+            return Ok(false);
         }
         if paper {
             shift_by_controls(ws, i, dt);
@@ -879,7 +942,7 @@ fn backward(
             iteration,
         });
     }
-    Ok(())
+    Ok(true)
 }
 
 /// One step of the backward pass before the model's VJP: with `(S_x, S_w)` the Jacobians of the
@@ -974,7 +1037,7 @@ pub fn sample(
     ws: &mut GuidanceWorkspace,
 ) -> Result<Vec<f64>, GuidanceError> {
     start(model, x0, steps_n, ws)?;
-    forward(model, cond, ws, 0)?;
+    forward(model, cond, ws, 0, &Deadline::never())?;
     ws.plain = true;
     Ok(ws.final_state().to_vec())
 }
@@ -1003,9 +1066,18 @@ pub fn control_gradient(
         )));
     }
     ws.u.copy_from_slice(controls);
-    forward(model, cond, ws, 0)?;
+    let never = Deadline::never();
+    forward(model, cond, ws, 0, &never)?;
     terminal_cost(phi, ctx, ws, 0)?;
-    backward(model, cond, ws, f64::INFINITY, Direction::Gradient, 0)?;
+    backward(
+        model,
+        cond,
+        ws,
+        f64::INFINITY,
+        Direction::Gradient,
+        0,
+        &never,
+    )?;
     grad.copy_from_slice(&ws.dir);
     Ok(ws.phi.clone())
 }
@@ -1021,11 +1093,46 @@ pub fn sample_guided(
     settings: &GuidanceSettings,
     ws: &mut GuidanceWorkspace,
 ) -> Result<GuidanceResult, GuidanceError> {
+    sample_guided_until(model, cond, x0, phi, ctx, settings, ws, &Deadline::never())
+}
+
+/// [`sample_guided`] that starts no network call after `deadline` (module docs,
+/// "Deadlines"). A rollout cut short leaves the workspace unusable for [`guide_subset`].
+#[allow(clippy::too_many_arguments)]
+pub fn sample_guided_until(
+    model: &(impl FlowModel + ?Sized),
+    cond: &FlowCondition,
+    x0: &[f64],
+    phi: &Phi,
+    ctx: &ConstraintContext<'_>,
+    settings: &GuidanceSettings,
+    ws: &mut GuidanceWorkspace,
+    deadline: &Deadline,
+) -> Result<GuidanceResult, GuidanceError> {
     settings.validate()?;
     start(model, x0, settings.steps_n, ws)?;
-    forward(model, cond, ws, 0)?;
+    let steps_run = forward(model, cond, ws, 0, deadline)?;
+    if steps_run == 0 {
+        return Err(GuidanceError::DeadlineBeforeSampling);
+    }
+    if steps_run < ws.steps {
+        extrapolate(ws, steps_run);
+        terminal_cost(phi, ctx, ws, 0)?;
+        let poses = ws.final_state().to_vec();
+        return Ok(GuidanceResult {
+            samples: ws.samples,
+            horizon: ws.horizon,
+            unguided: poses.clone(),
+            guided: poses,
+            phi_before: ws.phi.clone(),
+            phi_after: ws.phi.clone(),
+            iterations_run: 0,
+            steps_run,
+            cut_short: true,
+        });
+    }
     ws.plain = true;
-    optimise(model, cond, phi, ctx, settings, ws)
+    optimise(model, cond, phi, ctx, settings, ws, deadline)
 }
 
 /// Algorithm 1 on the samples `keep` (ascending indices) of the rollout the previous
@@ -1041,6 +1148,31 @@ pub fn guide_subset(
     ctx: &ConstraintContext<'_>,
     settings: &GuidanceSettings,
     ws: &mut GuidanceWorkspace,
+) -> Result<GuidanceResult, GuidanceError> {
+    guide_subset_until(
+        model,
+        cond,
+        keep,
+        phi,
+        ctx,
+        settings,
+        ws,
+        &Deadline::never(),
+    )
+}
+
+/// [`guide_subset`] that starts no network call after `deadline`: the result is the last
+/// iterate of Algorithm 1 completed by then (module docs, "Deadlines").
+#[allow(clippy::too_many_arguments)]
+pub fn guide_subset_until(
+    model: &(impl FlowModel + ?Sized),
+    cond: &FlowCondition,
+    keep: &[usize],
+    phi: &Phi,
+    ctx: &ConstraintContext<'_>,
+    settings: &GuidanceSettings,
+    ws: &mut GuidanceWorkspace,
+    deadline: &Deadline,
 ) -> Result<GuidanceResult, GuidanceError> {
     settings.validate()?;
     if !ws.plain || ws.steps != settings.steps_n || ws.samples == 0 {
@@ -1081,7 +1213,7 @@ pub fn guide_subset(
     }
     ws.prepare(keep.len(), ws.horizon, ws.steps);
     ws.u.fill(0.0);
-    optimise(model, cond, phi, ctx, settings, ws)
+    optimise(model, cond, phi, ctx, settings, ws, deadline)
 }
 
 /// Algorithm 1 from the plain rollout held in `ws` (controls zero).
@@ -1092,17 +1224,22 @@ fn optimise(
     ctx: &ConstraintContext<'_>,
     settings: &GuidanceSettings,
     ws: &mut GuidanceWorkspace,
+    deadline: &Deadline,
 ) -> Result<GuidanceResult, GuidanceError> {
     terminal_cost(phi, ctx, ws, 0)?;
 
     let unguided = ws.final_state().to_vec();
     let phi_before = ws.phi.clone();
-    let iterations_run = match (settings.enabled, settings.variant) {
-        (false, _) => 0,
-        (true, GuidanceVariant::Adaptive) => iterate_adaptive(model, cond, phi, ctx, settings, ws)?,
-        (true, GuidanceVariant::Paper) => iterate_paper(model, cond, phi, ctx, settings, ws)?,
+    let run = match (settings.enabled, settings.variant) {
+        (false, _) => Iterations::default(),
+        (true, GuidanceVariant::Adaptive) => {
+            iterate_adaptive(model, cond, phi, ctx, settings, ws, deadline)?
+        }
+        (true, GuidanceVariant::Paper) => {
+            iterate_paper(model, cond, phi, ctx, settings, ws, deadline)?
+        }
     };
-    ws.plain = iterations_run == 0;
+    ws.plain = run.completed == 0;
     Ok(GuidanceResult {
         samples: ws.samples,
         horizon: ws.horizon,
@@ -1110,11 +1247,54 @@ fn optimise(
         guided: ws.final_state().to_vec(),
         phi_before,
         phi_after: ws.phi.clone(),
-        iterations_run,
+        iterations_run: run.completed,
+        steps_run: ws.steps,
+        cut_short: run.cut_short,
     })
 }
 
-/// The adaptive variant's iterations; returns how many ran.
+/// How an iteration loop of Algorithm 1 ended.
+#[derive(Clone, Copy, Debug, Default)]
+struct Iterations {
+    /// Iterations completed (their result kept).
+    completed: usize,
+    /// True when the deadline ended the loop before `M` iterations or the early stop.
+    cut_short: bool,
+}
+
+/// One iteration of Algorithm 1 under a deadline: saves the iterate (when `save` or a
+/// deadline is set), runs the backward pass, the control update and the forward rollout with Φ,
+/// and returns false, with the saved iterate restored, when the deadline cut it short.
+#[allow(clippy::too_many_arguments)]
+fn iteration_step(
+    model: &(impl FlowModel + ?Sized),
+    cond: &FlowCondition,
+    phi: &Phi,
+    ctx: &ConstraintContext<'_>,
+    ws: &mut GuidanceWorkspace,
+    (clip, direction, momentum, clip_dir): (f64, Direction<'_>, f64, f64),
+    save: bool,
+    iteration: usize,
+    deadline: &Deadline,
+) -> Result<bool, GuidanceError> {
+    let guarded = !deadline.is_never();
+    if save || guarded {
+        ws.save();
+    }
+    if !backward(model, cond, ws, clip, direction, iteration, deadline)? {
+        ws.restore_all();
+        return Ok(false);
+    }
+    update_controls(ws, momentum, clip_dir);
+    if forward(model, cond, ws, iteration, deadline)? < ws.steps {
+        ws.restore_all();
+        return Ok(false);
+    }
+    terminal_cost(phi, ctx, ws, iteration)?;
+    Ok(true)
+}
+
+/// The adaptive variant's iterations.
 fn iterate_adaptive(
     model: &(impl FlowModel + ?Sized),
     cond: &FlowCondition,
@@ -1122,7 +1302,8 @@ fn iterate_adaptive(
     ctx: &ConstraintContext<'_>,
     settings: &GuidanceSettings,
     ws: &mut GuidanceWorkspace,
-) -> Result<usize, GuidanceError> {
+    deadline: &Deadline,
+) -> Result<Iterations, GuidanceError> {
     ws.step.clear();
     ws.step.resize(ws.samples, settings.learning_rate);
     let metric = settings
@@ -1132,7 +1313,7 @@ fn iterate_adaptive(
         Some(metric) => (Direction::GaussNewton(metric), f64::INFINITY),
         None => (Direction::Gradient, settings.clip),
     };
-    let mut iterations_run = 0;
+    let mut run = Iterations::default();
     for iteration in 1..=settings.iterations_m {
         let mut any = false;
         for (a, p) in ws.active.iter_mut().zip(&ws.phi) {
@@ -1142,23 +1323,23 @@ fn iterate_adaptive(
         if !any {
             break;
         }
-        backward(model, cond, ws, settings.clip, direction, iteration)?;
-        if settings.adaptive_step {
-            ws.save();
+        let step = (settings.clip, direction, settings.momentum, clip_dir);
+        let save = settings.adaptive_step;
+        if !iteration_step(model, cond, phi, ctx, ws, step, save, iteration, deadline)? {
+            run.cut_short = true;
+            break;
         }
-        update_controls(ws, settings.momentum, clip_dir);
-        forward(model, cond, ws, iteration)?;
-        terminal_cost(phi, ctx, ws, iteration)?;
         if settings.adaptive_step {
             ws.accept_or_restore();
         }
-        iterations_run = iteration;
+        run.completed = iteration;
     }
-    Ok(iterations_run)
+    Ok(run)
 }
 
 /// The paper variant: exactly `M` iterations of Algorithm 1 on every sample (module docs, "The
-/// paper variant"); returns `M`. The rollout in `ws` is the first iteration's line 5.
+/// paper variant"), fewer only when the deadline cuts them short. The rollout in `ws` is the
+/// first iteration's line 5.
 fn iterate_paper(
     model: &(impl FlowModel + ?Sized),
     cond: &FlowCondition,
@@ -1166,23 +1347,26 @@ fn iterate_paper(
     ctx: &ConstraintContext<'_>,
     settings: &GuidanceSettings,
     ws: &mut GuidanceWorkspace,
-) -> Result<usize, GuidanceError> {
+    deadline: &Deadline,
+) -> Result<Iterations, GuidanceError> {
     let p = settings.paper;
     // `u` holds velocities, `u_{t_i} = Δt·u_i`: line 12's step γ on `u_{t_i}` is γ/Δt on `u_i`.
     let dt = 1.0 / ws.steps as f64;
     ws.active.fill(true);
     ws.step.clear();
     ws.step.resize(ws.samples, p.learning_rate / dt);
+    let mut run = Iterations::default();
     for iteration in 1..=settings.iterations_m {
-        // Lines 6-11.
-        backward(model, cond, ws, p.clip, Direction::CoState, iteration)?;
-        // Line 12; the co-states are already clipped.
-        update_controls(ws, p.momentum, f64::INFINITY);
-        // Line 5 of the next iteration, or line 14 after the last; Φ and ∇Φ for line 6.
-        forward(model, cond, ws, iteration)?;
-        terminal_cost(phi, ctx, ws, iteration)?;
+        // Lines 6-11, line 12 (the co-states are already clipped), then line 5 of the next
+        // iteration, or line 14 after the last, with Φ and ∇Φ for line 6.
+        let step = (p.clip, Direction::CoState, p.momentum, f64::INFINITY);
+        if !iteration_step(model, cond, phi, ctx, ws, step, false, iteration, deadline)? {
+            run.cut_short = true;
+            break;
+        }
+        run.completed = iteration;
     }
-    Ok(settings.iterations_m)
+    Ok(run)
 }
 
 /// Line 12: `u_i ← β·u_i − γ_k·d_i` for every active sample `k` (`γ_k` its step), `d_i` first

@@ -44,6 +44,23 @@
 //! also sees "straight to the goal" ([`goal_approach`]): the model, trained on goals metres
 //! away, walks past one that close, and the robot circled it until its time ran out.
 //!
+//! # Planning under a deadline
+//! [`Planner::plan_within`] (or [`Planner::plan`] with [`Human2NavSettings::budget_ms`] set)
+//! is anytime: the stages run in order (sampling, Algorithm 1, the last-step correction) and
+//! none starts a network call after the [`Deadline`], so a call returns at most one network
+//! call (about 1–2 ms with the native backend) plus two small QPs past it. What was cut:
+//! * sampling: the remaining integration steps continue at the last velocity (module docs of
+//!   [`guidance`], "Deadlines"); with no step at all there are no samples;
+//! * Algorithm 1: the last completed iteration is kept, or none runs if sampling was cut;
+//! * the correction: only the stop and previous-plan candidates are corrected once the
+//!   deadline has passed (a stop candidate is added if it is off), and an uncorrected
+//!   candidate never wins over a corrected one, so the plan is feasible: the best corrected
+//!   candidate or braking to a stop.
+//!
+//! [`PlanInfo::stages`] says how far each stage got and which one the deadline cut short.
+//! Without guidance there is no correction, and a call cut before its first integration step
+//! keeps the previous plan or falls back to stopping in place.
+//!
 //! # Safe fallback
 //! A planner never returns a non-finite number. If the flow model or guidance fails, or every
 //! candidate is non-finite, the plan is "stop in place" ([`Plan::stop_in_place`]) with
@@ -53,9 +70,12 @@
 use crate::bev::{self, BevSpec};
 use crate::constraint::{ConstraintContext, Phi};
 use crate::flow::{FlowCondition, FlowModel};
-use crate::guidance::{self, GuidanceSettings, GuidanceVariant, GuidanceWorkspace};
+use crate::guidance::{self, GuidanceError, GuidanceSettings, GuidanceVariant, GuidanceWorkspace};
 use crate::limits::Limits;
-use crate::planner::{AgentState, Observation, Plan, PlanError, PlanInfo, Planner};
+use crate::planner::{
+    AgentState, Deadline, Observation, Plan, PlanError, PlanInfo, Planner, Stage, StageProgress,
+    Stages,
+};
 use crate::projection::{self, ProjectionSettings};
 use crate::robot::footprint::{self, FootprintShape};
 use crate::se2::{Pose2, Twist2};
@@ -103,6 +123,9 @@ impl Default for SelectionWeights {
 /// an error rather than an allocation of gigabytes.
 pub const MAX_SAMPLES: usize = 1024;
 
+/// Largest [`Human2NavSettings::budget_ms`]: a minute is no planning budget but a typo.
+pub const MAX_BUDGET_MS: f64 = 60_000.0;
+
 /// Settings of the Human2Nav planner (TOML table; every field optional).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -131,6 +154,10 @@ pub struct Human2NavSettings {
     /// to it at half of `v_max`, stopping there ([`goal_approach`]). The model's samples walk
     /// past a goal that close (it was trained on goals metres away). 0: never. Default 1.
     pub goal_approach: f64,
+    /// Time budget of one [`Planner::plan`] call in milliseconds (0: none). The call then
+    /// returns the best plan found within it (module docs, "Planning under a deadline").
+    /// [`Planner::plan_within`] takes a deadline per call instead. Default 0.
+    pub budget_ms: f64,
     /// Algorithm 1's parameters; `guidance.enabled = false` is the "w/o guidance" ablation
     /// (it also turns the last-step correction and the slowed, stop and goal candidates off).
     pub guidance: GuidanceSettings,
@@ -151,6 +178,7 @@ impl Default for Human2NavSettings {
             slowdown: 0.5,
             stop_candidate: true,
             goal_approach: 1.0,
+            budget_ms: 0.0,
             guidance: GuidanceSettings::default(),
             projection: ProjectionSettings::default(),
             selection: SelectionWeights::default(),
@@ -195,6 +223,12 @@ impl Human2NavSettings {
         }
         if !(self.goal_approach.is_finite() && self.goal_approach >= 0.0) {
             return bad("goal_approach", "must be finite and ≥ 0");
+        }
+        if !(self.budget_ms.is_finite() && (0.0..=MAX_BUDGET_MS).contains(&self.budget_ms)) {
+            return bad(
+                "budget_ms",
+                &format!("must lie in 0 (no budget) to {MAX_BUDGET_MS}"),
+            );
         }
         let s = &self.selection;
         for (name, v) in [
@@ -302,6 +336,11 @@ impl<M: FlowModel> Human2Nav<M> {
         &self.settings
     }
 
+    /// The flow model the planner samples from.
+    pub fn model(&self) -> &M {
+        &self.model
+    }
+
     /// Builds the ego-frame condition and the ego-frame agents for one observation.
     pub fn condition(&mut self, obs: &Observation) -> (FlowCondition, Vec<AgentState>) {
         bev::rasterize(self.bev, obs.ego, &obs.agents, &mut self.raster);
@@ -343,9 +382,9 @@ impl<M: FlowModel> Human2Nav<M> {
         x0
     }
 
-    /// Plans, returning the plan or the reason the flow stage failed (for [`Planner::plan`],
-    /// which turns such failures into the stop-in-place fallback).
-    fn try_plan(&mut self, obs: &Observation) -> Result<Plan, String> {
+    /// Plans within `deadline`, returning the plan or the reason the flow stage failed (for
+    /// [`Planner::plan_within`], which turns such failures into the stop-in-place fallback).
+    fn try_plan(&mut self, obs: &Observation, deadline: &Deadline) -> Result<Plan, String> {
         let horizon = self.model.horizon();
         let k = self.settings.samples;
         let dt = self.settings.dt;
@@ -365,13 +404,21 @@ impl<M: FlowModel> Human2Nav<M> {
         };
         let previous_ego = warm.as_deref();
         let guidance = self.settings.guidance;
+        let mut stages = Stages {
+            sampling: StageProgress {
+                done: 0,
+                planned: guidance.steps_n,
+            },
+            ..Stages::default()
+        };
+        let mut notes = Vec::new();
 
         // Stage 1: the K samples of the flow model, without guidance (Φ for diagnostics).
         let plain = GuidanceSettings {
             enabled: false,
             ..guidance
         };
-        let first = guidance::sample_guided(
+        let first = match guidance::sample_guided_until(
             &self.model,
             &cond,
             &x0,
@@ -379,43 +426,85 @@ impl<M: FlowModel> Human2Nav<M> {
             &ctx,
             &plain,
             &mut self.workspace,
-        )
-        .map_err(|e| format!("sampling failed: {e}"))?;
-        let unguided: Vec<Vec<Pose2>> = (0..k).map(|i| first.unguided_poses(i)).collect();
+            deadline,
+        ) {
+            Ok(first) => {
+                stages.sampling.done = first.steps_run;
+                if first.cut_short {
+                    stages.cut_short = Some(Stage::Sampling);
+                    notes.push(format!(
+                        "deadline: sampling stopped after {} of {} integration steps",
+                        first.steps_run, guidance.steps_n
+                    ));
+                }
+                Some(first)
+            }
+            Err(GuidanceError::DeadlineBeforeSampling) => {
+                stages.cut_short = Some(Stage::Sampling);
+                notes.push("deadline: it passed before sampling began".into());
+                None
+            }
+            Err(e) => return Err(format!("sampling failed: {e}")),
+        };
+        let unguided: Vec<Vec<Pose2>> = first
+            .as_ref()
+            .map(|f| (0..k).map(|i| f.unguided_poses(i)).collect())
+            .unwrap_or_default();
 
         // Stage 2 (guidance on): Algorithm 1 on the shortlist, its slowed copies and the stop
         // candidate, then the last-step correction of all of them.
         let mut candidates: Vec<Vec<Pose2>>;
         let mut origin: Vec<Source>;
-        let mut phi: Vec<(f64, f64)> = first.phi_before.iter().map(|&p| (p, p)).collect();
-        let mut notes = Vec::new();
+        let mut phi: Vec<(f64, f64)> = first
+            .as_ref()
+            .map(|f| f.phi_before.iter().map(|&p| (p, p)).collect())
+            .unwrap_or_default();
         let mut guidance_iterations = None;
         // Which candidates the last-step correction made feasible (empty when it did not run).
         let mut corrected: Vec<bool> = Vec::new();
         if guidance.enabled {
-            let shortlist =
-                self.shortlist(&unguided, goal, &agents, obs.ego_velocity, previous_ego);
-            let result = guidance::guide_subset(
-                &self.model,
-                &cond,
-                &shortlist,
-                &self.robot.phi,
-                &ctx,
-                &guidance,
-                &mut self.workspace,
-            )
-            .map_err(|e| format!("guidance failed: {e}"))?;
-            guidance_iterations = Some(result.iterations_run);
-            candidates = (0..shortlist.len())
-                .map(|j| result.guided_poses(j))
-                .collect();
+            stages.guidance.planned = guidance.iterations_m;
+            let shortlist = if unguided.is_empty() {
+                Vec::new()
+            } else {
+                self.shortlist(&unguided, goal, &agents, obs.ego_velocity, previous_ego)
+            };
+            if shortlist.is_empty() || stages.cut_short.is_some() {
+                // No time left for Algorithm 1: the shortlist goes on unguided.
+                candidates = shortlist.iter().map(|&i| unguided[i].clone()).collect();
+                phi = shortlist.iter().map(|&i| phi[i]).collect();
+            } else {
+                let result = guidance::guide_subset_until(
+                    &self.model,
+                    &cond,
+                    &shortlist,
+                    &self.robot.phi,
+                    &ctx,
+                    &guidance,
+                    &mut self.workspace,
+                    deadline,
+                )
+                .map_err(|e| format!("guidance failed: {e}"))?;
+                guidance_iterations = Some(result.iterations_run);
+                stages.guidance.done = result.iterations_run;
+                if result.cut_short {
+                    stages.cut_short = Some(Stage::Guidance);
+                    notes.push(format!(
+                        "deadline: guidance stopped after {} iterations",
+                        result.iterations_run
+                    ));
+                }
+                candidates = (0..shortlist.len())
+                    .map(|j| result.guided_poses(j))
+                    .collect();
+                phi = result
+                    .phi_before
+                    .iter()
+                    .copied()
+                    .zip(result.phi_after.iter().copied())
+                    .collect();
+            }
             origin = shortlist.iter().map(|&i| Source::Sample(i)).collect();
-            phi = result
-                .phi_before
-                .iter()
-                .copied()
-                .zip(result.phi_after.iter().copied())
-                .collect();
             if self.settings.slowdown < 1.0 {
                 for (j, &i) in shortlist.iter().enumerate() {
                     candidates.push(time_scaled(&candidates[j], self.settings.slowdown));
@@ -436,30 +525,18 @@ impl<M: FlowModel> Human2Nav<M> {
                 origin.push(Source::Previous);
             }
             if self.settings.projection.enabled {
-                corrected.clear();
-                for c in candidates.iter_mut() {
-                    match projection::project_with(
-                        c,
-                        dt,
-                        &self.robot.limits,
-                        obs.ego_velocity,
-                        &self.settings.projection,
-                        &mut self.projection,
-                    ) {
-                        Ok(p) => {
-                            *c = p.poses;
-                            corrected.push(true);
-                        }
-                        Err(e) => {
-                            notes.push(format!("last-step correction skipped: {e}"));
-                            corrected.push(false);
-                        }
-                    }
-                }
+                corrected = self.correct(
+                    &mut candidates,
+                    &mut origin,
+                    obs.ego_velocity,
+                    deadline,
+                    &mut stages,
+                    &mut notes,
+                );
             }
         } else {
             candidates = unguided.clone();
-            origin = (0..k).map(Source::Sample).collect();
+            origin = (0..unguided.len()).map(Source::Sample).collect();
             if let Some(prev) = &warm {
                 candidates.push(prev.clone());
                 origin.push(Source::Previous);
@@ -471,7 +548,11 @@ impl<M: FlowModel> Human2Nav<M> {
             self.score(c, goal, &agents, obs.ego_velocity, previous_ego, true)
         });
         let Some(chosen) = best else {
-            return Err("every candidate trajectory was non-finite".into());
+            return Err(if candidates.is_empty() {
+                "the deadline passed before sampling began, and there was no previous plan".into()
+            } else {
+                "every candidate trajectory was non-finite".into()
+            });
         };
 
         let to_world = |traj: &[Pose2]| -> Vec<Pose2> {
@@ -521,6 +602,7 @@ impl<M: FlowModel> Human2Nav<M> {
             fallback: false,
             notes,
             error: None,
+            stages: Some(stages),
         };
         Ok(Plan {
             t0: obs.time,
@@ -528,6 +610,67 @@ impl<M: FlowModel> Human2Nav<M> {
             poses: to_world(&candidates[chosen]),
             info,
         })
+    }
+
+    /// The last-step correction of every candidate, in order, returning which it made
+    /// feasible. Once `deadline` has passed only the stop and the previous-plan candidates are
+    /// corrected (the previous plan usually is feasible already, which costs no QP), and a stop
+    /// candidate is added if there is none, so that a plan cut short is still a safe one.
+    fn correct(
+        &mut self,
+        candidates: &mut Vec<Vec<Pose2>>,
+        origin: &mut Vec<Source>,
+        v0: Twist2,
+        deadline: &Deadline,
+        stages: &mut Stages,
+        notes: &mut Vec<String>,
+    ) -> Vec<bool> {
+        let mut corrected = Vec::with_capacity(candidates.len() + 1);
+        let mut late = false;
+        for j in 0.. {
+            late = late || stages.cut_short.is_some() || deadline.passed();
+            if j == candidates.len() {
+                if !late || origin.contains(&Source::Stop) {
+                    break;
+                }
+                candidates.push(vec![Pose2::IDENTITY; self.model.horizon()]);
+                origin.push(Source::Stop);
+            }
+            if late && !matches!(origin[j], Source::Stop | Source::Previous) {
+                corrected.push(false);
+                continue;
+            }
+            stages.correction.done += 1;
+            match projection::project_with(
+                &candidates[j],
+                self.settings.dt,
+                &self.robot.limits,
+                v0,
+                &self.settings.projection,
+                &mut self.projection,
+            ) {
+                Ok(p) => {
+                    candidates[j] = p.poses;
+                    corrected.push(true);
+                }
+                Err(e) => {
+                    notes.push(format!("last-step correction skipped: {e}"));
+                    corrected.push(false);
+                }
+            }
+        }
+        stages.correction.planned = candidates.len();
+        if late {
+            stages.cut_short.get_or_insert(Stage::Correction);
+            if corrected.iter().filter(|&&c| c).count() < candidates.len() {
+                notes.push(format!(
+                    "deadline: {} of {} candidates corrected",
+                    stages.correction.done,
+                    candidates.len()
+                ));
+            }
+        }
+        corrected
     }
 
     /// The samples Algorithm 1 runs on: the [`Human2NavSettings::guided_samples`] best by the
@@ -763,8 +906,19 @@ impl<M: FlowModel + Send> Planner for Human2Nav<M> {
     }
 
     fn plan(&mut self, obs: &Observation) -> Result<Plan, PlanError> {
+        let deadline = if self.settings.budget_ms > 0.0 {
+            Deadline::after(std::time::Duration::from_secs_f64(
+                self.settings.budget_ms / 1e3,
+            ))
+        } else {
+            Deadline::never()
+        };
+        self.plan_within(obs, &deadline)
+    }
+
+    fn plan_within(&mut self, obs: &Observation, deadline: &Deadline) -> Result<Plan, PlanError> {
         obs.validate()?;
-        let plan = match self.try_plan(obs) {
+        let plan = match self.try_plan(obs, deadline) {
             Ok(plan) if plan.is_finite() => plan,
             Ok(_) => Plan::stop_in_place(
                 obs,

@@ -33,5 +33,8 @@ pub mod trajectory;
 
 pub use flow::{FlowCondition, FlowError, FlowModel};
 pub use limits::{ControllerGains, GuidanceWeights, Limits};
-pub use planner::{AgentState, Observation, Plan, PlanError, PlanInfo, Planner};
+pub use planner::{
+    AgentState, Deadline, Observation, Plan, PlanError, PlanInfo, Planner, Stage, StageProgress,
+    Stages,
+};
 pub use se2::{Pose2, Twist2};

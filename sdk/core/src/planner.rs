@@ -6,6 +6,8 @@
 
 use crate::se2::{Pose2, Twist2};
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 /// Another agent (a pedestrian) as the robot perceives it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -61,6 +63,134 @@ pub struct PlanInfo {
     /// missed its deadline gets the stop-in-place plan with this set): callers count it as a
     /// failed planner call, not as the planner's own fallback.
     pub error: Option<String>,
+    /// How far each stage of an anytime planner got ([`Planner::plan_within`]); `None` for a
+    /// planner without stages.
+    pub stages: Option<Stages>,
+}
+
+/// A stage of an anytime planning call, in the order they run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    /// Integrating the flow model from the source samples.
+    Sampling,
+    /// Algorithm 1's iterations.
+    Guidance,
+    /// The last-step correction (one QP per candidate).
+    Correction,
+}
+
+impl Stage {
+    /// Lower-case name used in reports (`sampling`, `guidance`, `correction`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Sampling => "sampling",
+            Stage::Guidance => "guidance",
+            Stage::Correction => "correction",
+        }
+    }
+}
+
+impl std::fmt::Display for Stage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// How much of one stage ran: `done` of `planned` units (integration steps, iterations or
+/// candidates).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StageProgress {
+    /// Units completed.
+    pub done: usize,
+    /// Units the stage would have run without a deadline (0: the stage is off).
+    pub planned: usize,
+}
+
+impl StageProgress {
+    /// True when every planned unit ran.
+    pub fn complete(&self) -> bool {
+        self.done >= self.planned
+    }
+}
+
+/// Which stages of an anytime planning call ran, and how far.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Stages {
+    /// Integration steps of the flow model that ran (the rest, if any, was extrapolated).
+    pub sampling: StageProgress,
+    /// Algorithm 1 iterations completed.
+    pub guidance: StageProgress,
+    /// Candidates the last-step correction ran on.
+    pub correction: StageProgress,
+    /// The first stage the deadline cut short (`None`: the call finished every stage).
+    pub cut_short: Option<Stage>,
+}
+
+/// When an anytime planning call must return its best plan so far.
+///
+/// A planner checks it before each unit of work (a network call, a QP) and never starts one
+/// after it has passed. Clone it freely: a clock-based deadline is a copy of an instant.
+#[derive(Clone, Default)]
+pub struct Deadline(DeadlineKind);
+
+#[derive(Clone, Default)]
+enum DeadlineKind {
+    #[default]
+    Never,
+    At(Instant),
+    Probe(Arc<dyn Fn() -> bool + Send + Sync>),
+}
+
+impl Deadline {
+    /// No deadline: every stage runs to completion.
+    pub fn never() -> Self {
+        Self(DeadlineKind::Never)
+    }
+
+    /// The deadline is the instant `at` of the monotonic clock.
+    pub fn at(at: Instant) -> Self {
+        Self(DeadlineKind::At(at))
+    }
+
+    /// The deadline is `budget` from now; a zero budget still lets a planner return its
+    /// safe plan.
+    pub fn after(budget: Duration) -> Self {
+        Self(DeadlineKind::At(Instant::now() + budget))
+    }
+
+    /// The deadline has passed when `passed()` says so: for a clock of the caller's own, such as
+    /// simulated time or a robot middleware's clock. `passed` must be cheap; it is called before
+    /// every unit of work.
+    pub fn from_fn(passed: impl Fn() -> bool + Send + Sync + 'static) -> Self {
+        Self(DeadlineKind::Probe(Arc::new(passed)))
+    }
+
+    /// True once the deadline has passed.
+    pub fn passed(&self) -> bool {
+        match &self.0 {
+            DeadlineKind::Never => false,
+            DeadlineKind::At(at) => Instant::now() >= *at,
+            DeadlineKind::Probe(passed) => passed(),
+        }
+    }
+
+    /// True for [`Deadline::never`].
+    pub fn is_never(&self) -> bool {
+        matches!(self.0, DeadlineKind::Never)
+    }
+}
+
+impl std::fmt::Debug for Deadline {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.0 {
+            DeadlineKind::Never => f.write_str("Deadline::never()"),
+            DeadlineKind::At(at) => {
+                let left = at.saturating_duration_since(Instant::now());
+                write!(f, "Deadline(in {left:?})")
+            }
+            DeadlineKind::Probe(_) => f.write_str("Deadline::from_fn(..)"),
+        }
+    }
 }
 
 /// A planned trajectory in the world frame: `poses[k]` is the target at `t0 + k·dt`.
@@ -127,6 +257,17 @@ pub trait Planner: Send {
 
     /// Plans from one observation.
     fn plan(&mut self, obs: &Observation) -> Result<Plan, PlanError>;
+
+    /// Plans from one observation, returning the best plan found when `deadline` passes.
+    ///
+    /// An anytime planner (Human2Nav) starts no network call after the deadline and always
+    /// returns a plan it considers safe, reporting how far it got in [`PlanInfo::stages`]. A
+    /// planner whose cost is small and fixed (ORCA, SARL, plugins) may ignore the deadline:
+    /// that is what this provided method does.
+    fn plan_within(&mut self, obs: &Observation, deadline: &Deadline) -> Result<Plan, PlanError> {
+        let _ = deadline;
+        self.plan(obs)
+    }
 }
 
 impl Observation {

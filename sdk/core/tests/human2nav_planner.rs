@@ -12,7 +12,12 @@ use human2nav_core::guidance::{GuidanceVariant, PaperSettings};
 use human2nav_core::human2nav::{Human2Nav, Human2NavSettings, RobotModel, pose_at};
 use human2nav_core::robot::footprint::FootprintShape;
 use human2nav_core::tfs::tfs_plan;
-use human2nav_core::{AgentState, GuidanceWeights, Limits, Observation, Planner, Pose2, Twist2};
+use human2nav_core::{
+    AgentState, Deadline, GuidanceWeights, Limits, Observation, Planner, Pose2, Stage, Twist2,
+};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
 
 fn limits() -> Limits {
     Limits {
@@ -484,4 +489,235 @@ fn a_goal_close_by_is_approached_directly() {
         gap > 0.3,
         "without the approach it ends {gap} m away ({notes:?})"
     );
+}
+
+/// The fast human future behind a virtual clock: every network call costs one tick, and the
+/// test's deadline reads the same clock, so where the deadline falls is exact and the test is
+/// deterministic. Counts the calls that start once the deadline has passed.
+struct Ticking {
+    inner: HumanFuture,
+    clock: Arc<AtomicUsize>,
+    deadline_tick: usize,
+    late_calls: AtomicUsize,
+}
+
+impl Ticking {
+    fn tick(&self) {
+        if self.clock.fetch_add(1, Ordering::SeqCst) >= self.deadline_tick {
+            self.late_calls.fetch_add(1, Ordering::SeqCst);
+        }
+    }
+}
+
+impl FlowModel for Ticking {
+    fn horizon(&self) -> usize {
+        self.inner.horizon()
+    }
+    fn source_std(&self) -> [f64; 3] {
+        self.inner.source_std()
+    }
+    fn velocity(
+        &self,
+        x: &[f64],
+        t: f64,
+        c: &FlowCondition,
+        out: &mut [f64],
+    ) -> Result<(), FlowError> {
+        self.tick();
+        self.inner.velocity(x, t, c, out)
+    }
+    fn velocity_vjp(
+        &self,
+        x: &[f64],
+        t: f64,
+        c: &FlowCondition,
+        cot: &[f64],
+        out: &mut [f64],
+        vjp: &mut [f64],
+    ) -> Result<(), FlowError> {
+        self.tick();
+        self.inner.velocity_vjp(x, t, c, cot, out, vjp)
+    }
+}
+
+/// A planner on the ticking model with its deadline `deadline_tick` network calls in.
+fn ticking(settings: Human2NavSettings, deadline_tick: usize) -> (Human2Nav<Ticking>, Deadline) {
+    let clock = Arc::new(AtomicUsize::new(0));
+    let model = Ticking {
+        inner: fast_straight(),
+        clock: Arc::clone(&clock),
+        deadline_tick,
+        late_calls: AtomicUsize::new(0),
+    };
+    let planner = Human2Nav::new(model, robot(), BevSpec::default(), settings).unwrap();
+    let deadline = Deadline::from_fn(move || clock.load(Ordering::SeqCst) >= deadline_tick);
+    (planner, deadline)
+}
+
+/// Network calls of one planning call of `settings` without a deadline.
+fn calls_without_deadline(settings: Human2NavSettings) -> usize {
+    let (mut p, _) = ticking(settings, usize::MAX);
+    p.plan(&observation()).unwrap();
+    p.model().clock.load(Ordering::SeqCst)
+}
+
+#[test]
+fn a_deadline_anywhere_in_the_call_gives_a_feasible_plan_and_no_late_network_call() {
+    let obs = observation();
+    let tfs = |p: &[Pose2]| tfs_plan(&ego_frame(p, obs.ego), 0.1, &limits(), obs.ego_velocity);
+    let mut paper = Human2NavSettings::default();
+    paper.guidance.variant = GuidanceVariant::Paper;
+    let no_stop = Human2NavSettings {
+        stop_candidate: false,
+        ..Default::default()
+    };
+    for settings in [Human2NavSettings::default(), paper, no_stop] {
+        let n = settings.guidance.steps_n;
+        let total = calls_without_deadline(settings);
+        // N plain steps, then M iterations of N VJPs (N − 1 when μ_0 is not needed) and N
+        // forward calls: the fast future stays infeasible, so no iteration stops early.
+        let per_iteration = if settings.guidance.variant == GuidanceVariant::Paper {
+            2 * n
+        } else {
+            2 * n - 1
+        };
+        assert_eq!(total, n + settings.guidance.iterations_m * per_iteration);
+        for at in 0..=total + 1 {
+            let (mut p, deadline) = ticking(settings, at);
+            let plan = p.plan_within(&obs, &deadline).unwrap();
+            let stages = plan.info.stages.unwrap();
+            assert_eq!(
+                p.model().late_calls.load(Ordering::SeqCst),
+                0,
+                "deadline at call {at}: a network call started after it"
+            );
+            assert!(plan.is_finite() && !plan.info.fallback, "deadline at {at}");
+            assert_eq!(tfs(&plan.poses), 1.0, "deadline at call {at}: not feasible");
+            assert_eq!(stages.sampling.done, at.min(n), "deadline at {at}");
+            assert_eq!(stages.sampling.planned, n);
+            if at > total {
+                assert_eq!(stages.cut_short, None, "deadline at {at}");
+                assert_eq!(stages.guidance.done, settings.guidance.iterations_m);
+                assert!(stages.correction.complete());
+            } else {
+                // Passed during sampling, during guidance, or just as the last network call
+                // returned (then the correction is what it cuts).
+                let expected = if at < n {
+                    Stage::Sampling
+                } else if at < total {
+                    Stage::Guidance
+                } else {
+                    Stage::Correction
+                };
+                assert_eq!(stages.cut_short, Some(expected), "deadline at {at}");
+                assert_eq!(stages.guidance.done, at.saturating_sub(n) / per_iteration);
+                assert!(!stages.correction.complete() || stages.correction.planned <= 2);
+                assert!(plan.info.notes.iter().any(|n| n.starts_with("deadline")));
+            }
+        }
+    }
+}
+
+#[test]
+fn a_deadline_before_sampling_keeps_the_previous_plan_or_brakes() {
+    let obs = observation();
+    // Guidance on: nothing sampled, so the plan brakes to a stop (the corrected stop candidate).
+    let (mut p, deadline) = ticking(Human2NavSettings::default(), 0);
+    let plan = p.plan_within(&obs, &deadline).unwrap();
+    assert!(!plan.info.fallback);
+    assert!(plan.info.notes.iter().any(|n| n == "braking to a stop"));
+    assert!(plan.info.candidates.is_empty());
+
+    // A full call first, then one with no time: the previous plan is kept (it is feasible).
+    let (mut p, _) = ticking(Human2NavSettings::default(), usize::MAX);
+    let first = p.plan(&obs).unwrap();
+    let later = Observation {
+        time: obs.time + 0.1,
+        ego: pose_at(&first, obs.time + 0.1),
+        ..obs.clone()
+    };
+    let second = p.plan_within(&later, &Deadline::from_fn(|| true)).unwrap();
+    assert!(!second.info.fallback);
+    assert!(
+        second
+            .info
+            .notes
+            .iter()
+            .any(|n| n == "kept the previous plan"),
+        "{:?}",
+        second.info.notes
+    );
+
+    // Guidance off: no samples and no previous plan leave only the stop-in-place fallback.
+    let mut off = Human2NavSettings::default();
+    off.guidance.enabled = false;
+    let (mut p, deadline) = ticking(off, 0);
+    let plan = p.plan_within(&obs, &deadline).unwrap();
+    assert!(plan.info.fallback && plan.is_finite());
+}
+
+/// A field that takes `delay` of wall-clock time per network call.
+struct Sleepy(HumanFuture, Duration);
+
+impl FlowModel for Sleepy {
+    fn horizon(&self) -> usize {
+        self.0.horizon()
+    }
+    fn source_std(&self) -> [f64; 3] {
+        self.0.source_std()
+    }
+    fn velocity(
+        &self,
+        x: &[f64],
+        t: f64,
+        c: &FlowCondition,
+        out: &mut [f64],
+    ) -> Result<(), FlowError> {
+        std::thread::sleep(self.1);
+        self.0.velocity(x, t, c, out)
+    }
+    fn velocity_vjp(
+        &self,
+        x: &[f64],
+        t: f64,
+        c: &FlowCondition,
+        cot: &[f64],
+        out: &mut [f64],
+        vjp: &mut [f64],
+    ) -> Result<(), FlowError> {
+        std::thread::sleep(self.1);
+        self.0.velocity_vjp(x, t, c, cot, out, vjp)
+    }
+}
+
+#[test]
+fn the_budget_setting_bounds_a_slow_model_by_the_clock() {
+    // 32 calls of 20 ms would take 640 ms; the budget is 50 ms. The bound checked is loose
+    // (one call plus 400 ms of slack for a loaded machine): the exact property, no call after
+    // the deadline, is the virtual-clock test's.
+    let settings = Human2NavSettings {
+        budget_ms: 50.0,
+        ..Default::default()
+    };
+    let model = Sleepy(fast_straight(), Duration::from_millis(20));
+    let mut p = Human2Nav::new(model, robot(), BevSpec::default(), settings).unwrap();
+    let started = Instant::now();
+    let plan = p.plan(&observation()).unwrap();
+    let took = started.elapsed();
+    assert!(took < Duration::from_millis(50 + 20 + 400), "took {took:?}");
+    let stages = plan.info.stages.unwrap();
+    assert!(stages.cut_short.is_some(), "{stages:?}");
+    assert!(plan.is_finite() && !plan.info.fallback);
+}
+
+#[test]
+fn a_budget_outside_its_range_is_an_error_naming_the_field() {
+    for budget_ms in [-1.0, f64::NAN, 1e9] {
+        let settings = Human2NavSettings {
+            budget_ms,
+            ..Default::default()
+        };
+        let err = settings.validate().unwrap_err().to_string();
+        assert!(err.contains("budget_ms"), "{err}");
+    }
 }

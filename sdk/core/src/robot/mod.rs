@@ -90,38 +90,55 @@ pub enum ProfileError {
     /// The profile file itself could not be read.
     #[error("{}: (file): cannot read: {source}", file.display())]
     Read {
+        /// The profile.
         file: PathBuf,
+        /// Why it could not be read (missing, not a regular file, over the size cap, not UTF-8).
         #[source]
         source: std::io::Error,
     },
     /// TOML syntax error, unknown field, missing field or wrong type.
     #[error("{}: {field}: line {line}, column {column}: {message}", file.display())]
     Parse {
+        /// The profile.
         file: PathBuf,
+        /// Best-effort dotted name of the field at the error (`limits.v_max`,
+        /// `constraint[1].weight`); `(document)` when there is none.
         field: String,
+        /// 1-based line of the error.
         line: usize,
+        /// 1-based column of the error, in characters.
         column: usize,
+        /// The TOML parser's message, on one line.
         message: String,
     },
     /// A value that parsed but is not acceptable (negative limit, unknown embodiment, ...).
     #[error("{}: {field}: {message}", file.display())]
     Invalid {
+        /// The profile.
         file: PathBuf,
+        /// Dotted name of the offending field (`limits.v_max`, `embodiment.wheel_joints[1]`).
         field: String,
+        /// What is wrong with its value.
         message: String,
     },
     /// The URDF named by the profile's `urdf` field is missing or unparsable.
     #[error("{}: urdf: cannot load `{}`: {message}", file.display(), urdf.display())]
     UrdfLoad {
+        /// The profile that names the URDF.
         file: PathBuf,
+        /// The URDF, resolved against the profile's directory.
         urdf: PathBuf,
+        /// Why it could not be read or parsed, on one line.
         message: String,
     },
     /// The URDF parsed but lacks something the profile needs.
     #[error("{}: {element}: {message}", urdf.display())]
     UrdfContent {
+        /// The URDF.
         urdf: PathBuf,
+        /// The element at fault (``link `base_link` ``, ``joint `left_wheel_joint` ``, `robot`).
         element: String,
+        /// What is missing or wrong.
         message: String,
     },
 }
@@ -190,7 +207,10 @@ pub struct PluginRef {
 /// How the robot moves: a built-in model or one from a plugin.
 #[derive(Clone, Debug, PartialEq)]
 pub enum EmbodimentSpec {
+    /// One of the built-in kinematic models ([`RobotProfile::builtin_embodiment`] builds it).
     Builtin(EmbodimentKind),
+    /// A model from a plugin library (`kind = "plugin"`); its weight is 1, it has no deadline
+    /// and runs in the host process.
     Plugin(PluginRef),
 }
 
@@ -219,7 +239,9 @@ pub enum Origin {
 /// `URDF joint left_wheel_joint velocity 22 rad/s × wheel radius 0.09 m`, ...).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Provenance {
+    /// Which kind of source set the value.
     pub origin: Origin,
+    /// The account itself, as shown to users (also what `Display` prints).
     pub detail: String,
 }
 
@@ -247,11 +269,18 @@ impl fmt::Display for Provenance {
 /// Provenance of each effective limit.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LimitProvenance {
+    /// Of `v_max`: robot.toml, or the slowest wheel joint's rim speed when lower.
     pub v_max: Provenance,
+    /// Of `v_reverse_max`: robot.toml, or the slowest wheel joint's rim speed when lower.
     pub v_reverse_max: Provenance,
+    /// Of `a_max`: always robot.toml.
     pub a_max: Provenance,
+    /// Of `omega_max`: robot.toml, or a differential drive's wheel cap `2·v_wheel / track`.
     pub omega_max: Provenance,
+    /// Of `kappa_max`: `1 / min_turning_radius` from robot.toml or from an Ackermann robot's
+    /// steering joints, or why there is none (turns in place).
     pub kappa_max: Provenance,
+    /// Of `lateral_speed_max`: always robot.toml.
     pub lateral_speed_max: Provenance,
 }
 
@@ -262,14 +291,18 @@ pub struct LimitEntry<'a> {
     pub name: &'static str,
     /// The effective value; `None` for `kappa_max` of a robot that turns in place.
     pub value: Option<f64>,
+    /// SI unit of `value` (`m/s`, `m/s²`, `rad/s`, `1/m`).
     pub unit: &'static str,
+    /// Where the value came from.
     pub source: &'a Provenance,
 }
 
 /// A loaded and validated robot profile.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RobotProfile {
+    /// The robot's name (`name`; by convention its folder name), non-empty.
     pub name: String,
+    /// Free text from `description` (empty when not given).
     pub description: String,
     /// The robot.toml this was loaded from (as given to [`RobotProfile::load`]).
     pub source: PathBuf,
@@ -277,6 +310,7 @@ pub struct RobotProfile {
     pub urdf: PathBuf,
     /// The URDF link whose origin the robot's pose refers to.
     pub base_link: String,
+    /// How the robot moves: a built-in kinematic model or a plugin.
     pub embodiment: EmbodimentSpec,
     /// Wheel joints used for limit caps (and the wheelbase of an Ackermann robot).
     pub wheel_joints: Vec<WheelJoint>,
@@ -289,6 +323,8 @@ pub struct RobotProfile {
     /// Radius of the disc about the base-link origin that covers the footprint (m): the body
     /// planners avoid pedestrians with.
     pub footprint_radius: f64,
+    /// Where `footprint_radius` came from: the URDF geometry that set it, or the
+    /// `[footprint] radius` override.
     pub footprint_source: Provenance,
     /// The footprint the simulator checks collisions with: the URDF base collision's xy
     /// projection ([`footprint`]), or the disc of `footprint_radius` when `[footprint] radius`
@@ -296,12 +332,19 @@ pub struct RobotProfile {
     pub footprint_shapes: Vec<footprint::FootprintShape>,
     /// Effective limits after the URDF caps.
     pub limits: Limits,
+    /// Where each effective limit came from.
     pub limit_sources: LimitProvenance,
     /// Effective minimum turning radius (m, 0 = turns in place); `kappa_max = 1 / r`.
     pub min_turning_radius: f64,
+    /// Gains of the tracking controller (`[controller]`, else the defaults), checked finite
+    /// and `>= 0` (`lookahead > 0`).
     pub controller: ControllerGains,
+    /// Whether `controller` was written in robot.toml ([`Origin::Profile`]) or defaulted.
     pub controller_source: Origin,
+    /// Weights and shape of the feasibility penalty Φ (`[guidance]`, else the defaults),
+    /// checked finite, `>= 0`, `gamma > 0`, `delta < 1`.
     pub guidance: GuidanceWeights,
+    /// Whether `guidance` was written in robot.toml ([`Origin::Profile`]) or defaulted.
     pub guidance_source: Origin,
     /// Plugin constraint terms, in the order declared.
     pub constraints: Vec<PluginRef>,

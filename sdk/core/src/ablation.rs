@@ -112,14 +112,17 @@ pub fn limit_shares(violations: &[Violations]) -> [f64; 6] {
 /// One arm's plan of one observation.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ArmStep {
+    /// The arm that planned this step.
     pub arm: Arm,
     /// Plan TFS ([`tfs::tfs_plan`]; pose 0 is the robot with its current velocity).
     pub tfs: f64,
     /// Share of the plan's waypoints that violate each limit ([`Violations::NAMES`] order).
     pub violations: [f64; 6],
-    /// Φ of the kept sample before and after Algorithm 1 (`None` when the plan follows no
-    /// sample, e.g. braking to a stop).
+    /// Φ of the kept sample before Algorithm 1 (`None` when the plan follows no sample, e.g.
+    /// braking to a stop).
     pub phi_before: Option<f64>,
+    /// Φ of the kept sample after Algorithm 1 (equal to `phi_before` when guidance is off;
+    /// `None` when the plan follows no sample).
     pub phi_after: Option<f64>,
     /// Mean distance (m) between this plan and the raw arm's plan at equal times.
     pub displacement: f64,
@@ -206,18 +209,26 @@ pub fn ablation_step<P: Planner + ?Sized>(
 /// none is present).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ArmSummary {
+    /// The arm summarised.
     pub arm: Arm,
     /// Number of planning steps.
     pub windows: usize,
+    /// Mean plan TFS, in `[0, 1]`.
     pub tfs: f64,
     /// Share of steps whose plan is entirely feasible (TFS = 1).
     pub all_feasible: f64,
     /// Mean share of waypoints violating each limit ([`Violations::NAMES`] order).
     pub violations: [f64; 6],
+    /// Mean Φ of the kept sample before Algorithm 1, over the steps that kept one.
     pub phi_before: f64,
+    /// Mean Φ of the kept sample after Algorithm 1, over the steps that kept one.
     pub phi_after: f64,
+    /// Mean distance to the reference (raw) arm's plan at equal times (m).
     pub displacement: f64,
+    /// Mean distance to the followed sample before guidance and correction (m), over the
+    /// steps that follow one.
     pub sample_displacement: f64,
+    /// Mean number of Algorithm 1 iterations, over the steps where it ran.
     pub iterations: f64,
     /// Median wall time of a planning call, milliseconds.
     pub millis_p50: f64,

@@ -59,8 +59,10 @@ impl Default for BevSpec {
 /// A [`BevSpec`] that cannot describe a raster.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum BevError {
+    /// `cells` (the value given) is 0 or more than 1024.
     #[error("bev.cells must be between 1 and 1024, got {0}")]
     Cells(usize),
+    /// `resolution` (the value given, m) is zero, negative or not finite.
     #[error("bev.resolution must be finite and positive, got {0}")]
     Resolution(f64),
 }

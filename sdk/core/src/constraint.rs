@@ -14,8 +14,12 @@ use crate::se2::Twist2;
 /// A read-only view of `batch` trajectories of `horizon` poses, flat `[B, T, 3]` (`x, y, θ`).
 #[derive(Clone, Copy, Debug)]
 pub struct TrajBatch<'a> {
+    /// The poses, trajectory after trajectory (`x, y` in m, `θ` in rad); `batch·horizon·3`
+    /// values when built by [`TrajBatch::new`].
     pub data: &'a [f64],
+    /// Number of trajectories `B`.
     pub batch: usize,
+    /// Number of poses `T` per trajectory.
     pub horizon: usize,
 }
 
@@ -58,10 +62,17 @@ pub struct ConstraintContext<'a> {
 /// Why a constraint term could not be evaluated.
 #[derive(Debug, thiserror::Error)]
 pub enum ConstraintError {
+    /// A batch or buffer whose size does not match the others; the message gives the sizes.
     #[error("shape mismatch: {0}")]
     Shape(String),
+    /// A term could not be evaluated (an unusable limit, a plugin that failed).
     #[error("constraint `{term}` failed: {message}")]
-    Failed { term: String, message: String },
+    Failed {
+        /// Name of the term ([`ConstraintTerm::name`]).
+        term: String,
+        /// Why it failed, on one line.
+        message: String,
+    },
 }
 
 /// One additive term of the feasibility cost.

@@ -11,6 +11,7 @@ use crate::se2::{Pose2, Twist2};
 /// The robot's state as the simulator and controllers see it.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RobotState {
+    /// Pose of the base-link origin in the world frame.
     pub pose: Pose2,
     /// Body-frame velocity actually executed during the last step.
     pub velocity: Twist2,
@@ -280,14 +281,17 @@ impl BuiltinEmbodiment {
         }
     }
 
+    /// The kinematic model.
     pub fn kind(&self) -> EmbodimentKind {
         self.kind
     }
 
+    /// The limits commands are saturated to.
     pub fn limits(&self) -> &Limits {
         &self.limits
     }
 
+    /// The gains of the tracking controller.
     pub fn gains(&self) -> &ControllerGains {
         &self.gains
     }

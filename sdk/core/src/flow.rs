@@ -24,10 +24,13 @@ pub struct FlowCondition {
 /// Why a flow model failed.
 #[derive(Debug, thiserror::Error)]
 pub enum FlowError {
+    /// An input or output buffer of the wrong size; the message gives the sizes.
     #[error("shape mismatch: {0}")]
     Shape(String),
+    /// The implementation itself failed (a libtorch error, say); the message is its own.
     #[error("flow model backend error: {0}")]
     Backend(String),
+    /// The model returned a NaN or an infinity.
     #[error("flow model produced a non-finite value")]
     NonFinite,
 }

@@ -52,11 +52,17 @@ pub struct ControllerGains {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GuidanceWeights {
+    /// Weight `λ_v` of the forward-speed term (against `v_max`); dimensionless, `>= 0`.
     pub lambda_v: f64,
+    /// Weight `λ_a` of the longitudinal-acceleration term (against `a_max`).
     pub lambda_a: f64,
+    /// Weight `λ_ω` of the yaw-rate term (against `omega_max`).
     pub lambda_omega: f64,
+    /// Weight `λ_κ` of the curvature term (against `kappa_max`; no cost without one).
     pub lambda_kappa: f64,
+    /// Weight of the body-frame lateral-speed term (against `lateral_speed_max`).
     pub lambda_lateral: f64,
+    /// Weight of the reverse-speed term (against `v_reverse_max`).
     pub lambda_reverse: f64,
     /// Softplus sharpness `γ` (Eq. 8).
     pub gamma: f64,

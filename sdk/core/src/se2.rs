@@ -30,26 +30,35 @@ pub fn wrap_angle(a: f64) -> f64 {
 /// A rigid transform in the plane: translation `(x, y)` in metres and heading `θ` in radians.
 #[derive(Clone, Copy, Debug, PartialEq, Default, Serialize, Deserialize)]
 pub struct Pose2 {
+    /// Translation along the x axis of the frame the pose is expressed in (m).
     pub x: f64,
+    /// Translation along that frame's y axis (m).
     pub y: f64,
+    /// Heading (rad), counter-clockwise from that frame's x axis; kept as given by
+    /// [`Pose2::new`], wrapped to `(-π, π]` by the group operations.
     pub theta: f64,
 }
 
 /// A body-frame velocity in se(2): longitudinal `v_x`, lateral `v_y` (m/s), yaw rate `ω` (rad/s).
 #[derive(Clone, Copy, Debug, PartialEq, Default, Serialize, Deserialize)]
 pub struct Twist2 {
+    /// Longitudinal velocity along the body x axis, forward positive (m/s).
     pub vx: f64,
+    /// Lateral velocity along the body y axis, positive to the left (m/s).
     pub vy: f64,
+    /// Yaw rate, counter-clockwise positive (rad/s).
     pub omega: f64,
 }
 
 impl Twist2 {
+    /// Standing still: every component 0.
     pub const ZERO: Twist2 = Twist2 {
         vx: 0.0,
         vy: 0.0,
         omega: 0.0,
     };
 
+    /// A body-frame twist from `v_x`, `v_y` (m/s) and `ω` (rad/s).
     pub const fn new(vx: f64, vy: f64, omega: f64) -> Self {
         Self { vx, vy, omega }
     }
@@ -59,14 +68,18 @@ impl Twist2 {
         Self::new(self.vx * s, self.vy * s, self.omega * s)
     }
 
+    /// `[v_x, v_y, ω]`, the twist layout of the batched APIs.
     pub fn to_array(self) -> [f64; 3] {
         [self.vx, self.vy, self.omega]
     }
 
+    /// The twist from the first three values `[v_x, v_y, ω]` of `s`; panics when `s` holds
+    /// fewer than three.
     pub fn from_slice(s: &[f64]) -> Self {
         Self::new(s[0], s[1], s[2])
     }
 
+    /// True when all three components are finite.
     pub fn is_finite(self) -> bool {
         self.vx.is_finite() && self.vy.is_finite() && self.omega.is_finite()
     }
@@ -85,24 +98,30 @@ fn v_coefficients(theta: f64) -> (f64, f64) {
 }
 
 impl Pose2 {
+    /// The identity transform: origin, heading 0.
     pub const IDENTITY: Pose2 = Pose2 {
         x: 0.0,
         y: 0.0,
         theta: 0.0,
     };
 
+    /// A pose from `x`, `y` (m) and `θ` (rad), `θ` taken as given (not wrapped).
     pub const fn new(x: f64, y: f64, theta: f64) -> Self {
         Self { x, y, theta }
     }
 
+    /// `[x, y, θ]`, the pose layout of the batched APIs.
     pub fn to_array(self) -> [f64; 3] {
         [self.x, self.y, self.theta]
     }
 
+    /// The pose from the first three values `[x, y, θ]` of `s`; panics when `s` holds fewer
+    /// than three.
     pub fn from_slice(s: &[f64]) -> Self {
         Self::new(s[0], s[1], s[2])
     }
 
+    /// True when all three coordinates are finite.
     pub fn is_finite(self) -> bool {
         self.x.is_finite() && self.y.is_finite() && self.theta.is_finite()
     }

@@ -39,11 +39,17 @@ pub const TFS_TOLERANCE: f64 = 0.02;
 /// Which limits one waypoint (or command) violates.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Violations {
+    /// The forward speed `v` exceeds `v_max` (beyond the check's tolerance, as every flag).
     pub speed: bool,
+    /// The reverse speed `−v` exceeds `v_reverse_max`.
     pub reverse: bool,
+    /// `|a|`, the longitudinal acceleration, exceeds `a_max` (false where none is checked).
     pub acceleration: bool,
+    /// `|ω|` exceeds `omega_max`.
     pub yaw_rate: bool,
+    /// `|κ|` exceeds `kappa_max` (never set for a robot without a curvature limit).
     pub curvature: bool,
+    /// The body-frame lateral speed `|v_y|` exceeds `lateral_speed_max`.
     pub lateral: bool,
 }
 

@@ -47,12 +47,24 @@ pub const KAPPA_EPS: f64 = 0.05;
 /// Why a trajectory could not be built.
 #[derive(Debug, thiserror::Error)]
 pub enum TrajectoryError {
+    /// The time step is zero, negative or not finite.
     #[error("time step dt = {dt} s must be finite and positive")]
-    InvalidDt { dt: f64 },
+    InvalidDt {
+        /// The time step given (s).
+        dt: f64,
+    },
+    /// A pose has a non-finite coordinate.
     #[error("pose {index} is not finite")]
-    NonFinite { index: usize },
+    NonFinite {
+        /// Index of the first non-finite pose.
+        index: usize,
+    },
+    /// A flat pose array whose length is not a multiple of 3.
     #[error("{len} values are not a whole number of (x, y, θ) poses")]
-    Shape { len: usize },
+    Shape {
+        /// Number of values given.
+        len: usize,
+    },
 }
 
 /// `T` poses at a fixed time step: `poses[k]` is the pose at `k·dt`.
@@ -194,11 +206,17 @@ pub fn curvature(v: f64, omega: f64) -> f64 {
 /// The derivative of the angle wrap is taken as 1 (its value everywhere except at the jump).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SegmentJet {
+    /// Signed longitudinal speed along the midpoint heading (m/s), negative when reversing.
     pub v: f64,
+    /// Lateral speed in the frame of the midpoint heading (m/s), positive to the left.
     pub vy: f64,
+    /// Yaw rate, the wrapped heading change over `dt` (rad/s).
     pub omega: f64,
+    /// Gradient of `v` with respect to `[x_i, y_i, θ_i, x_{i+1}, y_{i+1}, θ_{i+1}]`.
     pub dv: [f64; 6],
+    /// Gradient of `vy` with respect to the six coordinates.
     pub dvy: [f64; 6],
+    /// Gradient of `omega` with respect to the six coordinates (only the two headings count).
     pub domega: [f64; 6],
 }
 

@@ -124,11 +124,14 @@ impl BuiltinKind {
 /// One soft-margin term of Eq. 8 on one motion quantity (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BuiltinTerm {
+    /// The motion quantity penalised, and so the limit it is measured against.
     pub kind: BuiltinKind,
+    /// Sharpness `γ` and margin `δ` of the penalty.
     pub margin: SoftMargin,
 }
 
 impl BuiltinTerm {
+    /// The unweighted term on `kind` (its weight `λ` is applied by [`super::Phi`]).
     pub const fn new(kind: BuiltinKind, margin: SoftMargin) -> Self {
         Self { kind, margin }
     }

@@ -39,9 +39,11 @@ fn check(x: &[f64], horizon: usize, others: &[usize]) -> Result<(), FlowError> {
 /// `f(x) = A·x + b` applied to every waypoint's `(x, y, θ)`, read as a body twist.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LinearField {
+    /// Number of poses `T` per trajectory the field accepts.
     pub horizon: usize,
     /// Row-major `A`: `f_r = Σ_c a[r][c]·x_c + b_r`.
     pub a: Jacobian3,
+    /// Offset `b`, the twist `[v_x, v_y, ω]` at `x = 0` (m/s, rad/s).
     pub b: [f64; 3],
 }
 
@@ -87,6 +89,8 @@ impl FlowModel for LinearField {
 /// `f_k = ξ_k`: a fixed body twist per waypoint, `[T, 3]`, shared by every sample.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ConstantField {
+    /// The body twists `ξ_k`, flat `[T, 3]` (`v_x, v_y` in m/s, `ω` in rad/s); the length
+    /// sets the horizon `T` and should be a multiple of 3.
     pub twists: Vec<f64>,
 }
 
@@ -129,6 +133,8 @@ impl FlowModel for ConstantField {
 /// every sample): `f_k(x, t) = log(x_k⁻¹·x*_k) / max(1 − t, MIN_REMAINING_TIME)`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GeodesicTarget {
+    /// The target poses `x*`, flat `[T, 3]` (`x, y` in m, `θ` in rad) in the samples' frame;
+    /// the length sets the horizon `T` and should be a multiple of 3.
     pub target: Vec<f64>,
 }
 

@@ -13,11 +13,19 @@ use serde::{Deserialize, Serialize};
 #[serde(tag = "shape", rename_all = "snake_case")]
 pub enum FootprintShape {
     /// A disc (an upright cylinder or a sphere; the covering disc of a tilted element).
-    Disc { center: [f64; 2], radius: f64 },
+    Disc {
+        /// Centre `[x, y]` in the base-link frame (m).
+        center: [f64; 2],
+        /// Radius (m).
+        radius: f64,
+    },
     /// A rectangle (an upright box): half extents along its own axes, rotated by `yaw`.
     Rect {
+        /// Centre `[x, y]` in the base-link frame (m).
         center: [f64; 2],
+        /// Half extents along the rectangle's own x and y axes (m).
         half: [f64; 2],
+        /// Rotation of the rectangle's axes from the base link's x axis (rad, counter-clockwise).
         yaw: f64,
     },
 }

@@ -70,6 +70,7 @@
 //! rear-axle centre, where `v_y = 0`).
 
 pub mod footprint;
+mod resolve;
 mod urdf;
 
 pub use crate::embodiment::EmbodimentKind;
@@ -78,10 +79,10 @@ pub use urdf::{MAX_URDF_DEPTH, SteeringJoint, WheelJoint};
 use crate::embodiment::{BuiltinEmbodiment, Embodiment};
 use crate::input::MAX_PROFILE_BYTES;
 use crate::limits::{ControllerGains, GuidanceWeights, Limits};
+use resolve::Checker;
 use serde::Deserialize;
 use std::fmt;
 use std::path::{Path, PathBuf};
-use urdf::UrdfModel;
 
 /// Why a robot profile could not be loaded. Every variant names the file and the field.
 #[derive(Debug, thiserror::Error)]
@@ -89,38 +90,55 @@ pub enum ProfileError {
     /// The profile file itself could not be read.
     #[error("{}: (file): cannot read: {source}", file.display())]
     Read {
+        /// The profile.
         file: PathBuf,
+        /// Why it could not be read (missing, not a regular file, over the size cap, not UTF-8).
         #[source]
         source: std::io::Error,
     },
     /// TOML syntax error, unknown field, missing field or wrong type.
     #[error("{}: {field}: line {line}, column {column}: {message}", file.display())]
     Parse {
+        /// The profile.
         file: PathBuf,
+        /// Best-effort dotted name of the field at the error (`limits.v_max`,
+        /// `constraint[1].weight`); `(document)` when there is none.
         field: String,
+        /// 1-based line of the error.
         line: usize,
+        /// 1-based column of the error, in characters.
         column: usize,
+        /// The TOML parser's message, on one line.
         message: String,
     },
     /// A value that parsed but is not acceptable (negative limit, unknown embodiment, ...).
     #[error("{}: {field}: {message}", file.display())]
     Invalid {
+        /// The profile.
         file: PathBuf,
+        /// Dotted name of the offending field (`limits.v_max`, `embodiment.wheel_joints[1]`).
         field: String,
+        /// What is wrong with its value.
         message: String,
     },
     /// The URDF named by the profile's `urdf` field is missing or unparsable.
     #[error("{}: urdf: cannot load `{}`: {message}", file.display(), urdf.display())]
     UrdfLoad {
+        /// The profile that names the URDF.
         file: PathBuf,
+        /// The URDF, resolved against the profile's directory.
         urdf: PathBuf,
+        /// Why it could not be read or parsed, on one line.
         message: String,
     },
     /// The URDF parsed but lacks something the profile needs.
     #[error("{}: {element}: {message}", urdf.display())]
     UrdfContent {
+        /// The URDF.
         urdf: PathBuf,
+        /// The element at fault (``link `base_link` ``, ``joint `left_wheel_joint` ``, `robot`).
         element: String,
+        /// What is missing or wrong.
         message: String,
     },
 }
@@ -189,7 +207,10 @@ pub struct PluginRef {
 /// How the robot moves: a built-in model or one from a plugin.
 #[derive(Clone, Debug, PartialEq)]
 pub enum EmbodimentSpec {
+    /// One of the built-in kinematic models ([`RobotProfile::builtin_embodiment`] builds it).
     Builtin(EmbodimentKind),
+    /// A model from a plugin library (`kind = "plugin"`); its weight is 1, it has no deadline
+    /// and runs in the host process.
     Plugin(PluginRef),
 }
 
@@ -218,7 +239,9 @@ pub enum Origin {
 /// `URDF joint left_wheel_joint velocity 22 rad/s × wheel radius 0.09 m`, ...).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Provenance {
+    /// Which kind of source set the value.
     pub origin: Origin,
+    /// The account itself, as shown to users (also what `Display` prints).
     pub detail: String,
 }
 
@@ -246,11 +269,18 @@ impl fmt::Display for Provenance {
 /// Provenance of each effective limit.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LimitProvenance {
+    /// Of `v_max`: robot.toml, or the slowest wheel joint's rim speed when lower.
     pub v_max: Provenance,
+    /// Of `v_reverse_max`: robot.toml, or the slowest wheel joint's rim speed when lower.
     pub v_reverse_max: Provenance,
+    /// Of `a_max`: always robot.toml.
     pub a_max: Provenance,
+    /// Of `omega_max`: robot.toml, or a differential drive's wheel cap `2·v_wheel / track`.
     pub omega_max: Provenance,
+    /// Of `kappa_max`: `1 / min_turning_radius` from robot.toml or from an Ackermann robot's
+    /// steering joints, or why there is none (turns in place).
     pub kappa_max: Provenance,
+    /// Of `lateral_speed_max`: always robot.toml.
     pub lateral_speed_max: Provenance,
 }
 
@@ -261,14 +291,18 @@ pub struct LimitEntry<'a> {
     pub name: &'static str,
     /// The effective value; `None` for `kappa_max` of a robot that turns in place.
     pub value: Option<f64>,
+    /// SI unit of `value` (`m/s`, `m/s²`, `rad/s`, `1/m`).
     pub unit: &'static str,
+    /// Where the value came from.
     pub source: &'a Provenance,
 }
 
 /// A loaded and validated robot profile.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RobotProfile {
+    /// The robot's name (`name`; by convention its folder name), non-empty.
     pub name: String,
+    /// Free text from `description` (empty when not given).
     pub description: String,
     /// The robot.toml this was loaded from (as given to [`RobotProfile::load`]).
     pub source: PathBuf,
@@ -276,6 +310,7 @@ pub struct RobotProfile {
     pub urdf: PathBuf,
     /// The URDF link whose origin the robot's pose refers to.
     pub base_link: String,
+    /// How the robot moves: a built-in kinematic model or a plugin.
     pub embodiment: EmbodimentSpec,
     /// Wheel joints used for limit caps (and the wheelbase of an Ackermann robot).
     pub wheel_joints: Vec<WheelJoint>,
@@ -288,6 +323,8 @@ pub struct RobotProfile {
     /// Radius of the disc about the base-link origin that covers the footprint (m): the body
     /// planners avoid pedestrians with.
     pub footprint_radius: f64,
+    /// Where `footprint_radius` came from: the URDF geometry that set it, or the
+    /// `[footprint] radius` override.
     pub footprint_source: Provenance,
     /// The footprint the simulator checks collisions with: the URDF base collision's xy
     /// projection ([`footprint`]), or the disc of `footprint_radius` when `[footprint] radius`
@@ -295,12 +332,19 @@ pub struct RobotProfile {
     pub footprint_shapes: Vec<footprint::FootprintShape>,
     /// Effective limits after the URDF caps.
     pub limits: Limits,
+    /// Where each effective limit came from.
     pub limit_sources: LimitProvenance,
     /// Effective minimum turning radius (m, 0 = turns in place); `kappa_max = 1 / r`.
     pub min_turning_radius: f64,
+    /// Gains of the tracking controller (`[controller]`, else the defaults), checked finite
+    /// and `>= 0` (`lookahead > 0`).
     pub controller: ControllerGains,
+    /// Whether `controller` was written in robot.toml ([`Origin::Profile`]) or defaulted.
     pub controller_source: Origin,
+    /// Weights and shape of the feasibility penalty Φ (`[guidance]`, else the defaults),
+    /// checked finite, `>= 0`, `gamma > 0`, `delta < 1`.
     pub guidance: GuidanceWeights,
+    /// Whether `guidance` was written in robot.toml ([`Origin::Profile`]) or defaulted.
     pub guidance_source: Origin,
     /// Plugin constraint terms, in the order declared.
     pub constraints: Vec<PluginRef>,
@@ -353,7 +397,7 @@ struct RawFootprint {
     radius: Option<f64>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Copy, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawLimits {
     v_max: f64,
@@ -388,92 +432,6 @@ struct RawConstraint {
 // Loading
 // ---------------------------------------------------------------------------------------------
 
-/// Builds errors naming one profile file.
-struct Checker<'a> {
-    file: &'a Path,
-}
-
-impl Checker<'_> {
-    fn invalid(&self, field: impl Into<String>, message: impl Into<String>) -> ProfileError {
-        ProfileError::Invalid {
-            file: self.file.to_path_buf(),
-            field: field.into(),
-            message: message.into(),
-        }
-    }
-
-    /// Finite and `> 0`.
-    fn positive(&self, field: &str, v: f64) -> Result<f64, ProfileError> {
-        if !v.is_finite() {
-            Err(self.invalid(field, format!("must be a finite number, got {v}")))
-        } else if v <= 0.0 {
-            Err(self.invalid(field, format!("must be > 0, got {v}")))
-        } else {
-            Ok(v)
-        }
-    }
-
-    /// Finite and `>= 0`.
-    fn non_negative(&self, field: &str, v: f64) -> Result<f64, ProfileError> {
-        if !v.is_finite() {
-            Err(self.invalid(field, format!("must be a finite number, got {v}")))
-        } else if v < 0.0 {
-            Err(self.invalid(field, format!("must be >= 0, got {v}")))
-        } else {
-            Ok(v)
-        }
-    }
-
-    fn non_empty(&self, field: &str, s: &str) -> Result<(), ProfileError> {
-        if s.trim().is_empty() {
-            Err(self.invalid(field, "must not be empty"))
-        } else {
-            Ok(())
-        }
-    }
-
-    fn controller(&self, g: &ControllerGains) -> Result<(), ProfileError> {
-        self.non_negative("controller.k_x", g.k_x)?;
-        self.non_negative("controller.k_y", g.k_y)?;
-        self.non_negative("controller.k_theta", g.k_theta)?;
-        self.non_negative("controller.k_d", g.k_d)?;
-        self.positive("controller.lookahead", g.lookahead)?;
-        Ok(())
-    }
-
-    fn guidance(&self, w: &GuidanceWeights) -> Result<(), ProfileError> {
-        self.non_negative("guidance.lambda_v", w.lambda_v)?;
-        self.non_negative("guidance.lambda_a", w.lambda_a)?;
-        self.non_negative("guidance.lambda_omega", w.lambda_omega)?;
-        self.non_negative("guidance.lambda_kappa", w.lambda_kappa)?;
-        self.non_negative("guidance.lambda_lateral", w.lambda_lateral)?;
-        self.non_negative("guidance.lambda_reverse", w.lambda_reverse)?;
-        self.positive("guidance.gamma", w.gamma)?;
-        self.non_negative("guidance.delta", w.delta)?;
-        if w.delta >= 1.0 {
-            return Err(self.invalid("guidance.delta", format!("must be < 1, got {}", w.delta)));
-        }
-        Ok(())
-    }
-}
-
-/// `path` relative to `dir` unless absolute.
-fn resolve(dir: &Path, path: &str) -> PathBuf {
-    let p = PathBuf::from(path);
-    if p.is_absolute() { p } else { dir.join(p) }
-}
-
-/// A number formatted for provenance strings (no trailing zeros).
-fn num(v: f64) -> String {
-    let s = format!("{v:.4}");
-    let s = s.trim_end_matches('0').trim_end_matches('.');
-    if s.is_empty() || s == "-" {
-        "0".to_string()
-    } else {
-        s.to_string()
-    }
-}
-
 impl RobotProfile {
     /// Reads, validates and resolves a `robot.toml` and its URDF.
     pub fn load(path: &Path) -> Result<RobotProfile, ProfileError> {
@@ -488,369 +446,38 @@ impl RobotProfile {
         Self::from_raw(raw, path, &dir)
     }
 
+    /// Checks a parsed profile and resolves it against its URDF, one [`resolve`] step after
+    /// the other: the profile's own values, the embodiment, the plugin constraint terms, the
+    /// URDF, then the effective limits. Errors are reported in that order.
     fn from_raw(raw: RawProfile, path: &Path, dir: &Path) -> Result<RobotProfile, ProfileError> {
         let ck = Checker { file: path };
-
-        // --- Scalars first, so a bad number is reported even when the URDF is broken too.
-        ck.non_empty("name", &raw.name)?;
-        ck.non_empty("urdf", &raw.urdf)?;
-        let l = &raw.limits;
-        let v_max = ck.positive("limits.v_max", l.v_max)?;
-        let v_reverse_max = ck.positive("limits.v_reverse_max", l.v_reverse_max)?;
-        let a_max = ck.positive("limits.a_max", l.a_max)?;
-        let omega_max = ck.positive("limits.omega_max", l.omega_max)?;
-        let min_turning_radius =
-            ck.non_negative("limits.min_turning_radius", l.min_turning_radius)?;
-        let lateral_speed_max = ck.positive("limits.lateral_speed_max", l.lateral_speed_max)?;
-        let footprint_override = raw
-            .footprint
-            .radius
-            .map(|r| ck.positive("footprint.radius", r))
-            .transpose()?;
-        let controller_source = if raw.controller.is_some() {
-            Origin::Profile
-        } else {
-            Origin::Default
-        };
-        let controller = raw.controller.unwrap_or_default();
-        ck.controller(&controller)?;
-        let guidance_source = if raw.guidance.is_some() {
-            Origin::Profile
-        } else {
-            Origin::Default
-        };
-        let guidance = raw.guidance.unwrap_or_default();
-        ck.guidance(&guidance)?;
-
-        // --- Embodiment.
-        let e = &raw.embodiment;
-        let embodiment = if e.kind == "plugin" {
-            let library = e.library.as_deref().ok_or_else(|| {
-                ck.invalid("embodiment.library", "required with kind = \"plugin\"")
-            })?;
-            ck.non_empty("embodiment.library", library)?;
-            let plugin = e.plugin.as_deref().ok_or_else(|| {
-                ck.invalid("embodiment.plugin", "required with kind = \"plugin\"")
-            })?;
-            ck.non_empty("embodiment.plugin", plugin)?;
-            EmbodimentSpec::Plugin(PluginRef {
-                library: resolve(dir, library),
-                plugin: plugin.to_string(),
-                config: e.config.clone().unwrap_or_default(),
-                weight: 1.0,
-                deadline_ms: None,
-                isolation: PluginIsolation::InProcess,
-                declared_in: path.to_path_buf(),
-            })
-        } else {
-            let kind = EmbodimentKind::from_name(&e.kind).ok_or_else(|| {
-                ck.invalid(
-                    "embodiment.kind",
-                    format!(
-                        "unknown embodiment `{}`; expected one of differential_drive, ackermann, \
-                         omnidirectional, plugin",
-                        e.kind
-                    ),
-                )
-            })?;
-            for (field, present) in [
-                ("embodiment.library", e.library.is_some()),
-                ("embodiment.plugin", e.plugin.is_some()),
-                ("embodiment.config", e.config.is_some()),
-            ] {
-                if present {
-                    return Err(ck.invalid(field, "only allowed with kind = \"plugin\""));
-                }
-            }
-            EmbodimentSpec::Builtin(kind)
-        };
-        let kind = match &embodiment {
-            EmbodimentSpec::Builtin(k) => Some(*k),
-            EmbodimentSpec::Plugin(_) => None,
-        };
-        if !e.steering_joints.is_empty() && kind != Some(EmbodimentKind::Ackermann) {
-            return Err(ck.invalid(
-                "embodiment.steering_joints",
-                format!("only used with kind = \"ackermann\", not \"{}\"", e.kind),
-            ));
-        }
-
-        // --- Plugin constraint terms.
-        let mut constraints = Vec::with_capacity(raw.constraints.len());
-        for (i, c) in raw.constraints.iter().enumerate() {
-            ck.non_empty(&format!("constraint[{i}].library"), &c.library)?;
-            ck.non_empty(&format!("constraint[{i}].plugin"), &c.plugin)?;
-            let weight = ck.non_negative(&format!("constraint[{i}].weight"), c.weight)?;
-            if let Some(ms) = c.deadline_ms {
-                let field = format!("constraint[{i}].deadline_ms");
-                let ms = ck.non_negative(&field, ms)?;
-                if ms > MAX_PLUGIN_DEADLINE_MS {
-                    return Err(ck.invalid(
-                        &field,
-                        format!("at most {MAX_PLUGIN_DEADLINE_MS} ms (0: no deadline), got {ms}"),
-                    ));
-                }
-            }
-            constraints.push(PluginRef {
-                library: resolve(dir, &c.library),
-                plugin: c.plugin.clone(),
-                config: c.config.clone(),
-                weight,
-                deadline_ms: c.deadline_ms,
-                isolation: c.isolation,
-                declared_in: path.to_path_buf(),
-            });
-        }
-
-        // --- URDF.
-        let urdf_path = resolve(dir, &raw.urdf);
-        let model = UrdfModel::load(&urdf_path, path)?;
-        let urdf_name = raw.urdf.as_str();
-        let base_link = match &raw.base_link {
-            Some(b) => {
-                if !model.has_link(b) {
-                    return Err(ck.invalid("base_link", format!("no link `{b}` in {urdf_name}")));
-                }
-                b.clone()
-            }
-            None => model.root_link()?,
-        };
-
-        let (footprint_radius, footprint_source) = match footprint_override {
-            Some(r) => {
-                let urdf_says = match model.footprint_radius(&base_link) {
-                    Ok((u, _)) => format!("URDF base collision would give {} m", num(u)),
-                    Err(_) => "URDF base collision has no analytic extent".to_string(),
-                };
-                (
-                    r,
-                    Provenance::profile(format!(
-                        "robot.toml [footprint] radius (overrides; {urdf_says})"
-                    )),
-                )
-            }
-            None => {
-                let (r, account) = model.footprint_radius(&base_link)?;
-                (r, Provenance::urdf(format!("URDF {account}")))
-            }
-        };
-        let footprint_shapes = match footprint_override {
-            Some(radius) => vec![footprint::FootprintShape::Disc {
-                center: [0.0, 0.0],
-                radius,
-            }],
-            None => model.footprint_shapes(&base_link)?,
-        };
-
-        let mut wheel_joints = Vec::with_capacity(e.wheel_joints.len());
-        for (i, name) in e.wheel_joints.iter().enumerate() {
-            if !model.robot.joints.iter().any(|j| &j.name == name) {
-                return Err(ck.invalid(
-                    format!("embodiment.wheel_joints[{i}]"),
-                    format!("no joint `{name}` in {urdf_name}"),
-                ));
-            }
-            wheel_joints.push(model.wheel_joint(&base_link, name)?);
-        }
-        let mut steering_joints = Vec::with_capacity(e.steering_joints.len());
-        for (i, name) in e.steering_joints.iter().enumerate() {
-            if !model.robot.joints.iter().any(|j| &j.name == name) {
-                return Err(ck.invalid(
-                    format!("embodiment.steering_joints[{i}]"),
-                    format!("no joint `{name}` in {urdf_name}"),
-                ));
-            }
-            steering_joints.push(model.steering_joint(&base_link, name)?);
-        }
-        let track_width = if wheel_joints.len() >= 2 {
-            let ys = wheel_joints.iter().map(|w| w.position[1]);
-            let lo = ys.clone().fold(f64::INFINITY, f64::min);
-            let hi = ys.fold(f64::NEG_INFINITY, f64::max);
-            (hi - lo > 0.0).then_some(hi - lo)
-        } else {
-            None
-        };
-
-        // --- Effective limits.
-        let wheel_cap = wheel_joints
-            .iter()
-            .filter_map(|w| w.velocity_limit.map(|v| (v * w.radius, w)))
-            .min_by(|a, b| a.0.total_cmp(&b.0));
-        let capped = |field: &str, given: f64| -> (f64, Provenance) {
-            let toml = format!("robot.toml [limits] {field}");
-            match wheel_cap {
-                Some((cap, w)) if cap < given => (
-                    cap,
-                    Provenance::urdf(format!(
-                        "URDF joint `{}` velocity {} rad/s × wheel radius {} m (robot.toml said {})",
-                        w.name,
-                        num(w.velocity_limit.unwrap_or(0.0)),
-                        num(w.radius),
-                        num(given)
-                    )),
-                ),
-                Some((cap, w)) => (
-                    given,
-                    Provenance::profile(format!(
-                        "{toml} (URDF joint `{}` allows {} m/s)",
-                        w.name,
-                        num(cap)
-                    )),
-                ),
-                None => (given, Provenance::profile(toml)),
-            }
-        };
-        let (v_max, v_max_src) = capped("v_max", v_max);
-        let (v_reverse_max, v_reverse_src) = capped("v_reverse_max", v_reverse_max);
-
-        let (omega_max, omega_src) = match (kind, wheel_cap, track_width) {
-            (Some(EmbodimentKind::DifferentialDrive), Some((cap, _)), Some(track)) => {
-                let w_cap = 2.0 * cap / track;
-                if w_cap < omega_max {
-                    (
-                        w_cap,
-                        Provenance::urdf(format!(
-                            "URDF wheels: 2 × {} m/s / track {} m (robot.toml said {})",
-                            num(cap),
-                            num(track),
-                            num(omega_max)
-                        )),
-                    )
-                } else {
-                    (
-                        omega_max,
-                        Provenance::profile(format!(
-                            "robot.toml [limits] omega_max (URDF wheels allow {} rad/s)",
-                            num(w_cap)
-                        )),
-                    )
-                }
-            }
-            _ => (
-                omega_max,
-                Provenance::profile("robot.toml [limits] omega_max"),
-            ),
-        };
-
-        let mut wheelbase = None;
-        let (r_min, kappa_src) = if kind == Some(EmbodimentKind::Ackermann) {
-            let from_urdf = if steering_joints.is_empty() {
-                None
-            } else {
-                if wheel_joints.is_empty() {
-                    return Err(ck.invalid(
-                        "embodiment.wheel_joints",
-                        "an ackermann robot with steering_joints needs its rear wheel joints too \
-                         (the wheelbase is measured between the two)",
-                    ));
-                }
-                let mean_x =
-                    |xs: &mut dyn Iterator<Item = f64>, n: usize| xs.sum::<f64>() / n as f64;
-                let front = mean_x(
-                    &mut steering_joints.iter().map(|s| s.position[0]),
-                    steering_joints.len(),
-                );
-                let rear = mean_x(
-                    &mut wheel_joints.iter().map(|w| w.position[0]),
-                    wheel_joints.len(),
-                );
-                let l = (front - rear).abs();
-                if !(l.is_finite() && l > 1e-6) {
-                    return Err(ck.invalid(
-                        "embodiment.steering_joints",
-                        "the steering joints sit on the wheel joints' axle (wheelbase 0)",
-                    ));
-                }
-                wheelbase = Some(l);
-                let (delta, joint) = steering_joints
-                    .iter()
-                    .map(|s| (s.max_angle, s.name.as_str()))
-                    .min_by(|a, b| a.0.total_cmp(&b.0))
-                    .unwrap_or((0.0, ""));
-                Some((l / delta.tan(), l, delta, joint))
-            };
-            match from_urdf {
-                Some((r, l, delta, joint)) if r > min_turning_radius => (
-                    r,
-                    Provenance::urdf(format!(
-                        "URDF joint `{joint}` steering limit {} rad, wheelbase {} m: r_min = L / tan δ = {} m (robot.toml said {})",
-                        num(delta),
-                        num(l),
-                        num(r),
-                        num(min_turning_radius)
-                    )),
-                ),
-                Some((r, ..)) => (
-                    min_turning_radius,
-                    Provenance::profile(format!(
-                        "1 / robot.toml [limits] min_turning_radius (URDF steering allows r_min {} m)",
-                        num(r)
-                    )),
-                ),
-                None if min_turning_radius > 0.0 => (
-                    min_turning_radius,
-                    Provenance::profile("1 / robot.toml [limits] min_turning_radius"),
-                ),
-                None => {
-                    return Err(ck.invalid(
-                        "limits.min_turning_radius",
-                        "an ackermann robot cannot turn in place: give min_turning_radius > 0 or \
-                         embodiment.steering_joints",
-                    ));
-                }
-            }
-        } else if min_turning_radius > 0.0 {
-            (
-                min_turning_radius,
-                Provenance::profile("1 / robot.toml [limits] min_turning_radius"),
-            )
-        } else {
-            (
-                0.0,
-                Provenance::profile(
-                    "none: robot.toml [limits] min_turning_radius = 0 (turns in place)",
-                ),
-            )
-        };
-
-        let limits = Limits {
-            v_max,
-            v_reverse_max,
-            a_max,
-            omega_max,
-            kappa_max: (r_min > 0.0).then(|| 1.0 / r_min),
-            lateral_speed_max,
-        };
-        let limit_sources = LimitProvenance {
-            v_max: v_max_src,
-            v_reverse_max: v_reverse_src,
-            a_max: Provenance::profile("robot.toml [limits] a_max"),
-            omega_max: omega_src,
-            kappa_max: kappa_src,
-            lateral_speed_max: Provenance::profile("robot.toml [limits] lateral_speed_max"),
-        };
-
+        let checked = resolve::check_values(&raw, &ck)?;
+        let embodiment = resolve::embodiment(&raw.embodiment, &ck, dir)?;
+        let constraints = resolve::constraints(&raw.constraints, &ck, dir)?;
+        let urdf = resolve::urdf(&raw, &ck, dir, checked.footprint_override)?;
+        let kind = resolve::builtin_kind(&embodiment);
+        let effective = resolve::limits(&checked.limits, kind, &urdf, &ck)?;
         Ok(RobotProfile {
             name: raw.name,
             description: raw.description,
             source: path.to_path_buf(),
-            urdf: urdf_path,
-            base_link,
+            urdf: urdf.path,
+            base_link: urdf.base_link,
             embodiment,
-            wheel_joints,
-            steering_joints,
-            track_width,
-            wheelbase,
-            footprint_radius,
-            footprint_source,
-            footprint_shapes,
-            limits,
-            limit_sources,
-            min_turning_radius: r_min,
-            controller,
-            controller_source,
-            guidance,
-            guidance_source,
+            wheel_joints: urdf.wheel_joints,
+            steering_joints: urdf.steering_joints,
+            track_width: urdf.track_width,
+            wheelbase: effective.wheelbase,
+            footprint_radius: urdf.footprint_radius,
+            footprint_source: urdf.footprint_source,
+            footprint_shapes: urdf.footprint_shapes,
+            limits: effective.limits,
+            limit_sources: effective.sources,
+            min_turning_radius: effective.min_turning_radius,
+            controller: checked.controller,
+            controller_source: checked.controller_source,
+            guidance: checked.guidance,
+            guidance_source: checked.guidance_source,
             constraints,
         })
     }

@@ -680,3 +680,28 @@ fn oversized_profile_and_urdf_are_refused_with_the_cap() {
         other => panic!("{other:?}"),
     }
 }
+
+#[test]
+fn a_profile_and_urdf_given_as_text_load_like_the_files() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../robots/diablo");
+    let path = dir.join("robot.toml");
+    let from_files = RobotProfile::load(&path).unwrap();
+    let toml = std::fs::read_to_string(&path).unwrap();
+    let urdf = std::fs::read_to_string(&from_files.urdf).unwrap();
+    // The URDF text is used, not the file its key names: the profile may live anywhere.
+    let elsewhere = std::path::Path::new("/nonexistent/param_server/robot.toml");
+    let from_text = RobotProfile::from_toml_str(&toml, elsewhere, Some(&urdf)).unwrap();
+    assert_eq!(from_text.limits, from_files.limits);
+    assert_eq!(from_text.footprint_shapes, from_files.footprint_shapes);
+    assert_eq!(from_text.source, elsewhere);
+    // Without the URDF text, the file is looked for next to the named profile.
+    let err = RobotProfile::from_toml_str(&toml, elsewhere, None).unwrap_err();
+    assert!(err.to_string().contains("urdf"), "{err}");
+    // A broken URDF text is an error naming the profile and the URDF.
+    let err = RobotProfile::from_toml_str(&toml, elsewhere, Some("<robot")).unwrap_err();
+    let text = err.to_string();
+    assert!(
+        text.contains("robot.toml") && text.contains("urdf"),
+        "{text}"
+    );
+}

@@ -441,20 +441,50 @@ impl RobotProfile {
                 source,
             },
         )?;
-        let raw: RawProfile = toml::from_str(&text).map_err(|e| parse_error(path, &text, &e))?;
+        Self::from_toml_str(&text, path, None)
+    }
+
+    /// Validates and resolves a profile held in memory: `text` is the `robot.toml`, `path`
+    /// names it in errors and its folder is where relative paths in it are resolved (plugins,
+    /// and the URDF when `urdf` is `None`), and `urdf` is the text of the URDF its `urdf` key
+    /// names, for a robot description read from elsewhere (a parameter server); `None` reads
+    /// that file. The same size caps apply as to files.
+    pub fn from_toml_str(
+        text: &str,
+        path: &Path,
+        urdf: Option<&str>,
+    ) -> Result<RobotProfile, ProfileError> {
+        if text.len() as u64 > MAX_PROFILE_BYTES {
+            return Err(ProfileError::Read {
+                file: path.to_path_buf(),
+                source: std::io::Error::new(
+                    std::io::ErrorKind::InvalidData,
+                    format!(
+                        "{} bytes is more than the limit of {MAX_PROFILE_BYTES} for a robot profile",
+                        text.len()
+                    ),
+                ),
+            });
+        }
+        let raw: RawProfile = toml::from_str(text).map_err(|e| parse_error(path, text, &e))?;
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-        Self::from_raw(raw, path, &dir)
+        Self::from_raw(raw, path, &dir, urdf)
     }
 
     /// Checks a parsed profile and resolves it against its URDF, one [`resolve`] step after
     /// the other: the profile's own values, the embodiment, the plugin constraint terms, the
     /// URDF, then the effective limits. Errors are reported in that order.
-    fn from_raw(raw: RawProfile, path: &Path, dir: &Path) -> Result<RobotProfile, ProfileError> {
+    fn from_raw(
+        raw: RawProfile,
+        path: &Path,
+        dir: &Path,
+        urdf_text: Option<&str>,
+    ) -> Result<RobotProfile, ProfileError> {
         let ck = Checker { file: path };
         let checked = resolve::check_values(&raw, &ck)?;
         let embodiment = resolve::embodiment(&raw.embodiment, &ck, dir)?;
         let constraints = resolve::constraints(&raw.constraints, &ck, dir)?;
-        let urdf = resolve::urdf(&raw, &ck, dir, checked.footprint_override)?;
+        let urdf = resolve::urdf(&raw, &ck, dir, checked.footprint_override, urdf_text)?;
         let kind = resolve::builtin_kind(&embodiment);
         let effective = resolve::limits(&checked.limits, kind, &urdf, &ck)?;
         Ok(RobotProfile {

@@ -317,16 +317,21 @@ pub(super) struct UrdfFacts {
     pub(super) track_width: Option<f64>,
 }
 
-/// Loads the URDF named by `raw.urdf`, picks the base link and measures the footprint, then
-/// the wheel joints and the steering joints (each checked to exist, in the order listed).
+/// Loads the URDF named by `raw.urdf` (or parses `text`, its contents given in memory), picks
+/// the base link and measures the footprint, then the wheel joints and the steering joints
+/// (each checked to exist, in the order listed).
 pub(super) fn urdf(
     raw: &RawProfile,
     ck: &Checker<'_>,
     dir: &Path,
     footprint_override: Option<f64>,
+    text: Option<&str>,
 ) -> Result<UrdfFacts, ProfileError> {
     let path = resolve_path(dir, &raw.urdf);
-    let model = UrdfModel::load(&path, ck.file)?;
+    let model = match text {
+        Some(text) => UrdfModel::parse(text, &path, ck.file)?,
+        None => UrdfModel::load(&path, ck.file)?,
+    };
     let urdf_name = raw.urdf.as_str();
     let base_link = match &raw.base_link {
         Some(b) => {

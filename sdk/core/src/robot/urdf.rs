@@ -130,24 +130,40 @@ fn pose_to_isometry(p: &urdf_rs::Pose) -> Isometry3<f64> {
     )
 }
 
+/// A URDF that could not be read or parsed, in one line whatever the XML parser reports.
+fn load_error(path: &Path, toml: &Path, message: &str) -> ProfileError {
+    ProfileError::UrdfLoad {
+        file: toml.to_path_buf(),
+        urdf: path.to_path_buf(),
+        message: message.split_whitespace().collect::<Vec<_>>().join(" "),
+    }
+}
+
 impl UrdfModel {
     /// Reads and parses `path` (a regular file of at most [`MAX_URDF_BYTES`], elements nested at
     /// most [`MAX_URDF_DEPTH`] deep); `toml` is the profile that names it (for the error).
     pub(crate) fn load(path: &Path, toml: &Path) -> Result<Self, ProfileError> {
-        // One line, whatever the XML parser reports.
-        let fail = |message: String| ProfileError::UrdfLoad {
-            file: toml.to_path_buf(),
-            urdf: path.to_path_buf(),
-            message: message.split_whitespace().collect::<Vec<_>>().join(" "),
-        };
         let text = crate::input::read_user_file(path, "URDF", MAX_URDF_BYTES)
-            .map_err(|e| fail(e.to_string()))?;
-        if let Some(line) = element_too_deep(&text, MAX_URDF_DEPTH) {
+            .map_err(|e| load_error(path, toml, &e.to_string()))?;
+        Self::parse(&text, path, toml)
+    }
+
+    /// Parses URDF `text` held in memory (at most [`MAX_URDF_BYTES`], elements nested at most
+    /// [`MAX_URDF_DEPTH`] deep); `path` names it and `toml` the profile in errors.
+    pub(crate) fn parse(text: &str, path: &Path, toml: &Path) -> Result<Self, ProfileError> {
+        let fail = |message: String| load_error(path, toml, &message);
+        if text.len() as u64 > MAX_URDF_BYTES {
+            return Err(fail(format!(
+                "{} bytes is more than the limit of {MAX_URDF_BYTES} for a URDF",
+                text.len()
+            )));
+        }
+        if let Some(line) = element_too_deep(text, MAX_URDF_DEPTH) {
             return Err(fail(format!(
                 "line {line}: elements nested more than {MAX_URDF_DEPTH} deep (the limit of a URDF)"
             )));
         }
-        let robot = urdf_rs::read_from_string(&text).map_err(|e| fail(e.to_string()))?;
+        let robot = urdf_rs::read_from_string(text).map_err(|e| fail(e.to_string()))?;
         if robot.links.is_empty() {
             return Err(fail("the URDF has no <link>".into()));
         }

@@ -382,22 +382,32 @@ impl GuidanceSettings {
 /// Why sampling or guidance failed.
 #[derive(Debug, thiserror::Error)]
 pub enum GuidanceError {
+    /// A setting is out of range.
     #[error("invalid guidance setting `{field}`: {message}")]
     InvalidSettings {
+        /// The setting's TOML key (`iterations_m`, `paper.momentum`, ...).
         field: &'static str,
+        /// What is wrong with its value.
         message: String,
     },
+    /// The TOML text of the settings could not be parsed (syntax, unknown key, wrong type).
     #[error("cannot parse guidance settings: {0}")]
     Parse(String),
+    /// The initial poses, sample indices or buffers do not fit the model or the workspace.
     #[error("shape mismatch: {0}")]
     Shape(String),
+    /// The flow model failed.
     #[error(transparent)]
     Flow(#[from] FlowError),
+    /// A constraint term of Φ failed.
     #[error(transparent)]
     Constraint(#[from] ConstraintError),
+    /// A non-finite number appeared; nothing non-finite is returned.
     #[error("non-finite value in the {stage} of iteration {iteration}")]
     NonFinite {
+        /// Where it appeared (`flow velocity`, `rollout`, `feasibility cost`, ...).
         stage: &'static str,
+        /// The iteration of Algorithm 1 (0: the plain rollout).
         iteration: usize,
     },
     /// The deadline had passed before the first integration step, so there is no sample.
@@ -1098,7 +1108,6 @@ pub fn sample_guided(
 
 /// [`sample_guided`] that starts no network call after `deadline` (module docs,
 /// "Deadlines"). A rollout cut short leaves the workspace unusable for [`guide_subset`].
-#[allow(clippy::too_many_arguments)]
 pub fn sample_guided_until(
     model: &(impl FlowModel + ?Sized),
     cond: &FlowCondition,
@@ -1163,7 +1172,6 @@ pub fn guide_subset(
 
 /// [`guide_subset`] that starts no network call after `deadline`: the result is the last
 /// iterate of Algorithm 1 completed by then (module docs, "Deadlines").
-#[allow(clippy::too_many_arguments)]
 pub fn guide_subset_until(
     model: &(impl FlowModel + ?Sized),
     cond: &FlowCondition,
@@ -1265,7 +1273,6 @@ struct Iterations {
 /// One iteration of Algorithm 1 under a deadline: saves the iterate (when `save` or a
 /// deadline is set), runs the backward pass, the control update and the forward rollout with Φ,
 /// and returns false, with the saved iterate restored, when the deadline cut it short.
-#[allow(clippy::too_many_arguments)]
 fn iteration_step(
     model: &(impl FlowModel + ?Sized),
     cond: &FlowCondition,

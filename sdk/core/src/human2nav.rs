@@ -163,6 +163,7 @@ pub struct Human2NavSettings {
     pub guidance: GuidanceSettings,
     /// The exact last-step correction applied after Algorithm 1 ([`crate::projection`]).
     pub projection: ProjectionSettings,
+    /// The weights of the selection rule (module docs, "Selection rule").
     pub selection: SelectionWeights,
 }
 

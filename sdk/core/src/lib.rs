@@ -14,6 +14,8 @@
 //! * [`human2nav`]: the reference planner (sampling, guidance, selection).
 //! * [`ablation`]: the four-arm guidance ablation (raw, Algorithm 1, QP, both).
 
+#![warn(missing_docs)]
+
 pub mod ablation;
 pub mod bev;
 pub mod constraint;

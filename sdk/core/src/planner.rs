@@ -50,8 +50,9 @@ pub struct PlanInfo {
     /// Index in `candidates` of the sample whose path the plan follows (`None` when the plan
     /// follows none of them, e.g. a kept previous plan or braking to a stop).
     pub selected: Option<usize>,
-    /// Φ of the selected trajectory before and after guidance.
+    /// Φ of the selected trajectory before guidance (`None` when the plan follows no sample).
     pub phi_before: Option<f64>,
+    /// Φ of the selected trajectory after guidance (`None` when the plan follows no sample).
     pub phi_after: Option<f64>,
     /// Algorithm 1 iterations run for this plan (`None` when guidance did not run).
     pub guidance_iterations: Option<usize>,
@@ -196,10 +197,13 @@ impl std::fmt::Debug for Deadline {
 /// A planned trajectory in the world frame: `poses[k]` is the target at `t0 + k·dt`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Plan {
+    /// Time of the first pose, s (the observation's time).
     pub t0: f64,
+    /// Time between poses, s.
     pub dt: f64,
     /// `poses[0]` is the robot's pose at `t0`.
     pub poses: Vec<Pose2>,
+    /// Diagnostics: candidates, Φ, stages, notes.
     pub info: PlanInfo,
 }
 
@@ -237,14 +241,30 @@ impl Plan {
 /// Why a planner could not produce a plan.
 #[derive(Debug, thiserror::Error)]
 pub enum PlanError {
+    /// The observation has a non-finite or negative field (named in the message); the caller
+    /// must fix it.
     #[error("invalid observation: {0}")]
     InvalidObservation(String),
+    /// The planner's settings are out of range (the field is named in the message).
     #[error("invalid planner settings: {0}")]
     InvalidSettings(String),
+    /// The planner failed on this call (a plugin planner's error, say).
     #[error("planner `{planner}` failed: {message}")]
-    Failed { planner: String, message: String },
+    Failed {
+        /// The planner's name.
+        planner: String,
+        /// Its explanation.
+        message: String,
+    },
+    /// The planner refuses every call after an earlier failure (a panic, a crashed helper
+    /// process that was restarted too often).
     #[error("planner `{planner}` is unusable after an earlier failure: {message}")]
-    Unusable { planner: String, message: String },
+    Unusable {
+        /// The planner's name.
+        planner: String,
+        /// What happened.
+        message: String,
+    },
 }
 
 /// Observation → plan. Implementations must never return a plan with a non-finite value.

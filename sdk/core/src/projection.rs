@@ -102,17 +102,27 @@ impl Default for ProjectionSettings {
 /// Why a plan could not be corrected.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum ProjectionError {
+    /// A setting is out of range.
     #[error("invalid projection setting `{field}`: {message}")]
     InvalidSettings {
+        /// The setting's TOML key.
         field: &'static str,
+        /// What is wrong with its value.
         message: String,
     },
+    /// The plan to correct has a non-finite pose.
     #[error("the target plan has a non-finite pose")]
     NonFinite,
+    /// The QP has no solution: no plan within the limits starts at the current speed.
     #[error(
         "no feasible plan from the current speed {speed:.3} m/s (the QP solver reports {status})"
     )]
-    Infeasible { speed: f64, status: String },
+    Infeasible {
+        /// The robot's current forward speed, m/s.
+        speed: f64,
+        /// The solver's status.
+        status: String,
+    },
 }
 
 impl ProjectionSettings {

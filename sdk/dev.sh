@@ -3,6 +3,8 @@
 #
 #   sdk/dev.sh demo [ARGS...]   the main job (see README.md)
 #   sdk/dev.sh test             build everything and run the whole test suite
+#   sdk/dev.sh python           install the Python package `human2nav` (sdk/python) into the
+#                               torch virtualenv below (`import human2nav` with its python3)
 #   sdk/dev.sh env              print the exports this script uses (eval "$(sdk/dev.sh env)")
 #
 # libtorch comes from PyTorch 2.13.0 on PyPI (the version tch 0.26 is built against),
@@ -33,6 +35,24 @@ ensure_torch() {
     mv "$venv.partial" "$venv"
     # A venv's scripts name their own path; re-create them at the final location.
     python3 -m venv --upgrade "$venv" >/dev/null
+}
+
+ensure_python_tools() {
+    # The Python package's build backend, its runtime dependency and its test runner, in the
+    # same virtualenv as torch (the package links that torch's libtorch).
+    if ! "$venv/bin/python3" -c "import maturin, numpy, pytest" 2>/dev/null; then
+        log "installing maturin, numpy and pytest into $venv"
+        "$venv/bin/python3" -m pip install --quiet --disable-pip-version-check \
+            "maturin>=1.7,<2" "numpy>=1.22" "pytest>=7"
+    fi
+}
+
+# Builds and installs sdk/python into the virtualenv. No build isolation: torch-sys finds
+# libtorch through the virtualenv's torch (LIBTORCH_USE_PYTORCH=1).
+install_python_package() {
+    ensure_python_tools
+    "$venv/bin/python3" -m pip install --quiet --disable-pip-version-check --no-build-isolation \
+        --force-reinstall --no-deps "$root/sdk/python"
 }
 
 ensure_fonts() {
@@ -74,7 +94,15 @@ case "${1:-}" in
     test)
         setup
         cargo build --workspace
-        exec cargo test --workspace
+        cargo test --workspace
+        # The Python package, built with the test build's profile (sharing its artifacts).
+        MATURIN_PEP517_ARGS="--profile dev" install_python_package
+        exec "$venv/bin/python3" -m pytest -q "$root/sdk/python/tests"
+        ;;
+    python)
+        setup
+        install_python_package
+        log "installed: $venv/bin/python3 -c 'import human2nav'"
         ;;
     env)
         setup >&2

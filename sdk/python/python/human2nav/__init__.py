@@ -1,0 +1,265 @@
+"""Crowd-navigation planning learned from human trajectories, from Python.
+
+Load a robot, build the Human2Nav planner (or ORCA), plan from numpy arrays, run one episode of
+the closed-loop benchmark::
+
+    import numpy as np
+    import human2nav
+
+    robot = human2nav.RobotProfile.load("robots/diablo/robot.toml")
+    planner = human2nav.Human2NavPlanner(robot, "models/human2nav-cfm")
+    people = np.array([[2.5, 0.4, -1.0, 0.0, 0.3]])          # x, y, vx, vy, radius
+    plan = planner.plan(ego=(0, 0, 0), goal=(5, 0), agents=people)
+    plan.poses                                                 # (T + 1, 3): x, y, theta
+
+    result = human2nav.run_episode(planner, robot)             # an embedded synthetic episode
+    result.metrics["success"], result.states[:, :2]
+
+Units are SI. Poses, goals and pedestrians are in one world-fixed frame; the robot's velocity is
+in its body frame (forward, leftward, yaw rate). Bad arguments raise ``ValueError`` (a missing
+file ``FileNotFoundError``); other failures of the SDK raise :class:`Human2NavError`.
+
+The package links the libtorch of the torch 2.13 installation it was built against, so it
+works in the same process as ``import torch``, before or after it.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from ._human2nav import Human2NavError, RobotProfile, version
+from ._human2nav import Planner as _NativePlanner
+from ._human2nav import run_episode as _run_episode
+
+__all__ = [
+    "EpisodeResult",
+    "Human2NavError",
+    "Human2NavPlanner",
+    "OrcaPlanner",
+    "Plan",
+    "Planner",
+    "RobotProfile",
+    "run_episode",
+    "version",
+]
+
+__version__ = version()
+
+PathLike = Union[str, Path]
+ArrayLike = Union[np.ndarray, Sequence[Sequence[float]]]
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A planned trajectory in the world frame and the planner's diagnostics."""
+
+    t0: float
+    """Time of the first pose (the observation's time), s."""
+    dt: float
+    """Time between poses, s."""
+    poses: np.ndarray
+    """``(T + 1, 3)``: ``x, y, theta`` at ``t0 + k * dt``; row 0 is the robot's pose."""
+    candidates: np.ndarray
+    """``(K, T + 1, 3)``: the flow model's samples before guidance (empty for ORCA)."""
+    guided: np.ndarray
+    """``(G, T + 1, 3)``: the guided samples (empty when guidance is off)."""
+    info: Dict[str, Any]
+    """``selected``, ``phi_before``, ``phi_after``, ``guidance_iterations``, ``fallback``,
+    ``notes`` and ``stages`` (how far sampling, guidance and correction got, as
+    ``(done, planned)``, and which stage a budget cut short)."""
+
+    @property
+    def times(self) -> np.ndarray:
+        """The time of every pose, s."""
+        return self.t0 + self.dt * np.arange(len(self.poses))
+
+
+def _trajectories(value: List[List[Tuple[float, float, float]]]) -> np.ndarray:
+    if not value:
+        return np.zeros((0, 0, 3))
+    return np.asarray(value, dtype=np.float64)
+
+
+def _vector(name: str, value: Sequence[float], n: int) -> Tuple[float, ...]:
+    array = np.asarray(value, dtype=np.float64)
+    if array.shape != (n,):
+        raise ValueError(f"{name} must hold {n} numbers, got shape {array.shape}")
+    return tuple(float(v) for v in array)
+
+
+def _agents(agents: Optional[ArrayLike], ids: Optional[Sequence[int]]) -> List[Tuple[Any, ...]]:
+    if agents is None:
+        return []
+    array = np.asarray(agents, dtype=np.float64)
+    if array.size == 0:
+        return []
+    if array.ndim != 2 or array.shape[1] != 5:
+        raise ValueError(
+            "agents must be an (n, 5) array of x, y, vx, vy, radius per pedestrian, "
+            f"got shape {array.shape}"
+        )
+    if ids is None:
+        ids = range(len(array))
+    ids = [int(i) for i in ids]
+    if len(ids) != len(array):
+        raise ValueError(f"agent_ids holds {len(ids)} ids for {len(array)} agents")
+    if any(i < 0 for i in ids):
+        raise ValueError("agent_ids must be non-negative")
+    return [(i, *map(float, row)) for i, row in zip(ids, array)]
+
+
+class Planner:
+    """A planner behind the SDK's planner interface; see :class:`Human2NavPlanner` and
+    :class:`OrcaPlanner`."""
+
+    def __init__(self, native: _NativePlanner) -> None:
+        self._native = native
+
+    @property
+    def name(self) -> str:
+        """``human2nav``, ``human2nav-noguide`` or ``orca``."""
+        return self._native.name
+
+    def reset(self) -> None:
+        """Forgets the previous plan: call it at the start of a new navigation task."""
+        self._native.reset()
+
+    def plan(
+        self,
+        ego: Sequence[float],
+        goal: Sequence[float],
+        agents: Optional[ArrayLike] = None,
+        ego_velocity: Sequence[float] = (0.0, 0.0, 0.0),
+        time: float = 0.0,
+        agent_ids: Optional[Sequence[int]] = None,
+        budget_ms: float = 0.0,
+    ) -> Plan:
+        """Plans from one observation.
+
+        ``ego`` is the robot's ``(x, y, theta)``, ``goal`` its ``(x, y)``, ``agents`` an
+        ``(n, 5)`` array of ``x, y, vx, vy, radius`` per pedestrian (ids ``0 … n − 1`` unless
+        ``agent_ids`` gives stable tracker ids), ``ego_velocity`` the body-frame
+        ``(vx, vy, omega)``. ``budget_ms > 0`` bounds the call: the best plan found by then,
+        always a feasible one (Human2Nav only).
+        """
+        raw = self._native.plan(
+            float(time),
+            _vector("ego", ego, 3),
+            _vector("ego_velocity", ego_velocity, 3),
+            _vector("goal", goal, 2),
+            _agents(agents, agent_ids),
+            float(budget_ms),
+        )
+        info = {k: raw[k] for k in (
+            "selected", "phi_before", "phi_after", "guidance_iterations", "fallback", "notes",
+            "stages",
+        )}
+        return Plan(
+            t0=raw["t0"],
+            dt=raw["dt"],
+            poses=np.asarray(raw["poses"], dtype=np.float64),
+            candidates=_trajectories(raw["candidates"]),
+            guided=_trajectories(raw["guided"]),
+            info=info,
+        )
+
+
+class Human2NavPlanner(Planner):
+    """The Human2Nav planner: flow-matching samples, feasibility guidance (Algorithm 1), the
+    last-step correction and the selection.
+
+    ``model_dir`` is a model folder (``model.toml`` and its weights); ``config`` a
+    ``planner.toml`` (None: the built-in defaults, equal to the shipped
+    ``sdk/configs/planner.toml``). ``guidance=False`` is the ablation without guidance;
+    ``seed``, ``samples`` and ``backend`` (``"native"`` or ``"torch"``) override the
+    configuration.
+    """
+
+    def __init__(
+        self,
+        robot: RobotProfile,
+        model_dir: PathLike,
+        config: Optional[PathLike] = None,
+        guidance: Optional[bool] = None,
+        seed: Optional[int] = None,
+        samples: Optional[int] = None,
+        backend: Optional[str] = None,
+    ) -> None:
+        super().__init__(
+            _NativePlanner.human2nav(
+                robot,
+                Path(model_dir),
+                None if config is None else Path(config),
+                guidance,
+                seed,
+                samples,
+                backend,
+            )
+        )
+
+
+class OrcaPlanner(Planner):
+    """ORCA with RVO2's semantics. ``config`` is the TOML text of its settings (RVO2 names:
+    ``neighbor_dist``, ``max_neighbors``, ``time_horizon``, ...); the robot's footprint radius
+    and ``v_max`` are used for ``radius`` and ``max_speed`` unless it sets them."""
+
+    def __init__(self, robot: RobotProfile, config: Optional[str] = None) -> None:
+        super().__init__(_NativePlanner.orca(robot, config))
+
+
+@dataclass(frozen=True)
+class EpisodeResult:
+    """One closed-loop episode."""
+
+    episode_id: str
+    metrics: Dict[str, Any]
+    """``outcome``, ``success``, ``collision``, ``timeout``, ``tfs``, ``path_length``,
+    ``time_to_goal``, ``min_clearance``, ``plans``, ``fallbacks``, ... (the benchmark's
+    per-run metrics)."""
+    states: np.ndarray
+    """``(N + 1, 6)``: ``x, y, theta, vx, vy, omega`` of the robot every simulation step."""
+    commands: np.ndarray
+    """``(N, 3)``: the executed body-frame commands ``vx, vy, omega``."""
+    clearance: np.ndarray
+    """``(N + 1,)``: the smallest footprint-to-pedestrian distance, m (inf with nobody near)."""
+
+
+def run_episode(
+    planner: Planner,
+    robot: RobotProfile,
+    episodes: Optional[PathLike] = None,
+    index: int = 0,
+    episode_id: Optional[str] = None,
+    crowd: str = "replay",
+    replan_hz: float = 10.0,
+) -> EpisodeResult:
+    """Runs one benchmark episode closed loop with ``planner`` driving ``robot``.
+
+    ``episodes`` is an episode file (``human2nav data episodes``; None: the embedded synthetic
+    episodes, one per scenario class); ``index`` or ``episode_id`` picks the episode; ``crowd``
+    is ``"replay"`` (the recording as it walked) or ``"reactive"`` (pedestrians that respond to
+    the robot). The simulator steps at 20 Hz and replans at ``replan_hz``.
+    """
+    if not isinstance(planner, Planner):
+        raise TypeError("planner must be a human2nav.Planner (Human2NavPlanner, OrcaPlanner)")
+    ident, metrics, states, commands, clearance = _run_episode(
+        planner._native,
+        robot,
+        None if episodes is None else Path(episodes),
+        int(index),
+        episode_id,
+        crowd,
+        float(replan_hz),
+    )
+    return EpisodeResult(
+        episode_id=ident,
+        metrics=json.loads(metrics),
+        states=np.asarray(states, dtype=np.float64).reshape(-1, 6),
+        commands=np.asarray(commands, dtype=np.float64).reshape(-1, 3),
+        clearance=np.asarray(clearance, dtype=np.float64),
+    )

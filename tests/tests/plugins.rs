@@ -409,6 +409,7 @@ fn planner_plugin_round_trip() {
         ego_velocity: Twist2::ZERO,
         goal: [1.0, 5.0],
         agents: agents(),
+        ..Default::default()
     };
     // 100 poses: longer than the host's first 64-pose buffer, so `last_plan` is exercised.
     let plan = p.plan(&obs).unwrap();
@@ -719,6 +720,7 @@ fn a_panicking_planner_fails_then_is_unusable() {
         ego_velocity: Twist2::ZERO,
         goal: [3.0, 0.0],
         agents: vec![],
+        ..Default::default()
     };
     let err = p.plan(&obs).unwrap_err();
     assert!(

@@ -46,6 +46,7 @@ fn obs() -> Observation {
         ego_velocity: Twist2::ZERO,
         goal: [3.0, 0.0],
         agents: vec![],
+        ..Default::default()
     }
 }
 

@@ -84,6 +84,7 @@ fn bench(c: &mut Criterion) {
         ego_velocity: Twist2::new(1.0, 0.0, 0.0),
         goal: [10.0, 0.0],
         agents,
+        ..Default::default()
     };
     let mut planner = OrcaPlanner::new(OrcaConfig::default()).expect("default config is valid");
     c.bench_function("orca/plan_10_pedestrians", |b| {

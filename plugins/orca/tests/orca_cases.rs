@@ -393,6 +393,7 @@ fn obs_at(ego: Pose2, v_body: Twist2, goal: [f64; 2], agents: Vec<AgentState>) -
         ego_velocity: v_body,
         goal,
         agents,
+        ..Default::default()
     }
 }
 

@@ -138,6 +138,7 @@ pub fn run_episode(
                 states,
                 rewards,
                 humans,
+                obstacles: Vec::new(),
             });
         }
     }

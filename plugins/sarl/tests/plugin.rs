@@ -53,6 +53,7 @@ fn crowd() -> Observation {
                 history: Vec::new(),
             })
             .collect(),
+        ..Default::default()
     }
 }
 

@@ -592,6 +592,7 @@ unsafe fn observation(obs: &h2n_observation) -> Result<Observation, Failure> {
         ego_velocity: Twist2::new(v.vx, v.vy, v.omega),
         goal: [obs.goal_x, obs.goal_y],
         agents: out,
+        ..Default::default()
     })
 }
 

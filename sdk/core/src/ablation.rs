@@ -316,6 +316,7 @@ mod tests {
             ego_velocity: Twist2::new(1.0, 0.0, 0.0),
             goal: [5.0, 0.0],
             agents: Vec::<AgentState>::new(),
+            ..Default::default()
         }
     }
 

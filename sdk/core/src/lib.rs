@@ -11,6 +11,8 @@
 //! * [`bev`]: the ego-centred bird's-eye-view raster shared by training and inference.
 //! * [`flow`], [`guidance`]: the flow-model interface and feasibility guidance (Algorithm 1).
 //! * [`planner`]: the `Planner` trait, observations and plans.
+//! * [`obstacle`]: static obstacles and occupancy grids; [`frames`]: pedestrians from another
+//!   frame and time.
 //! * [`human2nav`]: the reference planner (sampling, guidance, selection).
 //! * [`ablation`]: the four-arm guidance ablation (raw, Algorithm 1, QP, both).
 
@@ -21,11 +23,13 @@ pub mod bev;
 pub mod constraint;
 pub mod embodiment;
 pub mod flow;
+pub mod frames;
 pub mod guidance;
 pub mod human2nav;
 pub mod input;
 pub mod limits;
 pub mod lock;
+pub mod obstacle;
 pub mod planner;
 pub mod projection;
 pub mod robot;

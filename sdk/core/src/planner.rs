@@ -4,6 +4,7 @@
 //! integrations only ever see this trait, so a plugin planner and a built-in are used alike.
 //! All quantities are SI and in the world frame unless a field says otherwise.
 
+use crate::obstacle::{Obstacle, OccupancyGrid};
 use crate::se2::{Pose2, Twist2};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -25,11 +26,26 @@ pub struct AgentState {
     pub history: Vec<[f64; 2]>,
 }
 
+/// The frame an observation is in when it does not say: `"world"`.
+pub const DEFAULT_FRAME: &str = "world";
+
+fn default_frame() -> String {
+    DEFAULT_FRAME.to_owned()
+}
+
 /// Everything a planner may use at one planning instant.
+///
+/// Every pose, position and velocity is in one world-fixed frame, [`Observation::frame_id`]
+/// (the "world frame" of the field docs), at [`Observation::time`]; the robot's velocity is in
+/// its body frame. Pedestrians a tracker reports in another frame or at another time are added
+/// with [`Observation::add_tracked`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Observation {
     /// Simulation or wall-clock time in seconds.
     pub time: f64,
+    /// Name of the world frame of this observation (`map`, `odom`, ...). Default `"world"`.
+    #[serde(default = "default_frame")]
+    pub frame_id: String,
     /// The robot's pose in the world frame.
     pub ego: Pose2,
     /// The robot's body-frame velocity.
@@ -38,6 +54,28 @@ pub struct Observation {
     pub goal: [f64; 2],
     /// The other agents in view.
     pub agents: Vec<AgentState>,
+    /// Static obstacles in the world frame (walls, pillars, parked carts).
+    #[serde(default)]
+    pub obstacles: Vec<Obstacle>,
+    /// A static occupancy grid in the world frame (its occupied cells are obstacles too).
+    #[serde(default)]
+    pub occupancy: Option<OccupancyGrid>,
+}
+
+impl Default for Observation {
+    /// The robot at rest at the origin of the world frame, the goal there too, nothing around.
+    fn default() -> Self {
+        Self {
+            time: 0.0,
+            frame_id: default_frame(),
+            ego: Pose2::IDENTITY,
+            ego_velocity: Twist2::ZERO,
+            goal: [0.0, 0.0],
+            agents: Vec::new(),
+            obstacles: Vec::new(),
+            occupancy: None,
+        }
+    }
 }
 
 /// Diagnostics a planner may attach to its plan (all optional, for figures and reports).
@@ -313,6 +351,14 @@ impl Observation {
             if !finite {
                 return bad(format!("agent {} has a non-finite or negative field", a.id));
             }
+        }
+        for (i, o) in self.obstacles.iter().enumerate() {
+            o.validate()
+                .or_else(|why| bad(format!("obstacles[{i}]: {why}")))?;
+        }
+        if let Some(grid) = &self.occupancy {
+            grid.validate()
+                .or_else(|why| bad(format!("occupancy: {why}")))?;
         }
         Ok(())
     }

@@ -103,6 +103,7 @@ fn observation() -> Observation {
             radius: 0.25,
             history: vec![],
         }],
+        ..Default::default()
     }
 }
 
@@ -388,6 +389,7 @@ fn blocked() -> Observation {
             radius: 0.3,
             history: vec![],
         }],
+        ..Default::default()
     }
 }
 
@@ -456,6 +458,7 @@ fn a_goal_close_by_is_approached_directly() {
         ego_velocity: Twist2::ZERO,
         goal: [goal_world.x, goal_world.y],
         agents: vec![],
+        ..Default::default()
     };
     let end_gap = |approach: f64| {
         let settings = Human2NavSettings {

@@ -558,6 +558,7 @@ pub fn try_interaction(
             scene, index, None, c0, steps, path.start, path.goal, geometry,
         ),
         density,
+        obstacles: Vec::new(),
     };
     if !is_interactive(&episode, opts) {
         return Err(InteractionReject::NotInteractive(class));

@@ -15,6 +15,7 @@
 pub mod association;
 pub mod cache;
 pub mod config;
+pub mod corridor;
 pub mod error;
 pub mod homography;
 pub mod interaction;

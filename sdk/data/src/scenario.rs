@@ -229,6 +229,9 @@ pub struct Episode {
     pub agents: Vec<AgentTrack>,
     /// Number of relevant agents (module docs).
     pub density: usize,
+    /// Static obstacles, world frame (walls, pillars; none in the mined real episodes).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub obstacles: Vec<human2nav_core::obstacle::Obstacle>,
 }
 
 /// Largest time budget of an episode (s): an hour. The mined ones are 5–20 s; the simulator
@@ -280,6 +283,10 @@ impl Episode {
         }
         if !self.goal.iter().all(|&v| in_range(v)) {
             return field("goal", format!("{range}, got {:?}", self.goal));
+        }
+        for (i, o) in self.obstacles.iter().enumerate() {
+            o.validate()
+                .or_else(|why| field(&format!("obstacles[{i}]"), why))?;
         }
         for (i, a) in self.agents.iter().enumerate() {
             if !(a.radius.is_finite() && a.radius >= 0.0) {
@@ -732,6 +739,7 @@ pub fn try_episode(
         time_budget: budget,
         agents,
         density,
+        obstacles: Vec::new(),
     };
     Ok((episode, ig))
 }
@@ -1019,6 +1027,7 @@ mod tests {
             time_budget: 12.5,
             agents: Vec::new(),
             density,
+            obstacles: Vec::new(),
         };
         // Scene a: 40 candidates at density 1 and 2 at density 9; scene b: 4 at density 1.
         let mut all: Vec<Episode> = (0..40).map(|k| ep("a", k, 1)).collect();

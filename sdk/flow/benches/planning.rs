@@ -62,6 +62,7 @@ fn observation(ep: &Episode) -> Observation {
         ego_velocity: Twist2::ZERO,
         goal: ep.goal,
         agents,
+        ..Default::default()
     }
 }
 

@@ -739,6 +739,7 @@ mod tests {
                 radius: 0.3,
                 history: vec![[3.7, -0.25], [3.6, -0.22]],
             }],
+            ..Default::default()
         }
     }
 

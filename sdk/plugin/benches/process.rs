@@ -62,6 +62,7 @@ fn planner(c: &mut Criterion) {
         ego_velocity: Twist2::ZERO,
         goal: [5.0, 1.0],
         agents: agents(),
+        ..Default::default()
     };
     let run = |p: &mut dyn Planner| match p.plan(black_box(&obs)) {
         Ok(plan) => black_box(plan.poses.len()),

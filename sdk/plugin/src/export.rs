@@ -657,6 +657,7 @@ unsafe extern "C" fn planner_plan<T: Planner + 'static>(
                 ego_velocity: raw.ego_velocity.into(),
                 goal: raw.goal,
                 agents: agents_from_abi(raw.agents, raw.agent_count)?,
+                ..Default::default()
             };
             let mut state = state
                 .lock()

@@ -368,6 +368,7 @@ pub(crate) fn decode_observation(d: &mut Dec<'_>) -> Result<Observation, String>
         ego_velocity: d.twist()?,
         goal: [d.f64()?, d.f64()?],
         agents: d.agents()?,
+        ..Default::default()
     })
 }
 
@@ -1148,6 +1149,7 @@ mod tests {
                 radius: 0.3,
                 history: vec![[0.5, 0.25]; 3],
             }],
+            ..Default::default()
         };
         let mut e = Enc::default();
         encode_observation(&mut e, &obs);

@@ -48,6 +48,7 @@ fn obs(time: f64) -> Observation {
                 history: vec![[0.1 * j as f64, 1.0 / 7.0]; j as usize],
             })
             .collect(),
+        ..Default::default()
     }
 }
 

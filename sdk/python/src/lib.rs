@@ -342,6 +342,7 @@ impl PyPlanner {
                     history: Vec::new(),
                 })
                 .collect(),
+            ..Default::default()
         };
         let result = py.detach(|| {
             let mut planner = self.lock()?;

@@ -42,6 +42,7 @@ fn episode() -> Episode {
         time_budget: 12.5,
         agents,
         density: 12,
+        obstacles: Vec::new(),
     }
 }
 

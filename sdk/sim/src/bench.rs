@@ -121,6 +121,9 @@ pub enum SuiteKind {
     Synthetic,
     /// Episodes with every pedestrian removed (sanity: every working method must succeed).
     Empty,
+    /// Generated corridor episodes with walls, doors and pillars
+    /// ([`human2nav_data::corridor`]): the suite with static obstacles.
+    Corridor,
 }
 
 impl SuiteKind {
@@ -129,6 +132,7 @@ impl SuiteKind {
             SuiteKind::Real => "real",
             SuiteKind::Synthetic => "synthetic",
             SuiteKind::Empty => "empty",
+            SuiteKind::Corridor => "corridor",
         }
     }
 }

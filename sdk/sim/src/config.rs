@@ -520,6 +520,17 @@ pub fn build_suites(
                     "{n} episodes per class from the synthetic social-force generator, seed {seed}"
                 ),
             ),
+            SuiteKind::Corridor => (
+                SuiteKind::Corridor,
+                ScenarioClass::ALL
+                    .iter()
+                    .flat_map(|c| human2nav_data::corridor::episodes(*c, n, seed))
+                    .collect(),
+                format!(
+                    "{n} corridor episodes per class (walls with doors, pillars; generated \
+                     pedestrians on straight lanes), seed {seed}"
+                ),
+            ),
             SuiteKind::Empty => {
                 let source = suites.iter().find(|x| x.kind != SuiteKind::Empty);
                 let (base, from) = match source {

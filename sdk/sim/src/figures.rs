@@ -16,6 +16,7 @@ use crate::report::summarize;
 use crate::runner::{EpisodeRun, PlanSample};
 use crate::stats::{self, DENSITY_BINS, Z95};
 use human2nav_core::bev::BevSpec;
+use human2nav_core::obstacle::Obstacle;
 use human2nav_core::robot::footprint::FootprintShape;
 use human2nav_core::{AgentState, Pose2};
 use plotters::coord::Shift;
@@ -697,6 +698,40 @@ pub fn pedestrians_at(snap: &Snapshot, t: f64) -> Vec<AgentState> {
         .collect()
 }
 
+/// Colour of static obstacles in every picture.
+pub const OBSTACLE: RGBColor = RGBColor(90, 90, 110);
+
+/// Draws static obstacles on a chart: circles and polygons filled, segments as thick lines.
+pub(crate) fn draw_obstacles<DB: DrawingBackend>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    obstacles: &[Obstacle],
+) -> Result<(), String> {
+    for o in obstacles {
+        match o {
+            Obstacle::Circle { center, radius } => chart
+                .draw_series(std::iter::once(Polygon::new(
+                    disc(*center, *radius),
+                    OBSTACLE.mix(0.8).filled(),
+                )))
+                .map(|_| ()),
+            Obstacle::Polygon { vertices } => chart
+                .draw_series(std::iter::once(Polygon::new(
+                    vertices.iter().map(|v| (v[0], v[1])).collect::<Vec<_>>(),
+                    OBSTACLE.mix(0.8).filled(),
+                )))
+                .map(|_| ()),
+            Obstacle::Segment { a, b } => chart
+                .draw_series(std::iter::once(PathElement::new(
+                    vec![(a[0], a[1]), (b[0], b[1])],
+                    OBSTACLE.stroke_width(5),
+                )))
+                .map(|_| ()),
+        }
+        .map_err(text_err)?;
+    }
+    Ok(())
+}
+
 /// Polygon (24 vertices) of a disc of radius `r` around `c`.
 pub fn disc(c: [f64; 2], r: f64) -> Vec<(f64, f64)> {
     (0..24)
@@ -840,6 +875,7 @@ fn draw_snapshot(area: &Area<'_>, snap: &Snapshot) -> Result<(), String> {
         .map_err(text_err)?;
     let inside = |p: &[f64; 2]| (p[0] - c[0]).abs() < half && (p[1] - c[1]).abs() < half;
     let err = text_err;
+    draw_obstacles(&mut chart, &ep.obstacles)?;
 
     // Pedestrians: history dots, disc, velocity arrow (0.6 s of velocity).
     for a in pedestrians_at(snap, t) {

@@ -27,7 +27,7 @@
 
 use crate::episode::Episode;
 use crate::error::SimError;
-use crate::figures::{disc, star};
+use crate::figures::{disc, draw_obstacles, star};
 use crate::replay::CrowdReplay;
 use crate::runner::StartHeading;
 use human2nav_core::bev::{self, BevSpec};
@@ -159,6 +159,13 @@ pub fn observation_at(episode: &Episode, opts: &StepOptions) -> Result<Observati
         ego_velocity: Twist2::new(opts.ego_speed, 0.0, 0.0),
         goal: episode.goal,
         agents,
+        obstacles: episode
+            .obstacles
+            .iter()
+            .filter(|o| o.distance([ego.x, ego.y]) <= opts.sensor_range)
+            .cloned()
+            .collect(),
+        ..Default::default()
     })
 }
 
@@ -406,6 +413,7 @@ fn draw(root: &Area<'_>, fig: &PlanFigure<'_>, numbers: &PlanFigureNumbers) -> R
         .draw()
         .map_err(|x| e(&x))?;
     let inside = |p: [f64; 2]| (p[0] - c[0]).abs() < half && (p[1] - c[1]).abs() < half;
+    draw_obstacles(&mut chart, &obs.obstacles)?;
 
     // Pedestrians: history dots, disc, heading arrow.
     for a in &obs.agents {
@@ -798,6 +806,7 @@ mod tests {
                 },
             ],
             density: 1,
+            obstacles: Vec::new(),
         }
     }
 

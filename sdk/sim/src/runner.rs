@@ -34,6 +34,7 @@ use crate::episode::Episode;
 use crate::error::SimError;
 use crate::replay::PedestrianSample;
 use human2nav_core::embodiment::{Embodiment, RobotState};
+use human2nav_core::obstacle::footprint_clearance;
 use human2nav_core::robot::RobotProfile;
 use human2nav_core::robot::footprint::{self, FootprintShape};
 use human2nav_core::{
@@ -373,8 +374,11 @@ pub struct EpisodeRun {
     /// Planner failures (errors, panics, non-finite plans, substitute plans), in order, as
     /// messages.
     pub planner_errors: Vec<String>,
-    /// How the collision happened, when there was one.
+    /// How the collision happened, when there was one with a pedestrian.
     pub contact: Option<Contact>,
+    /// Index in the episode's `obstacles` of the static obstacle the robot hit, when the
+    /// collision was with one.
+    pub obstacle_hit: Option<usize>,
     /// The simulated pedestrians at each `t_n` (`N + 1` lists) when the crowd was reactive;
     /// `None` for a replayed crowd, whose pedestrians are the episode's recording.
     pub crowd: Option<Vec<Vec<PedestrianSample>>>,
@@ -469,6 +473,7 @@ pub fn run_episode_with(
         plans: Vec::new(),
         planner_errors: Vec::new(),
         contact: None,
+        obstacle_hit: None,
         crowd: crowd.is_reactive().then(|| Vec::with_capacity(reserve + 1)),
     };
     planner.reset();
@@ -486,6 +491,15 @@ pub fn run_episode_with(
         if clearance < 0.0 {
             run.outcome = Outcome::Collision;
             run.contact = nearest.and_then(|id| Contact::at(&crowd, &state, id));
+            break;
+        }
+        if let Some(i) = episode
+            .obstacles
+            .iter()
+            .position(|o| footprint_clearance(&robot.footprint, state.pose, o) < 0.0)
+        {
+            run.outcome = Outcome::Collision;
+            run.obstacle_hit = Some(i);
             break;
         }
         let to_goal = (episode.goal[0] - state.pose.x).hypot(episode.goal[1] - state.pose.y);
@@ -509,6 +523,13 @@ pub fn run_episode_with(
                     cfg.sensor_range,
                     cfg.history_len,
                 ),
+                obstacles: episode
+                    .obstacles
+                    .iter()
+                    .filter(|o| o.distance([state.pose.x, state.pose.y]) <= cfg.sensor_range)
+                    .cloned()
+                    .collect(),
+                ..Default::default()
             };
             let horizon = plan.as_ref().map_or(32, |p| p.poses.len());
             let result = catch_unwind(AssertUnwindSafe(|| planner.plan(&obs)));

@@ -501,6 +501,7 @@ mod tests {
             time_budget: 12.5,
             agents: Vec::new(),
             density,
+            obstacles: Vec::new(),
         }
     }
 

@@ -57,6 +57,7 @@ fn run_with(
         plans,
         planner_errors: vec![],
         contact: None,
+        obstacle_hit: None,
         crowd: None,
     }
 }

@@ -78,6 +78,7 @@ fn episode(id: String, scenario: ScenarioClass, density: usize, distance: f64) -
         time_budget: 12.5,
         agents: Vec::new(),
         density,
+        obstacles: Vec::new(),
     }
 }
 

@@ -35,6 +35,7 @@ pub fn episode(id: &str, scenario: ScenarioClass, theta: f64, agents: Vec<AgentT
         time_budget: 12.5,
         density: agents.len(),
         agents,
+        obstacles: Vec::new(),
     }
 }
 

@@ -7,6 +7,7 @@
 
 use crate::abi::*;
 use crate::init::{InitError, PluginInit, RobotContext};
+use crate::validate::EvaluateBuffers;
 use human2nav_core::constraint::{ConstraintContext, ConstraintTerm, TrajBatch};
 use human2nav_core::embodiment::{Embodiment, RobotState};
 use human2nav_core::{AgentState, Observation, Plan, PlanError, PlanInfo, Planner, Pose2};
@@ -355,28 +356,15 @@ unsafe extern "C" fn constraint_evaluate<T: ConstraintTerm + 'static>(
                     batch.dim
                 )));
             }
-            let expected = batch
-                .batch
-                .checked_mul(batch.horizon)
-                .and_then(|n| n.checked_mul(3));
-            if expected != Some(batch.len) {
-                return Err(Fail::invalid(format!(
-                    "{} values cannot be {} trajectories × {} poses × 3",
-                    batch.len, batch.batch, batch.horizon
-                )));
+            EvaluateBuffers {
+                batch: batch.batch,
+                horizon: batch.horizon,
+                values: batch.len,
+                cost: cost.len,
+                grad: grad.len,
             }
-            if cost.len != batch.batch {
-                return Err(Fail::invalid(format!(
-                    "cost has {} entries for {} trajectories",
-                    cost.len, batch.batch
-                )));
-            }
-            if grad.len != batch.len {
-                return Err(Fail::invalid(format!(
-                    "gradient has {} entries, the batch {}",
-                    grad.len, batch.len
-                )));
-            }
+            .check()
+            .map_err(Fail::invalid)?;
             let data = slice(batch.data, batch.len, "batch data")?;
             let cost = slice_mut(cost.data, cost.len, "cost")?;
             let grad = slice_mut(grad.data, grad.len, "gradient")?;
@@ -957,6 +945,10 @@ mod tests {
             eval(&short, &ctx, &mut cost, 1, &mut grad),
             H2N_INVALID_ARGUMENT
         );
+        assert_eq!(
+            last_error_of(&obj),
+            "5 values cannot be 1 trajectories × 2 poses × 3"
+        );
         let overflow = H2nTrajBatch {
             batch: usize::MAX,
             horizon: 2,
@@ -984,6 +976,13 @@ mod tests {
             eval(&good, &ctx, &mut cost2, 2, &mut grad),
             H2N_INVALID_ARGUMENT
         );
+        assert_eq!(last_error_of(&obj), "cost has 2 entries for 1 trajectories");
+        let mut grad5 = [0.0; 5];
+        assert_eq!(
+            eval(&good, &ctx, &mut cost, 1, &mut grad5),
+            H2N_INVALID_ARGUMENT
+        );
+        assert_eq!(last_error_of(&obj), "gradient has 5 entries, the batch 6");
         let old_ctx = H2nConstraintContext {
             struct_size: 16,
             ..context()

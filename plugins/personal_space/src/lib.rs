@@ -32,7 +32,9 @@
 //! predict = true         # constant-velocity prediction of the agents (false: frozen)
 //! ```
 
-use human2nav_core::constraint::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
+use human2nav_core::constraint::{
+    ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch, sigmoid, softplus,
+};
 use human2nav_plugin::{InitError, PluginInit};
 use serde::Deserialize;
 
@@ -138,25 +140,6 @@ impl PersonalSpace {
     pub fn from_init(init: &PluginInit<'_>) -> Result<Self, InitError> {
         let config: PersonalSpaceConfig = init.config()?;
         Self::new(&config, init.robot().map(|r| r.footprint_radius))
-    }
-}
-
-/// `ln(1 + eˣ)` without overflow.
-fn softplus(x: f64) -> f64 {
-    if x > 0.0 {
-        x + (-x).exp().ln_1p()
-    } else {
-        x.exp().ln_1p()
-    }
-}
-
-/// `1 / (1 + e⁻ˣ)` without overflow.
-fn sigmoid(x: f64) -> f64 {
-    if x >= 0.0 {
-        1.0 / (1.0 + (-x).exp())
-    } else {
-        let e = x.exp();
-        e / (1.0 + e)
     }
 }
 

@@ -36,7 +36,7 @@
 //! track_speed_max = 1.4    # m/s, > 0 (required)
 //! ```
 
-use human2nav_core::embodiment::{Embodiment, RobotState, bound_feedback};
+use human2nav_core::embodiment::{Embodiment, RobotState, bound_feedback, plan_pose_at};
 use human2nav_core::{ControllerGains, Limits, Plan, Pose2, Twist2};
 use human2nav_plugin::{InitError, PluginInit};
 use serde::Deserialize;
@@ -129,24 +129,14 @@ impl SkidSteer {
         }
     }
 
-    /// The plan's pose at time `t` (geodesic interpolation, Eq. 4, clamped to the plan).
-    fn pose_at(plan: &Plan, t: f64) -> Option<Pose2> {
-        let last = plan.poses.len().checked_sub(1)?;
-        if last == 0 || !(plan.dt.is_finite() && plan.dt > 0.0) {
-            return plan.poses.first().copied();
-        }
-        let s = ((t - plan.t0) / plan.dt).clamp(0.0, last as f64);
-        if !s.is_finite() {
-            return plan.poses.first().copied();
-        }
-        let k = (s.floor() as usize).min(last - 1);
-        Some(plan.poses[k].interpolate(plan.poses[k + 1], s - k as f64))
-    }
-
     /// The reference at time `t`: the plan's pose and the feed-forward body twist
     /// `log(P(t)⁻¹·P(t + h)) / h` over the look-ahead window `h` (zero past the plan's end).
+    ///
+    /// Not the core's `plan_reference`, which gives no reference for a non-finite `t` (this one
+    /// tracks with zero feed-forward) and zeroes the feed-forward only below a 1e-9 s window
+    /// (this one below 1e-6 s).
     fn reference(plan: &Plan, t: f64, lookahead: f64) -> Option<(Pose2, Twist2)> {
-        let pose = Self::pose_at(plan, t)?;
+        let pose = plan_pose_at(plan, t)?;
         if plan.poses.len() < 2 || !(plan.dt.is_finite() && plan.dt > 0.0 && t.is_finite()) {
             return Some((pose, Twist2::ZERO));
         }
@@ -156,7 +146,7 @@ impl SkidSteer {
         if h < 1e-6 {
             return Some((pose, Twist2::ZERO));
         }
-        let ahead = Self::pose_at(plan, t + h)?;
+        let ahead = plan_pose_at(plan, t + h)?;
         Some((pose, pose.between(ahead).log().scale(1.0 / h)))
     }
 }
@@ -339,7 +329,7 @@ mod tests {
             let cmd = b.saturate(&s, b.track(&s, &plan, t), dt);
             s = b.step(&s, cmd, dt);
             if t > 5.0 {
-                let reference = SkidSteer::pose_at(&plan, t + dt).unwrap();
+                let reference = plan_pose_at(&plan, t + dt).unwrap();
                 worst = worst.max(
                     ((s.pose.x - reference.x).powi(2) + (s.pose.y - reference.y).powi(2)).sqrt(),
                 );

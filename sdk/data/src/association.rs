@@ -29,6 +29,19 @@ use std::collections::BTreeMap;
 /// Minimum-cost assignment: `cost` is `rows × cols` row-major. Returns each row's column.
 /// When `rows ≤ cols` every row is assigned; otherwise `cols` rows are and the rest get
 /// `None`. O(n²·m) (shortest augmenting paths with potentials).
+//
+// Hand-written on purpose, not `pathfinding::kuhn_munkres_min`: that solver needs integer-like
+// weights (`Ord`, exact zero tests on slacks), so these f64 costs would have to be scaled and
+// rounded to i64. The scale must leave room for sums of `rows` weights and is set by the
+// largest cost, which in `associate` is a forbidden pair at 1e6·gate, so distances would only
+// be resolved to about 1e6·gate·(rows + 1)/2⁶², and assignments whose totals differ by less
+// than that would be decided by rounding, not by cost. Example (test
+// `tracker_near_tie_is_decided_by_cost_next_to_forbidden_pairs`):
+// 2 tracks × (2 detections + 2 miss columns) with costs [[0.5 + 4e-14, 0.5 + 6e-14, 1, 1e6],
+// [0.5, 0.5 + 4e-14, 1e6, 1]]: this solver returns the optimum (1, 0) of total 1 + 6e-14; at
+// the largest safe scale (2⁶²/(3·1e6) ≈ 1.5e12) every real pair rounds to the same weight and
+// kuhn_munkres_min returns (0, 1), total 1 + 8e-14. (On this module's other tests the two
+// solvers agree, ties included.)
 pub fn hungarian(cost: &[f64], rows: usize, cols: usize) -> Vec<Option<usize>> {
     assert_eq!(
         cost.len(),
@@ -470,6 +483,23 @@ mod tests {
         assert_eq!(a, vec![Some(1), Some(0), Some(2)]);
         assert!(hungarian(&[], 0, 3).is_empty());
         assert_eq!(hungarian(&[], 2, 0), vec![None, None]);
+    }
+
+    #[test]
+    fn tracker_near_tie_is_decided_by_cost_next_to_forbidden_pairs() {
+        // Two tracks × (two detections + one miss column each); forbidden pairs cost 1e6. The
+        // cross assignment is cheaper by 2e-14, which the solver must still see.
+        let c = [
+            0.5 + 4e-14,
+            0.5 + 6e-14,
+            1.0,
+            1e6,
+            0.5,
+            0.5 + 4e-14,
+            1e6,
+            1.0,
+        ];
+        assert_eq!(hungarian(&c, 2, 4), vec![Some(1), Some(0)]);
     }
 
     fn walkers(n_frames: usize) -> (Vec<Frame>, Vec<Vec<u64>>) {

@@ -7,6 +7,7 @@
 
 use crate::error::DataError;
 use crate::text;
+use nalgebra::Matrix3;
 use std::path::Path;
 
 /// Below this |w| a point maps to infinity (it lies on the horizon line of the homography).
@@ -27,32 +28,19 @@ fn det3(m: &[[f64; 3]; 3]) -> f64 {
         + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
 }
 
+/// `m⁻¹`, or `None` when `m` is singular relative to its largest entry
+/// (`|det| ≤ 1e-14·max|mᵢⱼ|³`) or its determinant is not finite.
 fn inverse3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
     let det = det3(m);
     let scale = m.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
     if !det.is_finite() || det.abs() <= 1e-14 * scale.powi(3) {
         return None;
     }
-    let c =
-        |r0: usize, r1: usize, c0: usize, c1: usize| m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0];
-    // Adjugate (transposed cofactor matrix) divided by the determinant.
-    Some([
-        [
-            c(1, 2, 1, 2) / det,
-            -c(0, 2, 1, 2) / det,
-            c(0, 1, 1, 2) / det,
-        ],
-        [
-            -c(1, 2, 0, 2) / det,
-            c(0, 2, 0, 2) / det,
-            -c(0, 1, 0, 2) / det,
-        ],
-        [
-            c(1, 2, 0, 1) / det,
-            -c(0, 2, 0, 1) / det,
-            c(0, 1, 0, 1) / det,
-        ],
-    ])
+    // nalgebra's closed-form 3×3 inverse: the adjugate divided by the same determinant.
+    let inv = Matrix3::from_fn(|r, c| m[r][c]).try_inverse()?;
+    Some(std::array::from_fn(|r| {
+        std::array::from_fn(|c| inv[(r, c)])
+    }))
 }
 
 fn apply(m: &[[f64; 3]; 3], p: [f64; 2]) -> Option<[f64; 2]> {
@@ -168,6 +156,73 @@ mod tests {
                 assert_relative_eq!(v, if i == j { 1.0 } else { 0.0 }, epsilon = 1e-12);
             }
         }
+    }
+
+    /// The adjugate inverse this module computed by hand before it used nalgebra.
+    fn adjugate_inverse(m: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+        let det = det3(m);
+        let c = |r0: usize, r1: usize, c0: usize, c1: usize| {
+            m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0]
+        };
+        [
+            [
+                c(1, 2, 1, 2) / det,
+                -c(0, 2, 1, 2) / det,
+                c(0, 1, 1, 2) / det,
+            ],
+            [
+                -c(1, 2, 0, 2) / det,
+                c(0, 2, 0, 2) / det,
+                -c(0, 1, 0, 2) / det,
+            ],
+            [
+                c(1, 2, 0, 1) / det,
+                -c(0, 2, 0, 1) / det,
+                c(0, 1, 0, 1) / det,
+            ],
+        ]
+    }
+
+    #[test]
+    fn inverse_equals_the_former_adjugate_inverse() {
+        let mut cases = vec![
+            [
+                [0.0281, 0.0020, -4.669],
+                [0.0008, 0.0252, -5.061],
+                [0.00035, 0.0000925, 0.4626],
+            ],
+            [[0.04, 0.0, 0.0], [0.0, 0.04, 0.0], [0.0, 0.0, 1.0]],
+            [[2.0, -1.0, 0.5], [1e-3, 3.0, -7.0], [1e-4, 2e-4, 1.0]],
+        ];
+        // Deterministic pseudo-random matrices over several orders of magnitude.
+        let mut s = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        for k in 0..500 {
+            let mag = 10f64.powi(k % 7 - 3);
+            cases.push(std::array::from_fn(|_| {
+                std::array::from_fn(|_| next() * mag)
+            }));
+        }
+        for m in &cases {
+            let Some(inv) = inverse3(m) else {
+                continue;
+            };
+            let old = adjugate_inverse(m);
+            for (a, b) in inv.iter().flatten().zip(old.iter().flatten()) {
+                // Equal as numbers (the sign of a zero entry may differ).
+                assert_eq!(a, b, "{m:?}");
+            }
+        }
+        assert!(inverse3(&[[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 0.0, 1.0]]).is_none());
+        assert!(inverse3(&[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1e-15]]).is_none());
+        assert!(inverse3(&[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1e-13]]).is_some());
+        assert!(inverse3(&[[1e300, 0.0, 0.0], [0.0, 1e300, 0.0], [0.0, 0.0, 1e300]]).is_none());
+        assert!(inverse3(&[[0.0; 3]; 3]).is_none());
     }
 
     proptest! {

@@ -7,11 +7,13 @@
 
 use crate::abi::*;
 use crate::init::{InitError, PluginInit, RobotContext};
+use crate::validate::EvaluateBuffers;
 use human2nav_core::constraint::{ConstraintContext, ConstraintTerm, TrajBatch};
 use human2nav_core::embodiment::{Embodiment, RobotState};
 use human2nav_core::{AgentState, Observation, Plan, PlanError, PlanInfo, Planner, Pose2};
 use std::ffi::c_void;
 use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::ptr::NonNull;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -120,6 +122,12 @@ unsafe fn reference<'a, T>(ptr: *const T, what: &str) -> Result<&'a T, Fail> {
     }
     // SAFETY: non-null, aligned and valid per the caller's contract.
     Ok(unsafe { &*ptr })
+}
+
+/// A non-null output pointer. Like every output, it must be valid and aligned for writes for
+/// the duration of the call (the host's side of the contract); only null is checked.
+fn output<T>(ptr: *mut T, what: &str) -> Result<NonNull<T>, Fail> {
+    NonNull::new(ptr).ok_or_else(|| Fail::invalid(format!("{what} is null")))
 }
 
 /// Rebuilds the host's agents (copying their histories).
@@ -355,28 +363,15 @@ unsafe extern "C" fn constraint_evaluate<T: ConstraintTerm + 'static>(
                     batch.dim
                 )));
             }
-            let expected = batch
-                .batch
-                .checked_mul(batch.horizon)
-                .and_then(|n| n.checked_mul(3));
-            if expected != Some(batch.len) {
-                return Err(Fail::invalid(format!(
-                    "{} values cannot be {} trajectories × {} poses × 3",
-                    batch.len, batch.batch, batch.horizon
-                )));
+            EvaluateBuffers {
+                batch: batch.batch,
+                horizon: batch.horizon,
+                values: batch.len,
+                cost: cost.len,
+                grad: grad.len,
             }
-            if cost.len != batch.batch {
-                return Err(Fail::invalid(format!(
-                    "cost has {} entries for {} trajectories",
-                    cost.len, batch.batch
-                )));
-            }
-            if grad.len != batch.len {
-                return Err(Fail::invalid(format!(
-                    "gradient has {} entries, the batch {}",
-                    grad.len, batch.len
-                )));
-            }
+            .check()
+            .map_err(Fail::invalid)?;
             let data = slice(batch.data, batch.len, "batch data")?;
             let cost = slice_mut(cost.data, cost.len, "cost")?;
             let grad = slice_mut(grad.data, grad.len, "gradient")?;
@@ -447,9 +442,7 @@ unsafe extern "C" fn embodiment_holonomic<T: Embodiment + 'static>(
     // SAFETY: the host upholds the ABI contract for every pointer; `call` checks `instance`.
     unsafe {
         call::<T>(instance, |e| {
-            if out.is_null() {
-                return Err(Fail::invalid("output is null"));
-            }
+            let out = output(out, "output")?;
             out.write(u32::from(e.holonomic()));
             Ok(())
         })
@@ -468,9 +461,7 @@ unsafe extern "C" fn embodiment_saturate<T: Embodiment + 'static>(
         call::<T>(instance, |e| {
             let state: RobotState = reference(state, "state")?.into();
             let cmd = *reference(cmd, "command")?;
-            if out.is_null() {
-                return Err(Fail::invalid("output is null"));
-            }
+            let out = output(out, "output")?;
             out.write(e.saturate(&state, cmd.into(), dt).into());
             Ok(())
         })
@@ -489,9 +480,7 @@ unsafe extern "C" fn embodiment_step<T: Embodiment + 'static>(
         call::<T>(instance, |e| {
             let state: RobotState = reference(state, "state")?.into();
             let cmd = *reference(cmd, "command")?;
-            if out.is_null() {
-                return Err(Fail::invalid("output is null"));
-            }
+            let out = output(out, "output")?;
             out.write((&e.step(&state, cmd.into(), dt)).into());
             Ok(())
         })
@@ -517,9 +506,7 @@ unsafe extern "C" fn embodiment_track<T: Embodiment + 'static>(
                 poses: poses.iter().map(|&p| Pose2::from(p)).collect(),
                 info: PlanInfo::default(),
             };
-            if out.is_null() {
-                return Err(Fail::invalid("output is null"));
-            }
+            let out = output(out, "output")?;
             out.write(e.track(&state, &plan, t).into());
             Ok(())
         })
@@ -647,10 +634,8 @@ unsafe extern "C" fn planner_plan<T: Planner + 'static>(
             if (raw.struct_size as usize) < std::mem::size_of::<H2nObservation>() {
                 return Err(Fail::invalid("observation is from an older host"));
             }
-            if out.is_null() {
-                return Err(Fail::invalid("plan output is null"));
-            }
-            let out = &mut *out;
+            let mut out = output(out, "plan output")?;
+            let out = out.as_mut();
             let obs = Observation {
                 time: raw.time,
                 ego: raw.ego.into(),
@@ -677,9 +662,7 @@ unsafe extern "C" fn planner_last_plan<T: Planner + 'static>(
     // SAFETY: `call` checks `instance`; the host upholds the rest of the contract.
     unsafe {
         call::<Mutex<PlannerState<T>>>(instance, |state| {
-            if out.is_null() {
-                return Err(Fail::invalid("plan output is null"));
-            }
+            let mut out = output(out, "plan output")?;
             let state = state
                 .lock()
                 .map_err(|_| Fail::error("planner state is poisoned"))?;
@@ -687,7 +670,7 @@ unsafe extern "C" fn planner_last_plan<T: Planner + 'static>(
                 .last_plan
                 .as_ref()
                 .ok_or_else(|| Fail::error("no plan yet"))?;
-            write_plan(plan, &mut *out)
+            write_plan(plan, out.as_mut())
         })
     }
 }
@@ -958,6 +941,10 @@ mod tests {
             eval(&short, &ctx, &mut cost, 1, &mut grad),
             H2N_INVALID_ARGUMENT
         );
+        assert_eq!(
+            last_error_of(&obj),
+            "5 values cannot be 1 trajectories × 2 poses × 3"
+        );
         let overflow = H2nTrajBatch {
             batch: usize::MAX,
             horizon: 2,
@@ -985,6 +972,13 @@ mod tests {
             eval(&good, &ctx, &mut cost2, 2, &mut grad),
             H2N_INVALID_ARGUMENT
         );
+        assert_eq!(last_error_of(&obj), "cost has 2 entries for 1 trajectories");
+        let mut grad5 = [0.0; 5];
+        assert_eq!(
+            eval(&good, &ctx, &mut cost, 1, &mut grad5),
+            H2N_INVALID_ARGUMENT
+        );
+        assert_eq!(last_error_of(&obj), "gradient has 5 entries, the batch 6");
         let old_ctx = H2nConstraintContext {
             struct_size: 16,
             ..context()
@@ -1021,6 +1015,139 @@ mod tests {
             (vt.destroy.expect("destroy"))(obj.instance);
             (vt.destroy.expect("destroy"))(std::ptr::null_mut());
         }
+    }
+
+    /// An embodiment and a planner whose methods must not run: a call panics.
+    struct Untouchable;
+
+    impl Embodiment for Untouchable {
+        fn name(&self) -> &str {
+            "untouchable"
+        }
+
+        fn holonomic(&self) -> bool {
+            panic!("holonomic ran")
+        }
+
+        fn saturate(
+            &self,
+            _: &RobotState,
+            _: human2nav_core::Twist2,
+            _: f64,
+        ) -> human2nav_core::Twist2 {
+            panic!("saturate ran")
+        }
+
+        fn step(&self, _: &RobotState, _: human2nav_core::Twist2, _: f64) -> RobotState {
+            panic!("step ran")
+        }
+
+        fn track(&self, _: &RobotState, _: &Plan, _: f64) -> human2nav_core::Twist2 {
+            panic!("track ran")
+        }
+    }
+
+    impl Planner for Untouchable {
+        fn name(&self) -> &str {
+            "untouchable"
+        }
+
+        fn plan(&mut self, _: &Observation) -> Result<Plan, PlanError> {
+            panic!("plan ran")
+        }
+    }
+
+    fn untouchable(_: &PluginInit<'_>) -> Result<Untouchable, InitError> {
+        Ok(Untouchable)
+    }
+
+    fn message(last_error: Option<LastErrorFn>, instance: *mut c_void) -> String {
+        let mut buf = [0u8; 256];
+        let mut out = H2nBuffer {
+            data: buf.as_mut_ptr(),
+            capacity: buf.len(),
+            len: 0,
+        };
+        // SAFETY: live instance, host-owned buffer.
+        unsafe { (last_error.expect("last_error"))(instance, &mut out) };
+        String::from_utf8_lossy(&buf[..out.len.min(buf.len())]).into_owned()
+    }
+
+    #[test]
+    fn null_outputs_are_refused_before_the_author_code_runs() {
+        let create_as = |kind: u32| {
+            let mut obj = H2nObject {
+                instance: std::ptr::null_mut(),
+                vtable: std::ptr::null(),
+            };
+            let a = H2nCreateArgs { kind, ..args("") };
+            // SAFETY: valid pointers for the duration of the call; a null error buffer is allowed.
+            let status = unsafe {
+                if kind == H2N_KIND_EMBODIMENT {
+                    create_embodiment(&a, &mut obj, std::ptr::null_mut(), untouchable)
+                } else {
+                    create_planner(&a, &mut obj, std::ptr::null_mut(), untouchable)
+                }
+            };
+            assert_eq!(status, H2N_OK);
+            obj
+        };
+
+        let obj = create_as(H2N_KIND_EMBODIMENT);
+        // SAFETY: `create_embodiment` returns an embodiment vtable in static memory.
+        let vt = unsafe { &*obj.vtable.cast::<H2nEmbodimentVTable>() };
+        let state = H2nRobotState::default();
+        let cmd = H2nTwist::default();
+        let plan = H2nPlanView {
+            t0: 0.0,
+            dt: 0.1,
+            poses: std::ptr::null(),
+            pose_count: 0,
+        };
+        // SAFETY: live instance; every input valid, every output deliberately null.
+        let statuses = unsafe {
+            [
+                (vt.holonomic.expect("holonomic"))(obj.instance, std::ptr::null_mut()),
+                (vt.saturate.expect("saturate"))(
+                    obj.instance,
+                    &state,
+                    &cmd,
+                    0.1,
+                    std::ptr::null_mut(),
+                ),
+                (vt.step.expect("step"))(obj.instance, &state, &cmd, 0.1, std::ptr::null_mut()),
+                (vt.track.expect("track"))(obj.instance, &state, &plan, 0.0, std::ptr::null_mut()),
+            ]
+        };
+        assert_eq!(statuses, [H2N_INVALID_ARGUMENT; 4]);
+        assert_eq!(message(vt.last_error, obj.instance), "output is null");
+        // SAFETY: destroyed exactly once.
+        unsafe { (vt.destroy.expect("destroy"))(obj.instance) };
+
+        let obj = create_as(H2N_KIND_PLANNER);
+        // SAFETY: `create_planner` returns a planner vtable in static memory.
+        let vt = unsafe { &*obj.vtable.cast::<H2nPlannerVTable>() };
+        let obs = H2nObservation {
+            struct_size: std::mem::size_of::<H2nObservation>() as u32,
+            reserved: 0,
+            time: 0.0,
+            ego: H2nPose::default(),
+            ego_velocity: H2nTwist::default(),
+            goal: [1.0, 0.0],
+            agents: std::ptr::null(),
+            agent_count: 0,
+        };
+        // SAFETY: live instance; the observation is valid, the output deliberately null.
+        let status = unsafe { (vt.plan.expect("plan"))(obj.instance, &obs, std::ptr::null_mut()) };
+        assert_eq!(status, H2N_INVALID_ARGUMENT);
+        assert_eq!(message(vt.last_error, obj.instance), "plan output is null");
+        // SAFETY: as above.
+        let status =
+            unsafe { (vt.last_plan.expect("last_plan"))(obj.instance, std::ptr::null_mut()) };
+        assert_eq!(status, H2N_INVALID_ARGUMENT);
+        assert_eq!(message(vt.last_error, obj.instance), "plan output is null");
+        // SAFETY: destroyed exactly once.
+        unsafe { (vt.destroy.expect("destroy"))(obj.instance) };
     }
 
     #[test]

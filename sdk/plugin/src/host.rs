@@ -25,8 +25,8 @@ use crate::libfile::{self, MAX_LIBRARY_BYTES};
 use crate::process::{self as proc_host, ProcessClient};
 use crate::resolve::resolve_library_path;
 use crate::validate::{
-    Check, MAX_DESCRIPTION_BYTES, MAX_FACTORIES, MAX_MESSAGE_BYTES, MAX_NAME_BYTES, MAX_PLAN_POSES,
-    MAX_TABLE_BYTES, plugin_str,
+    Check, EvaluateBuffers, MAX_DESCRIPTION_BYTES, MAX_FACTORIES, MAX_MESSAGE_BYTES,
+    MAX_NAME_BYTES, MAX_PLAN_POSES, MAX_TABLE_BYTES, plugin_str,
 };
 use human2nav_core::constraint::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
 use human2nav_core::embodiment::{Embodiment, RobotState};
@@ -1486,23 +1486,15 @@ impl ConstraintTerm for PluginConstraint {
         if self.health.poisoned() {
             return Err(self.unusable());
         }
-        if batch.data.len() != batch.batch * batch.horizon * 3 {
-            return Err(ConstraintError::Shape(format!(
-                "{} values cannot be {} trajectories × {} poses × 3",
-                batch.data.len(),
-                batch.batch,
-                batch.horizon
-            )));
+        EvaluateBuffers {
+            batch: batch.batch,
+            horizon: batch.horizon,
+            values: batch.data.len(),
+            cost: cost.len(),
+            grad: grad.len(),
         }
-        if cost.len() != batch.batch || grad.len() != batch.data.len() {
-            return Err(ConstraintError::Shape(format!(
-                "cost has {} entries and gradient {} for a batch of {} × {} poses",
-                cost.len(),
-                grad.len(),
-                batch.batch,
-                batch.horizon
-            )));
-        }
+        .check()
+        .map_err(ConstraintError::Shape)?;
         let result = match &self.exec {
             ConstraintExec::Direct(core) => {
                 let agents: Vec<H2nAgent> = ctx.agents.iter().map(H2nAgent::borrow).collect();

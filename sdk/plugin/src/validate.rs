@@ -96,6 +96,48 @@ impl fmt::Display for Check {
     }
 }
 
+/// The buffer lengths of one constraint `evaluate` call, as the host passes them and the
+/// plugin receives them: `values` poses values for `batch` trajectories of `horizon` poses
+/// (`x, y, θ`), one `cost` entry per trajectory and one `grad` entry per pose value.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct EvaluateBuffers {
+    pub batch: usize,
+    pub horizon: usize,
+    pub values: usize,
+    pub cost: usize,
+    pub grad: usize,
+}
+
+impl EvaluateBuffers {
+    /// Checks `values == batch·horizon·3` (without overflow), then `cost == batch`, then
+    /// `grad == values`; the error describes the first mismatch.
+    pub(crate) fn check(&self) -> Result<(), String> {
+        let expected = self
+            .batch
+            .checked_mul(self.horizon)
+            .and_then(|n| n.checked_mul(3));
+        if expected != Some(self.values) {
+            return Err(format!(
+                "{} values cannot be {} trajectories × {} poses × 3",
+                self.values, self.batch, self.horizon
+            ));
+        }
+        if self.cost != self.batch {
+            return Err(format!(
+                "cost has {} entries for {} trajectories",
+                self.cost, self.batch
+            ));
+        }
+        if self.grad != self.values {
+            return Err(format!(
+                "gradient has {} entries, the batch {}",
+                self.grad, self.values
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Reads a string a plugin handed over: at most `cap` bytes, UTF-8, and a null pointer only
 /// with length 0. The error is a phrase for "<what> <error>".
 ///
@@ -115,4 +157,46 @@ pub(crate) unsafe fn plugin_str<'a>(s: crate::abi::H2nStr, cap: usize) -> Result
     // SAFETY: non-null, within the cap, readable per the caller's contract.
     let bytes = unsafe { std::slice::from_raw_parts(s.ptr, s.len) };
     std::str::from_utf8(bytes).map_err(|e| format!("is not UTF-8: {e}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn buffers(batch: usize, horizon: usize, values: usize, cost: usize, grad: usize) -> String {
+        EvaluateBuffers {
+            batch,
+            horizon,
+            values,
+            cost,
+            grad,
+        }
+        .check()
+        .err()
+        .unwrap_or_default()
+    }
+
+    #[test]
+    fn evaluate_buffers_name_the_first_mismatch() {
+        assert_eq!(buffers(2, 4, 24, 2, 24), "");
+        assert_eq!(buffers(0, 0, 0, 0, 0), "");
+        assert_eq!(
+            buffers(2, 4, 23, 2, 24),
+            "23 values cannot be 2 trajectories × 4 poses × 3"
+        );
+        assert_eq!(
+            buffers(2, 4, 24, 3, 25),
+            "cost has 3 entries for 2 trajectories"
+        );
+        assert_eq!(
+            buffers(2, 4, 24, 2, 25),
+            "gradient has 25 entries, the batch 24"
+        );
+        // B·T·3 overflowing usize is a mismatch, not a wrapped product.
+        let huge = usize::MAX / 2 + 1;
+        assert_eq!(
+            buffers(huge, 2, 0, huge, 0),
+            format!("0 values cannot be {huge} trajectories × 2 poses × 3")
+        );
+    }
 }

@@ -5,7 +5,7 @@
 //! The fixture library is the cdylib cargo builds for this crate's dev-dependency (next to this
 //! test binary); the helper is this crate's `human2nav-plugin-host` binary.
 
-use human2nav_core::constraint::{ConstraintContext, ConstraintTerm, TrajBatch};
+use human2nav_core::constraint::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
 use human2nav_core::{AgentState, Limits, Observation, PlanError, Planner, Pose2, Twist2};
 use human2nav_plugin::resolve::resolve_library_path;
 use human2nav_plugin::{PluginError, PluginHost, PluginIsolation, PluginPlanner, process};
@@ -161,6 +161,57 @@ fn a_well_behaved_constraint_answers_bit_for_bit_as_in_process() {
     let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&c1), bits(&c2));
     assert_eq!(bits(&g1), bits(&g2));
+}
+
+#[test]
+fn mismatched_buffers_are_refused_before_the_plugin_is_called() {
+    let host = host();
+    let lib = fixture();
+    let inside = host
+        .constraint_with_deadline(&lib, "quadratic", "", None, None)
+        .expect("in-process");
+    let outside = host
+        .constraint_with_options(
+            &lib,
+            "quadratic",
+            "",
+            None,
+            Some(Duration::from_secs(1)),
+            PluginIsolation::Process,
+        )
+        .expect("process");
+    let data = vec![0.5; 2 * 4 * 3];
+    let limits = limits();
+    let ctx = ConstraintContext {
+        dt: 0.1,
+        limits: &limits,
+        initial_velocity: Twist2::ZERO,
+        agents: &[],
+    };
+    let good = TrajBatch::new(&data, 2, 4).expect("batch");
+    // `TrajBatch`'s fields are public, so a caller can hand over a view that does not add up.
+    let odd = TrajBatch {
+        data: &data,
+        batch: 2,
+        horizon: 3,
+    };
+    for term in [&inside, &outside] {
+        let shape = |batch: TrajBatch<'_>, cost: usize, grad: usize| {
+            let (mut c, mut g) = (vec![0.0; cost], vec![0.0; grad]);
+            match term.evaluate(batch, &ctx, &mut c, &mut g) {
+                Err(ConstraintError::Shape(m)) => m,
+                other => panic!("expected a shape error, got {other:?}"),
+            }
+        };
+        assert_eq!(
+            shape(odd, 2, 24),
+            "24 values cannot be 2 trajectories × 3 poses × 3"
+        );
+        assert_eq!(shape(good, 3, 24), "cost has 3 entries for 2 trajectories");
+        assert_eq!(shape(good, 2, 23), "gradient has 23 entries, the batch 24");
+        let (mut c, mut g) = (vec![0.0; 2], vec![0.0; 24]);
+        term.evaluate(good, &ctx, &mut c, &mut g).expect("good");
+    }
 }
 
 #[test]

@@ -18,14 +18,6 @@ time_within_0_45,time_within_1_2,mean_jerk,plans,fallbacks,planner_errors,contac
 contact_pedestrian_closing,contact_pedestrian_age,commands,exec_over_speed,exec_over_reverse,\
 exec_over_acceleration,exec_over_yaw_rate,exec_over_curvature,exec_over_lateral";
 
-fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
-}
-
 fn num(v: f64) -> String {
     if v.is_finite() {
         format!("{v:.6}")
@@ -38,59 +30,68 @@ fn opt(v: Option<f64>) -> String {
     v.map(num).unwrap_or_default()
 }
 
-/// `results.csv` (header plus one line per row, `\n` line ends, six decimals).
+/// The fields of one `results.csv` line, in [`CSV_HEADER`]'s order.
+fn csv_record(r: &ResultRow) -> Vec<String> {
+    let m = &r.metrics;
+    [
+        r.suite.clone(),
+        r.suite_kind.as_str().to_string(),
+        r.scenario.name().to_string(),
+        r.episode.clone(),
+        r.scene.clone(),
+        r.robot.clone(),
+        r.method.clone(),
+        r.seed.to_string(),
+        r.agents.to_string(),
+        r.density.to_string(),
+        m.outcome.as_str().to_string(),
+        u8::from(m.success).to_string(),
+        u8::from(m.collision).to_string(),
+        u8::from(m.timeout).to_string(),
+        num(m.tfs),
+        num(m.tfs_plan),
+        num(m.tfs_executed),
+        num(m.path_length),
+        opt(m.time_to_goal),
+        num(m.duration),
+        num(m.budget),
+        opt(m.min_clearance),
+        num(m.time_within_intimate),
+        num(m.time_within_personal),
+        num(m.mean_jerk),
+        m.plans.to_string(),
+        m.fallbacks.to_string(),
+        m.planner_errors.to_string(),
+        opt(m.contact.map(|c| c.robot_closing)),
+        opt(m.contact.map(|c| c.pedestrian_closing)),
+        opt(m.contact.map(|c| c.pedestrian_age)),
+        m.executed_violations.commands.to_string(),
+    ]
+    .into_iter()
+    .chain(
+        m.executed_violations
+            .per_limit()
+            .iter()
+            .map(|c| c.to_string()),
+    )
+    .collect()
+}
+
+/// `results.csv` (header plus one line per row, `\n` line ends, six decimals). A field is
+/// quoted only when it contains `,`, `"`, `\r` or `\n`, with its quotes doubled (the `csv`
+/// crate's default writer).
 pub fn results_csv(rows: &[ResultRow]) -> String {
-    let mut out = String::with_capacity(256 * (rows.len() + 1));
-    out.push_str(CSV_HEADER);
-    out.push('\n');
+    let mut w = csv::Writer::from_writer(Vec::with_capacity(256 * (rows.len() + 1)));
+    // Only an I/O error (there is none: the writer is a Vec) or a record whose length differs
+    // from the header's (there is none: `csv_record` has one field per header column, as the
+    // tests check) can fail.
+    const INFALLIBLE: &str = "results.csv records match the header and are written to memory";
+    w.write_record(CSV_HEADER.split(',')).expect(INFALLIBLE);
     for r in rows {
-        let m = &r.metrics;
-        let fields = [
-            csv_field(&r.suite),
-            r.suite_kind.as_str().to_string(),
-            r.scenario.name().to_string(),
-            csv_field(&r.episode),
-            csv_field(&r.scene),
-            csv_field(&r.robot),
-            csv_field(&r.method),
-            r.seed.to_string(),
-            r.agents.to_string(),
-            r.density.to_string(),
-            m.outcome.as_str().to_string(),
-            u8::from(m.success).to_string(),
-            u8::from(m.collision).to_string(),
-            u8::from(m.timeout).to_string(),
-            num(m.tfs),
-            num(m.tfs_plan),
-            num(m.tfs_executed),
-            num(m.path_length),
-            opt(m.time_to_goal),
-            num(m.duration),
-            num(m.budget),
-            opt(m.min_clearance),
-            num(m.time_within_intimate),
-            num(m.time_within_personal),
-            num(m.mean_jerk),
-            m.plans.to_string(),
-            m.fallbacks.to_string(),
-            m.planner_errors.to_string(),
-            opt(m.contact.map(|c| c.robot_closing)),
-            opt(m.contact.map(|c| c.pedestrian_closing)),
-            opt(m.contact.map(|c| c.pedestrian_age)),
-            m.executed_violations.commands.to_string(),
-        ]
-        .into_iter()
-        .chain(
-            m.executed_violations
-                .per_limit()
-                .iter()
-                .map(|c| c.to_string()),
-        )
-        .collect::<Vec<String>>();
-        out.push_str(&fields.join(","));
-        out.push('\n');
+        w.write_record(csv_record(r)).expect(INFALLIBLE);
     }
-    out
+    let bytes = w.into_inner().expect(INFALLIBLE);
+    String::from_utf8(bytes).expect("CSV made of UTF-8 fields is UTF-8")
 }
 
 /// Aggregates over a group of rows.
@@ -831,5 +832,167 @@ fn composition_section(md: &mut String, composition: &[SuiteComposition]) {
             let _ = writeln!(md, " {goal} |");
         }
         let _ = writeln!(md);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::metrics::EpisodeMetrics;
+    use crate::runner::Outcome;
+
+    /// `results_csv` as it was written by hand before it used the `csv` crate (verbatim): the
+    /// reference the crate's bytes are compared with.
+    fn hand_written_results_csv(rows: &[ResultRow]) -> String {
+        fn csv_field(s: &str) -> String {
+            if s.contains([',', '"', '\n', '\r']) {
+                format!("\"{}\"", s.replace('"', "\"\""))
+            } else {
+                s.to_string()
+            }
+        }
+        let mut out = String::with_capacity(256 * (rows.len() + 1));
+        out.push_str(CSV_HEADER);
+        out.push('\n');
+        for r in rows {
+            let m = &r.metrics;
+            let fields = [
+                csv_field(&r.suite),
+                r.suite_kind.as_str().to_string(),
+                r.scenario.name().to_string(),
+                csv_field(&r.episode),
+                csv_field(&r.scene),
+                csv_field(&r.robot),
+                csv_field(&r.method),
+                r.seed.to_string(),
+                r.agents.to_string(),
+                r.density.to_string(),
+                m.outcome.as_str().to_string(),
+                u8::from(m.success).to_string(),
+                u8::from(m.collision).to_string(),
+                u8::from(m.timeout).to_string(),
+                num(m.tfs),
+                num(m.tfs_plan),
+                num(m.tfs_executed),
+                num(m.path_length),
+                opt(m.time_to_goal),
+                num(m.duration),
+                num(m.budget),
+                opt(m.min_clearance),
+                num(m.time_within_intimate),
+                num(m.time_within_personal),
+                num(m.mean_jerk),
+                m.plans.to_string(),
+                m.fallbacks.to_string(),
+                m.planner_errors.to_string(),
+                opt(m.contact.map(|c| c.robot_closing)),
+                opt(m.contact.map(|c| c.pedestrian_closing)),
+                opt(m.contact.map(|c| c.pedestrian_age)),
+                m.executed_violations.commands.to_string(),
+            ]
+            .into_iter()
+            .chain(
+                m.executed_violations
+                    .per_limit()
+                    .iter()
+                    .map(|c| c.to_string()),
+            )
+            .collect::<Vec<String>>();
+            out.push_str(&fields.join(","));
+            out.push('\n');
+        }
+        out
+    }
+
+    fn row(text: &str, outcome: Outcome, k: u32) -> ResultRow {
+        let x = f64::from(k);
+        ResultRow {
+            suite: format!("suite {text}"),
+            suite_kind: [SuiteKind::Real, SuiteKind::Synthetic, SuiteKind::Empty][k as usize % 3],
+            scenario: ScenarioClass::ALL[k as usize % 4],
+            episode: text.to_string(),
+            scene: format!("{text}{text}"),
+            robot: if k % 2 == 0 {
+                String::new()
+            } else {
+                "go2".into()
+            },
+            method: format!("m,{k}"),
+            seed: u64::MAX - u64::from(k),
+            agents: k as usize,
+            density: 2 * k as usize,
+            metrics: EpisodeMetrics {
+                outcome,
+                success: outcome == Outcome::Success,
+                collision: outcome == Outcome::Collision,
+                timeout: outcome == Outcome::Timeout,
+                tfs: 1.0 / (x + 3.0),
+                tfs_plan: [f64::NAN, 0.0, -0.0, 1e-7][k as usize % 4],
+                tfs_executed: [f64::INFINITY, 1.0, 0.1 + 0.2, -1e300][k as usize % 4],
+                path_length: 12.345_678_9 * x,
+                time_to_goal: (outcome == Outcome::Success).then_some(9.5 + x),
+                duration: 20.0,
+                budget: 30.000_000_5,
+                min_clearance: (k % 3 != 0).then_some(0.25 * x - 0.5),
+                time_within_intimate: 0.05 * x,
+                time_within_personal: 0.1 * x,
+                mean_jerk: 1e6 / (x + 1.0),
+                plans: 100 + k as usize,
+                fallbacks: k as usize,
+                planner_errors: (k % 2) as usize,
+                contact: (outcome == Outcome::Collision).then_some(Contact {
+                    pedestrian: 7,
+                    robot_closing: 0.4,
+                    pedestrian_closing: -0.2,
+                    pedestrian_age: f64::NAN,
+                }),
+                executed_violations: LimitCounts {
+                    commands: 400,
+                    speed: k as usize,
+                    reverse: 0,
+                    acceleration: 3,
+                    yaw_rate: 4,
+                    curvature: 5,
+                    lateral: 6,
+                },
+            },
+        }
+    }
+
+    #[test]
+    fn the_csv_crate_writes_the_bytes_of_the_hand_written_writer() {
+        let texts = [
+            "e0",
+            "",
+            "a,b",
+            "say \"hi\"",
+            "\"",
+            "\"\"",
+            ",",
+            "line\nbreak",
+            "carriage\rreturn",
+            "crlf\r\n",
+            " padded ",
+            "tab\there",
+            "semi;colon",
+            "#hash",
+            "'single'",
+            "ünïcødé → ✓",
+            "=1+2",
+            "trailing,",
+            "\"quoted, with comma\"",
+        ];
+        let outcomes = [Outcome::Success, Outcome::Collision, Outcome::Timeout];
+        let rows: Vec<ResultRow> = texts
+            .iter()
+            .enumerate()
+            .map(|(k, t)| row(t, outcomes[k % 3], k as u32))
+            .collect();
+        assert_eq!(results_csv(&rows), hand_written_results_csv(&rows));
+        assert_eq!(results_csv(&[]), hand_written_results_csv(&[]));
+        assert_eq!(
+            results_csv(&rows[..1]),
+            hand_written_results_csv(&rows[..1])
+        );
     }
 }

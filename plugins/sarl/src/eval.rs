@@ -138,7 +138,6 @@ pub fn run_episode(
                 states,
                 rewards,
                 humans,
-                obstacles: Vec::new(),
             });
         }
     }

@@ -31,8 +31,10 @@
 //! distance to the (clipped) goal relative to the current one, `C` the mean over waypoints of
 //! `max(0, margin − gap)²/margin²` with `gap` the distance between the robot's footprint (its
 //! shapes at the waypoint's pose, [`RobotModel::footprint`]) and each agent's disc, agents
-//! predicted at constant velocity, where the first waypoint with a
-//! predicted overlap and every one after it count [`COLLISION_PENALTY`] instead (a collision ends
+//! predicted at constant velocity, and each static obstacle of the observation
+//! ([`crate::obstacle`]: circles, polygons, segments and the occupied cells of its grid), where
+//! the first waypoint with a predicted overlap and every one after it count
+//! [`COLLISION_PENALTY`] instead (a collision ends
 //! the plan: the earlier, the worse), and `D` the mean distance (m) to the previous plan at the
 //! same times (0 without one).
 //!
@@ -72,6 +74,7 @@ use crate::constraint::{ConstraintContext, Phi};
 use crate::flow::{FlowCondition, FlowModel};
 use crate::guidance::{self, GuidanceError, GuidanceSettings, GuidanceVariant, GuidanceWorkspace};
 use crate::limits::Limits;
+use crate::obstacle::{self, Obstacle};
 use crate::planner::{
     AgentState, Deadline, Observation, Plan, PlanError, PlanInfo, Planner, Stage, StageProgress,
     Stages,
@@ -281,6 +284,9 @@ pub struct Human2Nav<M> {
     projection: projection::ProjectionSolver,
     previous: Option<Plan>,
     raster: Vec<f32>,
+    /// The static obstacles near the robot in the ego frame of the current call (explicit ones
+    /// and occupied grid cells), for the selection.
+    obstacles: Vec<Obstacle>,
 }
 
 impl<M> std::fmt::Debug for Human2Nav<M> {
@@ -321,6 +327,7 @@ impl<M: FlowModel> Human2Nav<M> {
         Ok(Self {
             name: name.to_string(),
             raster: vec![0.0; bev.len()],
+            obstacles: Vec::new(),
             rng: ChaCha8Rng::seed_from_u64(settings.seed),
             model,
             robot,
@@ -390,6 +397,7 @@ impl<M: FlowModel> Human2Nav<M> {
         let k = self.settings.samples;
         let dt = self.settings.dt;
         let (cond, agents) = self.condition(obs);
+        self.obstacles = self.nearby_obstacles(obs, horizon);
         let x0 = self.draw_source(k, horizon);
         let ctx = ConstraintContext {
             dt,
@@ -613,6 +621,33 @@ impl<M: FlowModel> Human2Nav<M> {
         })
     }
 
+    /// The observation's static obstacles that a plan of `horizon` poses could reach (within
+    /// the distance covered at `v_max`, plus the footprint's reach and the selection margin),
+    /// with the occupied cells of its grid there, in the ego frame.
+    fn nearby_obstacles(&self, obs: &Observation, horizon: usize) -> Vec<Obstacle> {
+        let reach = self
+            .robot
+            .footprint
+            .iter()
+            .map(FootprintShape::reach)
+            .fold(0.0, f64::max);
+        let range = self.robot.limits.v_max * horizon as f64 * self.settings.dt
+            + reach
+            + self.settings.selection.margin;
+        let here = [obs.ego.x, obs.ego.y];
+        let grid = obs
+            .occupancy
+            .as_ref()
+            .map(|g| g.obstacles_near(here, range))
+            .unwrap_or_default();
+        obs.obstacles
+            .iter()
+            .filter(|o| o.distance(here) <= range)
+            .chain(&grid)
+            .map(|o| o.in_frame(obs.ego))
+            .collect()
+    }
+
     /// The last-step correction of every candidate, in order, returning which it made
     /// feasible. Once `deadline` has passed only the stop and the previous-plan candidates are
     /// corrected (the previous plan usually is feasible already, which costs no QP), and a stop
@@ -752,10 +787,17 @@ impl<M: FlowModel> Human2Nav<M> {
         for (j, p) in traj.iter().enumerate() {
             let t = (j + 1) as f64 * dt;
             let mut hit = false;
-            for a in agents {
+            let footprint = &self.robot.footprint;
+            let agent_gaps = agents.iter().map(|a| {
                 let ax = a.position[0] + a.velocity[0] * t;
                 let ay = a.position[1] + a.velocity[1] * t;
-                let gap = footprint::clearance_at(&self.robot.footprint, *p, [ax, ay], a.radius);
+                footprint::clearance_at(footprint, *p, [ax, ay], a.radius)
+            });
+            let obstacle_gaps = self
+                .obstacles
+                .iter()
+                .map(|o| obstacle::footprint_clearance(footprint, *p, o));
+            for gap in agent_gaps.chain(obstacle_gaps) {
                 if gap < 0.0 {
                     hit = true;
                     break;

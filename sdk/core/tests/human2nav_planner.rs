@@ -10,6 +10,7 @@ use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use human2nav_core::guidance::analytic::ConstantField;
 use human2nav_core::guidance::{GuidanceVariant, PaperSettings};
 use human2nav_core::human2nav::{Human2Nav, Human2NavSettings, RobotModel, pose_at};
+use human2nav_core::obstacle::{Obstacle, OccupancyGrid, footprint_clearance};
 use human2nav_core::robot::footprint::FootprintShape;
 use human2nav_core::tfs::tfs_plan;
 use human2nav_core::{
@@ -723,4 +724,69 @@ fn a_budget_outside_its_range_is_an_error_naming_the_field() {
         let err = settings.validate().unwrap_err().to_string();
         assert!(err.contains("budget_ms"), "{err}");
     }
+}
+
+/// The robot at the origin facing +x at rest, the goal 5 m ahead, nobody around.
+fn open_floor() -> Observation {
+    Observation {
+        goal: [5.0, 0.0],
+        ..Observation::default()
+    }
+}
+
+fn min_wall_clearance(plan: &[Pose2], wall: &Obstacle) -> f64 {
+    plan.iter()
+        .map(|p| footprint_clearance(&robot().footprint, *p, wall))
+        .fold(f64::INFINITY, f64::min)
+}
+
+#[test]
+fn a_wall_or_an_occupied_grid_column_across_the_way_stops_the_plan_short_of_it() {
+    let wall = Obstacle::Segment {
+        a: [1.2, -5.0],
+        b: [1.2, 5.0],
+    };
+    let free = planner(true).plan(&open_floor()).unwrap();
+    assert!(
+        min_wall_clearance(&free.poses, &wall) < 0.0,
+        "without the wall the plan runs through where it would be"
+    );
+    let walled = Observation {
+        obstacles: vec![wall.clone()],
+        ..open_floor()
+    };
+    let plan = planner(true).plan(&walled).unwrap();
+    assert!(!plan.info.fallback);
+    assert!(
+        min_wall_clearance(&plan.poses, &wall) >= 0.0,
+        "{:?}",
+        plan.info.notes
+    );
+
+    // The same wall as a column of occupied cells (0.1 m) of a grid around the robot.
+    let (w, h) = (60, 100);
+    let mut data = vec![0i8; w * h];
+    for row in 0..h {
+        data[row * w + 32] = 100; // x from 1.2 to 1.3 with the origin at (-2, -5)
+    }
+    let grid = OccupancyGrid {
+        origin: Pose2::new(-2.0, -5.0, 0.0),
+        resolution: 0.1,
+        width: w,
+        height: h,
+        data,
+        occupied_threshold: 65,
+    };
+    let gridded = Observation {
+        occupancy: Some(grid),
+        ..open_floor()
+    };
+    let plan = planner(true).plan(&gridded).unwrap();
+    assert!(min_wall_clearance(&plan.poses, &wall) >= 0.0);
+    let mut broken = gridded.clone();
+    if let Some(g) = broken.occupancy.as_mut() {
+        g.data.pop();
+    }
+    let err = planner(true).plan(&broken).unwrap_err().to_string();
+    assert!(err.contains("occupancy: data holds"), "{err}");
 }

@@ -8,6 +8,7 @@
 //! the SDK reports is `human2nav.Human2NavError`.
 
 use human2nav_core::embodiment::Embodiment;
+use human2nav_core::obstacle::{Obstacle, OccupancyGrid};
 use human2nav_core::robot::{ProfileError, RobotProfile};
 use human2nav_core::{AgentState, Deadline, Observation, Plan, PlanError, Planner, Pose2, Twist2};
 use human2nav_data::ScenarioClass;
@@ -173,6 +174,16 @@ impl PyRobot {
     }
 }
 
+/// The static scene of one planning call, as the Python half sends it.
+#[derive(Debug, Default, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Scene {
+    #[serde(default)]
+    obstacles: Vec<Obstacle>,
+    #[serde(default)]
+    occupancy: Option<OccupancyGrid>,
+}
+
 /// A planner: Human2Nav or ORCA behind the SDK's `Planner` trait.
 #[pyclass(module = "human2nav._human2nav", name = "Planner", frozen)]
 struct PyPlanner {
@@ -310,8 +321,10 @@ impl PyPlanner {
 
     /// Plans from one observation (world frame; the robot's velocity in its body frame).
     /// `agents` holds `(id, x, y, vx, vy, radius)` per pedestrian; `budget_ms > 0` bounds the
-    /// call (anytime planning; ignored by ORCA).
-    #[pyo3(signature = (time, ego, ego_velocity, goal, agents, budget_ms = 0.0))]
+    /// call (anytime planning; ignored by ORCA); `scene` is the JSON text of the static scene,
+    /// `{"obstacles": [...], "occupancy": {...}}` in the serde form of core's `Obstacle` and
+    /// `OccupancyGrid` (ORCA ignores it).
+    #[pyo3(signature = (time, ego, ego_velocity, goal, agents, budget_ms = 0.0, scene = None))]
     fn plan<'py>(
         &self,
         py: Python<'py>,
@@ -321,7 +334,13 @@ impl PyPlanner {
         goal: (f64, f64),
         agents: Vec<(u64, f64, f64, f64, f64, f64)>,
         budget_ms: f64,
+        scene: Option<&str>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let scene: Scene = match scene {
+            Some(text) => serde_json::from_str(text)
+                .map_err(|e| value_error(format!("obstacles or occupancy: {e}")))?,
+            None => Scene::default(),
+        };
         if !(budget_ms.is_finite() && budget_ms >= 0.0) {
             return Err(value_error(format!(
                 "budget_ms {budget_ms} must be finite and ≥ 0 (0: no budget)"
@@ -342,6 +361,8 @@ impl PyPlanner {
                     history: Vec::new(),
                 })
                 .collect(),
+            obstacles: scene.obstacles,
+            occupancy: scene.occupancy,
             ..Default::default()
         };
         let result = py.detach(|| {

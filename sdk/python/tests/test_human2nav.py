@@ -160,3 +160,31 @@ def test_it_shares_a_process_and_libtorch_with_torch(torch_first):
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
     assert out.returncode == 0, out.stdout + out.stderr
     assert out.stdout.startswith("ok 2.13.0")
+
+
+def test_obstacles_and_occupancy_keep_the_plan_off_a_wall(robot, planner):
+    planner.reset()
+    free = planner.plan(ego=(0, 0, 0), goal=(5, 0))
+    assert free.poses[:, 0].max() > 1.2, "without the wall the plan runs where it would be"
+    planner.reset()
+    walled = planner.plan(
+        ego=(0, 0, 0), goal=(5, 0), obstacles=[human2nav.Segment((1.2, -5), (1.2, 5))]
+    )
+    assert walled.poses[:, 0].max() < 1.2
+    grid = np.zeros((100, 60), dtype=np.int8)
+    grid[:, 32] = 100                       # x from 1.2 to 1.3 with the origin at (-2, -5)
+    planner.reset()
+    mapped = planner.plan(
+        ego=(0, 0, 0),
+        goal=(5, 0),
+        occupancy=human2nav.OccupancyGrid(grid, 0.1, origin=(-2.0, -5.0, 0.0)),
+        obstacles=[human2nav.Circle((0, 3), 0.5), human2nav.Polygon([[3, 3], [4, 3], [4, 4]])],
+    )
+    assert mapped.poses[:, 0].max() < 1.2
+    with pytest.raises(ValueError, match="obstacles"):
+        planner.plan(ego=(0, 0, 0), goal=(5, 0), obstacles=[human2nav.Polygon([[0, 0], [1, 0]])])
+    with pytest.raises(ValueError, match="occupancy"):
+        bad = human2nav.OccupancyGrid(grid, -0.1)
+        planner.plan(ego=(0, 0, 0), goal=(5, 0), occupancy=bad)
+    with pytest.raises(TypeError):
+        planner.plan(ego=(0, 0, 0), goal=(5, 0), obstacles=[(1, 2)])

@@ -37,13 +37,17 @@ from ._human2nav import Planner as _NativePlanner
 from ._human2nav import run_episode as _run_episode
 
 __all__ = [
+    "Circle",
     "EpisodeResult",
     "Human2NavError",
     "Human2NavPlanner",
+    "OccupancyGrid",
     "OrcaPlanner",
     "Plan",
+    "Polygon",
     "Planner",
     "RobotProfile",
+    "Segment",
     "run_episode",
     "version",
 ]
@@ -52,6 +56,96 @@ __version__ = version()
 
 PathLike = Union[str, Path]
 ArrayLike = Union[np.ndarray, Sequence[Sequence[float]]]
+
+
+@dataclass(frozen=True)
+class Circle:
+    """A round static obstacle (a pillar, a bin), world frame."""
+
+    center: Tuple[float, float]
+    radius: float
+
+    def _json(self) -> Dict[str, Any]:
+        return {"kind": "circle", "center": _point(self.center), "radius": float(self.radius)}
+
+
+@dataclass(frozen=True)
+class Polygon:
+    """A static obstacle bounded by a simple polygon (a table, a parked cart), world frame."""
+
+    vertices: ArrayLike
+    """``(n, 2)``, n ≥ 3, either orientation."""
+
+    def _json(self) -> Dict[str, Any]:
+        v = np.asarray(self.vertices, dtype=np.float64)
+        if v.ndim != 2 or v.shape[1] != 2:
+            raise ValueError(f"Polygon vertices must be an (n, 2) array, got shape {v.shape}")
+        return {"kind": "polygon", "vertices": v.tolist()}
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A wall or railing from ``a`` to ``b`` (no thickness), world frame."""
+
+    a: Tuple[float, float]
+    b: Tuple[float, float]
+
+    def _json(self) -> Dict[str, Any]:
+        return {"kind": "segment", "a": _point(self.a), "b": _point(self.b)}
+
+
+@dataclass(frozen=True)
+class OccupancyGrid:
+    """A static map in the layout of ``nav_msgs/OccupancyGrid``: ``data`` is ``(height, width)``
+    with −1 unknown (treated as free), 0 free to 100 occupied; cell ``(row, col)`` covers
+    ``[col, col + 1) × [row, row + 1)`` cells of ``resolution`` metres from ``origin``
+    (``x, y, theta`` of the corner of cell ``(0, 0)`` in the world frame)."""
+
+    data: np.ndarray
+    resolution: float
+    origin: Tuple[float, float, float] = (0.0, 0.0, 0.0)
+    occupied_threshold: int = 65
+
+    def _json(self) -> Dict[str, Any]:
+        grid = np.asarray(self.data)
+        if grid.ndim != 2:
+            raise ValueError(f"OccupancyGrid data must be 2-D (height, width), got {grid.shape}")
+        if grid.size and (grid.min() < -128 or grid.max() > 127):
+            raise ValueError("OccupancyGrid data must fit in int8 (-1, 0 … 100)")
+        x, y, theta = _vector("origin", self.origin, 3)
+        return {
+            "origin": {"x": x, "y": y, "theta": theta},
+            "resolution": float(self.resolution),
+            "width": int(grid.shape[1]),
+            "height": int(grid.shape[0]),
+            "data": grid.astype(np.int64).ravel().tolist(),
+            "occupied_threshold": int(self.occupied_threshold),
+        }
+
+
+Obstacle = Union[Circle, Polygon, Segment]
+
+
+def _point(p: Sequence[float]) -> List[float]:
+    return list(_vector("point", p, 2))
+
+
+def _scene(
+    obstacles: Optional[Sequence[Obstacle]], occupancy: Optional[OccupancyGrid]
+) -> Optional[str]:
+    if not obstacles and occupancy is None:
+        return None
+    items = []
+    for i, o in enumerate(obstacles or ()):
+        if not isinstance(o, (Circle, Polygon, Segment)):
+            raise TypeError(f"obstacles[{i}] must be a Circle, Polygon or Segment, got {o!r}")
+        items.append(o._json())
+    scene: Dict[str, Any] = {"obstacles": items}
+    if occupancy is not None:
+        if not isinstance(occupancy, OccupancyGrid):
+            raise TypeError("occupancy must be a human2nav.OccupancyGrid")
+        scene["occupancy"] = occupancy._json()
+    return json.dumps(scene, allow_nan=True)
 
 
 @dataclass(frozen=True)
@@ -138,6 +232,8 @@ class Planner:
         time: float = 0.0,
         agent_ids: Optional[Sequence[int]] = None,
         budget_ms: float = 0.0,
+        obstacles: Optional[Sequence[Obstacle]] = None,
+        occupancy: Optional[OccupancyGrid] = None,
     ) -> Plan:
         """Plans from one observation.
 
@@ -145,7 +241,9 @@ class Planner:
         ``(n, 5)`` array of ``x, y, vx, vy, radius`` per pedestrian (ids ``0 … n − 1`` unless
         ``agent_ids`` gives stable tracker ids), ``ego_velocity`` the body-frame
         ``(vx, vy, omega)``. ``budget_ms > 0`` bounds the call: the best plan found by then,
-        always a feasible one (Human2Nav only).
+        always a feasible one (Human2Nav only). ``obstacles`` (:class:`Circle`,
+        :class:`Polygon`, :class:`Segment`) and ``occupancy`` (:class:`OccupancyGrid`) are the
+        static scene; Human2Nav's selection keeps its candidates off them, ORCA ignores them.
         """
         raw = self._native.plan(
             float(time),
@@ -154,6 +252,7 @@ class Planner:
             _vector("goal", goal, 2),
             _agents(agents, agent_ids),
             float(budget_ms),
+            _scene(obstacles, occupancy),
         )
         info = {k: raw[k] for k in (
             "selected", "phi_before", "phi_after", "guidance_iterations", "fallback", "notes",

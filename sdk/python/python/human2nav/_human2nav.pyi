@@ -55,6 +55,7 @@ class Planner:
         goal: Tuple[float, float],
         agents: List[Tuple[int, float, float, float, float, float]],
         budget_ms: float = 0.0,
+        scene: Optional[str] = None,
     ) -> Dict[str, Any]: ...
 
 def run_episode(

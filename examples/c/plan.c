@@ -1,6 +1,6 @@
 /*
  * One planning step with the Human2Nav planner from C: create a planner for a robot, plan
- * past two pedestrians, read the plan and its diagnostics, turn it into a velocity command,
+ * past two pedestrians in a corridor with a pillar, read the plan and its diagnostics, turn it into a velocity command,
  * plan again under a 5 ms budget, and see how bad input is refused.
  *
  * Build and run from the repository root after `cargo build -p human2nav-capi` (`sdk/dev.sh
@@ -66,6 +66,13 @@ int main(int argc, char **argv) {
         {.id = 1, .x = 2.5, .y = 0.4, .vx = -1.0, .vy = 0.0, .radius = 0.3},
         {.id = 2, .x = 3.5, .y = -0.8, .vx = -0.8, .vy = 0.3, .radius = 0.3},
     };
+    /* A corridor: two walls 1.6 m to either side and a square pillar ahead on the left. */
+    const double pillar[8] = {3.0, 0.4, 3.4, 0.4, 3.4, 0.8, 3.0, 0.8};
+    h2n_obstacle walls[3] = {
+        {.kind = H2N_OBSTACLE_KIND_SEGMENT, .x0 = -2.0, .y0 = 1.6, .x1 = 12.0, .y1 = 1.6},
+        {.kind = H2N_OBSTACLE_KIND_SEGMENT, .x0 = -2.0, .y0 = -1.6, .x1 = 12.0, .y1 = -1.6},
+        {.kind = H2N_OBSTACLE_KIND_POLYGON, .vertices = pillar, .vertex_count = 4},
+    };
     h2n_observation obs = {
         .time = 0.0,
         .ego = {0.0, 0.0, 0.0},
@@ -74,6 +81,8 @@ int main(int argc, char **argv) {
         .goal_y = 0.0,
         .agents = people,
         .agent_count = 2,
+        .obstacles = walls,
+        .obstacle_count = 3,
     };
 
     h2n_plan *plan = NULL;
@@ -135,6 +144,13 @@ int main(int argc, char **argv) {
         printf("refused: %s\n", h2n_last_error());
         refused++;
     }
+    obs.agents = people;
+    walls[0].kind = 7;
+    if (h2n_planner_plan(planner, &obs, 0.0, &never) == H2N_STATUS_INVALID_ARGUMENT) {
+        printf("refused: %s\n", h2n_last_error());
+        refused++;
+    }
+    walls[0].kind = H2N_OBSTACLE_KIND_SEGMENT;
     if (h2n_plan_poses(plan, poses, 3, &written) == H2N_STATUS_BUFFER_TOO_SMALL) {
         printf("refused: %s\n", h2n_last_error());
         refused++;
@@ -149,8 +165,8 @@ int main(int argc, char **argv) {
     h2n_plan_free(quick);
     h2n_plan_free(plan);
     h2n_planner_free(planner);
-    if (refused != 5 || never != NULL || broken != NULL) {
-        fprintf(stderr, "bad input was not refused as documented (%d of 5)\n", refused);
+    if (refused != 6 || never != NULL || broken != NULL) {
+        fprintf(stderr, "bad input was not refused as documented (%d of 6)\n", refused);
         return 1;
     }
     printf("ok\n");

@@ -21,6 +21,11 @@
 #define H2N_MAX_AGENTS 10000
 
 /**
+ * Largest number of static obstacles one observation may carry.
+ */
+#define H2N_MAX_OBSTACLES 100000
+
+/**
  * What a call returned.
  */
 enum h2n_status
@@ -104,6 +109,35 @@ enum h2n_stage
 typedef enum h2n_stage h2n_stage;
 #else
 typedef int32_t h2n_stage;
+#endif // __STDC_VERSION__ >= 202311L
+#endif // __cplusplus
+
+/**
+ * The shape of a static obstacle.
+ */
+enum h2n_obstacle_kind
+#if defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+  : int32_t
+#endif // defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+ {
+  /**
+   * A disc: centre `(x0, y0)`, `radius`.
+   */
+  H2N_OBSTACLE_KIND_CIRCLE = 0,
+  /**
+   * A line segment (a wall) from `(x0, y0)` to `(x1, y1)`.
+   */
+  H2N_OBSTACLE_KIND_SEGMENT = 1,
+  /**
+   * A simple polygon: `vertex_count ≥ 3` points, `vertices` holding `x, y` pairs.
+   */
+  H2N_OBSTACLE_KIND_POLYGON = 2,
+};
+#ifndef __cplusplus
+#if __STDC_VERSION__ >= 202311L
+typedef enum h2n_obstacle_kind h2n_obstacle_kind;
+#else
+typedef int32_t h2n_obstacle_kind;
 #endif // __STDC_VERSION__ >= 202311L
 #endif // __cplusplus
 
@@ -214,6 +248,44 @@ typedef struct h2n_agent {
 } h2n_agent;
 
 /**
+ * A static obstacle in the world frame (the fields its kind does not use are ignored).
+ */
+typedef struct h2n_obstacle {
+  /**
+   * Which shape it is: an `h2n_obstacle_kind` value (any other is refused).
+   */
+  int32_t kind;
+  /**
+   * Circle centre or segment start, m.
+   */
+  double x0;
+  /**
+   * Circle centre or segment start, m.
+   */
+  double y0;
+  /**
+   * Segment end, m.
+   */
+  double x1;
+  /**
+   * Segment end, m.
+   */
+  double y1;
+  /**
+   * Circle radius, m (≥ 0).
+   */
+  double radius;
+  /**
+   * Polygon vertices as `2·vertex_count` numbers `x0, y0, x1, y1, …`.
+   */
+  const double *vertices;
+  /**
+   * Number of polygon vertices.
+   */
+  size_t vertex_count;
+} h2n_obstacle;
+
+/**
  * Everything the planner uses at one planning instant.
  */
 typedef struct h2n_observation {
@@ -245,6 +317,14 @@ typedef struct h2n_observation {
    * Number of pedestrians, at most `H2N_MAX_AGENTS`.
    */
   size_t agent_count;
+  /**
+   * `obstacle_count` static obstacles (may be NULL when the count is 0): walls, pillars.
+   */
+  const struct h2n_obstacle *obstacles;
+  /**
+   * Number of obstacles, at most `H2N_MAX_OBSTACLES`.
+   */
+  size_t obstacle_count;
 } h2n_observation;
 
 /**

@@ -31,6 +31,7 @@
 
 use human2nav_core::embodiment::{Embodiment, RobotState};
 use human2nav_core::human2nav::pose_at;
+use human2nav_core::obstacle::{MAX_POLYGON_VERTICES, Obstacle};
 use human2nav_core::robot::RobotProfile;
 use human2nav_core::{AgentState, Deadline, Observation, Plan, PlanError, Pose2, Stage, Twist2};
 use human2nav_flow::planner::{Backend, PlannerConfig, PlannerError, RobotPlanner, load_model};
@@ -111,6 +112,43 @@ pub struct h2n_agent {
     pub radius: f64,
 }
 
+/// Largest number of static obstacles one observation may carry.
+pub const H2N_MAX_OBSTACLES: usize = 100_000;
+
+/// The shape of a static obstacle.
+#[repr(i32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum h2n_obstacle_kind {
+    /// A disc: centre `(x0, y0)`, `radius`.
+    Circle = 0,
+    /// A line segment (a wall) from `(x0, y0)` to `(x1, y1)`.
+    Segment = 1,
+    /// A simple polygon: `vertex_count ≥ 3` points, `vertices` holding `x, y` pairs.
+    Polygon = 2,
+}
+
+/// A static obstacle in the world frame (the fields its kind does not use are ignored).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct h2n_obstacle {
+    /// Which shape it is: an `h2n_obstacle_kind` value (any other is refused).
+    pub kind: i32,
+    /// Circle centre or segment start, m.
+    pub x0: f64,
+    /// Circle centre or segment start, m.
+    pub y0: f64,
+    /// Segment end, m.
+    pub x1: f64,
+    /// Segment end, m.
+    pub y1: f64,
+    /// Circle radius, m (≥ 0).
+    pub radius: f64,
+    /// Polygon vertices as `2·vertex_count` numbers `x0, y0, x1, y1, …`.
+    pub vertices: *const f64,
+    /// Number of polygon vertices.
+    pub vertex_count: usize,
+}
+
 /// Everything the planner uses at one planning instant.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
@@ -129,6 +167,10 @@ pub struct h2n_observation {
     pub agents: *const h2n_agent,
     /// Number of pedestrians, at most `H2N_MAX_AGENTS`.
     pub agent_count: usize,
+    /// `obstacle_count` static obstacles (may be NULL when the count is 0): walls, pillars.
+    pub obstacles: *const h2n_obstacle,
+    /// Number of obstacles, at most `H2N_MAX_OBSTACLES`.
+    pub obstacle_count: usize,
 }
 
 /// The stage of a planning call a deadline cut short.
@@ -586,14 +628,82 @@ unsafe fn observation(obs: &h2n_observation) -> Result<Observation, Failure> {
             history: Vec::new(),
         });
     }
+    // SAFETY: the caller's contract on `obstacles` and their vertices.
+    let obstacles = unsafe { obstacles(obs) }?;
     Ok(Observation {
         time: obs.time,
         ego: Pose2::new(obs.ego.x, obs.ego.y, obs.ego.theta),
         ego_velocity: Twist2::new(v.vx, v.vy, v.omega),
         goal: [obs.goal_x, obs.goal_y],
         agents: out,
+        obstacles,
         ..Default::default()
     })
+}
+
+/// The observation's obstacles, checked (the planner validates their numbers).
+///
+/// # Safety
+/// `obs.obstacles` points to `obs.obstacle_count` obstacles when the count is not 0, and each
+/// polygon's `vertices` to `2·vertex_count` numbers.
+unsafe fn obstacles(obs: &h2n_observation) -> Result<Vec<Obstacle>, Failure> {
+    if obs.obstacle_count > H2N_MAX_OBSTACLES {
+        return Err(Failure::invalid(format!(
+            "observation.obstacle_count {} is more than {H2N_MAX_OBSTACLES}",
+            obs.obstacle_count
+        )));
+    }
+    if obs.obstacle_count == 0 {
+        return Ok(Vec::new());
+    }
+    if obs.obstacles.is_null() {
+        return Err(Failure::invalid(format!(
+            "observation.obstacles is NULL but obstacle_count is {}",
+            obs.obstacle_count
+        )));
+    }
+    // SAFETY: non-null, `obstacle_count` elements (the caller's contract), capped above.
+    let raw = unsafe { std::slice::from_raw_parts(obs.obstacles, obs.obstacle_count) };
+    let mut out = Vec::with_capacity(raw.len());
+    for (i, o) in raw.iter().enumerate() {
+        let obstacle = match o.kind {
+            k if k == h2n_obstacle_kind::Circle as i32 => Obstacle::Circle {
+                center: [o.x0, o.y0],
+                radius: o.radius,
+            },
+            k if k == h2n_obstacle_kind::Segment as i32 => Obstacle::Segment {
+                a: [o.x0, o.y0],
+                b: [o.x1, o.y1],
+            },
+            k if k == h2n_obstacle_kind::Polygon as i32 => {
+                if !(3..=MAX_POLYGON_VERTICES).contains(&o.vertex_count) {
+                    return Err(Failure::invalid(format!(
+                        "observation.obstacles[{i}]: a polygon needs 3 to \
+                         {MAX_POLYGON_VERTICES} vertices, vertex_count is {}",
+                        o.vertex_count
+                    )));
+                }
+                if o.vertices.is_null() {
+                    return Err(Failure::invalid(format!(
+                        "observation.obstacles[{i}].vertices is NULL"
+                    )));
+                }
+                // SAFETY: non-null, 2·vertex_count numbers (contract), count capped above.
+                let xy = unsafe { std::slice::from_raw_parts(o.vertices, 2 * o.vertex_count) };
+                Obstacle::Polygon {
+                    vertices: xy.chunks_exact(2).map(|c| [c[0], c[1]]).collect(),
+                }
+            }
+            other => {
+                return Err(Failure::invalid(format!(
+                    "observation.obstacles[{i}].kind {other} is not an h2n_obstacle_kind \
+                     (0 circle, 1 segment, 2 polygon)"
+                )));
+            }
+        };
+        out.push(obstacle);
+    }
+    Ok(out)
 }
 
 /// Plans from `obs`. `budget_ms > 0` bounds the call: it returns the best plan found by then,

@@ -56,6 +56,8 @@ fn observation(agents: &[h2n_agent]) -> h2n_observation {
         goal_y: 0.0,
         agents: agents.as_ptr(),
         agent_count: agents.len(),
+        obstacles: std::ptr::null(),
+        obstacle_count: 0,
     }
 }
 
@@ -193,7 +195,18 @@ fn planning_refuses_bad_observations_and_budgets() {
                 "budget_ms",
             );
         }
-        let cases: [(&str, Spoil); 6] = [
+        let circle = h2n_obstacle {
+            kind: h2n_obstacle_kind::Circle as i32,
+            x0: 1.0,
+            y0: 0.0,
+            x1: 0.0,
+            y1: 0.0,
+            radius: -1.0,
+            vertices: null(),
+            vertex_count: 0,
+        };
+        let bad_circle: *const h2n_obstacle = &circle;
+        let cases: [(&str, Spoil); 8] = [
             ("observation.time", Box::new(|o| o.time = f64::NAN)),
             ("observation.ego", Box::new(|o| o.ego.theta = f64::INFINITY)),
             (
@@ -208,6 +221,17 @@ fn planning_refuses_bad_observations_and_budgets() {
             (
                 "more than 10000",
                 Box::new(|o| o.agent_count = H2N_MAX_AGENTS + 1),
+            ),
+            (
+                "observation.obstacles is NULL but obstacle_count is 1",
+                Box::new(|o| o.obstacle_count = 1),
+            ),
+            (
+                "obstacles[0]: radius -1",
+                Box::new(move |o| {
+                    o.obstacles = bad_circle;
+                    o.obstacle_count = 1;
+                }),
             ),
         ];
         for (needle, spoil) in cases {

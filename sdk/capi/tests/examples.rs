@@ -83,6 +83,7 @@ fn the_c_example_plans_commands_and_refuses_bad_input() {
         "observation.agents is NULL but agent_count is 2",
         "planner is NULL",
         "out holds 3 poses; the plan has 33",
+        "observation.obstacles[0].kind 7 is not an h2n_obstacle_kind",
         "no/such/robot.toml",
     ] {
         assert!(text.contains(message), "missing `{message}` in:\n{text}");

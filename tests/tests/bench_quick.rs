@@ -123,7 +123,7 @@ fn check_outputs(res: &BenchOutcome, suites: &[Suite], methods: &[String]) {
         );
         if let Some(c) = m.min_clearance {
             assert_eq!(
-                c < 0.0,
+                c < 0.0 || m.obstacle_hit.is_some(),
                 m.collision,
                 "{}: clearance {c} vs collision {}",
                 r.episode,

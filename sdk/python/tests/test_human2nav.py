@@ -188,3 +188,11 @@ def test_obstacles_and_occupancy_keep_the_plan_off_a_wall(robot, planner):
         planner.plan(ego=(0, 0, 0), goal=(5, 0), occupancy=bad)
     with pytest.raises(TypeError):
         planner.plan(ego=(0, 0, 0), goal=(5, 0), obstacles=[(1, 2)])
+
+
+def test_the_python_example_runs():
+    example = ROOT / "examples" / "python" / "plan_and_run.py"
+    out = subprocess.run([sys.executable, str(example)], capture_output=True, text=True)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "Human2Nav: 33 poses" in out.stdout
+    assert "episode " in out.stdout

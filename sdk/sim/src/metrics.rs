@@ -63,6 +63,9 @@ pub struct EpisodeMetrics {
     pub planner_errors: usize,
     /// How the collision happened (collisions only).
     pub contact: Option<Contact>,
+    /// Index of the episode's static obstacle the robot hit (collisions with one only).
+    #[serde(default)]
+    pub obstacle_hit: Option<usize>,
     /// Executed commands (before saturation) outside each limit: what pulls `tfs_executed`
     /// down.
     pub executed_violations: LimitCounts,
@@ -145,6 +148,7 @@ impl EpisodeMetrics {
             fallbacks: run.plans.iter().filter(|p| p.fallback).count(),
             planner_errors: run.planner_errors.len(),
             contact: run.contact,
+            obstacle_hit: run.obstacle_hit,
             executed_violations: LimitCounts::of(&tfs::command_violations(
                 &run.raw_commands,
                 run.dt,

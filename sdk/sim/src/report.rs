@@ -946,6 +946,7 @@ mod tests {
                     pedestrian_closing: -0.2,
                     pedestrian_age: f64::NAN,
                 }),
+                obstacle_hit: None,
                 executed_violations: LimitCounts {
                     commands: 400,
                     speed: k as usize,

@@ -58,6 +58,7 @@ fn metrics(outcome: Outcome, tfs: f64) -> EpisodeMetrics {
             pedestrian_closing: 0.8,
             pedestrian_age: 3.0,
         }),
+        obstacle_hit: None,
         executed_violations: LimitCounts {
             commands: 160,
             speed: 2,

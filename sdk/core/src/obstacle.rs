@@ -102,6 +102,16 @@ fn edges(vertices: &[[f64; 2]]) -> impl Iterator<Item = ([f64; 2], [f64; 2])> + 
     (0..n).map(move |i| (vertices[i], vertices[(i + 1) % n]))
 }
 
+/// The obstacles of `obstacles` within `range` (signed distance) of `p`, cloned: what a robot
+/// at `p` sees of a static scene.
+pub fn within(obstacles: &[Obstacle], p: [f64; 2], range: f64) -> Vec<Obstacle> {
+    obstacles
+        .iter()
+        .filter(|o| o.distance(p) <= range)
+        .cloned()
+        .collect()
+}
+
 impl Obstacle {
     /// Checks the numbers: finite, within [`MAX_OBSTACLE_COORDINATE`] m, a radius ≥ 0, a polygon
     /// of 3 to [`MAX_POLYGON_VERTICES`] vertices. The error says what is wrong.

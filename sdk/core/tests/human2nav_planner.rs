@@ -495,25 +495,18 @@ fn a_goal_close_by_is_approached_directly() {
     );
 }
 
-/// The fast human future behind a virtual clock: every network call costs one tick, and the
-/// test's deadline reads the same clock, so where the deadline falls is exact and the test is
-/// deterministic. Counts the calls that start once the deadline has passed.
-struct Ticking {
+/// The fast human future with a hook run ahead of every network call.
+struct Hooked<H> {
     inner: HumanFuture,
-    clock: Arc<AtomicUsize>,
-    deadline_tick: usize,
-    late_calls: AtomicUsize,
+    hook: H,
 }
 
-impl Ticking {
-    fn tick(&self) {
-        if self.clock.fetch_add(1, Ordering::SeqCst) >= self.deadline_tick {
-            self.late_calls.fetch_add(1, Ordering::SeqCst);
-        }
-    }
+/// What a [`Hooked`] model does before each network call.
+trait BeforeCall {
+    fn before_call(&self);
 }
 
-impl FlowModel for Ticking {
+impl<H: BeforeCall> FlowModel for Hooked<H> {
     fn horizon(&self) -> usize {
         self.inner.horizon()
     }
@@ -527,7 +520,7 @@ impl FlowModel for Ticking {
         c: &FlowCondition,
         out: &mut [f64],
     ) -> Result<(), FlowError> {
-        self.tick();
+        self.hook.before_call();
         self.inner.velocity(x, t, c, out)
     }
     fn velocity_vjp(
@@ -539,19 +532,41 @@ impl FlowModel for Ticking {
         out: &mut [f64],
         vjp: &mut [f64],
     ) -> Result<(), FlowError> {
-        self.tick();
+        self.hook.before_call();
         self.inner.velocity_vjp(x, t, c, cot, out, vjp)
     }
 }
 
+/// A virtual clock: every network call costs one tick, and the test's deadline reads the same
+/// clock, so where the deadline falls is exact and the test is deterministic. Counts the calls
+/// that start once the deadline has passed.
+struct Ticking {
+    clock: Arc<AtomicUsize>,
+    deadline_tick: usize,
+    late_calls: AtomicUsize,
+}
+
+impl BeforeCall for Ticking {
+    fn before_call(&self) {
+        if self.clock.fetch_add(1, Ordering::SeqCst) >= self.deadline_tick {
+            self.late_calls.fetch_add(1, Ordering::SeqCst);
+        }
+    }
+}
+
 /// A planner on the ticking model with its deadline `deadline_tick` network calls in.
-fn ticking(settings: Human2NavSettings, deadline_tick: usize) -> (Human2Nav<Ticking>, Deadline) {
+fn ticking(
+    settings: Human2NavSettings,
+    deadline_tick: usize,
+) -> (Human2Nav<Hooked<Ticking>>, Deadline) {
     let clock = Arc::new(AtomicUsize::new(0));
-    let model = Ticking {
+    let model = Hooked {
         inner: fast_straight(),
-        clock: Arc::clone(&clock),
-        deadline_tick,
-        late_calls: AtomicUsize::new(0),
+        hook: Ticking {
+            clock: Arc::clone(&clock),
+            deadline_tick,
+            late_calls: AtomicUsize::new(0),
+        },
     };
     let planner = Human2Nav::new(model, robot(), BevSpec::default(), settings).unwrap();
     let deadline = Deadline::from_fn(move || clock.load(Ordering::SeqCst) >= deadline_tick);
@@ -562,7 +577,7 @@ fn ticking(settings: Human2NavSettings, deadline_tick: usize) -> (Human2Nav<Tick
 fn calls_without_deadline(settings: Human2NavSettings) -> usize {
     let (mut p, _) = ticking(settings, usize::MAX);
     p.plan(&observation()).unwrap();
-    p.model().clock.load(Ordering::SeqCst)
+    p.model().hook.clock.load(Ordering::SeqCst)
 }
 
 #[test]
@@ -591,7 +606,7 @@ fn a_deadline_anywhere_in_the_call_gives_a_feasible_plan_and_no_late_network_cal
             let plan = p.plan_within(&obs, &deadline).unwrap();
             let stages = plan.info.stages.unwrap();
             assert_eq!(
-                p.model().late_calls.load(Ordering::SeqCst),
+                p.model().hook.late_calls.load(Ordering::SeqCst),
                 0,
                 "deadline at call {at}: a network call started after it"
             );
@@ -660,37 +675,12 @@ fn a_deadline_before_sampling_keeps_the_previous_plan_or_brakes() {
     assert!(plan.info.fallback && plan.is_finite());
 }
 
-/// A field that takes `delay` of wall-clock time per network call.
-struct Sleepy(HumanFuture, Duration);
+/// A network call that takes this long of wall-clock time.
+struct Sleepy(Duration);
 
-impl FlowModel for Sleepy {
-    fn horizon(&self) -> usize {
-        self.0.horizon()
-    }
-    fn source_std(&self) -> [f64; 3] {
-        self.0.source_std()
-    }
-    fn velocity(
-        &self,
-        x: &[f64],
-        t: f64,
-        c: &FlowCondition,
-        out: &mut [f64],
-    ) -> Result<(), FlowError> {
-        std::thread::sleep(self.1);
-        self.0.velocity(x, t, c, out)
-    }
-    fn velocity_vjp(
-        &self,
-        x: &[f64],
-        t: f64,
-        c: &FlowCondition,
-        cot: &[f64],
-        out: &mut [f64],
-        vjp: &mut [f64],
-    ) -> Result<(), FlowError> {
-        std::thread::sleep(self.1);
-        self.0.velocity_vjp(x, t, c, cot, out, vjp)
+impl BeforeCall for Sleepy {
+    fn before_call(&self) {
+        std::thread::sleep(self.0);
     }
 }
 
@@ -703,7 +693,10 @@ fn the_budget_setting_bounds_a_slow_model_by_the_clock() {
         budget_ms: 50.0,
         ..Default::default()
     };
-    let model = Sleepy(fast_straight(), Duration::from_millis(20));
+    let model = Hooked {
+        inner: fast_straight(),
+        hook: Sleepy(Duration::from_millis(20)),
+    };
     let mut p = Human2Nav::new(model, robot(), BevSpec::default(), settings).unwrap();
     let started = Instant::now();
     let plan = p.plan(&observation()).unwrap();

@@ -11,10 +11,10 @@ use human2nav_core::embodiment::Embodiment;
 use human2nav_core::obstacle::{Obstacle, OccupancyGrid};
 use human2nav_core::robot::{ProfileError, RobotProfile};
 use human2nav_core::{AgentState, Deadline, Observation, Plan, PlanError, Planner, Pose2, Twist2};
-use human2nav_data::ScenarioClass;
 use human2nav_flow::planner::{Backend, PlannerConfig, PlannerError, RobotPlanner, load_model};
 use human2nav_orca_core::planner::{OrcaConfig, OrcaPlanner};
 use human2nav_plugin::PluginHost;
+use human2nav_sim::config::synthetic_episodes;
 use human2nav_sim::crowd::{CrowdModel, SocialForce};
 use human2nav_sim::episode::load_episode_file;
 use human2nav_sim::metrics::EpisodeMetrics;
@@ -405,10 +405,7 @@ fn run_episode(
 )> {
     let list = match &episodes {
         Some(path) => load_episode_file(path).map_err(value_error)?.episodes,
-        None => ScenarioClass::ALL
-            .iter()
-            .flat_map(|c| human2nav_data::synthetic::episodes(*c, 1, 1))
-            .collect(),
+        None => synthetic_episodes(1, 1).map_err(value_error)?,
     };
     let episode = select_episode(&list, index, episode_id).map_err(value_error)?;
     let model = match crowd {

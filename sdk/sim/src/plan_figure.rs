@@ -31,6 +31,7 @@ use crate::figures::{disc, draw_obstacles, star};
 use crate::replay::CrowdReplay;
 use crate::runner::StartHeading;
 use human2nav_core::bev::{self, BevSpec};
+use human2nav_core::obstacle;
 use human2nav_core::tfs;
 use human2nav_core::{AgentState, Limits, Observation, Plan, Pose2, Twist2};
 use plotters::coord::Shift;
@@ -159,12 +160,7 @@ pub fn observation_at(episode: &Episode, opts: &StepOptions) -> Result<Observati
         ego_velocity: Twist2::new(opts.ego_speed, 0.0, 0.0),
         goal: episode.goal,
         agents,
-        obstacles: episode
-            .obstacles
-            .iter()
-            .filter(|o| o.distance([ego.x, ego.y]) <= opts.sensor_range)
-            .cloned()
-            .collect(),
+        obstacles: obstacle::within(&episode.obstacles, [ego.x, ego.y], opts.sensor_range),
         ..Default::default()
     })
 }

@@ -34,7 +34,7 @@ use crate::episode::Episode;
 use crate::error::SimError;
 use crate::replay::PedestrianSample;
 use human2nav_core::embodiment::{Embodiment, RobotState};
-use human2nav_core::obstacle::footprint_clearance;
+use human2nav_core::obstacle::{self, footprint_clearance};
 use human2nav_core::robot::RobotProfile;
 use human2nav_core::robot::footprint::{self, FootprintShape};
 use human2nav_core::{
@@ -523,12 +523,11 @@ pub fn run_episode_with(
                     cfg.sensor_range,
                     cfg.history_len,
                 ),
-                obstacles: episode
-                    .obstacles
-                    .iter()
-                    .filter(|o| o.distance([state.pose.x, state.pose.y]) <= cfg.sensor_range)
-                    .cloned()
-                    .collect(),
+                obstacles: obstacle::within(
+                    &episode.obstacles,
+                    [state.pose.x, state.pose.y],
+                    cfg.sensor_range,
+                ),
                 ..Default::default()
             };
             let horizon = plan.as_ref().map_or(32, |p| p.poses.len());

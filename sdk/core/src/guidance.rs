@@ -144,6 +144,26 @@
 //! tolerance), or after `M` iterations. Network calls: `N` for the first rollout, then `2N − 1`
 //! per iteration (`μ_0` is never needed).
 //!
+//! # Last-step iterations
+//!
+//! With [`GuidanceSettings::last_step_iterations`] `L > 0`, the adaptive variant follows its `M`
+//! iterations with `L` iterations of line 12's update on the last control `u_{N−1}` alone. Its
+//! path to `x_N` is the step `x_N = x_{N−1}·exp(Δt·(f(x_{N−1}) + u_{N−1}))`, whose network
+//! output does not depend on `u_{N−1}`, so these iterations call no network: one costs an
+//! evaluation of Φ on the batch. The step is Adam's (`β₁ = 0.9`, `β₂ = 0.999`) on each
+//! waypoint coordinate's `clip(∇Φ)`, at most [`GuidanceSettings::last_step_rate`] metres
+//! (radians) a coordinate and iteration; the control change that realises it to first order is
+//! `S_w⁻¹·δx`. Every sample takes part, and each ends at its lowest-Φ iterate, so Φ never rises.
+//!
+//! Why: on the trained model the violations are local (acceleration and lateral jitter of
+//! 0.1 s finite differences, ARCHITECTURE.md, "The guidance ablation"), Φ's soft margins are
+//! nearly linear past the limit, and plain gradient steps through all `N` controls need
+//! hundreds of iterations of `2N − 1` network calls. A per-coordinate step removes local
+//! violations within about 100 cheap iterations. It is slow on a violation spread over the
+//! whole plan (a uniform over-speed, yaw rate or curvature), which moving the last waypoints
+//! first cannot fix quickly (measured in the tests). Off by default (`L = 0`): in closed loop
+//! it did not raise the success rate (`sdk/configs/planner.toml`).
+//!
 //! # Both variants
 //!
 //! Nothing non-finite leaves: a non-finite pose, velocity, cost or gradient is a
@@ -235,7 +255,8 @@ impl Default for PaperSettings {
 /// them are): `variant = "adaptive"`, `enabled = true`, `steps_n = 5`, `iterations_m = 3`,
 /// `learning_rate = 0.1`, `momentum = 1.0`, `clip = 10.0`, `tolerance = 0.01`,
 /// `precondition = false` (on the trained model every preconditioned update raised Φ),
-/// `adaptive_step = true`, and the [`PaperSettings`] defaults. See the module docs for what
+/// `adaptive_step = true`, `last_step_iterations = 0`, `last_step_rate = 0.01`, and the
+/// [`PaperSettings`] defaults. See the module docs for what
 /// each does. The analytic tests of the preconditioned direction use `steps_n = 10`,
 /// `iterations_m = 8`, `learning_rate = 0.03` (a unit-less step there: 1 would move each
 /// violated twist component by about its own limit per iteration). `enabled`, `steps_n` and `iterations_m` apply to both
@@ -271,6 +292,13 @@ pub struct GuidanceSettings {
     pub adaptive_step: bool,
     /// The paper variant's `γ`, `β` and clip (validated whichever variant is selected).
     pub paper: PaperSettings,
+    /// Adaptive variant: iterations of the control update on the last control `u_{N−1}` alone
+    /// after the `M` full iterations (module docs, "Last-step iterations"). They call no
+    /// network; 0 turns them off. At most [`MAX_LAST_STEP_ITERATIONS`].
+    pub last_step_iterations: usize,
+    /// Adam's step size in the last-step iterations: the largest move of a waypoint coordinate
+    /// per iteration, in metres (radians for the heading); finite, > 0.
+    pub last_step_rate: f64,
 }
 
 /// Largest number of Euler integration steps `N` ([`GuidanceSettings::steps_n`]). The planner
@@ -282,6 +310,15 @@ pub const MAX_STEPS_N: usize = 1000;
 /// Largest number of guidance iterations `M` ([`GuidanceSettings::iterations_m`]); the planner
 /// uses 3 (the default). Each iteration costs `2N` network calls (see [`MAX_STEPS_N`]).
 pub const MAX_ITERATIONS_M: usize = 1000;
+
+/// Largest number of last-step iterations ([`GuidanceSettings::last_step_iterations`]). One
+/// costs one evaluation of Φ on the batch (no network call).
+pub const MAX_LAST_STEP_ITERATIONS: usize = 10_000;
+
+/// Adam's `β₁`, `β₂` and `ε` in the last-step iterations (the usual defaults).
+const ADAM_BETA1: f64 = 0.9;
+const ADAM_BETA2: f64 = 0.999;
+const ADAM_EPS: f64 = 1e-8;
 
 /// Factor applied to a sample's step size after an accepted update.
 pub const STEP_GROW: f64 = 1.5;
@@ -303,6 +340,8 @@ impl Default for GuidanceSettings {
             precondition: false,
             adaptive_step: true,
             paper: PaperSettings::default(),
+            last_step_iterations: 0,
+            last_step_rate: 0.01,
         }
     }
 }
@@ -350,6 +389,21 @@ impl GuidanceSettings {
             return bad(
                 "tolerance",
                 format!("{} must be finite and ≥ 0", self.tolerance),
+            );
+        }
+        if self.last_step_iterations > MAX_LAST_STEP_ITERATIONS {
+            return bad(
+                "last_step_iterations",
+                format!(
+                    "{} is more than the limit of {MAX_LAST_STEP_ITERATIONS}",
+                    self.last_step_iterations
+                ),
+            );
+        }
+        if !(self.last_step_rate.is_finite() && self.last_step_rate > 0.0) {
+            return bad(
+                "last_step_rate",
+                format!("{} must be finite and > 0", self.last_step_rate),
             );
         }
         let p = &self.paper;
@@ -500,6 +554,9 @@ pub struct GuidanceWorkspace {
     saved_u: Vec<f64>,
     saved_phi: Vec<f64>,
     saved_ext_grad: Vec<f64>,
+    /// Adam's first and second moments of the last-step iterations, `K·T·3`.
+    adam_m: Vec<f64>,
+    adam_v: Vec<f64>,
     /// Preconditioner scratch: twist-space gradient `[T, 3]` and a tridiagonal solve `[T]`.
     gxi: Vec<f64>,
     tri: Vec<f64>,
@@ -570,6 +627,23 @@ impl GuidanceWorkspace {
         for b in 0..self.samples {
             self.restore(b);
         }
+    }
+
+    /// Sample `b`'s current iterate becomes its saved one (the last-step iterations keep each
+    /// sample's best). Only the last step's states and controls change there.
+    fn save_sample(&mut self, b: usize) {
+        let m = self.size();
+        let per = self.horizon * 3;
+        let per_ext = (self.horizon + 1) * 3;
+        self.saved_phi[b] = self.phi[b];
+        let e = b * per_ext..(b + 1) * per_ext;
+        self.saved_ext_grad[e.clone()].copy_from_slice(&self.ext_grad[e]);
+        let n = self.steps;
+        let last = (n - 1) * m + b * per..(n - 1) * m + (b + 1) * per;
+        let fin = n * m + b * per..n * m + (b + 1) * per;
+        self.saved_xs[fin.clone()].copy_from_slice(&self.xs[fin]);
+        self.saved_ws[last.clone()].copy_from_slice(&self.ws[last.clone()]);
+        self.saved_u[last.clone()].copy_from_slice(&self.u[last]);
     }
 
     /// Sample `b`'s states, velocities, controls, Φ and ∇Φ back to the saved iterate.
@@ -1341,7 +1415,87 @@ fn iterate_adaptive(
         }
         run.completed = iteration;
     }
+    if settings.last_step_iterations > 0 && !run.cut_short {
+        last_step_iterations(phi, ctx, settings, ws, deadline)?;
+    }
     Ok(run)
+}
+
+/// The last-step iterations (module docs, "Last-step iterations"): line 12's update restricted
+/// to `u_{N−1}`, whose path to `x_N` crosses no network call, with Adam's per-coordinate step on
+/// the waypoint gradient `∇Φ`, on every sample; each sample ends at its best iterate.
+fn last_step_iterations(
+    phi: &Phi,
+    ctx: &ConstraintContext<'_>,
+    settings: &GuidanceSettings,
+    ws: &mut GuidanceWorkspace,
+    deadline: &Deadline,
+) -> Result<(), GuidanceError> {
+    let (k, t) = (ws.samples, ws.horizon);
+    let m = ws.size();
+    let n = ws.steps;
+    let dt = 1.0 / n as f64;
+    let last = (n - 1) * m;
+    let rate = settings.last_step_rate;
+    ws.adam_m.clear();
+    ws.adam_m.resize(m, 0.0);
+    ws.adam_v.clear();
+    ws.adam_v.resize(m, 0.0);
+    // The saved iterate is each sample's best so far.
+    ws.save();
+    for iteration in 0..settings.last_step_iterations {
+        if deadline.passed() {
+            break;
+        }
+        for b in 0..k {
+            let src = &ws.ext_grad[(b * (t + 1) + 1) * 3..(b + 1) * (t + 1) * 3];
+            ws.mu[b * t * 3..(b + 1) * t * 3].copy_from_slice(src);
+        }
+        let bias1 = 1.0 - ADAM_BETA1.powi(iteration as i32 + 1);
+        let bias2 = 1.0 - ADAM_BETA2.powi(iteration as i32 + 1);
+        for j in 0..m / 3 {
+            let r = 3 * j..3 * j + 3;
+            clip3(&mut ws.mu[r.clone()], settings.clip);
+            // Adam's step of the waypoint, then the control change that realises it to first
+            // order through the step's Jacobian S_w (which contains Δt).
+            let mut dx = [0.0; 3];
+            for (e, d) in r.clone().zip(dx.iter_mut()) {
+                let g = ws.mu[e];
+                ws.adam_m[e] = ADAM_BETA1 * ws.adam_m[e] + (1.0 - ADAM_BETA1) * g;
+                ws.adam_v[e] = ADAM_BETA2 * ws.adam_v[e] + (1.0 - ADAM_BETA2) * g * g;
+                *d = -rate * (ws.adam_m[e] / bias1) / ((ws.adam_v[e] / bias2).sqrt() + ADAM_EPS);
+            }
+            let x = Pose2::from_slice(&ws.xs[last + r.start..last + r.end]);
+            let w = &mut ws.ws[last + r.start..last + r.end];
+            let (_, sw) = euler_step_jacobians(x, Twist2::from_slice(w), dt);
+            let du = solve3(&sw, dx).unwrap_or(dx.map(|e| e / dt));
+            let u = &mut ws.u[last + r.start..last + r.end];
+            for e in 0..3 {
+                u[e] += du[e];
+                w[e] += du[e];
+            }
+            let q = x.euler_step(Twist2::from_slice(w), dt);
+            ws.xs[n * m + r.start..n * m + r.end].copy_from_slice(&q.to_array());
+        }
+        if !all_finite(&ws.xs[n * m..]) {
+            return Err(GuidanceError::NonFinite {
+                stage: "last-step iterations",
+                iteration,
+            });
+        }
+        terminal_cost(phi, ctx, ws, iteration)?;
+        for b in 0..k {
+            if ws.phi[b] < ws.saved_phi[b] {
+                ws.save_sample(b);
+            }
+        }
+    }
+    for b in 0..k {
+        if ws.phi[b] > ws.saved_phi[b] {
+            ws.restore(b);
+        }
+    }
+    Ok(())
 }
 
 /// The paper variant: exactly `M` iterations of Algorithm 1 on every sample (module docs, "The

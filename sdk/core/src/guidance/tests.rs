@@ -20,10 +20,7 @@ fn cond() -> FlowCondition {
 fn weights() -> GuidanceWeights {
     GuidanceWeights {
         lambda_v: 1.0,
-        lambda_a: std::env::var("LA")
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(1.0),
+        lambda_a: 1.0,
         lambda_omega: 1.0,
         lambda_kappa: 1.0,
         lambda_lateral: 1.0,
@@ -397,6 +394,68 @@ fn guidance_never_raises_phi() {
 }
 
 #[test]
+fn last_step_iterations_remove_local_violations_and_touch_only_the_last_step() {
+    // M = 0: only the last-step iterations act. Local violations (an acceleration step, a
+    // sideways drift: the trained model's jitter) are removed; a violation spread over the
+    // whole plan (a uniform over-speed, reversing, yaw rate or curvature) is only reduced, as
+    // moving the last waypoints first is a slow way to slow down or straighten a whole plan.
+    // No sample's Φ rises, and the rollout before the last step is the unguided one.
+    let settings = GuidanceSettings {
+        iterations_m: 0,
+        last_step_iterations: 200,
+        last_step_rate: 0.01,
+        ..GuidanceSettings::default()
+    };
+    let model_steps = settings.steps_n;
+    for (name, twists, v0, kappa) in violation_cases() {
+        let l = limits(kappa);
+        let c = ctx(&l, v0);
+        let model = GeodesicTarget {
+            target: future(&twists),
+        };
+        let phi = Phi::from_weights(&weights(), &l);
+        let x0 = source(4, twists.len(), 1.0, 1);
+        let mut ws = GuidanceWorkspace::new();
+        let r = sample_guided(&model, &cond(), &x0, &phi, &c, &settings, &mut ws).unwrap();
+        assert!(r.guided.iter().all(|v| v.is_finite()), "{name}");
+        let n = twists.len() * 3;
+        for k in 0..4 {
+            let plan = |v: &[f64]| with_start(&v[k * n..(k + 1) * n]);
+            let before = tfs_plan(&plan(&r.unguided), DT, &l, v0);
+            let after = tfs_plan(&plan(&r.guided), DT, &l, v0);
+            let (pb, pa) = (r.phi_before[k], r.phi_after[k]);
+            eprintln!("{name} {k}: TFS {before:.2} -> {after:.2}, phi {pb:.4} -> {pa:.4}");
+            assert!(pa <= pb, "{name} sample {k}: phi {pb} -> {pa}");
+            assert!(
+                after >= before,
+                "{name} sample {k}: TFS {before:.2} -> {after:.2}"
+            );
+            if matches!(name, "accel" | "lateral" | "feasible") {
+                assert_eq!(after, 1.0, "{name} sample {k}");
+            }
+            if matches!(name, "accel" | "lateral") {
+                assert!(pa < 0.1 * pb, "{name} sample {k}: phi {pb} -> {pa}");
+            } else {
+                assert!(pa < pb, "{name} sample {k}: phi {pb} -> {pa}");
+            }
+        }
+        // The states x_0 … x_{N−1} are the plain rollout's: only u_{N−1} moved.
+        let m = 4 * n;
+        let mut plain = GuidanceWorkspace::new();
+        sample(&model, &cond(), &x0, model_steps, &mut plain).unwrap();
+        assert_eq!(
+            ws.xs[..model_steps * m],
+            plain.xs[..model_steps * m],
+            "{name}"
+        );
+        assert!(
+            ws.u[..(model_steps - 1) * m].iter().all(|&u| u == 0.0),
+            "{name}"
+        );
+    }
+}
+
+#[test]
 fn disabled_guidance_is_the_plain_rollout() {
     let l = limits(None);
     let c = ctx(&l, Twist2::ZERO);
@@ -589,6 +648,17 @@ fn settings_validate_and_parse() {
         match s.validate() {
             Err(GuidanceError::InvalidSettings { field: f, .. }) => assert_eq!(f, field),
             other => panic!("{field}: {other:?}"),
+        }
+    }
+    for (text, field) in [
+        ("last_step_iterations = 100000", "last_step_iterations"),
+        ("last_step_rate = 0.0", "last_step_rate"),
+        ("last_step_rate = nan", "last_step_rate"),
+        ("last_step_rate = inf", "last_step_rate"),
+    ] {
+        match GuidanceSettings::from_toml_str(text) {
+            Err(GuidanceError::InvalidSettings { field: f, .. }) => assert_eq!(f, field),
+            other => panic!("{text}: {other:?}"),
         }
     }
     let s =

@@ -44,8 +44,11 @@ use std::time::Duration;
 /// One factory a library provides.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FactoryInfo {
+    /// What the factory creates: a constraint term, an embodiment or a planner.
     pub kind: PluginKind,
+    /// The name robot profiles and benchmark configs refer to (`plugin = "..."`).
     pub name: String,
+    /// The factory's one-line description, for `human2nav plugin inspect`.
     pub description: String,
 }
 

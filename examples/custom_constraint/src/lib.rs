@@ -27,8 +27,8 @@
 //! predict = true      # constant-velocity prediction of the pedestrians
 //! ```
 
-use human2nav_core::constraint::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
-use human2nav_plugin::{InitError, PluginInit};
+use human2nav::core::constraint::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
+use human2nav::plugin::{InitError, PluginInit};
 use serde::Deserialize;
 
 /// Options of the term.
@@ -191,7 +191,7 @@ impl ConstraintTerm for ProximitySpeed {
     }
 }
 
-human2nav_plugin::export_plugin! {
+human2nav::plugin::export_plugin! {
     name: "proximity_speed",
     version: env!("CARGO_PKG_VERSION"),
     factories: [
@@ -203,7 +203,7 @@ human2nav_plugin::export_plugin! {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use human2nav_core::{AgentState, Limits, Twist2};
+    use human2nav::core::{AgentState, Limits, Twist2};
 
     fn eval(term: &ProximitySpeed, data: &[f64], b: usize, t: usize) -> (Vec<f64>, Vec<f64>) {
         let limits = Limits {

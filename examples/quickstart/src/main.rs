@@ -10,30 +10,39 @@
 //! The picture goes to `out/quickstart/<robot>.png`. See README.md for what to try next.
 
 use anyhow::{Context, bail};
-use human2nav_core::Planner;
-use human2nav_core::tfs::feasibility_mask;
-use human2nav_data::ScenarioClass;
-use human2nav_data::paths::find_workspace_root;
-use human2nav_flow::planner::{PlannerConfig, RobotPlanner};
-use human2nav_sim::plan_figure::{PlanFigure, StepOptions, draw_plan_figure, observation_at};
+use clap::Parser;
+use human2nav::flow::tch;
+use human2nav::prelude::*;
 use std::path::PathBuf;
 
+/// Plans one step for a robot in a synthetic crowd with the shipped model, prints the plan
+/// and draws it to `out/quickstart/<robot>.png`.
+#[derive(Debug, Parser)]
+#[command(name = "quickstart")]
+struct Args {
+    /// The robot profile (default: robots/diablo/robot.toml in the workspace).
+    robot: Option<PathBuf>,
+    /// Plan without feasibility guidance (the paper's ablation).
+    #[arg(long)]
+    no_guidance: bool,
+}
+
 fn main() -> anyhow::Result<()> {
-    // Arguments: an optional robot profile and an optional `--no-guidance`.
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let no_guidance = args.iter().any(|a| a == "--no-guidance");
-    let robot_arg = args.iter().find(|a| !a.starts_with("--"));
+    let args = Args::parse();
+    let no_guidance = args.no_guidance;
 
     // Paths in the SDK are relative to the workspace root (the folder with the top Cargo.toml).
     let cwd = std::env::current_dir()?;
     let root = find_workspace_root(&cwd)
         .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../.."));
-    let robot = robot_arg.map_or_else(|| root.join("robots/diablo/robot.toml"), PathBuf::from);
+    let robot = args
+        .robot
+        .unwrap_or_else(|| root.join("robots/diablo/robot.toml"));
 
     // 1. The planner settings (K samples, guidance, selection) and the model folder.
     let mut config = PlannerConfig::load(&root.join("sdk/configs/planner.toml"))?;
     config.human2nav.guidance.enabled = !no_guidance;
-    human2nav_flow::tch::set_num_threads(1);
+    tch::set_num_threads(1);
     let model_dir = config.model_dir(&root);
     if !model_dir.join("model.toml").is_file() {
         bail!(
@@ -60,7 +69,7 @@ fn main() -> anyhow::Result<()> {
     //    itself at the start facing the goal, at rest, and the pedestrians within 10 m. Of a
     //    few generated scenes we take the busiest one.
     let mut scenes = Vec::new();
-    for episode in human2nav_data::synthetic::episodes(ScenarioClass::CrossFlow, 6, 7) {
+    for episode in synthetic_episodes(ScenarioClass::CrossFlow, 6, 7) {
         let obs = observation_at(&episode, &StepOptions::default())?;
         scenes.push((episode, obs));
     }

@@ -27,6 +27,7 @@
 //! * **Ownership.** `h2n_planner_create*` and `h2n_planner_plan` hand out objects the caller
 //!   frees with `h2n_planner_free` and `h2n_plan_free`; freeing NULL does nothing.
 
+#![warn(missing_docs)]
 #![allow(non_camel_case_types)]
 
 use human2nav_core::embodiment::{Embodiment, RobotState};

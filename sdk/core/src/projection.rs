@@ -295,6 +295,10 @@ pub fn project_with(
 
 /// One Gauss-Newton step: the change of the twists that minimises the linearised objective
 /// subject to the (linear) limits.
+///
+/// Variables `z = [δξ_1 … δξ_T, e_1 … e_T]`: the change of the twists and the (linearised)
+/// change of the poses it causes. The constraint matrix stacks the `3·T` dynamics equalities
+/// ([`dynamics_rows`]) over the limit inequalities ([`limit_rows`]).
 fn solve_step(
     xi: &[f64],
     target: &[Pose2],
@@ -305,47 +309,120 @@ fn solve_step(
     settings: &ProjectionSettings,
     cache: &mut ProjectionSolver,
 ) -> Result<Vec<f64>, ProjectionError> {
-    let t = target.len();
-    let n = 3 * t;
+    let n = 3 * target.len();
     let poses = rollout(xi, dt);
-    // Variables z = [δξ_1 … δξ_T, e_1 … e_T]: the change of the twists and the (linearised)
-    // change of the poses it causes, tied by e_k = S_x·e_{k−1} + S_w·δξ_k, e_0 = 0. Keeping the
-    // poses as variables makes every matrix sparse and banded.
-    let e_col = |k: usize, r: usize| n + 3 * k + r;
-    let mut dynamics: Vec<Vec<(usize, f64)>> = Vec::with_capacity(n);
+    let mut rows = Rows::new(2 * n);
+    dynamics_rows(xi, &poses, dt, &mut rows);
+    let mut b = vec![0.0; n];
+    b.extend(limit_rows(
+        xi,
+        dt,
+        limits,
+        initial_velocity,
+        gear,
+        settings,
+        &mut rows,
+    ));
+    let qp = Qp {
+        p: objective_matrix(n, dt, settings),
+        q: objective_linear(&poses, target, dt, settings),
+        a: rows.into_csc(),
+        b,
+        equalities: n,
+    };
+    let key = (target.len(), limits.kappa_max.is_some());
+    let infeasible = |status: String| ProjectionError::Infeasible {
+        speed: initial_velocity.vx,
+        status,
+    };
+    solve_cached(cache, key, &qp, infeasible).map(|x| x[..n].to_vec())
+}
+
+/// Column of the pose-change variable `e_k` (component `r`) among `3·T` twist changes.
+fn e_col(n: usize, k: usize, r: usize) -> usize {
+    n + 3 * k + r
+}
+
+/// The linearised rollout as equalities: `e_k − S_w·δξ_k − S_x·e_{k−1} = 0`, `e_0 = 0`, with
+/// the step Jacobians at the current twists. Keeping the poses as variables makes every matrix
+/// sparse and banded.
+fn dynamics_rows(xi: &[f64], poses: &[Pose2], dt: f64, rows: &mut Rows) {
+    let n = xi.len();
     let mut prev = Pose2::IDENTITY;
     for (k, w) in xi.chunks_exact(3).enumerate() {
         let (sx, sw) = euler_step_jacobians(prev, Twist2::from_slice(w), dt);
         for r in 0..3 {
-            let mut row = vec![(e_col(k, r), 1.0)];
+            let mut row = vec![(e_col(n, k, r), 1.0)];
             for c in 0..3 {
                 row.push((3 * k + c, -sw[r][c]));
                 if k > 0 {
-                    row.push((e_col(k - 1, c), -sx[r][c]));
+                    row.push((e_col(n, k - 1, c), -sx[r][c]));
                 }
             }
-            dynamics.push(row);
+            rows.push(&row);
         }
         prev = poses[k];
     }
-    // Objective ½zᵀPz + qᵀz, scaled by 1/dt² so that its entries are of order one.
+}
+
+/// `P` of the objective `½zᵀPz + qᵀz` (diagonal), scaled by `1/dt²` so that its entries are of
+/// order one: the effort `ρ` on every variable, the pose weights on the pose changes.
+fn objective_matrix(n: usize, dt: f64, settings: &ProjectionSettings) -> CscMatrix<f64> {
     let w = [1.0, 1.0, settings.heading_weight];
     let scale = 1.0 / (dt * dt);
-    let mut p_diag = vec![settings.effort; 2 * n];
+    let mut diag = vec![settings.effort; 2 * n];
+    for (i, d) in diag[n..].iter_mut().enumerate() {
+        *d = w[i % 3] * scale;
+    }
+    CscMatrix::new(
+        2 * n,
+        2 * n,
+        (0..=2 * n).collect(),
+        (0..2 * n).collect(),
+        diag,
+    )
+}
+
+/// `q` of the objective: the pose weights times the current distance to the target.
+fn objective_linear(
+    poses: &[Pose2],
+    target: &[Pose2],
+    dt: f64,
+    settings: &ProjectionSettings,
+) -> Vec<f64> {
+    let n = 3 * target.len();
+    let w = [1.0, 1.0, settings.heading_weight];
+    let scale = 1.0 / (dt * dt);
     let mut q = vec![0.0; 2 * n];
     for (k, (p, g)) in poses.iter().zip(target).enumerate() {
         let r = [p.x - g.x, p.y - g.y, wrap_angle(p.theta - g.theta)];
         for d in 0..3 {
-            p_diag[e_col(k, d)] = w[d] * scale;
-            q[e_col(k, d)] = w[d] * r[d] * scale;
+            q[e_col(n, k, d)] = w[d] * r[d] * scale;
         }
     }
+    q
+}
 
-    // Constraints A·(ξ + δ) ≤ b, i.e. A·δ ≤ b − A·ξ.
+/// The limits as rows `A·δ ≤ b − A·ξ` (constraints `A·(ξ + δ) ≤ b` on the new twists) appended
+/// to `rows`; returns their right-hand sides.
+fn limit_rows(
+    xi: &[f64],
+    dt: f64,
+    limits: &Limits,
+    initial_velocity: Twist2,
+    gear: f64,
+    settings: &ProjectionSettings,
+    rows: &mut Rows,
+) -> Vec<f64> {
+    let AccelerationBounds {
+        c_min,
+        da,
+        da_first,
+        braking,
+    } = AccelerationBounds::new(dt, limits, initial_velocity, gear, settings);
     let s = 1.0 - settings.margin;
-    let mut rows: Vec<Vec<(usize, f64)>> = Vec::new();
-    let mut rhs: Vec<f64> = Vec::new();
-    let mut push = |row: Vec<(usize, f64)>, bound: f64| {
+    let mut rhs = Vec::new();
+    let mut push = |row: &[(usize, f64)], bound: f64| {
         let ax: f64 = row.iter().map(|(c, a)| a * xi[*c]).sum();
         rows.push(row);
         rhs.push(bound - ax);
@@ -357,96 +434,108 @@ fn solve_step(
             limits.v_reverse_max
         }
     };
-    // The chord factor c_k lies in [c_min, 1] once |ω_k| ≤ ω_max; the bounds below hold for
-    // every c_k in that range, so they need no linearisation.
-    let c_min = sinc(0.5 * limits.omega_max * dt);
-    let s_a = 1.0 - settings.acceleration_margin;
-    let da =
-        (s_a * limits.a_max * dt - (1.0 - c_min) * limits.v_max.max(limits.v_reverse_max)).max(0.0);
-    // From the current speed to the first segment's mean speed: half a step of ramp.
-    let da_first = 0.5 * s_a * limits.a_max * dt;
-    // A robot moving against the plan's gear brakes first: the segments before the one that can
-    // reach zero speed keep the robot's direction, the later ones the plan's gear.
-    let braking = if gear * initial_velocity.vx < 0.0 && da > 0.0 {
-        1 + ((initial_velocity.vx.abs() - da_first) / da)
-            .ceil()
-            .max(0.0) as usize
-    } else {
-        0
-    };
-    for k in 0..t {
+    for k in 0..xi.len() / 3 {
         let (iv, ivy, iw) = (3 * k, 3 * k + 1, 3 * k + 2);
         let dir = if k + 1 < braking { -gear } else { gear };
-        push(vec![(iv, dir)], s * speed_limit(dir));
-        push(vec![(iv, -dir)], 0.0);
-        push(vec![(ivy, 1.0)], s * limits.lateral_speed_max);
-        push(vec![(ivy, -1.0)], s * limits.lateral_speed_max);
-        push(vec![(iw, 1.0)], s * limits.omega_max);
-        push(vec![(iw, -1.0)], s * limits.omega_max);
+        push(&[(iv, dir)], s * speed_limit(dir));
+        push(&[(iv, -dir)], 0.0);
+        push(&[(ivy, 1.0)], s * limits.lateral_speed_max);
+        push(&[(ivy, -1.0)], s * limits.lateral_speed_max);
+        push(&[(iw, 1.0)], s * limits.omega_max);
+        push(&[(iw, -1.0)], s * limits.omega_max);
         if let Some(kappa) = limits.kappa_max {
             let kv = s * kappa * c_min * dir;
-            push(vec![(iw, 1.0), (iv, -kv)], 0.0);
-            push(vec![(iw, -1.0), (iv, -kv)], 0.0);
+            push(&[(iw, 1.0), (iv, -kv)], 0.0);
+            push(&[(iw, -1.0), (iv, -kv)], 0.0);
         }
         if k == 0 {
-            push(vec![(iv, 1.0)], da_first + initial_velocity.vx);
-            push(vec![(iv, -1.0)], da_first - initial_velocity.vx);
+            push(&[(iv, 1.0)], da_first + initial_velocity.vx);
+            push(&[(iv, -1.0)], da_first - initial_velocity.vx);
         } else {
             let pv = 3 * (k - 1);
-            push(vec![(iv, 1.0), (pv, -1.0)], da);
-            push(vec![(iv, -1.0), (pv, 1.0)], da);
+            push(&[(iv, 1.0), (pv, -1.0)], da);
+            push(&[(iv, -1.0), (pv, 1.0)], da);
         }
     }
+    rhs
+}
 
-    let inequalities = rows.len();
-    let mut all_rows = dynamics;
-    all_rows.append(&mut rows);
-    let mut b = vec![0.0; n];
-    b.append(&mut rhs);
-    let p = CscMatrix::new(
-        2 * n,
-        2 * n,
-        (0..=2 * n).collect(),
-        (0..2 * n).collect(),
-        p_diag,
-    );
-    let a = csc_rows(&all_rows, 2 * n);
-    let cones = [ZeroConeT(n), NonnegativeConeT(inequalities)];
-    let infeasible = |status: String| ProjectionError::Infeasible {
-        speed: initial_velocity.vx,
-        status,
-    };
-    let key = (t, limits.kappa_max.is_some());
+/// The speed-change bounds of [`limit_rows`] and the segments that brake first.
+struct AccelerationBounds {
+    /// The smallest chord factor: `c_k` lies in `[c_min, 1]` once `|ω_k| ≤ ω_max`; the bounds
+    /// hold for every `c_k` in that range, so they need no linearisation.
+    c_min: f64,
+    /// Largest change of speed between consecutive segments.
+    da: f64,
+    /// From the current speed to the first segment's mean speed: half a step of ramp.
+    da_first: f64,
+    /// A robot moving against the plan's gear brakes first: the segments before the one that
+    /// can reach zero speed keep the robot's direction, the later ones the plan's gear.
+    braking: usize,
+}
+
+impl AccelerationBounds {
+    fn new(
+        dt: f64,
+        limits: &Limits,
+        initial_velocity: Twist2,
+        gear: f64,
+        settings: &ProjectionSettings,
+    ) -> Self {
+        let c_min = sinc(0.5 * limits.omega_max * dt);
+        let s_a = 1.0 - settings.acceleration_margin;
+        let da = (s_a * limits.a_max * dt - (1.0 - c_min) * limits.v_max.max(limits.v_reverse_max))
+            .max(0.0);
+        let da_first = 0.5 * s_a * limits.a_max * dt;
+        let braking = if gear * initial_velocity.vx < 0.0 && da > 0.0 {
+            1 + ((initial_velocity.vx.abs() - da_first) / da)
+                .ceil()
+                .max(0.0) as usize
+        } else {
+            0
+        };
+        Self {
+            c_min,
+            da,
+            da_first,
+            braking,
+        }
+    }
+}
+
+/// A convex QP `min ½zᵀPz + qᵀz` subject to `A·z + s = b`, `s ∈ {0}^equalities × ℝ₊^rest`.
+struct Qp {
+    p: CscMatrix<f64>,
+    q: Vec<f64>,
+    a: CscMatrix<f64>,
+    b: Vec<f64>,
+    equalities: usize,
+}
+
+/// Solves `qp` with the cached solver when the problem's structure `key` (horizon, curvature
+/// limit) is the cached one's (only values are overwritten), else with a new solver that is
+/// then cached. Returns the solution, all finite.
+fn solve_cached<'c>(
+    cache: &'c mut ProjectionSolver,
+    key: (usize, bool),
+    qp: &Qp,
+    infeasible: impl Fn(String) -> ProjectionError,
+) -> Result<&'c [f64], ProjectionError> {
     let updated = match &mut cache.cached {
         Some((k, solver)) if *k == key => solver
-            .update_P(&p.nzval)
-            .and_then(|()| solver.update_q(&q))
-            .and_then(|()| solver.update_A(&a.nzval))
-            .and_then(|()| solver.update_b(&b))
+            .update_P(&qp.p.nzval)
+            .and_then(|()| solver.update_q(&qp.q))
+            .and_then(|()| solver.update_A(&qp.a.nzval))
+            .and_then(|()| solver.update_b(&qp.b))
             .is_ok(),
         _ => false,
     };
     if !updated {
-        let qp_settings = DefaultSettingsBuilder::default()
-            .verbose(false)
-            // Values are overwritten in place for the next correction (see ProjectionSolver):
-            // the presolver must not drop rows, nor the input its zeros.
-            .presolve_enable(false)
-            .input_sparse_dropzeros(false)
-            // Refinement's extra solves buy accuracy far below the tolerances below (about
-            // −40 % solve time in the `projection` bench).
-            .iterative_refinement_enable(false)
-            // Micrometres and micro-radians are plenty for a plan (default 1e-8; −19 % solve time
-            // for the car in the `projection` bench).
-            .tol_gap_abs(1e-6)
-            .tol_gap_rel(1e-6)
-            .tol_feas(1e-6)
-            .build()
-            .map_err(|e| ProjectionError::InvalidSettings {
-                field: "solver",
-                message: e.to_string(),
-            })?;
-        let solver = DefaultSolver::new(&p, &q, &a, &b, &cones, qp_settings)
+        let cones = [
+            ZeroConeT(qp.equalities),
+            NonnegativeConeT(qp.b.len() - qp.equalities),
+        ];
+        let solver = DefaultSolver::new(&qp.p, &qp.q, &qp.a, &qp.b, &cones, qp_settings()?)
             .map_err(|e| infeasible(format!("a setup error: {e:?}")))?;
         cache.cached = Some((key, solver));
     }
@@ -458,32 +547,71 @@ fn solve_step(
         SolverStatus::Solved | SolverStatus::AlmostSolved
             if solver.solution.x.iter().all(|x| x.is_finite()) =>
         {
-            Ok(solver.solution.x[..n].to_vec())
+            Ok(&solver.solution.x)
         }
         status => Err(infeasible(format!("{status:?}"))),
     }
 }
 
-/// A sparse matrix given by rows of `(column, value)` in compressed sparse columns.
-fn csc_rows(rows: &[Vec<(usize, f64)>], n: usize) -> CscMatrix<f64> {
-    let mut cols: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
-    for (r, row) in rows.iter().enumerate() {
+/// Clarabel's settings for the correction's QPs.
+fn qp_settings() -> Result<clarabel::solver::DefaultSettings<f64>, ProjectionError> {
+    DefaultSettingsBuilder::default()
+        .verbose(false)
+        // Values are overwritten in place for the next correction (see ProjectionSolver):
+        // the presolver must not drop rows, nor the input its zeros.
+        .presolve_enable(false)
+        .input_sparse_dropzeros(false)
+        // Refinement's extra solves buy accuracy far below the tolerances below (about
+        // −40 % solve time in the `projection` bench).
+        .iterative_refinement_enable(false)
+        // Micrometres and micro-radians are plenty for a plan (default 1e-8; −19 % solve time
+        // for the car in the `projection` bench).
+        .tol_gap_abs(1e-6)
+        .tol_gap_rel(1e-6)
+        .tol_feas(1e-6)
+        .build()
+        .map_err(|e| ProjectionError::InvalidSettings {
+            field: "solver",
+            message: e.to_string(),
+        })
+}
+
+/// A sparse matrix built row by row as `(row, column, value)` triplets, compressed by
+/// Clarabel's [`CscMatrix::new_from_triplets`] (which sorts by column, then row, and keeps
+/// explicit zeros: every correction of one structure has the same pattern, which the cached
+/// solver's in-place updates rely on).
+struct Rows {
+    cols: usize,
+    count: usize,
+    i: Vec<usize>,
+    j: Vec<usize>,
+    v: Vec<f64>,
+}
+
+impl Rows {
+    fn new(cols: usize) -> Self {
+        Self {
+            cols,
+            count: 0,
+            i: Vec::new(),
+            j: Vec::new(),
+            v: Vec::new(),
+        }
+    }
+
+    /// Appends a row given by its `(column, value)` entries, each column at most once.
+    fn push(&mut self, row: &[(usize, f64)]) {
         for &(c, v) in row {
-            cols[c].push((r, v));
+            self.i.push(self.count);
+            self.j.push(c);
+            self.v.push(v);
         }
+        self.count += 1;
     }
-    let mut colptr = Vec::with_capacity(n + 1);
-    let mut rowval = Vec::new();
-    let mut nzval = Vec::new();
-    colptr.push(0);
-    for col in &cols {
-        for &(r, v) in col {
-            rowval.push(r);
-            nzval.push(v);
-        }
-        colptr.push(rowval.len());
+
+    fn into_csc(self) -> CscMatrix<f64> {
+        CscMatrix::new_from_triplets(self.count, self.cols, self.i, self.j, self.v)
     }
-    CscMatrix::new(rows.len(), n, colptr, rowval, nzval)
 }
 
 #[cfg(test)]
@@ -540,6 +668,56 @@ mod tests {
                 theta: p.theta + rng.random_range(-3.0 * jitter..3.0 * jitter),
             })
             .collect()
+    }
+
+    /// The triplet construction gives the matrix the column-by-column construction it replaced
+    /// gave: same pattern, same order of the values (the cached solver's updates rely on it).
+    #[test]
+    fn triplets_build_the_matrix_the_column_builder_built() {
+        let target = jittery(3, 1.0, 0.3, 0.04);
+        let dt = 0.1;
+        let with_start: Vec<Pose2> = std::iter::once(Pose2::IDENTITY)
+            .chain(target.iter().copied())
+            .collect();
+        let xi: Vec<f64> = with_start
+            .windows(2)
+            .flat_map(|w| w[0].between(w[1]).log().scale(1.0 / dt).to_array())
+            .collect();
+        let n = xi.len();
+        let poses = rollout(&xi, dt);
+        let settings = ProjectionSettings::default();
+        let mut rows = Rows::new(2 * n);
+        dynamics_rows(&xi, &poses, dt, &mut rows);
+        let v0 = Twist2::new(-0.3, 0.0, 0.0);
+        let rhs = limit_rows(&xi, dt, &car(), v0, 1.0, &settings, &mut rows);
+        assert_eq!(rows.count, n + rhs.len());
+
+        // The previous construction: rows of (column, value) gathered column by column.
+        let mut by_row = vec![Vec::new(); rows.count];
+        for ((&r, &c), &v) in rows.i.iter().zip(&rows.j).zip(&rows.v) {
+            by_row[r].push((c, v));
+        }
+        let mut cols: Vec<Vec<(usize, f64)>> = vec![Vec::new(); 2 * n];
+        for (r, row) in by_row.iter().enumerate() {
+            for &(c, v) in row {
+                cols[c].push((r, v));
+            }
+        }
+        let mut colptr = vec![0];
+        let (mut rowval, mut nzval) = (Vec::new(), Vec::new());
+        for col in &cols {
+            for &(r, v) in col {
+                rowval.push(r);
+                nzval.push(v);
+            }
+            colptr.push(rowval.len());
+        }
+
+        let a = rows.into_csc();
+        assert_eq!((a.m, a.n), (n + rhs.len(), 2 * n));
+        assert_eq!(a.colptr, colptr);
+        assert_eq!(a.rowval, rowval);
+        assert_eq!(a.nzval, nzval);
     }
 
     #[test]

@@ -275,10 +275,15 @@ pub fn associate(frames: &[Frame], opts: &TrackerOptions) -> Vec<Vec<u64>> {
 /// Association quality against annotated identities (module docs).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct AssociationReport {
+    /// Frames with detections.
     pub frames: usize,
+    /// Detections associated.
     pub detections: usize,
+    /// Annotated identities among them.
     pub identities: usize,
+    /// Tracks the tracker made.
     pub tracks: usize,
+    /// Consecutive detections of one annotated identity given different track ids.
     pub id_switches: usize,
     /// IDTP / detections.
     pub correct_fraction: f64,

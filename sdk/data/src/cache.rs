@@ -33,13 +33,17 @@ const HEADER: usize = 24;
 pub struct SceneInfo {
     /// `dataset/scene`.
     pub name: String,
+    /// Dataset name (`eth`, `ucy`, `sdd`, `synthetic`).
     pub dataset: String,
     /// Loader format the scene came from.
     pub format: String,
+    /// The split the scene belongs to.
     pub split: Split,
     /// Recorded time covered by the scene's tracks, seconds.
     pub duration: f64,
+    /// Tracks on the 0.1 s grid.
     pub tracks: usize,
+    /// Training tuples made from the scene.
     pub tuples: usize,
     /// Median speed of the samples faster than 0.2 m/s, m/s.
     pub median_speed: Option<f64>,
@@ -50,18 +54,23 @@ pub struct SceneInfo {
 /// Everything needed to interpret the binary files.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Manifest {
+    /// Cache format version ([`CACHE_VERSION`] when written).
     pub version: u32,
     /// Where the data came from (`real` or `synthetic`).
     pub source: String,
+    /// The raster every tuple's BEV was drawn with.
     pub bev: BevSpec,
     /// Future poses per tuple.
     pub horizon: usize,
     /// Step between poses, seconds.
     pub dt: f64,
+    /// The options the tuples were made with.
     pub tuples: TupleOptions,
+    /// Every scene of the cache, in the index order tuples refer to.
     pub scenes: Vec<SceneInfo>,
     /// Tuples per split.
     pub counts: BTreeMap<Split, usize>,
+    /// What tuple making skipped, over all scenes.
     pub stats: TupleStats,
     /// Size in bytes of each split's file as written with this manifest; a file of another
     /// size belongs to another (or an interrupted) build. Empty in caches written before the

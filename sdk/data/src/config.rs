@@ -91,7 +91,9 @@ impl Default for SourcesConfig {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SplitConfig {
+    /// Held-out scenes (`dataset/scene`): the benchmark's.
     pub test: Vec<String>,
+    /// Validation scenes (`dataset/scene`).
     pub val: Vec<String>,
     /// Scenes left out entirely.
     pub exclude: Vec<String>,
@@ -116,16 +118,25 @@ impl SplitConfig {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct DataConfig {
+    /// Where the datasets are and where outputs go (`[paths]`).
     pub paths: PathsConfig,
+    /// Which datasets to read (`[sources]`).
     pub sources: SourcesConfig,
+    /// How Stanford Drone Dataset annotations are read (`[sdd]`).
     pub sdd: SddRawOptions,
+    /// Which scenes train, validate and test (`[split]`).
     pub split: SplitConfig,
+    /// The 0.1 s grid (`[resample]`).
     pub resample: ResampleOptions,
+    /// The BEV raster of the tuples (`[bev]`).
     pub bev: BevSpec,
+    /// How training tuples are made (`[tuples]`).
     pub tuples: TupleOptions,
+    /// How benchmark episodes are mined (`[episodes]`).
     pub episodes: MiningOptions,
     /// Interaction-rich episodes; their geometry comes from `episodes`.
     pub interaction: InteractionOptions,
+    /// The identity-free tracker (`[association]`).
     pub association: TrackerOptions,
 }
 

@@ -385,7 +385,9 @@ pub struct EgoPath {
     pub track: usize,
     /// Global step at which the pedestrian started the window.
     pub s0: i64,
+    /// The robot's start, world frame, metres.
     pub start: [f64; 2],
+    /// The robot's goal, world frame, metres.
     pub goal: [f64; 2],
     /// True when the path runs from the window's goal back to its start.
     pub reversed: bool,
@@ -484,8 +486,11 @@ pub fn draw_crowd_starts(
 pub enum InteractionReject {
     /// The crowd window does not lie inside the recording.
     OutsideRecording,
+    /// Someone is too close to the start during `start_window`.
     StartBlocked,
+    /// The number of relevant agents is outside `[min_density, max_density]`.
     DensityOutOfRange,
+    /// No relevant agent moves fast enough to vote on a class.
     Unclassified,
     /// The reference robot reached the goal without meeting anyone at some reference speed.
     NotInteractive(ScenarioClass),
@@ -579,9 +584,13 @@ pub struct InteractionStats {
     pub no_crowd_window: usize,
     /// Candidates (path direction × crowd start) tried.
     pub candidates: usize,
+    /// Rejected: [`InteractionReject::OutsideRecording`].
     pub outside_recording: usize,
+    /// Rejected: [`InteractionReject::StartBlocked`].
     pub start_blocked: usize,
+    /// Rejected: [`InteractionReject::DensityOutOfRange`].
     pub density_out_of_range: usize,
+    /// Rejected: [`InteractionReject::Unclassified`].
     pub unclassified: usize,
     /// Classified candidates on which the reference reached the goal without meeting anyone
     /// at some speed, per class.
@@ -690,7 +699,9 @@ pub fn mine_interaction_scene(
 /// ([`crate::pipeline::build_interaction_episodes`]).
 #[derive(Clone, Debug)]
 pub struct InteractionReport {
+    /// The split whose scenes were mined.
     pub split: Split,
+    /// The selected episodes.
     pub suite: EpisodeSuite,
     /// Counters per scene mined, in the order mined (scene name order in the pipeline).
     pub scenes: Vec<(String, InteractionStats)>,
@@ -698,6 +709,7 @@ pub struct InteractionReport {
     pub stats: InteractionStats,
     /// Classes, densities and goal distances of the selected suite.
     pub summary: SuiteSummary,
+    /// What the user should know (missing datasets, the synthetic fallback, ...).
     pub notes: Vec<String>,
 }
 
@@ -861,7 +873,9 @@ pub const DENSITY_BINS: [(usize, Option<usize>); 6] = [
 /// Density histogram over [`DENSITY_BINS`], with the largest density.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct DensityHistogram {
+    /// Episodes per bin of [`DENSITY_BINS`].
     pub bins: [usize; 6],
+    /// The largest density counted.
     pub max: usize,
 }
 
@@ -880,8 +894,11 @@ impl DensityHistogram {
 /// What a selected suite looks like: episodes, densities and goal distances per class.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct SuiteSummary {
+    /// Episodes per class.
     pub per_class: BTreeMap<ScenarioClass, usize>,
+    /// Densities of all episodes.
     pub density: DensityHistogram,
+    /// Densities per class.
     pub density_per_class: BTreeMap<ScenarioClass, DensityHistogram>,
     /// Goal distance `[min, median, mean, max]`, metres (zeros for an empty suite).
     pub goal_distance: [f64; 4],

@@ -12,6 +12,8 @@
 //! thread-count-independent jobs behind `human2nav data build | episodes | associate`, and
 //! [`paths`] locates datasets and outputs. [`limits`] lists the bounds on what is read.
 
+#![warn(missing_docs)]
+
 pub mod association;
 pub mod cache;
 pub mod config;

@@ -41,23 +41,37 @@ impl Progress for NoProgress {
 /// How to read one source file.
 #[derive(Clone, Debug, PartialEq)]
 pub enum SourceKind {
+    /// An ETH (EWAP) `obsmat.txt`: world coordinates at 2.5 fps.
     EwapObsmat {
+        /// The file.
         path: PathBuf,
     },
+    /// A UCY `.vsp` spline file in image coordinates.
     UcyVsp {
+        /// The file.
         path: PathBuf,
+        /// The UCY folder, where the scene's homography is looked up.
         ucy_root: PathBuf,
+        /// The scene (`zara01`, ...).
         scene: String,
     },
+    /// A Social-GAN benchmark file (`frame id x y`, world coordinates).
     Sgan {
+        /// The file.
         path: PathBuf,
     },
+    /// A Stanford Drone Dataset `annotations.txt` (pixel boxes at 30 fps).
     SddRaw {
+        /// The file.
         path: PathBuf,
+        /// The metres-per-pixel scale file.
         scales: PathBuf,
+        /// The video (`scene/videoN`) whose scale applies.
         video: String,
     },
+    /// A TrajNet conversion of SDD (world coordinates).
     SddTrajnet {
+        /// The file.
         path: PathBuf,
     },
 }
@@ -67,6 +81,7 @@ pub enum SourceKind {
 pub struct Source {
     /// `dataset/scene`.
     pub name: String,
+    /// Its file and how to read it.
     pub kind: SourceKind,
 }
 
@@ -236,9 +251,13 @@ pub fn load_source(src: &Source, cfg: &DataConfig) -> Result<RawScene, DataError
 /// Resolved locations of a job.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Locations {
+    /// The workspace root relative paths are resolved against.
     pub workspace: PathBuf,
+    /// Where the datasets are.
     pub data_root: PathBuf,
+    /// Where the tuple cache is written.
     pub cache_dir: PathBuf,
+    /// Where the paper protocol's episode file is written.
     pub episodes: PathBuf,
 }
 
@@ -351,7 +370,9 @@ fn split_of(cfg: &DataConfig, scene: &Scene, index: usize) -> Option<Split> {
 /// What `build_cache` did.
 #[derive(Clone, Debug)]
 pub struct BuildReport {
+    /// The cache written.
     pub cache: TupleCache,
+    /// What the user should know (missing datasets, the synthetic fallback, ...).
     pub notes: Vec<String>,
     /// `(dataset, split) → tuples`.
     pub counts: BTreeMap<(String, Split), usize>,
@@ -442,8 +463,11 @@ pub fn build_cache(
 /// What `build_episodes` did.
 #[derive(Clone, Debug)]
 pub struct EpisodeReport {
+    /// The selected episodes.
     pub suite: EpisodeSuite,
+    /// Why candidate windows were rejected, over all scenes.
     pub stats: MiningStats,
+    /// What the user should know (missing datasets, the synthetic fallback, ...).
     pub notes: Vec<String>,
     /// Test scenes mined.
     pub scenes: Vec<String>,
@@ -724,10 +748,13 @@ impl EpisodeFile {
 /// What [`write_episode_file`] wrote.
 #[derive(Clone, Debug)]
 pub struct WrittenEpisodes {
+    /// The episode file.
     pub path: PathBuf,
+    /// Episodes in it.
     pub episodes: usize,
     /// The mining report beside it (`<file>.md`, interaction files only) and its text.
     pub report: Option<(PathBuf, String)>,
+    /// What the user should know (missing datasets, the synthetic fallback, ...).
     pub notes: Vec<String>,
 }
 

@@ -92,11 +92,15 @@ pub struct Track {
     pub id: u64,
     /// The identity in the source file.
     pub source_id: u64,
+    /// What kind of agent it is.
     pub class: AgentClass,
     /// Global step index of the first sample.
     pub start: i64,
+    /// World positions, metres, one per step.
     pub positions: Vec<[f64; 2]>,
+    /// World velocities, m/s, one per step (finite differences).
     pub velocities: Vec<[f64; 2]>,
+    /// Headings, radians, one per step (from motion, held while the agent stands).
     pub headings: Vec<f64>,
 }
 
@@ -136,21 +140,32 @@ impl Track {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct ResampleStats {
+    /// Tracks read from the loader.
     pub input_tracks: usize,
+    /// Tracks on the grid (a split track counts once per segment).
     pub output_tracks: usize,
+    /// Tracks without a sample, skipped.
     pub empty_tracks: usize,
+    /// Segments too short for the grid (`min_duration`, or under two grid steps), skipped.
     pub short_segments: usize,
+    /// Tracks split where a gap exceeded the source's `max_gap`.
     pub gap_splits: usize,
 }
 
 /// A scene on the regular grid.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Scene {
+    /// Scene name, `dataset/scene`.
     pub name: String,
+    /// Dataset name (`eth`, `ucy`, `sdd`, `synthetic`).
     pub dataset: String,
+    /// Loader format the scene came from.
     pub format: String,
+    /// Grid step, seconds.
     pub dt: f64,
+    /// The agents on the grid.
     pub tracks: Vec<Track>,
+    /// What resampling skipped.
     pub stats: ResampleStats,
     /// The loader's dropped-row counters, carried along for reports.
     pub dropped: Vec<(String, usize)>,
@@ -159,7 +174,9 @@ pub struct Scene {
 /// For every global step of a scene, the tracks present then.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct StepIndex {
+    /// The first global step indexed.
     pub first: i64,
+    /// Per step from `first`, the indices of the tracks present.
     pub active: Vec<Vec<u32>>,
 }
 

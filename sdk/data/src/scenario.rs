@@ -44,9 +44,13 @@ use std::path::Path;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ScenarioClass {
+    /// The crowd moves with the robot (`|α| ≤ 45°`, module docs).
     CoFlow,
+    /// The crowd crosses the robot's path.
     CrossFlow,
+    /// The crowd comes toward the robot (`|α| ≥ 135°`).
     CounterFlow,
+    /// No direction holds the dominant share of the votes.
     MultidirectionFlow,
 }
 
@@ -202,21 +206,26 @@ pub fn classify(
 /// A non-reactive agent replayed during an episode.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AgentTrack {
+    /// The agent's identity in its scene.
     pub id: u64,
     /// First step index (from the episode start) at which the agent exists.
     pub start_step: usize,
     /// World-frame positions, one per `dt` from `start_step`.
     pub positions: Vec<[f64; 2]>,
+    /// Body radius, metres.
     pub radius: f64,
 }
 
 /// One benchmark episode: a robot start, a goal, a time budget and a replayed crowd.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Episode {
+    /// Unique id within its suite (scene, ego and start time for mined episodes).
     pub id: String,
+    /// The scene the crowd comes from (`dataset/scene`).
     pub scene: String,
     /// The dataset the crowd comes from (`eth`, `ucy`, `sdd`, `synthetic`).
     pub source: String,
+    /// The crowd's class relative to the start→goal direction.
     pub scenario: ScenarioClass,
     /// Step of the agent tracks, seconds (0.1).
     pub dt: f64,
@@ -226,6 +235,7 @@ pub struct Episode {
     pub goal: [f64; 2],
     /// Time allowed to reach the goal, seconds.
     pub time_budget: f64,
+    /// The crowd, replayed as recorded.
     pub agents: Vec<AgentTrack>,
     /// Number of relevant agents (module docs).
     pub density: usize,
@@ -344,11 +354,13 @@ pub const EPISODES_VERSION: u32 = 1;
 /// An episode suite as stored on disk (`episodes.json`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EpisodeSuite {
+    /// File format version ([`EPISODES_VERSION`]).
     pub version: u32,
     /// Where the episodes come from (`real: eth/eth, ucy/zara01, ...` or `synthetic`).
     pub source: String,
     /// Episodes per class.
     pub counts: BTreeMap<ScenarioClass, usize>,
+    /// The episodes.
     pub episodes: Vec<Episode>,
 }
 
@@ -477,7 +489,9 @@ pub struct MiningOptions {
     /// How long after the start `min_start_clearance` holds, seconds (0: the first step only).
     /// Default 1.5.
     pub start_window: f64,
+    /// Fewest relevant agents an episode may have (module docs, "Density").
     pub min_density: usize,
+    /// Most relevant agents an episode may have.
     pub max_density: usize,
     /// Episodes per class to select. Default 50.
     pub per_class: usize,
@@ -485,6 +499,7 @@ pub struct MiningOptions {
     pub agent_radius: f64,
     /// Seed of the selection shuffle.
     pub seed: u64,
+    /// How the crowd's class is decided.
     pub classify: ClassifyOptions,
 }
 
@@ -575,12 +590,19 @@ impl MiningOptions {
 /// Counters of why candidate windows were rejected.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct MiningStats {
+    /// Candidate windows examined.
     pub windows: usize,
+    /// Rejected: [`Reject::GoalNotReached`].
     pub goal_not_reached: usize,
+    /// Rejected: [`Reject::OutsideRecording`].
     pub outside_recording: usize,
+    /// Rejected: [`Reject::StartBlocked`].
     pub start_blocked: usize,
+    /// Rejected: [`Reject::DensityOutOfRange`].
     pub density_out_of_range: usize,
+    /// Rejected: [`Reject::Unclassified`].
     pub unclassified: usize,
+    /// Accepted windows per class, before the per-class selection.
     pub candidates: BTreeMap<ScenarioClass, usize>,
 }
 
@@ -681,10 +703,15 @@ pub(crate) fn goal_index(t: &Track, i0: usize, dt: f64, opts: &MiningOptions) ->
 /// Why [`try_episode`] rejected a window.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Reject {
+    /// The ego never gets `goal_distance` from its start within `max_goal_time`.
     GoalNotReached,
+    /// The episode's time budget reaches past the end of the recording.
     OutsideRecording,
+    /// Someone is too close to the start during `start_window`.
     StartBlocked,
+    /// The number of relevant agents is outside `[min_density, max_density]`.
     DensityOutOfRange,
+    /// No relevant agent moves fast enough to vote on a class.
     Unclassified,
 }
 

@@ -33,13 +33,21 @@ use std::f64::consts::{FRAC_PI_2, PI};
 /// Social-force parameters (module docs).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SocialForce {
+    /// Relaxation time `τ` toward the desired velocity, seconds.
     pub tau: f64,
+    /// Strength `A` of the repulsion between pedestrians, m/s².
     pub a: f64,
+    /// Range `B` of the repulsion, metres.
     pub b: f64,
+    /// Anisotropy `λ`: the weight of a pedestrian behind (1: as much as in front).
     pub lambda: f64,
+    /// Body radius `r`, metres.
     pub radius: f64,
+    /// Recording interval, seconds.
     pub dt: f64,
+    /// Integration steps per recording interval.
     pub substeps: usize,
+    /// Speeds are capped at this multiple of the desired speed.
     pub max_speed_factor: f64,
 }
 
@@ -61,9 +69,13 @@ impl Default for SocialForce {
 /// A simulated pedestrian.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Walker {
+    /// Position, metres.
     pub p: [f64; 2],
+    /// Velocity, m/s.
     pub v: [f64; 2],
+    /// Where it walks to, metres.
     pub goal: [f64; 2],
+    /// Desired speed, m/s.
     pub v0: f64,
 }
 

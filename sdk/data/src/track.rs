@@ -7,11 +7,17 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum AgentClass {
+    /// A person on foot (every ETH/UCY agent).
     Pedestrian,
+    /// A cyclist.
     Biker,
+    /// A skateboarder.
     Skater,
+    /// A golf cart or similar small vehicle.
     Cart,
+    /// A car.
     Car,
+    /// A bus.
     Bus,
 }
 
@@ -33,7 +39,9 @@ impl AgentClass {
 /// One timestamped observation of an agent: time in seconds, world position in metres.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Sample {
+    /// Time, seconds.
     pub t: f64,
+    /// World position `[x, y]`, metres.
     pub p: [f64; 2],
 }
 
@@ -42,7 +50,9 @@ pub struct Sample {
 pub struct RawTrack {
     /// The identity in the source file (SDD track id, ETH/UCY pedestrian id, TrajNet chunk id).
     pub id: u64,
+    /// What kind of agent it is.
     pub class: AgentClass,
+    /// The observations, sorted by time.
     pub samples: Vec<Sample>,
 }
 
@@ -67,7 +77,9 @@ pub struct RawScene {
     pub dataset: String,
     /// Loader format (`ewap_obsmat`, `ucy_vsp`, `sgan`, `sdd_raw`, `sdd_trajnet`, `social_force`).
     pub format: String,
+    /// How the source's samples are turned into the 0.1 s grid.
     pub timing: SourceTiming,
+    /// One track per agent.
     pub tracks: Vec<RawTrack>,
     /// Rows or tracks the loader dropped, with the reason (`lost`, `class`, `duplicate`, ...).
     pub dropped: Vec<(String, usize)>,

@@ -47,14 +47,19 @@ pub struct TrainingTuple {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Split {
+    /// Scenes the model is trained on.
     Train,
+    /// Scenes for validation and for tuning planner settings.
     Val,
+    /// Held-out scenes: the benchmark's.
     Test,
 }
 
 impl Split {
+    /// The three splits in order.
     pub const ALL: [Split; 3] = [Split::Train, Split::Val, Split::Test];
 
+    /// The lowercase name used in file names, configs and reports.
     pub fn name(self) -> &'static str {
         match self {
             Split::Train => "train",
@@ -155,11 +160,15 @@ impl TupleOptions {
 /// A tuple with its neighbours stored sparsely (as in the cache).
 #[derive(Clone, Debug, PartialEq)]
 pub struct CompactTuple {
+    /// Index into the manifest's scenes.
     pub scene: u16,
     /// Scenario class of the window from the agents in the raster (None: nobody moving).
     pub class: Option<ScenarioClass>,
+    /// Goal in the ego frame, metres.
     pub goal: [f32; 2],
+    /// The ego's current velocity in the ego frame, m/s.
     pub velocity: [f32; 2],
+    /// The next [`HORIZON`] poses `(x, y, θ)` in the ego frame.
     pub future: Vec<[f32; 3]>,
     /// Neighbours in the ego frame: `[x, y, v_x, v_y, radius]`.
     pub agents: Vec<[f32; 5]>,
@@ -199,14 +208,20 @@ impl CompactTuple {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct TupleStats {
+    /// Pedestrian tracks long enough to be an ego.
     pub ego_tracks: usize,
+    /// Pedestrian tracks shorter than the horizon plus one step, skipped.
     pub too_short_tracks: usize,
+    /// Tracks of other agent classes, never an ego.
     pub non_pedestrian_tracks: usize,
+    /// Windows whose future moves less than `min_future_displacement`, skipped.
     pub stationary_windows: usize,
+    /// Tuples made.
     pub tuples: usize,
 }
 
 impl TupleStats {
+    /// Adds another scene's counters.
     pub fn add(&mut self, o: &TupleStats) {
         self.ego_tracks += o.ego_tracks;
         self.too_short_tracks += o.too_short_tracks;

@@ -84,12 +84,15 @@ pub struct TrainingInfo {
     pub data: String,
     /// How the scenes were split into train / validation / test.
     pub split: String,
-    /// Number of training and validation tuples.
+    /// Number of training tuples.
     pub train_tuples: usize,
+    /// Number of validation tuples.
     pub val_tuples: usize,
-    /// Optimiser steps, batch size, and epochs (fractional).
+    /// Optimiser steps.
     pub steps: u64,
+    /// Examples per optimiser step.
     pub batch_size: usize,
+    /// Passes over the training tuples (fractional).
     pub epochs: f64,
     /// Random seed.
     pub seed: u64,
@@ -101,14 +104,15 @@ pub struct TrainingInfo {
     pub path_sigma: f64,
     /// Optimiser and schedule, in words.
     pub optimiser: String,
-    /// Wall time of training in seconds, and threads used.
+    /// Wall time of training in seconds.
     pub wall_time_s: f64,
+    /// Threads training ran on.
     pub threads: usize,
     /// Mean training throughput.
     pub samples_per_s: f64,
-    /// Loss (Eq. 3, standardised units) of the EMA weights on the validation split at the end,
-    /// and the best one seen.
+    /// Loss (Eq. 3, standardised units) of the EMA weights on the validation split at the end.
     pub final_val_loss: f64,
+    /// The lowest validation loss seen during training.
     pub best_val_loss: f64,
     /// Training loss averaged over the last validation interval.
     pub final_train_loss: f64,
@@ -120,23 +124,30 @@ pub struct TrainingInfo {
 pub struct EvaluationInfo {
     /// What was evaluated, in words (split, number of windows, sampler settings).
     pub protocol: String,
+    /// Held-out windows evaluated.
     pub windows: usize,
+    /// Trajectories sampled per window (the `K` of best-of-K).
     pub samples_per_window: usize,
+    /// Integration steps of the sampler.
     pub steps: usize,
-    /// Best-of-K average and final displacement error of the model, metres.
+    /// Best-of-K average displacement error of the model, metres.
     pub min_ade: f64,
+    /// Best-of-K final displacement error of the model, metres.
     pub min_fde: f64,
     /// Mean over samples (not the best) of ADE, metres.
     pub mean_ade: f64,
-    /// Constant-velocity baseline on the same windows, metres.
+    /// Average displacement error of the constant-velocity baseline on the same windows, metres.
     pub cv_ade: f64,
+    /// Final displacement error of the constant-velocity baseline, metres.
     pub cv_fde: f64,
     /// `1 − min_ade / cv_ade`.
     pub ade_improvement: f64,
-    /// Fraction of sampled trajectories that come within `proximity_radius` of another
-    /// agent's position, and the same for the ground-truth futures.
+    /// The distance (m) to another agent's position that counts as "close" in the proximity
+    /// rates below.
     pub proximity_radius: f64,
+    /// Fraction of sampled trajectories within `proximity_radius` of another agent.
     pub proximity_model: f64,
+    /// Fraction of ground-truth futures within `proximity_radius` of another agent.
     pub proximity_truth: f64,
     /// How the other agents' positions were obtained for the proximity metric.
     pub proximity_note: String,
@@ -148,13 +159,17 @@ pub struct EvaluationInfo {
 pub struct PerformanceInfo {
     /// Machine and thread count the numbers were measured with.
     pub machine: String,
+    /// Threads the numbers were measured with.
     pub threads: usize,
-    /// Median milliseconds: velocity at batch 1 / 16, velocity + VJP at batch 1 / 16,
-    /// condition encoding once.
+    /// Median milliseconds of a velocity call at batch 1.
     pub forward_b1_ms: f64,
+    /// Median milliseconds of a velocity call at batch 16.
     pub forward_b16_ms: f64,
+    /// Median milliseconds of a velocity + VJP call at batch 1.
     pub vjp_b1_ms: f64,
+    /// Median milliseconds of a velocity + VJP call at batch 16.
     pub vjp_b16_ms: f64,
+    /// Median milliseconds of encoding the condition once.
     pub encode_condition_ms: f64,
 }
 

@@ -64,8 +64,10 @@ impl Default for NetConfig {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Activation {
+    /// SiLU, `x·σ(x)` (the default).
     #[default]
     Silu,
+    /// Mish, `x·tanh(softplus(x))`, as in Diffusion Policy.
     Mish,
 }
 

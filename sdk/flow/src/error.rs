@@ -7,56 +7,103 @@ use std::path::PathBuf;
 pub enum CfmError {
     /// An option is out of range; `field` names it as it appears in the TOML.
     #[error("invalid option `{field}`: {reason}")]
-    Option { field: &'static str, reason: String },
+    Option {
+        /// The option's TOML key.
+        field: &'static str,
+        /// What is wrong with its value.
+        reason: String,
+    },
 
     /// A file could not be read or written.
     #[error("{path}: {source}")]
     Io {
+        /// The file.
         path: PathBuf,
+        /// What the operating system reported.
         #[source]
         source: std::io::Error,
     },
 
     /// A TOML file (model card, training state, config) could not be parsed.
     #[error("{path}: {message}")]
-    Toml { path: PathBuf, message: String },
+    Toml {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong, in one line.
+        message: String,
+    },
 
     /// A weights file is not a readable safetensors file.
     #[error("{path}: not a readable safetensors file: {message}")]
-    Corrupt { path: PathBuf, message: String },
+    Corrupt {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong, in one line.
+        message: String,
+    },
 
     /// A weights file lacks a tensor the architecture in the model card needs.
     #[error("{path}: missing tensor `{name}` (the model card's architecture expects it)")]
-    MissingTensor { path: PathBuf, name: String },
+    MissingTensor {
+        /// The file.
+        path: PathBuf,
+        /// The tensor's name.
+        name: String,
+    },
 
     /// A weights file holds a tensor the architecture does not know.
     #[error("{path}: unexpected tensor `{name}` (not part of the model card's architecture)")]
-    UnexpectedTensor { path: PathBuf, name: String },
+    UnexpectedTensor {
+        /// The file.
+        path: PathBuf,
+        /// The tensor's name.
+        name: String,
+    },
 
     /// A tensor in a weights file has the wrong shape.
     #[error("{path}: tensor `{name}` has shape {found:?}, the architecture expects {expected:?}")]
     TensorShape {
+        /// The file.
         path: PathBuf,
+        /// The tensor's name.
         name: String,
+        /// The shape the architecture needs.
         expected: Vec<i64>,
+        /// The shape in the file.
         found: Vec<i64>,
     },
 
     /// A training example does not match the model's input spec.
     #[error("training example {index}: {reason}")]
-    Example { index: usize, reason: String },
+    Example {
+        /// 0-based position of the example.
+        index: usize,
+        /// What does not match.
+        reason: String,
+    },
 
     /// The data set is empty or too small for the requested operation.
     #[error("data set `{split}` is empty")]
-    EmptyData { split: &'static str },
+    EmptyData {
+        /// The split (`train`, `val`).
+        split: &'static str,
+    },
 
     /// Evaluation windows could not be rebuilt from a scene.
     #[error("evaluation windows of scene `{scene}`: {reason}")]
-    EvalData { scene: String, reason: String },
+    EvalData {
+        /// The scene (`dataset/scene`).
+        scene: String,
+        /// What went wrong.
+        reason: String,
+    },
 
     /// Training diverged.
     #[error("training loss became non-finite at step {step}")]
-    Diverged { step: u64 },
+    Diverged {
+        /// The optimiser step at which the loss became NaN or infinite.
+        step: u64,
+    },
 
     /// A libtorch call failed.
     #[error("libtorch: {0}")]
@@ -68,19 +115,33 @@ pub enum CfmError {
          {expected}: these are not the weights the card was written with"
     )]
     WeightsChecksum {
+        /// The file.
         path: PathBuf,
+        /// The file's FNV-1a 64 checksum.
         found: String,
+        /// The model card's `weights_fnv64`.
         expected: String,
+        /// The file's size.
         bytes: usize,
     },
 
     /// A training checkpoint is not a complete set.
     #[error("checkpoint {path}: {reason}")]
-    Checkpoint { path: PathBuf, reason: String },
+    Checkpoint {
+        /// The file.
+        path: PathBuf,
+        /// What is missing or inconsistent.
+        reason: String,
+    },
 
     /// Drawing a figure failed.
     #[error("plot {path}: {message}")]
-    Plot { path: PathBuf, message: String },
+    Plot {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong, in one line.
+        message: String,
+    },
 }
 
 impl CfmError {

@@ -70,11 +70,17 @@ impl Default for EvalOptions {
 /// Aggregated metrics over all windows (means over windows).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct EvalMetrics {
+    /// Windows evaluated.
     pub windows: usize,
+    /// Best-of-K average displacement error (m).
     pub min_ade: f64,
+    /// Best-of-K final displacement error (m).
     pub min_fde: f64,
+    /// Average displacement error of all samples, not only the best (m).
     pub mean_ade: f64,
+    /// Average displacement error of the constant-velocity baseline (m).
     pub cv_ade: f64,
+    /// Final displacement error of the constant-velocity baseline (m).
     pub cv_fde: f64,
     /// Fraction of sampled trajectories within `radius` of another agent.
     pub proximity_model: f64,
@@ -284,20 +290,27 @@ pub fn evaluate<M: FlowModel + ?Sized>(
 /// Means over windows of means over the `K` samples of each.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct GuidedWindowMetrics {
+    /// Windows evaluated.
     pub windows: usize,
     /// TFS of the recorded futures themselves (pose 0 the ego at the window's velocity).
     pub tfs_human: f64,
+    /// TFS of the samples before guidance.
     pub tfs_raw: f64,
+    /// TFS of the samples after guidance.
     pub tfs_guided: f64,
-    /// Mean over samples of the ADE to the recorded future (m), before and after guidance.
+    /// Mean over samples of the ADE to the recorded future before guidance (m).
     pub ade_raw: f64,
+    /// Mean over samples of the ADE to the recorded future after guidance (m).
     pub ade_guided: f64,
-    /// Best-of-K ADE (m), before and after guidance.
+    /// Best-of-K ADE before guidance (m).
     pub min_ade_raw: f64,
+    /// Best-of-K ADE after guidance (m).
     pub min_ade_guided: f64,
     /// Mean distance (m) between each guided sample and the same sample before guidance.
     pub displacement: f64,
+    /// Φ (the robot's soft constraint cost, Eq. 9) of the samples before guidance.
     pub phi_raw: f64,
+    /// Φ of the samples after guidance.
     pub phi_guided: f64,
     /// Algorithm 1 iterations run per window (mean).
     pub iterations: f64,

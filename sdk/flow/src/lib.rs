@@ -21,6 +21,8 @@
 //! [`human2nav_core::FlowModel::source_std`] and the model card records. Samplers draw it
 //! with [`cfm::sample_source`] (or their own generator with that std).
 
+#![warn(missing_docs)]
+
 pub mod card;
 pub mod cfm;
 pub mod config;

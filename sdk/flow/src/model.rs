@@ -19,8 +19,9 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use tch::{Device, Kind, Tensor, nn};
 
-/// Default file names inside a model folder.
+/// The model card's file name inside a model folder (TOML, [`crate::card::ModelCard`]).
 pub const CARD_FILE: &str = "model.toml";
+/// The weights' file name inside a model folder (safetensors).
 pub const WEIGHTS_FILE: &str = "model.safetensors";
 
 /// Writes the normalised condition of one example: the raster with its velocity channels

@@ -161,6 +161,8 @@ pub struct CondUnet1d {
 impl CondUnet1d {
     /// Creates the network's variables under `p` (the config must be valid).
     pub fn new(p: &nn::Path<'_>, cfg: &NetConfig) -> Self {
+        // Variables are created (and randomly initialised) in this order: time, BEV and goal
+        // encoders, the U-Net's down, middle and up paths, the FiLM projection, the output.
         let k = cfg.kernel_size as i64;
         let g = cfg.n_groups as i64;
         let a = cfg.activation;
@@ -172,27 +174,7 @@ impl CondUnet1d {
         let time_mlp0 = nn::linear(&time / "fc0", tdim, 4 * tdim, Default::default());
         let time_mlp1 = nn::linear(&time / "fc1", 4 * tdim, tdim, Default::default());
 
-        let bev = p / "bev";
-        let mut bev_convs = Vec::new();
-        let mut cin = 3i64;
-        for (i, &c) in cfg.bev_channels.iter().enumerate() {
-            let c = c as i64;
-            let conv_cfg = nn::ConvConfig {
-                stride: 2,
-                padding: 1,
-                ..Default::default()
-            };
-            let conv = nn::conv2d(&bev / format!("conv{i}"), cin, c, 3, conv_cfg);
-            let norm = nn::group_norm(&bev / format!("norm{i}"), g, c, Default::default());
-            bev_convs.push((conv, norm));
-            cin = c;
-        }
-        let bev_fc = nn::linear(
-            &bev / "fc",
-            cin * 16,
-            cfg.bev_embed_dim as i64,
-            Default::default(),
-        );
+        let (bev_convs, bev_fc) = Self::bev_encoder(&(p / "bev"), cfg);
 
         let goal = p / "goal";
         let gdim = cfg.goal_embed_dim as i64;
@@ -203,57 +185,13 @@ impl CondUnet1d {
         let dims: Vec<i64> = std::iter::once(TRAJ_CHANNELS)
             .chain(cfg.down_dims.iter().map(|&d| d as i64))
             .collect();
-        let levels = cfg.down_dims.len();
-        let nb = cfg.blocks_per_level;
         let mut film_channels = Vec::new();
-        let mut down = Vec::new();
-        for i in 0..levels {
-            let (din, dout) = (dims[i], dims[i + 1]);
-            let lp = &unet / "down" / i;
-            let last = i + 1 == levels;
-            let blocks = (0..nb)
-                .map(|b| {
-                    let cin = if b == 0 { din } else { dout };
-                    ResBlock::new(&lp / format!("res{b}"), cin, dout, kga, &mut film_channels)
-                })
-                .collect();
-            down.push(DownLevel {
-                blocks,
-                down: (!last).then(|| {
-                    let c = nn::ConvConfig {
-                        stride: 2,
-                        padding: 1,
-                        ..Default::default()
-                    };
-                    nn::conv1d(&lp / "downsample", dout, dout, 3, c)
-                }),
-            });
-        }
-        let dmid = dims[levels];
+        let down = Self::down_path(&unet, cfg, &dims, kga, &mut film_channels);
+        let dmid = dims[cfg.down_dims.len()];
         let mid = (0..cfg.mid_blocks)
             .map(|i| ResBlock::new(&unet / "mid" / i, dmid, dmid, kga, &mut film_channels))
             .collect();
-        let mut up = Vec::new();
-        // Levels levels-1 .. 1, coarse to fine: (dim_in, dim_out) = (dims[i], dims[i+1]).
-        for (j, i) in (1..levels).rev().enumerate() {
-            let (din, dout) = (dims[i], dims[i + 1]);
-            let lp = &unet / "up" / j;
-            let c = nn::ConvTransposeConfig {
-                stride: 2,
-                padding: 1,
-                ..Default::default()
-            };
-            let blocks = (0..nb)
-                .map(|b| {
-                    let cin = if b == 0 { 2 * dout } else { din };
-                    ResBlock::new(&lp / format!("res{b}"), cin, din, kga, &mut film_channels)
-                })
-                .collect();
-            up.push(UpLevel {
-                blocks,
-                up: nn::conv_transpose1d(&lp / "upsample", din, din, 4, c),
-            });
-        }
+        let up = Self::up_path(&unet, cfg, &dims, kga, &mut film_channels);
         let film_width: i64 = film_channels.iter().map(|c| 2 * c).sum();
         let film = nn::linear(&unet / "film", cond, film_width, Default::default());
         let d0 = dims[1];
@@ -282,6 +220,105 @@ impl CondUnet1d {
             final_block,
             final_conv,
         }
+    }
+
+    /// The BEV encoder: stride-2 convolutions with group norms, then a linear layer.
+    fn bev_encoder(
+        bev: &nn::Path<'_>,
+        cfg: &NetConfig,
+    ) -> (Vec<(nn::Conv2D, nn::GroupNorm)>, nn::Linear) {
+        let g = cfg.n_groups as i64;
+        let mut bev_convs = Vec::new();
+        let mut cin = 3i64;
+        for (i, &c) in cfg.bev_channels.iter().enumerate() {
+            let c = c as i64;
+            let conv_cfg = nn::ConvConfig {
+                stride: 2,
+                padding: 1,
+                ..Default::default()
+            };
+            let conv = nn::conv2d(bev / format!("conv{i}"), cin, c, 3, conv_cfg);
+            let norm = nn::group_norm(bev / format!("norm{i}"), g, c, Default::default());
+            bev_convs.push((conv, norm));
+            cin = c;
+        }
+        let bev_fc = nn::linear(
+            bev / "fc",
+            cin * 16,
+            cfg.bev_embed_dim as i64,
+            Default::default(),
+        );
+        (bev_convs, bev_fc)
+    }
+
+    /// The U-Net's down path: per level its residual blocks and, but on the last level, a
+    /// stride-2 convolution.
+    fn down_path(
+        unet: &nn::Path<'_>,
+        cfg: &NetConfig,
+        dims: &[i64],
+        kga: (i64, i64, Activation),
+        film_channels: &mut Vec<i64>,
+    ) -> Vec<DownLevel> {
+        let levels = cfg.down_dims.len();
+        let mut down = Vec::new();
+        for i in 0..levels {
+            let (din, dout) = (dims[i], dims[i + 1]);
+            let lp = unet / "down" / i;
+            let last = i + 1 == levels;
+            let blocks = (0..cfg.blocks_per_level)
+                .map(|b| {
+                    let cin = if b == 0 { din } else { dout };
+                    ResBlock::new(&lp / format!("res{b}"), cin, dout, kga, film_channels)
+                })
+                .collect();
+            down.push(DownLevel {
+                blocks,
+                down: (!last).then(|| {
+                    let c = nn::ConvConfig {
+                        stride: 2,
+                        padding: 1,
+                        ..Default::default()
+                    };
+                    nn::conv1d(&lp / "downsample", dout, dout, 3, c)
+                }),
+            });
+        }
+        down
+    }
+
+    /// The U-Net's up path, levels `levels − 1 … 1`, coarse to fine (`(dim_in, dim_out) =
+    /// (dims[i], dims[i+1])`): residual blocks, the first taking the skip connection, then a
+    /// stride-2 transposed convolution.
+    fn up_path(
+        unet: &nn::Path<'_>,
+        cfg: &NetConfig,
+        dims: &[i64],
+        kga: (i64, i64, Activation),
+        film_channels: &mut Vec<i64>,
+    ) -> Vec<UpLevel> {
+        let levels = cfg.down_dims.len();
+        let mut up = Vec::new();
+        for (j, i) in (1..levels).rev().enumerate() {
+            let (din, dout) = (dims[i], dims[i + 1]);
+            let lp = unet / "up" / j;
+            let c = nn::ConvTransposeConfig {
+                stride: 2,
+                padding: 1,
+                ..Default::default()
+            };
+            let blocks = (0..cfg.blocks_per_level)
+                .map(|b| {
+                    let cin = if b == 0 { 2 * dout } else { din };
+                    ResBlock::new(&lp / format!("res{b}"), cin, din, kga, film_channels)
+                })
+                .collect();
+            up.push(UpLevel {
+                blocks,
+                up: nn::conv_transpose1d(&lp / "upsample", din, din, 4, c),
+            });
+        }
+        up
     }
 
     /// The architecture this network was built with.

@@ -43,20 +43,42 @@ pub const DEFAULT_MODEL_DIR: &str = "models/human2nav-cfm";
 pub enum PlannerError {
     /// A planner configuration file could not be read or parsed.
     #[error("{path}: {message}")]
-    Config { path: PathBuf, message: String },
+    Config {
+        /// The file or folder.
+        path: PathBuf,
+        /// What went wrong, in one line.
+        message: String,
+    },
     /// A configuration value is out of range; `field` is its TOML path.
     #[error("invalid planner setting `{field}`: {message}")]
-    Setting { field: String, message: String },
+    Setting {
+        /// The setting's TOML path.
+        field: String,
+        /// What went wrong, in one line.
+        message: String,
+    },
     /// The robot profile could not be loaded.
     #[error("robot profile {path}: {message}")]
-    Profile { path: PathBuf, message: String },
+    Profile {
+        /// The file or folder.
+        path: PathBuf,
+        /// What went wrong, in one line.
+        message: String,
+    },
     /// A plugin constraint term of the profile could not be instantiated.
     #[error("robot profile {path}: plugin constraint: {message}")]
-    Plugin { path: PathBuf, message: String },
+    Plugin {
+        /// The file or folder.
+        path: PathBuf,
+        /// What went wrong, in one line.
+        message: String,
+    },
     /// The model folder could not be loaded.
     #[error("model {path}: {source}")]
     Model {
+        /// The file or folder.
         path: PathBuf,
+        /// Why the model could not be loaded.
         #[source]
         source: CfmError,
     },
@@ -427,9 +449,13 @@ impl RobotPlanner {
 pub struct LatencyStats {
     /// Timed calls.
     pub calls: usize,
+    /// Median wall time (ms).
     pub p50_ms: f64,
+    /// 95th percentile wall time (ms).
     pub p95_ms: f64,
+    /// Mean wall time (ms).
     pub mean_ms: f64,
+    /// Slowest call (ms).
     pub max_ms: f64,
 }
 
@@ -495,14 +521,17 @@ pub fn measure_latency<P: Planner + ?Sized>(
 /// Calls and wall time spent inside a flow model, accumulated by [`TimedModel`].
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FlowCallStats {
-    /// Calls of [`FlowModel::velocity`] and their total time (s).
+    /// Calls of [`FlowModel::velocity`].
     pub velocity_calls: u64,
+    /// Total time inside [`FlowModel::velocity`] (s).
     pub velocity_s: f64,
-    /// Calls of [`FlowModel::velocity_vjp`] and their total time (s).
+    /// Calls of [`FlowModel::velocity_vjp`].
     pub vjp_calls: u64,
+    /// Total time inside [`FlowModel::velocity_vjp`] (s).
     pub vjp_s: f64,
-    /// Trajectories passed through the network by velocity and VJP calls.
+    /// Trajectories passed through the network by velocity calls.
     pub velocity_rows: u64,
+    /// Trajectories passed through the network by VJP calls.
     pub vjp_rows: u64,
 }
 

@@ -40,9 +40,13 @@ pub trait TrainingSample {
 /// A self-contained training example (tests, synthetic data).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Example {
+    /// The `[3, H, W]` BEV raster.
     pub bev: Vec<f32>,
+    /// Goal `[x, y]`, ego frame, metres.
     pub goal: [f64; 2],
+    /// Ego velocity `[v_x, v_y]`, ego frame, m/s.
     pub velocity: [f64; 2],
+    /// The future poses, ego frame, without the current (identity) pose.
     pub future: Vec<Pose2>,
 }
 
@@ -194,10 +198,13 @@ pub struct TrainOptions {
     pub lr_min: f64,
     /// Linear warm-up steps. Default 500.
     pub warmup_steps: u64,
-    /// AdamW `β1, β2, ε` and decoupled weight decay. Defaults 0.9, 0.999, 1e-8, 1e-4.
+    /// AdamW `β1`. Default 0.9.
     pub beta1: f64,
+    /// AdamW `β2`. Default 0.999.
     pub beta2: f64,
+    /// AdamW `ε`. Default 1e-8.
     pub eps: f64,
+    /// AdamW's decoupled weight decay. Default 1e-4.
     pub weight_decay: f64,
     /// Gradient clipping by global norm. Default 1.0.
     pub grad_clip: f64,

@@ -161,7 +161,9 @@ pub const H2N_KIND_PLANNER: u32 = 3;
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct H2nStr {
+    /// First byte of the text (may be null when `len == 0`).
     pub ptr: *const u8,
+    /// Length in bytes.
     pub len: usize,
 }
 
@@ -200,8 +202,11 @@ impl H2nStr {
 #[repr(C)]
 #[derive(Debug)]
 pub struct H2nBuffer {
+    /// Where the plugin writes (host-owned; may be null when `capacity == 0`).
     pub data: *mut u8,
+    /// Bytes the host allocated at `data`.
     pub capacity: usize,
+    /// Set by the plugin: the full length of its message, which may exceed `capacity`.
     pub len: usize,
 }
 
@@ -220,6 +225,7 @@ pub struct H2nPluginEntry {
     /// What the plugin provides: `factory_count` entries, each `struct_size` bytes apart (the
     /// `struct_size` of the first; every factory must have the same one).
     pub factories: *const H2nFactory,
+    /// Number of entries at `factories`.
     pub factory_count: usize,
     /// Factory lookup by kind and name (returns null when there is none). **Optional** (may be
     /// null): this host looks factories up in the validated `factories` array and does not call
@@ -256,13 +262,22 @@ unsafe impl Sync for H2nFactory {}
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct H2nLimits {
+    /// Largest forward speed (m/s).
     pub v_max: f64,
+    /// Largest reverse speed (m/s, a positive number).
     pub v_reverse_max: f64,
+    /// Largest longitudinal acceleration (m/s², braking too).
     pub a_max: f64,
+    /// Largest yaw rate (rad/s).
     pub omega_max: f64,
+    /// Largest curvature (1/m); read only when `has_kappa_max == 1`.
     pub kappa_max: f64,
+    /// Largest body-frame lateral speed (m/s): a small slip tolerance for non-holonomic robots,
+    /// the real sideways limit for omnidirectional ones.
     pub lateral_speed_max: f64,
+    /// 1 when `kappa_max` applies, 0 when the robot has no curvature limit.
     pub has_kappa_max: u32,
+    /// Padding, always 0.
     pub reserved: u32,
 }
 
@@ -270,10 +285,15 @@ pub struct H2nLimits {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct H2nGains {
+    /// Proportional gain on the along-track position error (1/s).
     pub k_x: f64,
+    /// Proportional gain on the cross-track position error (see [`human2nav_core::ControllerGains::k_y`]).
     pub k_y: f64,
+    /// Proportional gain on the heading error (1/s).
     pub k_theta: f64,
+    /// Derivative (velocity feed-forward error) gain, dimensionless.
     pub k_d: f64,
+    /// Look-ahead time along the plan (s).
     pub lookahead: f64,
 }
 
@@ -290,8 +310,11 @@ pub struct H2nCreateArgs {
     /// 1 when `limits`, `gains` and `footprint_radius` describe the robot the instance serves,
     /// 0 when there is no robot context (e.g. `plugin inspect`, a stand-alone constraint).
     pub has_robot: u32,
+    /// Padding, always 0.
     pub reserved: u32,
+    /// The robot's hard limits (meaningful when `has_robot == 1`).
     pub limits: H2nLimits,
+    /// The robot's tracking-controller gains (meaningful when `has_robot == 1`).
     pub gains: H2nGains,
     /// Footprint radius of the robot (m).
     pub footprint_radius: f64,
@@ -302,7 +325,9 @@ pub struct H2nCreateArgs {
 #[repr(C)]
 #[derive(Debug)]
 pub struct H2nObject {
+    /// The plugin's instance, passed back to every vtable function.
     pub instance: *mut c_void,
+    /// The kind's vtable (`H2nConstraintVTable`, `H2nEmbodimentVTable` or `H2nPlannerVTable`).
     pub vtable: *const c_void,
 }
 
@@ -310,8 +335,11 @@ pub struct H2nObject {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct H2nPose {
+    /// Position x (m).
     pub x: f64,
+    /// Position y (m).
     pub y: f64,
+    /// Heading (rad).
     pub theta: f64,
 }
 
@@ -319,8 +347,11 @@ pub struct H2nPose {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct H2nTwist {
+    /// Forward speed (m/s).
     pub vx: f64,
+    /// Lateral speed, to the left (m/s).
     pub vy: f64,
+    /// Yaw rate, counter-clockwise (rad/s).
     pub omega: f64,
 }
 
@@ -329,11 +360,17 @@ pub struct H2nTwist {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct H2nAgent {
+    /// The agent's identity, stable across calls.
     pub id: u64,
+    /// Current position `[x, y]` (m).
     pub position: [f64; 2],
+    /// Current velocity `[v_x, v_y]` (m/s).
     pub velocity: [f64; 2],
+    /// Body radius (m).
     pub radius: f64,
+    /// Past positions, `2·history_len` doubles, oldest first (may be null when `history_len == 0`).
     pub history: *const f64,
+    /// Number of past positions at `history`.
     pub history_len: usize,
 }
 
@@ -342,10 +379,15 @@ pub struct H2nAgent {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct H2nTrajBatch {
+    /// The poses, `[batch, horizon, dim]` doubles.
     pub data: *const f64,
+    /// Doubles at `data`: `batch·horizon·dim`.
     pub len: usize,
+    /// Number of trajectories.
     pub batch: usize,
+    /// Poses per trajectory.
     pub horizon: usize,
+    /// Values per pose, always 3 (`x, y, θ`).
     pub dim: usize,
 }
 
@@ -353,7 +395,9 @@ pub struct H2nTrajBatch {
 #[repr(C)]
 #[derive(Debug)]
 pub struct H2nF64Out {
+    /// Where the callee writes (host-owned).
     pub data: *mut f64,
+    /// Doubles at `data`.
     pub len: usize,
 }
 
@@ -363,12 +407,17 @@ pub struct H2nF64Out {
 pub struct H2nConstraintContext {
     /// `sizeof(H2nConstraintContext)` as the host was compiled.
     pub struct_size: u32,
+    /// Padding, always 0.
     pub reserved: u32,
     /// Time between poses (s).
     pub dt: f64,
+    /// The robot's hard limits.
     pub limits: H2nLimits,
+    /// The robot's body-frame velocity at the first pose.
     pub initial_velocity: H2nTwist,
+    /// The other agents, `agent_count` of them (may be null when `agent_count == 0`).
     pub agents: *const H2nAgent,
+    /// Number of agents at `agents`.
     pub agent_count: usize,
 }
 
@@ -378,6 +427,7 @@ pub struct H2nConstraintContext {
 pub struct H2nConstraintVTable {
     /// `sizeof(H2nConstraintVTable)` as the plugin was compiled.
     pub struct_size: u32,
+    /// Padding, always 0.
     pub reserved: u32,
     /// Frees the instance. Called exactly once. **Required.**
     pub destroy: Option<DestroyFn>,
@@ -396,7 +446,9 @@ pub struct H2nConstraintVTable {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct H2nRobotState {
+    /// The robot's pose (world frame).
     pub pose: H2nPose,
+    /// The body-frame velocity executed during the last step.
     pub velocity: H2nTwist,
 }
 
@@ -404,9 +456,13 @@ pub struct H2nRobotState {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct H2nPlanView {
+    /// Time of the first pose (s).
     pub t0: f64,
+    /// Time between poses (s).
     pub dt: f64,
+    /// The poses, `pose_count` of them.
     pub poses: *const H2nPose,
+    /// Number of poses at `poses`.
     pub pose_count: usize,
 }
 
@@ -416,6 +472,7 @@ pub struct H2nPlanView {
 pub struct H2nEmbodimentVTable {
     /// `sizeof(H2nEmbodimentVTable)` as the plugin was compiled.
     pub struct_size: u32,
+    /// Padding, always 0.
     pub reserved: u32,
     /// **Required** (as in [`H2nConstraintVTable`]).
     pub destroy: Option<DestroyFn>,
@@ -440,12 +497,19 @@ pub struct H2nEmbodimentVTable {
 pub struct H2nObservation {
     /// `sizeof(H2nObservation)` as the host was compiled.
     pub struct_size: u32,
+    /// Padding, always 0.
     pub reserved: u32,
+    /// Time of the observation (s).
     pub time: f64,
+    /// The robot's pose (world frame).
     pub ego: H2nPose,
+    /// The robot's body-frame velocity.
     pub ego_velocity: H2nTwist,
+    /// The goal position `[x, y]` (world frame, m).
     pub goal: [f64; 2],
+    /// The other agents, `agent_count` of them (may be null when `agent_count == 0`).
     pub agents: *const H2nAgent,
+    /// Number of agents at `agents`.
     pub agent_count: usize,
 }
 
@@ -456,14 +520,21 @@ pub struct H2nObservation {
 #[repr(C)]
 #[derive(Debug)]
 pub struct H2nPlanOut {
+    /// Written by the plugin: time of the first pose (s).
     pub t0: f64,
+    /// Written by the plugin: time between poses (s).
     pub dt: f64,
+    /// Host-owned room for `capacity` poses.
     pub poses: *mut H2nPose,
+    /// Poses the host allocated at `poses`.
     pub capacity: usize,
+    /// Written by the plugin: the plan's length (may exceed `capacity`).
     pub len: usize,
     /// 1 when the planner fell back to its safe behaviour (stop in place).
     pub fallback: u32,
+    /// Padding, always 0.
     pub reserved: u32,
+    /// Host-owned buffer for an optional one-line diagnostic.
     pub note: H2nBuffer,
 }
 
@@ -473,6 +544,7 @@ pub struct H2nPlanOut {
 pub struct H2nPlannerVTable {
     /// `sizeof(H2nPlannerVTable)` as the plugin was compiled.
     pub struct_size: u32,
+    /// Padding, always 0.
     pub reserved: u32,
     /// **Required** (as in [`H2nConstraintVTable`]).
     pub destroy: Option<DestroyFn>,
@@ -493,7 +565,9 @@ pub struct H2nPlannerVTable {
 /// Size and field offsets of one ABI struct.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct StructLayout {
+    /// The struct's name as in the C header.
     pub name: &'static str,
+    /// `sizeof` the struct (bytes).
     pub size: usize,
     /// `(field, offset)` in declaration order.
     pub fields: Vec<(&'static str, usize)>,
@@ -501,6 +575,8 @@ pub struct StructLayout {
 
 /// The layout of every ABI struct as this compiler lays them out; the C plugin reports the same
 /// table from its compiler and the tests compare the two.
+// One line per struct: a table, kept unformatted so that it reads as one.
+#[rustfmt::skip]
 pub fn layout() -> Vec<StructLayout> {
     use std::mem::{offset_of, size_of};
     macro_rules! entry {
@@ -514,138 +590,33 @@ pub fn layout() -> Vec<StructLayout> {
     }
     vec![
         entry!(H2nStr { ptr, len }),
-        entry!(H2nBuffer {
-            data,
-            capacity,
-            len
-        }),
-        entry!(H2nPluginEntry {
-            abi_version,
-            struct_size,
-            name,
-            version,
-            factories,
-            factory_count,
-            find_factory
-        }),
-        entry!(H2nFactory {
-            struct_size,
-            kind,
-            name,
-            description,
-            create
-        }),
-        entry!(H2nLimits {
-            v_max,
-            v_reverse_max,
-            a_max,
-            omega_max,
-            kappa_max,
-            lateral_speed_max,
-            has_kappa_max,
-            reserved
-        }),
-        entry!(H2nGains {
-            k_x,
-            k_y,
-            k_theta,
-            k_d,
-            lookahead
-        }),
-        entry!(H2nCreateArgs {
-            struct_size,
-            kind,
-            config,
-            has_robot,
-            reserved,
-            limits,
-            gains,
-            footprint_radius
-        }),
+        entry!(H2nBuffer { data, capacity, len }),
+        entry!(H2nPluginEntry { abi_version, struct_size, name, version, factories, factory_count,
+            find_factory }),
+        entry!(H2nFactory { struct_size, kind, name, description, create }),
+        entry!(H2nLimits { v_max, v_reverse_max, a_max, omega_max, kappa_max, lateral_speed_max,
+            has_kappa_max, reserved }),
+        entry!(H2nGains { k_x, k_y, k_theta, k_d, lookahead }),
+        entry!(H2nCreateArgs { struct_size, kind, config, has_robot, reserved, limits, gains,
+            footprint_radius }),
         entry!(H2nObject { instance, vtable }),
         entry!(H2nPose { x, y, theta }),
         entry!(H2nTwist { vx, vy, omega }),
-        entry!(H2nAgent {
-            id,
-            position,
-            velocity,
-            radius,
-            history,
-            history_len
-        }),
-        entry!(H2nTrajBatch {
-            data,
-            len,
-            batch,
-            horizon,
-            dim
-        }),
+        entry!(H2nAgent { id, position, velocity, radius, history, history_len }),
+        entry!(H2nTrajBatch { data, len, batch, horizon, dim }),
         entry!(H2nF64Out { data, len }),
-        entry!(H2nConstraintContext {
-            struct_size,
-            reserved,
-            dt,
-            limits,
-            initial_velocity,
-            agents,
-            agent_count
-        }),
-        entry!(H2nConstraintVTable {
-            struct_size,
-            reserved,
-            destroy,
-            last_error,
-            name,
-            evaluate
-        }),
+        entry!(H2nConstraintContext { struct_size, reserved, dt, limits, initial_velocity, agents,
+            agent_count }),
+        entry!(H2nConstraintVTable { struct_size, reserved, destroy, last_error, name, evaluate }),
         entry!(H2nRobotState { pose, velocity }),
-        entry!(H2nPlanView {
-            t0,
-            dt,
-            poses,
-            pose_count
-        }),
-        entry!(H2nEmbodimentVTable {
-            struct_size,
-            reserved,
-            destroy,
-            last_error,
-            name,
-            holonomic,
-            saturate,
-            step,
-            track
-        }),
-        entry!(H2nObservation {
-            struct_size,
-            reserved,
-            time,
-            ego,
-            ego_velocity,
-            goal,
-            agents,
-            agent_count
-        }),
-        entry!(H2nPlanOut {
-            t0,
-            dt,
-            poses,
-            capacity,
-            len,
-            fallback,
-            reserved,
-            note
-        }),
-        entry!(H2nPlannerVTable {
-            struct_size,
-            reserved,
-            destroy,
-            last_error,
-            name,
-            reset,
-            plan,
-            last_plan
-        }),
+        entry!(H2nPlanView { t0, dt, poses, pose_count }),
+        entry!(H2nEmbodimentVTable { struct_size, reserved, destroy, last_error, name, holonomic,
+            saturate, step, track }),
+        entry!(H2nObservation { struct_size, reserved, time, ego, ego_velocity, goal, agents,
+            agent_count }),
+        entry!(H2nPlanOut { t0, dt, poses, capacity, len, fallback, reserved, note }),
+        entry!(H2nPlannerVTable { struct_size, reserved, destroy, last_error, name, reset, plan,
+            last_plan }),
     ]
 }
 

@@ -882,32 +882,45 @@ mod tests {
         assert_eq!(status, H2N_CONFIG);
     }
 
-    #[test]
-    fn evaluate_checks_pointers_and_lengths() {
-        let (status, obj, _) = create(&args(""));
-        assert_eq!(status, H2N_OK);
-        let vt = vtable(&obj);
-        // SAFETY: live instance; the returned view lives as long as it.
-        assert_eq!(
-            unsafe { (vt.name.expect("name"))(obj.instance).as_str() },
-            Ok("sum_x")
-        );
-        let data = [1.0, 0.0, 0.0, 2.0, 0.0, 0.0];
-        let good = H2nTrajBatch {
-            data: data.as_ptr(),
-            len: 6,
-            batch: 1,
-            horizon: 2,
-            dim: 3,
-        };
-        let ctx = context();
-        let mut cost = [0.0];
-        let mut grad = [0.0; 6];
-        let eval = |batch: *const H2nTrajBatch,
-                    ctx: *const H2nConstraintContext,
-                    cost: &mut [f64],
-                    cost_len: usize,
-                    grad: &mut [f64]| {
+    /// A `sum_x` instance created through the shim and called through its vtable; destroyed
+    /// (and a null instance destroyed, a no-op) when dropped.
+    struct SumXInstance {
+        obj: H2nObject,
+        vt: &'static H2nConstraintVTable,
+        data: [f64; 6],
+    }
+
+    impl SumXInstance {
+        fn new() -> Self {
+            let (status, obj, _) = create(&args(""));
+            assert_eq!(status, H2N_OK);
+            let vt = vtable(&obj);
+            Self {
+                obj,
+                vt,
+                data: [1.0, 0.0, 0.0, 2.0, 0.0, 0.0],
+            }
+        }
+
+        /// One trajectory of two poses over `self.data`.
+        fn good(&self) -> H2nTrajBatch {
+            H2nTrajBatch {
+                data: self.data.as_ptr(),
+                len: 6,
+                batch: 1,
+                horizon: 2,
+                dim: 3,
+            }
+        }
+
+        fn eval(
+            &self,
+            batch: *const H2nTrajBatch,
+            ctx: *const H2nConstraintContext,
+            cost: &mut [f64],
+            cost_len: usize,
+            grad: &mut [f64],
+        ) -> H2nStatus {
             let c = H2nF64Out {
                 data: cost.as_mut_ptr(),
                 len: cost_len,
@@ -917,32 +930,54 @@ mod tests {
                 len: grad.len(),
             };
             // SAFETY: live instance; pointers valid or deliberately null.
-            unsafe { (vt.evaluate.expect("evaluate"))(obj.instance, batch, ctx, c, g) }
-        };
-        assert_eq!(eval(&good, &ctx, &mut cost, 1, &mut grad), H2N_OK);
-        assert_eq!((cost, grad), ([3.0], [1.0, 0.0, 0.0, 1.0, 0.0, 0.0]));
+            unsafe { (self.vt.evaluate.expect("evaluate"))(self.obj.instance, batch, ctx, c, g) }
+        }
 
+        /// A good call still succeeds: the refused calls before did not poison the instance.
+        fn assert_still_usable(&self) {
+            let (mut cost, mut grad) = ([0.0], [0.0; 6]);
+            assert_eq!(
+                self.eval(&self.good(), &context(), &mut cost, 1, &mut grad),
+                H2N_OK
+            );
+            assert_eq!((cost, grad), ([3.0], [1.0, 0.0, 0.0, 1.0, 0.0, 0.0]));
+        }
+    }
+
+    impl Drop for SumXInstance {
+        fn drop(&mut self) {
+            // SAFETY: destroyed exactly once; null is a no-op.
+            unsafe {
+                (self.vt.destroy.expect("destroy"))(self.obj.instance);
+                (self.vt.destroy.expect("destroy"))(std::ptr::null_mut());
+            }
+        }
+    }
+
+    #[test]
+    fn evaluate_computes_through_the_shim() {
+        let sum = SumXInstance::new();
+        // SAFETY: live instance; the returned view lives as long as it.
         assert_eq!(
-            eval(std::ptr::null(), &ctx, &mut cost, 1, &mut grad),
-            H2N_INVALID_ARGUMENT
+            unsafe { (sum.vt.name.expect("name"))(sum.obj.instance).as_str() },
+            Ok("sum_x")
         );
-        assert!(last_error_of(&obj).contains("batch is null"));
+        sum.assert_still_usable();
+    }
+
+    #[test]
+    fn evaluate_checks_the_batch() {
+        let sum = SumXInstance::new();
+        let good = sum.good();
+        let ctx = context();
+        let (mut cost, mut grad) = ([0.0], [0.0; 6]);
+        let mut eval = |batch: *const H2nTrajBatch| sum.eval(batch, &ctx, &mut cost, 1, &mut grad);
+        assert_eq!(eval(std::ptr::null()), H2N_INVALID_ARGUMENT);
+        assert!(last_error_of(&sum.obj).contains("batch is null"));
+        assert_eq!(eval(&H2nTrajBatch { dim: 2, ..good }), H2N_INVALID_ARGUMENT);
+        assert_eq!(eval(&H2nTrajBatch { len: 5, ..good }), H2N_INVALID_ARGUMENT);
         assert_eq!(
-            eval(&good, std::ptr::null(), &mut cost, 1, &mut grad),
-            H2N_INVALID_ARGUMENT
-        );
-        let two_d = H2nTrajBatch { dim: 2, ..good };
-        assert_eq!(
-            eval(&two_d, &ctx, &mut cost, 1, &mut grad),
-            H2N_INVALID_ARGUMENT
-        );
-        let short = H2nTrajBatch { len: 5, ..good };
-        assert_eq!(
-            eval(&short, &ctx, &mut cost, 1, &mut grad),
-            H2N_INVALID_ARGUMENT
-        );
-        assert_eq!(
-            last_error_of(&obj),
+            last_error_of(&sum.obj),
             "5 values cannot be 1 trajectories × 2 poses × 3"
         );
         let overflow = H2nTrajBatch {
@@ -950,41 +985,54 @@ mod tests {
             horizon: 2,
             ..good
         };
-        assert_eq!(
-            eval(&overflow, &ctx, &mut cost, 1, &mut grad),
-            H2N_INVALID_ARGUMENT
-        );
+        assert_eq!(eval(&overflow), H2N_INVALID_ARGUMENT);
         let null_data = H2nTrajBatch {
             data: std::ptr::null(),
             ..good
         };
-        assert_eq!(
-            eval(&null_data, &ctx, &mut cost, 1, &mut grad),
-            H2N_INVALID_ARGUMENT
-        );
+        assert_eq!(eval(&null_data), H2N_INVALID_ARGUMENT);
         assert!(
-            last_error_of(&obj).contains("batch data is null"),
+            last_error_of(&sum.obj).contains("batch data is null"),
             "{}",
-            last_error_of(&obj)
+            last_error_of(&sum.obj)
+        );
+        sum.assert_still_usable();
+    }
+
+    #[test]
+    fn evaluate_checks_the_outputs_the_context_and_the_instance() {
+        let sum = SumXInstance::new();
+        let good = sum.good();
+        let ctx = context();
+        let (mut cost, mut grad) = ([0.0], [0.0; 6]);
+        assert_eq!(
+            sum.eval(&good, std::ptr::null(), &mut cost, 1, &mut grad),
+            H2N_INVALID_ARGUMENT
         );
         let mut cost2 = [0.0; 2];
         assert_eq!(
-            eval(&good, &ctx, &mut cost2, 2, &mut grad),
+            sum.eval(&good, &ctx, &mut cost2, 2, &mut grad),
             H2N_INVALID_ARGUMENT
         );
-        assert_eq!(last_error_of(&obj), "cost has 2 entries for 1 trajectories");
+        assert_eq!(
+            last_error_of(&sum.obj),
+            "cost has 2 entries for 1 trajectories"
+        );
         let mut grad5 = [0.0; 5];
         assert_eq!(
-            eval(&good, &ctx, &mut cost, 1, &mut grad5),
+            sum.eval(&good, &ctx, &mut cost, 1, &mut grad5),
             H2N_INVALID_ARGUMENT
         );
-        assert_eq!(last_error_of(&obj), "gradient has 5 entries, the batch 6");
+        assert_eq!(
+            last_error_of(&sum.obj),
+            "gradient has 5 entries, the batch 6"
+        );
         let old_ctx = H2nConstraintContext {
             struct_size: 16,
             ..context()
         };
         assert_eq!(
-            eval(&good, &old_ctx, &mut cost, 1, &mut grad),
+            sum.eval(&good, &old_ctx, &mut cost, 1, &mut grad),
             H2N_INVALID_ARGUMENT
         );
         let null_agents = H2nConstraintContext {
@@ -992,11 +1040,10 @@ mod tests {
             ..context()
         };
         assert_eq!(
-            eval(&good, &null_agents, &mut cost, 1, &mut grad),
+            sum.eval(&good, &null_agents, &mut cost, 1, &mut grad),
             H2N_INVALID_ARGUMENT
         );
-        // None of these poisoned the instance.
-        assert_eq!(eval(&good, &ctx, &mut cost, 1, &mut grad), H2N_OK);
+        sum.assert_still_usable();
         // A null instance is refused too.
         let c = H2nF64Out {
             data: cost.as_mut_ptr(),
@@ -1007,14 +1054,10 @@ mod tests {
             len: 6,
         };
         // SAFETY: a null instance is part of what the shim must survive.
-        let status =
-            unsafe { (vt.evaluate.expect("evaluate"))(std::ptr::null_mut(), &good, &ctx, c, g) };
+        let status = unsafe {
+            (sum.vt.evaluate.expect("evaluate"))(std::ptr::null_mut(), &good, &ctx, c, g)
+        };
         assert_eq!(status, H2N_INVALID_ARGUMENT);
-        // SAFETY: destroyed exactly once; null is a no-op.
-        unsafe {
-            (vt.destroy.expect("destroy"))(obj.instance);
-            (vt.destroy.expect("destroy"))(std::ptr::null_mut());
-        }
     }
 
     /// An embodiment and a planner whose methods must not run: a call panics.

@@ -44,8 +44,11 @@ use std::time::Duration;
 /// One factory a library provides.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FactoryInfo {
+    /// What the factory creates: a constraint term, an embodiment or a planner.
     pub kind: PluginKind,
+    /// The name robot profiles and benchmark configs refer to (`plugin = "..."`).
     pub name: String,
+    /// The factory's one-line description, for `human2nav plugin inspect`.
     pub description: String,
 }
 
@@ -198,12 +201,38 @@ impl PluginLibrary {
         raw: *const H2nPluginEntry,
         checks: &mut Vec<Check>,
     ) -> Result<PluginLibrary, PluginError> {
-        let malformed = |message: String| PluginError::Malformed {
+        // SAFETY: the caller's contract on `raw`.
+        let (entry, found) = unsafe { Self::entry_table(path, raw, checks) }?;
+        // SAFETY: `entry` is a checked v1 table; its strings are readable for their length.
+        let (name, version) = unsafe { Self::entry_strings(path, entry, checks) }?;
+        // SAFETY: the caller's contract on the factory array.
+        let (factories, creates) = unsafe { Self::factory_array(path, entry, checks) }?;
+        Ok(PluginLibrary {
             path: path.to_path_buf(),
-            message,
-        };
+            abi_version: found,
+            name,
+            version,
+            factories,
+            creates,
+            checks: Vec::new(),
+        })
+    }
+
+    /// The entry table behind `raw` once its pointer, ABI version and size are checked, and
+    /// the ABI version found.
+    ///
+    /// # Safety
+    /// As [`Self::from_entry`].
+    unsafe fn entry_table(
+        path: &Path,
+        raw: *const H2nPluginEntry,
+        checks: &mut Vec<Check>,
+    ) -> Result<(&'static H2nPluginEntry, u32), PluginError> {
         if raw.is_null() || !raw.is_aligned() {
-            let e = malformed("the entry function returned a null or misaligned table".into());
+            let e = PluginError::Malformed {
+                path: path.to_path_buf(),
+                message: "the entry function returned a null or misaligned table".into(),
+            };
             return Err(failed(checks, "entry table", e));
         }
         // SAFETY: every ABI version starts the entry table with a `u32` ABI version, so this
@@ -229,7 +258,22 @@ impl PluginLibrary {
         // SAFETY: the version matches and the table is at least as large as a v1 table, so
         // `raw` points to a v1 entry table in static memory; every function slot is an
         // `Option`, valid for any pointer value, null included.
-        let entry: &'static H2nPluginEntry = unsafe { &*raw };
+        Ok((unsafe { &*raw }, found))
+    }
+
+    /// The plugin's name (not empty) and version from a checked entry table.
+    ///
+    /// # Safety
+    /// The table's strings are readable for their (capped) lengths.
+    unsafe fn entry_strings(
+        path: &Path,
+        entry: &H2nPluginEntry,
+        checks: &mut Vec<Check>,
+    ) -> Result<(String, String), PluginError> {
+        let malformed = |message: String| PluginError::Malformed {
+            path: path.to_path_buf(),
+            message,
+        };
         // SAFETY: strings of the table, readable for their length (capped by `plugin_str`).
         let name = unsafe { plugin_str(entry.name, MAX_NAME_BYTES) }
             .map_err(|m| malformed(format!("the plugin name {m}")))
@@ -248,9 +292,11 @@ impl PluginLibrary {
         checks.push(Check::pass(
             "entry table",
             format!(
-                "{size} bytes (this ABI needs {min}, limit {MAX_TABLE_BYTES}); name and version \
+                "{} bytes (this ABI needs {}, limit {MAX_TABLE_BYTES}); name and version \
                  UTF-8 within {MAX_NAME_BYTES} bytes; find_factory {} (optional, not called: \
                  factories are looked up in the checked array)",
+                entry.struct_size,
+                std::mem::size_of::<H2nPluginEntry>(),
                 if entry.find_factory.is_some() {
                     "set"
                 } else {
@@ -258,7 +304,20 @@ impl PluginLibrary {
                 }
             ),
         ));
+        Ok((name, version))
+    }
 
+    /// Every factory of a checked entry table: its count (capped), the array's pointer and
+    /// stride, then each factory ([`Self::factory`]).
+    ///
+    /// # Safety
+    /// The factory array holds `factory_count` (capped) factories of the declared stride, in
+    /// static memory.
+    unsafe fn factory_array(
+        path: &Path,
+        entry: &H2nPluginEntry,
+        checks: &mut Vec<Check>,
+    ) -> Result<(Vec<FactoryInfo>, Vec<CreateFn>), PluginError> {
         let count = entry.factory_count;
         if count > MAX_FACTORIES {
             let e = PluginError::Cap {
@@ -271,114 +330,131 @@ impl PluginLibrary {
         }
         let mut factories = Vec::with_capacity(count);
         let mut creates = Vec::with_capacity(count);
-        if count > 0 {
-            if entry.factories.is_null() || !entry.factories.is_aligned() {
-                let e = malformed("the factory table is null or misaligned".into());
-                return Err(failed(checks, "factory table", e));
-            }
-            // SAFETY: non-null and aligned; every factory starts with its `u32` size.
-            let stride = unsafe { entry.factories.cast::<u32>().read() };
-            let fmin = std::mem::size_of::<H2nFactory>();
-            table_size(path, "factory table entry 0", stride, fmin)
-                .map_err(|e| failed(checks, "factory table", e))?;
-            let stride = stride as usize;
-            if stride % std::mem::align_of::<H2nFactory>() != 0 {
-                let e = malformed(format!(
-                    "factories are {stride} bytes apart, not a multiple of their alignment {}",
-                    std::mem::align_of::<H2nFactory>()
-                ));
-                return Err(failed(checks, "factory table", e));
-            }
-            checks.push(Check::pass(
-                "factory table",
-                format!(
-                    "{count} factories (limit {MAX_FACTORIES}), {stride} bytes apart (this ABI \
-                     needs {fmin})"
-                ),
-            ));
-            for i in 0..count {
-                // SAFETY: within the `count · stride` bytes of the factory array (both capped);
-                // the stride is a multiple of the alignment, so each factory is aligned.
-                let fp = unsafe {
-                    entry
-                        .factories
-                        .cast::<u8>()
-                        .add(i * stride)
-                        .cast::<H2nFactory>()
-                };
-                let item = format!("factory {i}");
-                // SAFETY: as above; a factory starts with its `u32` size.
-                let fsize = unsafe { fp.cast::<u32>().read() };
-                if fsize as usize != stride {
-                    let e = malformed(format!(
-                        "factory {i} is {fsize} bytes, factory 0 is {stride} (the entries of \
-                         one array have one size)"
-                    ));
-                    return Err(failed(checks, &item, e));
-                }
-                // SAFETY: aligned, at least a v1 factory, static; slots are `Option`s.
-                let f: &'static H2nFactory = unsafe { &*fp };
-                let kind = PluginKind::from_code(f.kind);
-                // SAFETY: strings of the factory, readable for their (capped) length.
-                let fname = unsafe { plugin_str(f.name, MAX_NAME_BYTES) }
-                    .map_err(|m| malformed(format!("factory {i}: the name {m}")))
-                    .and_then(|n| {
-                        if n.is_empty() {
-                            Err(malformed(format!("factory {i}: the name is empty")))
-                        } else {
-                            Ok(n.to_owned())
-                        }
-                    })
-                    .map_err(|e| failed(checks, &item, e))?;
-                let item = format!("factory {i} ({kind} `{fname}`)");
-                // SAFETY: as above.
-                let description = unsafe { plugin_str(f.description, MAX_DESCRIPTION_BYTES) }
-                    .map(str::to_owned)
-                    .map_err(|m| {
-                        let e = malformed(format!("factory {i}: the description {m}"));
-                        failed(checks, &item, e)
-                    })?;
-                let Some(create) = f.create else {
-                    let e = PluginError::NullSlot {
-                        path: path.to_path_buf(),
-                        table: format!("factory table entry {i} ({kind} `{fname}`)"),
-                        slot: "create",
-                    };
-                    return Err(failed(checks, &item, e));
-                };
-                if factories
-                    .iter()
-                    .any(|o: &FactoryInfo| o.kind == kind && o.name == fname)
-                {
-                    let e = malformed(format!("factory {i} repeats {kind} `{fname}`"));
-                    return Err(failed(checks, &item, e));
-                }
-                checks.push(Check::pass(
-                    item,
-                    format!(
-                        "create set; name and description UTF-8 within {MAX_NAME_BYTES} and \
-                         {MAX_DESCRIPTION_BYTES} bytes"
-                    ),
-                ));
-                factories.push(FactoryInfo {
-                    kind,
-                    name: fname,
-                    description,
-                });
-                creates.push(create);
-            }
-        } else {
+        if count == 0 {
             checks.push(Check::pass("factory table", "no factories"));
+            return Ok((factories, creates));
         }
-        Ok(PluginLibrary {
+        let malformed = |message: String| PluginError::Malformed {
             path: path.to_path_buf(),
-            abi_version: found,
-            name,
-            version,
-            factories,
-            creates,
-            checks: Vec::new(),
-        })
+            message,
+        };
+        if entry.factories.is_null() || !entry.factories.is_aligned() {
+            let e = malformed("the factory table is null or misaligned".into());
+            return Err(failed(checks, "factory table", e));
+        }
+        // SAFETY: non-null and aligned; every factory starts with its `u32` size.
+        let stride = unsafe { entry.factories.cast::<u32>().read() };
+        let fmin = std::mem::size_of::<H2nFactory>();
+        table_size(path, "factory table entry 0", stride, fmin)
+            .map_err(|e| failed(checks, "factory table", e))?;
+        let stride = stride as usize;
+        if stride % std::mem::align_of::<H2nFactory>() != 0 {
+            let e = malformed(format!(
+                "factories are {stride} bytes apart, not a multiple of their alignment {}",
+                std::mem::align_of::<H2nFactory>()
+            ));
+            return Err(failed(checks, "factory table", e));
+        }
+        checks.push(Check::pass(
+            "factory table",
+            format!(
+                "{count} factories (limit {MAX_FACTORIES}), {stride} bytes apart (this ABI \
+                 needs {fmin})"
+            ),
+        ));
+        for i in 0..count {
+            // SAFETY: within the `count · stride` bytes of the factory array (both capped);
+            // the stride is a multiple of the alignment, so each factory is aligned.
+            let fp = unsafe {
+                entry
+                    .factories
+                    .cast::<u8>()
+                    .add(i * stride)
+                    .cast::<H2nFactory>()
+            };
+            // SAFETY: as above.
+            let (info, create) = unsafe { Self::factory(path, fp, i, stride, &factories, checks) }?;
+            factories.push(info);
+            creates.push(create);
+        }
+        Ok((factories, creates))
+    }
+
+    /// Factory `i` of the array: its size (the array's stride), name (not empty, not a repeat
+    /// of an earlier factory's of the same kind), description and `create` slot (required).
+    ///
+    /// # Safety
+    /// `fp` is aligned and points to `stride` readable bytes of static memory whose strings are
+    /// readable for their (capped) lengths.
+    unsafe fn factory(
+        path: &Path,
+        fp: *const H2nFactory,
+        i: usize,
+        stride: usize,
+        earlier: &[FactoryInfo],
+        checks: &mut Vec<Check>,
+    ) -> Result<(FactoryInfo, CreateFn), PluginError> {
+        let malformed = |message: String| PluginError::Malformed {
+            path: path.to_path_buf(),
+            message,
+        };
+        let item = format!("factory {i}");
+        // SAFETY: the caller's contract; a factory starts with its `u32` size.
+        let fsize = unsafe { fp.cast::<u32>().read() };
+        if fsize as usize != stride {
+            let e = malformed(format!(
+                "factory {i} is {fsize} bytes, factory 0 is {stride} (the entries of \
+                 one array have one size)"
+            ));
+            return Err(failed(checks, &item, e));
+        }
+        // SAFETY: aligned, at least a v1 factory, static; slots are `Option`s.
+        let f: &'static H2nFactory = unsafe { &*fp };
+        let kind = PluginKind::from_code(f.kind);
+        // SAFETY: strings of the factory, readable for their (capped) length.
+        let fname = unsafe { plugin_str(f.name, MAX_NAME_BYTES) }
+            .map_err(|m| malformed(format!("factory {i}: the name {m}")))
+            .and_then(|n| {
+                if n.is_empty() {
+                    Err(malformed(format!("factory {i}: the name is empty")))
+                } else {
+                    Ok(n.to_owned())
+                }
+            })
+            .map_err(|e| failed(checks, &item, e))?;
+        let item = format!("factory {i} ({kind} `{fname}`)");
+        // SAFETY: as above.
+        let description = unsafe { plugin_str(f.description, MAX_DESCRIPTION_BYTES) }
+            .map(str::to_owned)
+            .map_err(|m| {
+                let e = malformed(format!("factory {i}: the description {m}"));
+                failed(checks, &item, e)
+            })?;
+        let Some(create) = f.create else {
+            let e = PluginError::NullSlot {
+                path: path.to_path_buf(),
+                table: format!("factory table entry {i} ({kind} `{fname}`)"),
+                slot: "create",
+            };
+            return Err(failed(checks, &item, e));
+        };
+        if earlier.iter().any(|o| o.kind == kind && o.name == fname) {
+            let e = malformed(format!("factory {i} repeats {kind} `{fname}`"));
+            return Err(failed(checks, &item, e));
+        }
+        checks.push(Check::pass(
+            item,
+            format!(
+                "create set; name and description UTF-8 within {MAX_NAME_BYTES} and \
+                 {MAX_DESCRIPTION_BYTES} bytes"
+            ),
+        ));
+        let info = FactoryInfo {
+            kind,
+            name: fname,
+            description,
+        };
+        Ok((info, create))
     }
 
     /// The library file (canonical path).

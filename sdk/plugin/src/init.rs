@@ -28,13 +28,24 @@ pub struct PluginInit<'a> {
 pub enum InitError {
     /// The configuration is not valid TOML or does not fit the expected types.
     #[error("config: {message}")]
-    Parse { message: String },
+    Parse {
+        /// The TOML parser's message.
+        message: String,
+    },
     /// The configuration names fields the plugin does not know.
     #[error("config: unknown field(s) {fields}")]
-    UnknownField { fields: String },
+    UnknownField {
+        /// The unknown fields, comma-separated.
+        fields: String,
+    },
     /// A configuration value is out of range.
     #[error("config: {field}: {message}")]
-    Invalid { field: String, message: String },
+    Invalid {
+        /// The offending field.
+        field: String,
+        /// What is wrong with its value.
+        message: String,
+    },
     /// The factory needs the robot's limits but was called without a robot.
     #[error("this plugin needs a robot context (limits, gains, footprint) and none was given")]
     NeedsRobot,

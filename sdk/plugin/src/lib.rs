@@ -28,6 +28,8 @@
 //! Why not export Rust trait objects: their layout is not stable across compiler versions, so
 //! a plugin built with another rustc would be undefined behaviour. Only C types cross.
 
+#![warn(missing_docs)]
+
 pub mod abi;
 pub mod deadline;
 mod error;

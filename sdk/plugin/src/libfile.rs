@@ -255,7 +255,9 @@ pub fn check_elf<R: Read + Seek>(r: &mut R, size: u64) -> Result<String, FilePro
     check_elf_layout(r, size, wide, big)
 }
 
-/// Everything after the identification bytes (class and byte order given).
+/// Everything after the identification bytes (class and byte order given): the header, then
+/// the section headers (which may hold the real counts), the program headers and every
+/// segment, then every section.
 fn check_elf_layout<R: Read + Seek>(
     r: &mut R,
     size: u64,
@@ -263,79 +265,168 @@ fn check_elf_layout<R: Read + Seek>(
     big: bool,
 ) -> Result<String, FileProblem> {
     let f = Fields { big };
-    let ehsize: usize = if wide { 64 } else { 52 };
-    let mut h = vec![0u8; ehsize];
-    within(0, ehsize as u64, size, || "ELF header".into())?;
-    read_at(r, 0, &mut h, "ELF header")?;
-    let (e_type, e_machine) = (f.u16(&h, 16), f.u16(&h, 18));
-    let word = |at32: usize, at64: usize| {
-        if wide {
-            f.u64(&h, at64)
-        } else {
-            f.u32(&h, at32)
+    let mut h = ElfHeader::read(r, size, f, wide)?;
+    h.check_kind()?;
+    let sh_size: u64 = if wide { 64 } else { 40 };
+    let sections = read_section_headers(r, size, f, &mut h)?;
+    let (phnum, loads) = check_segments(r, size, f, &h)?;
+    for (i, sh) in sections.chunks_exact(sh_size as usize).enumerate() {
+        let sh_type = f.u32(sh, 4);
+        if sh_type == SHT_NULL || sh_type == SHT_NOBITS {
+            continue;
         }
-    };
-    let (phoff, shoff) = (word(28, 32), word(32, 40));
-    let base = if wide { 52 } else { 40 };
-    let (e_ehsize, phentsize, mut phnum, shentsize, mut shnum) = (
-        f.u16(&h, base),
-        f.u16(&h, base + 2),
-        f.u16(&h, base + 4),
-        f.u16(&h, base + 6),
-        f.u16(&h, base + 8),
-    );
-    if e_type != ET_DYN {
-        let what = match e_type {
-            1 => "a relocatable object (.o)".to_owned(),
-            2 => "an executable".to_owned(),
-            4 => "a core dump".to_owned(),
-            t => format!("an ELF file of type {t}"),
+        let (offset, len) = if wide {
+            (f.u64(sh, 24), f.u64(sh, 32))
+        } else {
+            (f.u32(sh, 16), f.u32(sh, 20))
         };
-        return problem(format!("{what}, not a shared library"));
+        within(offset, len, size, || format!("section {i}"))?;
     }
-    if let Some((code, name)) = host_machine() {
-        if e_machine != code {
+    let e_machine = h.e_machine;
+    let machine = host_machine().map_or_else(|| format!("machine {e_machine}"), |m| m.1.into());
+    Ok(format!(
+        "ELF {}-bit {} shared object, {machine}: {phnum} program headers ({loads} PT_LOAD) and \
+         {} section headers, all inside the file",
+        if wide { 64 } else { 32 },
+        if big { "MSB" } else { "LSB" },
+        sections.len() as u64 / sh_size
+    ))
+}
+
+/// The fields of an ELF header the checks use.
+#[derive(Clone, Copy, Debug)]
+struct ElfHeader {
+    wide: bool,
+    /// The header's size for this class (52 or 64 bytes).
+    ehsize: usize,
+    e_type: u64,
+    e_machine: u64,
+    e_ehsize: u64,
+    phoff: u64,
+    shoff: u64,
+    phentsize: u64,
+    phnum: u64,
+    shentsize: u64,
+    shnum: u64,
+}
+
+impl ElfHeader {
+    fn read<R: Read + Seek>(
+        r: &mut R,
+        size: u64,
+        f: Fields,
+        wide: bool,
+    ) -> Result<Self, FileProblem> {
+        let ehsize: usize = if wide { 64 } else { 52 };
+        let mut h = vec![0u8; ehsize];
+        within(0, ehsize as u64, size, || "ELF header".into())?;
+        read_at(r, 0, &mut h, "ELF header")?;
+        let word = |at32: usize, at64: usize| {
+            if wide {
+                f.u64(&h, at64)
+            } else {
+                f.u32(&h, at32)
+            }
+        };
+        let base = if wide { 52 } else { 40 };
+        Ok(Self {
+            wide,
+            ehsize,
+            e_type: f.u16(&h, 16),
+            e_machine: f.u16(&h, 18),
+            phoff: word(28, 32),
+            shoff: word(32, 40),
+            e_ehsize: f.u16(&h, base),
+            phentsize: f.u16(&h, base + 2),
+            phnum: f.u16(&h, base + 4),
+            shentsize: f.u16(&h, base + 6),
+            shnum: f.u16(&h, base + 8),
+        })
+    }
+
+    /// A shared library for this host's machine, with a header of its class's size.
+    fn check_kind(&self) -> Result<(), FileProblem> {
+        if self.e_type != ET_DYN {
+            let what = match self.e_type {
+                1 => "a relocatable object (.o)".to_owned(),
+                2 => "an executable".to_owned(),
+                4 => "a core dump".to_owned(),
+                t => format!("an ELF file of type {t}"),
+            };
+            return problem(format!("{what}, not a shared library"));
+        }
+        let e_machine = self.e_machine;
+        if let Some((code, name)) = host_machine() {
+            if e_machine != code {
+                return problem(format!(
+                    "built for ELF machine {e_machine}, but this host is {name} (machine {code})"
+                ));
+            }
+        }
+        let (e_ehsize, ehsize) = (self.e_ehsize, self.ehsize);
+        if e_ehsize < ehsize as u64 {
             return problem(format!(
-                "built for ELF machine {e_machine}, but this host is {name} (machine {code})"
+                "corrupt ELF header: e_ehsize is {e_ehsize}, the header is {ehsize} bytes"
             ));
         }
+        Ok(())
     }
-    if e_ehsize < ehsize as u64 {
+}
+
+/// The section-header table (empty when the file has none), checked to lie inside the file.
+/// Section 0 may hold the real section and program-header counts (extended numbering); they
+/// are written into `h`.
+fn read_section_headers<R: Read + Seek>(
+    r: &mut R,
+    size: u64,
+    f: Fields,
+    h: &mut ElfHeader,
+) -> Result<Vec<u8>, FileProblem> {
+    let wide = h.wide;
+    let sh_size: u64 = if wide { 64 } else { 40 };
+    let (shoff, shentsize) = (h.shoff, h.shentsize);
+    if shoff == 0 {
+        return Ok(Vec::new());
+    }
+    if shentsize != sh_size {
         return problem(format!(
-            "corrupt ELF header: e_ehsize is {e_ehsize}, the header is {ehsize} bytes"
+            "corrupt ELF header: section headers are {shentsize} bytes, expected {sh_size}"
         ));
     }
-    let (ph_size, sh_size): (u64, u64) = if wide { (56, 64) } else { (32, 40) };
-
-    // Section headers first: section 0 may hold the real counts (extended numbering).
-    let mut sections = Vec::new();
-    if shoff != 0 {
-        if shentsize != sh_size {
-            return problem(format!(
-                "corrupt ELF header: section headers are {shentsize} bytes, expected {sh_size}"
-            ));
-        }
-        within(shoff, sh_size, size, || "section-header table".into())?;
-        let mut s0 = vec![0u8; sh_size as usize];
-        read_at(r, shoff, &mut s0, "section-header table")?;
-        if shnum == 0 {
-            shnum = if wide { f.u64(&s0, 32) } else { f.u32(&s0, 20) };
-        }
-        if phnum == PN_XNUM {
-            phnum = f.u32(&s0, if wide { 44 } else { 28 });
-        }
-        // The extended count can be any 32/64-bit number; more than a million sections is not
-        // a library this host loads (and the table must fit in the file anyway).
-        if shnum > 1 << 20 {
-            return problem(format!("corrupt ELF header: {shnum} sections"));
-        }
-        within(shoff, shnum * sh_size, size, || {
-            format!("section-header table ({shnum} entries)")
-        })?;
-        let mut table = vec![0u8; (shnum * sh_size) as usize];
-        read_at(r, shoff, &mut table, "section-header table")?;
-        sections = table;
+    within(shoff, sh_size, size, || "section-header table".into())?;
+    let mut s0 = vec![0u8; sh_size as usize];
+    read_at(r, shoff, &mut s0, "section-header table")?;
+    if h.shnum == 0 {
+        h.shnum = if wide { f.u64(&s0, 32) } else { f.u32(&s0, 20) };
     }
+    if h.phnum == PN_XNUM {
+        h.phnum = f.u32(&s0, if wide { 44 } else { 28 });
+    }
+    let shnum = h.shnum;
+    // The extended count can be any 32/64-bit number; more than a million sections is not
+    // a library this host loads (and the table must fit in the file anyway).
+    if shnum > 1 << 20 {
+        return problem(format!("corrupt ELF header: {shnum} sections"));
+    }
+    within(shoff, shnum * sh_size, size, || {
+        format!("section-header table ({shnum} entries)")
+    })?;
+    let mut table = vec![0u8; (shnum * sh_size) as usize];
+    read_at(r, shoff, &mut table, "section-header table")?;
+    Ok(table)
+}
+
+/// The program-header table and every segment with file contents lie inside the file, and
+/// there is a `PT_LOAD` segment. Returns the number of program headers and of `PT_LOAD`s.
+fn check_segments<R: Read + Seek>(
+    r: &mut R,
+    size: u64,
+    f: Fields,
+    h: &ElfHeader,
+) -> Result<(u64, usize), FileProblem> {
+    let wide = h.wide;
+    let ph_size: u64 = if wide { 56 } else { 32 };
+    let (phoff, phentsize, phnum) = (h.phoff, h.phentsize, h.phnum);
     if phnum == 0 {
         return problem("corrupt ELF file: a shared library without program headers");
     }
@@ -370,26 +461,7 @@ fn check_elf_layout<R: Read + Seek>(
     if loads == 0 {
         return problem("corrupt ELF file: no PT_LOAD segment");
     }
-    for (i, sh) in sections.chunks_exact(sh_size as usize).enumerate() {
-        let sh_type = f.u32(sh, 4);
-        if sh_type == SHT_NULL || sh_type == SHT_NOBITS {
-            continue;
-        }
-        let (offset, len) = if wide {
-            (f.u64(sh, 24), f.u64(sh, 32))
-        } else {
-            (f.u32(sh, 16), f.u32(sh, 20))
-        };
-        within(offset, len, size, || format!("section {i}"))?;
-    }
-    let machine = host_machine().map_or_else(|| format!("machine {e_machine}"), |m| m.1.into());
-    Ok(format!(
-        "ELF {}-bit {} shared object, {machine}: {phnum} program headers ({loads} PT_LOAD) and \
-         {} section headers, all inside the file",
-        if wide { 64 } else { 32 },
-        if big { "MSB" } else { "LSB" },
-        sections.len() as u64 / sh_size
-    ))
+    Ok((phnum, loads))
 }
 
 const MH_MAGIC_64: u32 = 0xfeed_facf;

@@ -87,6 +87,7 @@ pub fn robot_context(profile: &RobotProfile) -> RobotContext {
 
 /// A robot profile with its embodiment and plugin constraint terms instantiated.
 pub struct LoadedRobot {
+    /// The parsed and validated profile the robot was built from.
     pub profile: RobotProfile,
     /// The built-in embodiment or the plugin's proxy.
     pub embodiment: Box<dyn Embodiment>,

@@ -37,7 +37,9 @@ pub const MAX_MESSAGE_BYTES: usize = 1 << 16;
 /// How a check came out.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CheckStatus {
+    /// The check was made and passed.
     Passed,
+    /// The check was made and failed; the [`Check::detail`] says why.
     Failed,
     /// Not checked now (e.g. a factory that needs a configuration to create an instance: its
     /// vtable is checked when an instance is created).
@@ -49,6 +51,7 @@ pub enum CheckStatus {
 pub struct Check {
     /// What was checked (`file`, `entry table`, `factory 0 (constraint `x`)`, ...).
     pub item: String,
+    /// Whether the check passed, failed or was not run.
     pub status: CheckStatus,
     /// What was found (on failure, the error).
     pub detail: String,

@@ -138,13 +138,19 @@ impl Default for SddRawOptions {
 /// One row of a raw SDD annotation file.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SddRow {
+    /// The annotation's track id.
     pub track_id: u64,
     /// Box centre in pixels `(u, v)`.
     pub center_px: [f64; 2],
+    /// Video frame (30 fps).
     pub frame: i64,
+    /// The annotator marked the agent as out of view.
     pub lost: bool,
+    /// The agent is occluded.
     pub occluded: bool,
+    /// The box was interpolated by the annotation tool, not drawn.
     pub generated: bool,
+    /// The agent's label.
     pub class: AgentClass,
 }
 

@@ -83,9 +83,13 @@ pub fn load_homography(ucy_root: &Path, scene: &str) -> Result<Homography, DataE
 /// A control point of a vsp spline, in file units.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ControlPoint {
+    /// Horizontal image coordinate, file units.
     pub x: f64,
+    /// Vertical image coordinate, file units.
     pub y: f64,
+    /// Video frame.
     pub frame: i64,
+    /// Gaze direction, degrees, as in the file.
     pub gaze_deg: f64,
     /// The 1-based line of the file it was read from.
     pub line: usize,

@@ -1087,6 +1087,17 @@ fn report_markdown(
     wall_s: f64,
 ) -> String {
     let mut md = String::new();
+    report_intro(&mut md, settings, quick, wall_s);
+    sr_table(&mut md, results);
+    if robots.len() > 1 {
+        robot_table(&mut md, results, robots);
+    }
+    models_table(&mut md, results);
+    md
+}
+
+/// The report's title, what it measures, its wall time and the settings table.
+fn report_intro(md: &mut String, settings: &[(String, String)], quick: bool, wall_s: f64) {
     let _ = writeln!(
         md,
         "# Success rate against the amount of human training data (paper Fig. 5)\n"
@@ -1113,7 +1124,11 @@ fn report_markdown(
     for (k, v) in settings {
         let _ = writeln!(md, "| {k} | {} |", v.replace('|', "\\|"));
     }
+}
 
+/// SR per fraction: overall with its standard error, per scenario class, TFS and the failure
+/// rates.
+fn sr_table(md: &mut String, results: &[FractionResult]) {
     let _ = writeln!(md, "\n## SR per fraction of the training scenes\n");
     let mut header = String::from("| training data | scenes | tuples | n | SR (%) |");
     let mut rule = String::from("|---|---|---|---|---|");
@@ -1152,26 +1167,31 @@ fn report_markdown(
         );
         let _ = writeln!(md, "{line}");
     }
+}
 
-    if robots.len() > 1 {
-        let _ = writeln!(md, "\n## SR per robot (%)\n");
-        let mut header = String::from("| training data |");
-        let mut rule = String::from("|---|");
-        for r in robots {
-            let _ = write!(header, " {} |", r.name);
-            rule.push_str("---|");
-        }
-        let _ = writeln!(md, "{header}\n{rule}");
-        for r in results {
-            let mut line = format!("| {:.0} % |", 100.0 * r.fraction);
-            for robot in robots {
-                let s = summarize(r.rows.iter().filter(|x| x.robot == robot.name));
-                let _ = write!(line, " {} ± {} |", pct(s.sr), pct(s.sr_se));
-            }
-            let _ = writeln!(md, "{line}");
-        }
+/// SR per fraction and robot, with standard errors.
+fn robot_table(md: &mut String, results: &[FractionResult], robots: &[RobotSetup]) {
+    let _ = writeln!(md, "\n## SR per robot (%)\n");
+    let mut header = String::from("| training data |");
+    let mut rule = String::from("|---|");
+    for r in robots {
+        let _ = write!(header, " {} |", r.name);
+        rule.push_str("---|");
     }
+    let _ = writeln!(md, "{header}\n{rule}");
+    for r in results {
+        let mut line = format!("| {:.0} % |", 100.0 * r.fraction);
+        for robot in robots {
+            let s = summarize(r.rows.iter().filter(|x| x.robot == robot.name));
+            let _ = write!(line, " {} ± {} |", pct(s.sr), pct(s.sr_se));
+        }
+        let _ = writeln!(md, "{line}");
+    }
+}
 
+/// Each fraction's model, its training record and the wall time of both stages, then the
+/// training scenes per fraction.
+fn models_table(md: &mut String, results: &[FractionResult]) {
     let _ = writeln!(md, "\n## Models and wall time per stage\n");
     let _ = writeln!(
         md,
@@ -1211,5 +1231,4 @@ fn report_markdown(
             r.scenes.join(", ")
         );
     }
-    md
 }

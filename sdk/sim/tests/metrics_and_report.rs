@@ -7,7 +7,7 @@ use common::{episode, robot, robots, standing, walking};
 use human2nav_core::embodiment::RobotState;
 use human2nav_core::{Pose2, Twist2};
 use human2nav_sim::bench::{MethodSpec, ResultRow, Suite, SuiteKind, episode_seed, run_bench};
-use human2nav_sim::driver::{self, BenchPlan};
+use human2nav_sim::driver::{self, BenchOutcome, BenchPlan};
 use human2nav_sim::episode::ScenarioClass;
 use human2nav_sim::metrics::{EpisodeMetrics, mean_jerk, tfs_scores};
 use human2nav_sim::report::{CSV_HEADER, results_csv};
@@ -295,6 +295,26 @@ fn driver_writes_csv_report_and_figures() {
     }
     // Every collision is classified: its three classes add up to the method's collisions.
     let hand: Vec<_> = res.rows.iter().filter(|r| r.suite == "hand").collect();
+    check_collision_classes(&report, &hand);
+    let slow_successes = check_figure_list(&res, &report, &hand);
+    for needle in [
+        "Paired comparison with `straight`",
+        "Suite composition",
+        "against crowd density",
+    ] {
+        assert!(report.contains(needle), "report lacks `{needle}`");
+    }
+    check_pngs(&res, &slow_successes);
+    let csv = std::fs::read_to_string(&res.results_csv).unwrap();
+    assert_eq!(csv.lines().count(), res.rows.len() + 1);
+    if keep.is_none() {
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+}
+
+/// Every collision of the `hand` suite is classified: for each method, the report's three
+/// collision classes add up to its collisions.
+fn check_collision_classes(report: &str, hand: &[&ResultRow]) {
     for m in ["straight", "slow"] {
         let n = hand
             .iter()
@@ -325,6 +345,11 @@ fn driver_writes_csv_report_and_figures() {
             .sum();
         assert_eq!(counts, n, "{line}");
     }
+}
+
+/// The figures of the run and the report's references to them; returns the scenario classes
+/// where `slow` succeeded on diablo (the Fig. 4 panels).
+fn check_figure_list(res: &BenchOutcome, report: &str, hand: &[&ResultRow]) -> Vec<ScenarioClass> {
     // Fig. 6, 7 and the density figure of the one non-empty suite, Fig. 4 (`slow` succeeded
     // on diablo in some class), and one failure figure per method that failed somewhere in
     // the suite.
@@ -363,13 +388,12 @@ fn driver_writes_csv_report_and_figures() {
         let fig4 = report.lines().find(|l| l.starts_with("*Fig. 4")).unwrap();
         assert_eq!(fig4.contains(&panel), slow_successes.contains(&c), "{fig4}");
     }
-    for needle in [
-        "Paired comparison with `straight`",
-        "Suite composition",
-        "against crowd density",
-    ] {
-        assert!(report.contains(needle), "report lacks `{needle}`");
-    }
+    slow_successes
+}
+
+/// Every figure is a PNG of the expected size: Fig. 4 with one 800 px panel per class where
+/// `slow` succeeded (two per row, a legend strip below), a failure figure with one or two.
+fn check_pngs(res: &BenchOutcome, slow_successes: &[ScenarioClass]) {
     for f in &res.figures {
         let bytes = std::fs::read(f).unwrap();
         assert!(
@@ -398,11 +422,6 @@ fn driver_writes_csv_report_and_figures() {
             assert!(size(16) == 800 || size(16) == 1600, "{name}");
             assert!((840..1000).contains(&size(20)), "{name}");
         }
-    }
-    let csv = std::fs::read_to_string(&res.results_csv).unwrap();
-    assert_eq!(csv.lines().count(), res.rows.len() + 1);
-    if keep.is_none() {
-        std::fs::remove_dir_all(&out).unwrap();
     }
 }
 

@@ -11,7 +11,7 @@
 //!
 //! [[methods]]
 //! name = "orca"                                 # name in the report
-//! kind = "plugin"                               # straight | plugin | ... (resolved by the CLI)
+//! kind = "plugin"                               # straight | plugin | ... (human2nav: the experiments crate)
 //! library = "target/{profile}/human2nav_orca"   # plugin library (kind = "plugin")
 //! plugin = "orca"                               # factory name in the library
 //! config = { time_horizon = 5.0 }               # passed to the method, kind-specific
@@ -39,7 +39,7 @@
 //! from another config: each top-level key the file sets replaces the base's.
 //!
 //! A `real` suite whose episode file is missing is an error naming the file, unless the caller
-//! allows the synthetic fallback (the CLI does when the datasets are absent): the suite then
+//! allows the synthetic fallback (the benchmark does when the datasets are absent): the suite then
 //! becomes a `synthetic` suite of the same size, with a warning in its note. An `empty` suite
 //! takes the episodes of the first other suite (or synthetic ones when there is none) and
 //! removes every pedestrian.

@@ -394,6 +394,10 @@ impl<M: FlowModel> Human2Nav<M> {
 
     /// Plans within `deadline`, returning the plan or the reason the flow stage failed (for
     /// [`Planner::plan_within`], which turns such failures into the stop-in-place fallback).
+    ///
+    /// A little over 120 lines: stage 2 fills half a dozen locals the selection and the plan's
+    /// diagnostics read (candidates, their origin, Φ, the corrected flags, stages, notes);
+    /// splitting it further would pass all of them back and forth.
     fn try_plan(&mut self, obs: &Observation, deadline: &Deadline) -> Result<Plan, String> {
         let horizon = self.model.horizon();
         let k = self.settings.samples;

@@ -325,7 +325,9 @@ fn check_collision_classes(report: &str, hand: &[&ResultRow]) {
                 .filter(|r| r.method == m && r.metrics.collision)
                 .all(|r| r.metrics.contact.is_some())
         );
-        let section = &report[report.find("How the collisions happened").unwrap()..];
+        let section = &report[report
+            .find("How the collisions happened")
+            .expect("report has a collisions section")..];
         let line = section
             .lines()
             .find(|l| l.starts_with(&format!("| {m} | {n} |")))
@@ -338,7 +340,7 @@ fn check_collision_classes(report: &str, hand: &[&ResultRow]) {
                 c.trim()
                     .split(' ')
                     .next()
-                    .unwrap()
+                    .expect("split yields at least one piece")
                     .parse::<usize>()
                     .unwrap_or(0)
             })
@@ -361,7 +363,12 @@ fn check_figure_list(res: &BenchOutcome, report: &str, hand: &[&ResultRow]) -> V
     let names: Vec<String> = res
         .figures
         .iter()
-        .map(|f| f.file_name().unwrap().to_string_lossy().into_owned())
+        .map(|f| {
+            f.file_name()
+                .expect("figure path has a file name")
+                .to_string_lossy()
+                .into_owned()
+        })
         .collect();
     assert_eq!(res.figures.len(), 4 + failing, "{names:?}");
     for f in [
@@ -385,7 +392,10 @@ fn check_figure_list(res: &BenchOutcome, report: &str, hand: &[&ResultRow]) -> V
         .collect();
     for c in ScenarioClass::ALL {
         let panel = format!("{} `", human2nav_sim::episode::ScenarioTitle::title(c));
-        let fig4 = report.lines().find(|l| l.starts_with("*Fig. 4")).unwrap();
+        let fig4 = report
+            .lines()
+            .find(|l| l.starts_with("*Fig. 4"))
+            .expect("report has a Fig. 4 caption");
         assert_eq!(fig4.contains(&panel), slow_successes.contains(&c), "{fig4}");
     }
     slow_successes
@@ -395,7 +405,7 @@ fn check_figure_list(res: &BenchOutcome, report: &str, hand: &[&ResultRow]) -> V
 /// `slow` succeeded (two per row, a legend strip below), a failure figure with one or two.
 fn check_pngs(res: &BenchOutcome, slow_successes: &[ScenarioClass]) {
     for f in &res.figures {
-        let bytes = std::fs::read(f).unwrap();
+        let bytes = std::fs::read(f).expect("figure is readable");
         assert!(
             bytes.len() > 1000 && bytes.starts_with(b"\x89PNG"),
             "{} is not a PNG",
@@ -406,7 +416,10 @@ fn check_pngs(res: &BenchOutcome, slow_successes: &[ScenarioClass]) {
         let size = |at: usize| {
             u32::from_be_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]])
         };
-        let name = f.file_name().unwrap().to_string_lossy();
+        let name = f
+            .file_name()
+            .expect("figure path has a file name")
+            .to_string_lossy();
         if name.starts_with("fig4") {
             let panels = slow_successes
                 .iter()

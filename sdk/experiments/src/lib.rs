@@ -1,8 +1,8 @@
 //! The experiments of human2nav as a library, so that a program (the `human2nav` command-line
 //! tool among them) runs them with a few calls and gets typed results back:
 //!
-//! * [`bench`]: the closed-loop benchmark (suites × robots × methods) with its `results.csv`,
-//!   `report.md` and figures, including the libtorch-backed `human2nav` method;
+//! * [`bench`](mod@bench): the closed-loop benchmark (suites × robots × methods) with its
+//!   `results.csv`, `report.md` and figures, including the libtorch-backed `human2nav` method;
 //! * [`train`]: training the conditional flow-matching model on the tuple cache and evaluating
 //!   it on the held-out test scenes;
 //! * [`scaling`]: the paper's Fig. 5, success rate against the amount of training data.

@@ -3,6 +3,7 @@
 
 use anyhow::Context;
 use clap::Subcommand;
+use human2nav_data::cache::Manifest;
 use human2nav_data::config::DataConfig;
 use human2nav_data::pipeline::{self, Locations, Progress};
 use human2nav_data::resample::median;
@@ -196,6 +197,8 @@ fn quantile(v: &mut [f64], q: f64) -> f64 {
     v[((v.len() - 1) as f64 * q).round() as usize]
 }
 
+/// `human2nav data stats`: the cache's header, then its tuples per split, per scenario class
+/// and per scene.
 fn stats(dir: &Path) -> anyhow::Result<ExitCode> {
     let cache =
         TupleCache::open(dir).with_context(|| format!("opening cache {}", dir.display()))?;
@@ -212,6 +215,19 @@ fn stats(dir: &Path) -> anyhow::Result<ExitCode> {
         m.dt,
         cache.size_bytes() as f64 / 1e6
     );
+    let (class_rows, per_scene_class) = print_splits(&cache)?;
+    print_classes(&class_rows);
+    print_scenes(m, &per_scene_class);
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Tuples per scenario class of each split (co, cross, counter, multidirection, none).
+type ClassRows = Vec<(Split, [usize; 5])>;
+
+/// Prints the per-split table (tuples, scenes, hours, speeds, goal distance, neighbours);
+/// returns the class counts per split and per scene.
+fn print_splits(cache: &TupleCache) -> anyhow::Result<(ClassRows, BTreeMap<u16, [usize; 5]>)> {
+    let m = cache.manifest();
     let mut per_scene_class: BTreeMap<u16, [usize; 5]> = BTreeMap::new();
     println!("\nper split:");
     println!(
@@ -268,6 +284,11 @@ fn stats(dir: &Path) -> anyhow::Result<ExitCode> {
         }
         class_rows.push((split, tot));
     }
+    Ok((class_rows, per_scene_class))
+}
+
+/// Prints the tuples per scenario class of each split.
+fn print_classes(class_rows: &ClassRows) {
     println!("\nper scenario class (from the agents in each tuple's raster):");
     println!(
         "{:<6} {:>9} {:>11} {:>13} {:>20} {:>9}",
@@ -284,6 +305,11 @@ fn stats(dir: &Path) -> anyhow::Result<ExitCode> {
             t[4]
         );
     }
+}
+
+/// Prints one line per scene: its split, format, duration, tracks, tuples, median speed and
+/// tuples per scenario class.
+fn print_scenes(m: &Manifest, per_scene_class: &BTreeMap<u16, [usize; 5]>) {
     println!("\nper scene:");
     println!(
         "{:<22} {:<6} {:<12} {:>8} {:>7} {:>8} {:>7} | {:>6} {:>6} {:>7} {:>6} {:>6}",
@@ -321,7 +347,6 @@ fn stats(dir: &Path) -> anyhow::Result<ExitCode> {
             c[4]
         );
     }
-    Ok(ExitCode::SUCCESS)
 }
 
 fn episodes(config: &Path, out: Option<PathBuf>) -> anyhow::Result<ExitCode> {

@@ -6,7 +6,6 @@
 //! `human2nav_sim::plan_figure::observation_at`: the robot at the episode's start pose (facing
 //! the goal), moving at `--speed`, the replayed crowd at `--time`.
 
-use crate::train::cache_windows;
 use anyhow::{Context, bail};
 use clap::Args;
 use human2nav_core::ablation::{Arm, ArmSummary, ablation_step};
@@ -17,6 +16,7 @@ use human2nav_data::ScenarioClass;
 use human2nav_data::cache::TupleCache;
 use human2nav_data::paths::find_workspace_root;
 use human2nav_data::tuples::Split;
+use human2nav_experiments::train::cache_windows;
 use human2nav_flow::eval::{EvalOptions, guided_windows};
 use human2nav_flow::net::Complexity;
 use human2nav_flow::planner::{

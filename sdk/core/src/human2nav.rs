@@ -72,7 +72,9 @@
 use crate::bev::{self, BevSpec};
 use crate::constraint::{ConstraintContext, Phi};
 use crate::flow::{FlowCondition, FlowModel};
-use crate::guidance::{self, GuidanceError, GuidanceSettings, GuidanceVariant, GuidanceWorkspace};
+use crate::guidance::{
+    self, GuidanceError, GuidanceResult, GuidanceSettings, GuidanceVariant, GuidanceWorkspace,
+};
 use crate::limits::Limits;
 use crate::obstacle::{self, Obstacle};
 use crate::planner::{
@@ -392,19 +394,16 @@ impl<M: FlowModel> Human2Nav<M> {
 
     /// Plans within `deadline`, returning the plan or the reason the flow stage failed (for
     /// [`Planner::plan_within`], which turns such failures into the stop-in-place fallback).
+    ///
+    /// A little over 120 lines: stage 2 fills half a dozen locals the selection and the plan's
+    /// diagnostics read (candidates, their origin, Φ, the corrected flags, stages, notes);
+    /// splitting it further would pass all of them back and forth.
     fn try_plan(&mut self, obs: &Observation, deadline: &Deadline) -> Result<Plan, String> {
         let horizon = self.model.horizon();
         let k = self.settings.samples;
-        let dt = self.settings.dt;
         let (cond, agents) = self.condition(obs);
         self.obstacles = self.nearby_obstacles(obs, horizon);
         let x0 = self.draw_source(k, horizon);
-        let ctx = ConstraintContext {
-            dt,
-            limits: &self.robot.limits,
-            initial_velocity: obs.ego_velocity,
-            agents: &agents,
-        };
         let goal = cond.goal;
         let warm = if self.settings.warm_start {
             self.shifted_previous(obs, horizon)
@@ -423,38 +422,8 @@ impl<M: FlowModel> Human2Nav<M> {
         let mut notes = Vec::new();
 
         // Stage 1: the K samples of the flow model, without guidance (Φ for diagnostics).
-        let plain = GuidanceSettings {
-            enabled: false,
-            ..guidance
-        };
-        let first = match guidance::sample_guided_until(
-            &self.model,
-            &cond,
-            &x0,
-            &self.robot.phi,
-            &ctx,
-            &plain,
-            &mut self.workspace,
-            deadline,
-        ) {
-            Ok(first) => {
-                stages.sampling.done = first.steps_run;
-                if first.cut_short {
-                    stages.cut_short = Some(Stage::Sampling);
-                    notes.push(format!(
-                        "deadline: sampling stopped after {} of {} integration steps",
-                        first.steps_run, guidance.steps_n
-                    ));
-                }
-                Some(first)
-            }
-            Err(GuidanceError::DeadlineBeforeSampling) => {
-                stages.cut_short = Some(Stage::Sampling);
-                notes.push("deadline: it passed before sampling began".into());
-                None
-            }
-            Err(e) => return Err(format!("sampling failed: {e}")),
-        };
+        let first =
+            self.sample_stage(obs, &cond, &x0, &agents, deadline, &mut stages, &mut notes)?;
         let unguided: Vec<Vec<Pose2>> = first
             .as_ref()
             .map(|f| (0..k).map(|i| f.unguided_poses(i)).collect())
@@ -483,56 +452,35 @@ impl<M: FlowModel> Human2Nav<M> {
                 candidates = shortlist.iter().map(|&i| unguided[i].clone()).collect();
                 phi = shortlist.iter().map(|&i| phi[i]).collect();
             } else {
-                let result = guidance::guide_subset_until(
-                    &self.model,
+                let guided = self.guide_stage(
+                    obs,
                     &cond,
+                    &agents,
                     &shortlist,
-                    &self.robot.phi,
-                    &ctx,
-                    &guidance,
-                    &mut self.workspace,
                     deadline,
-                )
-                .map_err(|e| format!("guidance failed: {e}"))?;
-                guidance_iterations = Some(result.iterations_run);
-                stages.guidance.done = result.iterations_run;
-                if result.cut_short {
-                    stages.cut_short = Some(Stage::Guidance);
-                    notes.push(format!(
-                        "deadline: guidance stopped after {} iterations",
-                        result.iterations_run
-                    ));
-                }
+                    &mut stages,
+                    &mut notes,
+                )?;
+                guidance_iterations = Some(guided.iterations_run);
                 candidates = (0..shortlist.len())
-                    .map(|j| result.guided_poses(j))
+                    .map(|j| guided.guided_poses(j))
                     .collect();
-                phi = result
+                phi = guided
                     .phi_before
                     .iter()
                     .copied()
-                    .zip(result.phi_after.iter().copied())
+                    .zip(guided.phi_after.iter().copied())
                     .collect();
             }
             origin = shortlist.iter().map(|&i| Source::Sample(i)).collect();
-            if self.settings.slowdown < 1.0 {
-                for (j, &i) in shortlist.iter().enumerate() {
-                    candidates.push(time_scaled(&candidates[j], self.settings.slowdown));
-                    origin.push(Source::Slowed(i));
-                }
-            }
-            if self.settings.stop_candidate {
-                candidates.push(vec![Pose2::IDENTITY; horizon]);
-                origin.push(Source::Stop);
-            }
-            if goal[0].hypot(goal[1]) <= self.settings.goal_approach {
-                let speed = 0.5 * self.robot.limits.v_max;
-                candidates.push(goal_approach(goal, speed, dt, horizon));
-                origin.push(Source::Goal);
-            }
-            if let Some(prev) = &warm {
-                candidates.push(prev.clone());
-                origin.push(Source::Previous);
-            }
+            self.push_extra_candidates(
+                &shortlist,
+                goal,
+                horizon,
+                warm.as_ref(),
+                &mut candidates,
+                &mut origin,
+            );
             if self.settings.projection.enabled {
                 corrected = self.correct(
                     &mut candidates,
@@ -563,7 +511,170 @@ impl<M: FlowModel> Human2Nav<M> {
                 "every candidate trajectory was non-finite".into()
             });
         };
+        Ok(self.assemble_plan(
+            obs,
+            Chosen {
+                candidates: &candidates,
+                origin: &origin,
+                phi: &phi,
+                index: chosen,
+            },
+            &unguided,
+            guidance_iterations,
+            notes,
+            stages,
+        ))
+    }
 
+    /// Stage 1 of [`Self::try_plan`]: the flow model's samples from `x0` without guidance, or
+    /// `None` when the deadline passed before sampling began; progress and deadline cuts go
+    /// into `stages` and `notes`.
+    fn sample_stage(
+        &mut self,
+        obs: &Observation,
+        cond: &FlowCondition,
+        x0: &[f64],
+        agents: &[AgentState],
+        deadline: &Deadline,
+        stages: &mut Stages,
+        notes: &mut Vec<String>,
+    ) -> Result<Option<GuidanceResult>, String> {
+        let guidance = self.settings.guidance;
+        let ctx = ConstraintContext {
+            dt: self.settings.dt,
+            limits: &self.robot.limits,
+            initial_velocity: obs.ego_velocity,
+            agents,
+        };
+        let plain = GuidanceSettings {
+            enabled: false,
+            ..guidance
+        };
+        Ok(
+            match guidance::sample_guided_until(
+                &self.model,
+                cond,
+                x0,
+                &self.robot.phi,
+                &ctx,
+                &plain,
+                &mut self.workspace,
+                deadline,
+            ) {
+                Ok(first) => {
+                    stages.sampling.done = first.steps_run;
+                    if first.cut_short {
+                        stages.cut_short = Some(Stage::Sampling);
+                        notes.push(format!(
+                            "deadline: sampling stopped after {} of {} integration steps",
+                            first.steps_run, guidance.steps_n
+                        ));
+                    }
+                    Some(first)
+                }
+                Err(GuidanceError::DeadlineBeforeSampling) => {
+                    stages.cut_short = Some(Stage::Sampling);
+                    notes.push("deadline: it passed before sampling began".into());
+                    None
+                }
+                Err(e) => return Err(format!("sampling failed: {e}")),
+            },
+        )
+    }
+
+    /// Algorithm 1 of [`Self::try_plan`]'s stage 2 on the `shortlist` of samples; progress and
+    /// deadline cuts go into `stages` and `notes`.
+    fn guide_stage(
+        &mut self,
+        obs: &Observation,
+        cond: &FlowCondition,
+        agents: &[AgentState],
+        shortlist: &[usize],
+        deadline: &Deadline,
+        stages: &mut Stages,
+        notes: &mut Vec<String>,
+    ) -> Result<GuidanceResult, String> {
+        let guidance = self.settings.guidance;
+        let ctx = ConstraintContext {
+            dt: self.settings.dt,
+            limits: &self.robot.limits,
+            initial_velocity: obs.ego_velocity,
+            agents,
+        };
+        let result = guidance::guide_subset_until(
+            &self.model,
+            cond,
+            shortlist,
+            &self.robot.phi,
+            &ctx,
+            &guidance,
+            &mut self.workspace,
+            deadline,
+        )
+        .map_err(|e| format!("guidance failed: {e}"))?;
+        stages.guidance.done = result.iterations_run;
+        if result.cut_short {
+            stages.cut_short = Some(Stage::Guidance);
+            notes.push(format!(
+                "deadline: guidance stopped after {} iterations",
+                result.iterations_run
+            ));
+        }
+        Ok(result)
+    }
+
+    /// The candidates besides the flow samples: the shortlist's slowed copies, the stop, the
+    /// straight approach to a near goal and the previous plan, each as the settings allow.
+    fn push_extra_candidates(
+        &self,
+        shortlist: &[usize],
+        goal: [f64; 2],
+        horizon: usize,
+        warm: Option<&Vec<Pose2>>,
+        candidates: &mut Vec<Vec<Pose2>>,
+        origin: &mut Vec<Source>,
+    ) {
+        let dt = self.settings.dt;
+        if self.settings.slowdown < 1.0 {
+            for (j, &i) in shortlist.iter().enumerate() {
+                candidates.push(time_scaled(&candidates[j], self.settings.slowdown));
+                origin.push(Source::Slowed(i));
+            }
+        }
+        if self.settings.stop_candidate {
+            candidates.push(vec![Pose2::IDENTITY; horizon]);
+            origin.push(Source::Stop);
+        }
+        if goal[0].hypot(goal[1]) <= self.settings.goal_approach {
+            let speed = 0.5 * self.robot.limits.v_max;
+            candidates.push(goal_approach(goal, speed, dt, horizon));
+            origin.push(Source::Goal);
+        }
+        if let Some(prev) = warm {
+            candidates.push(prev.clone());
+            origin.push(Source::Previous);
+        }
+    }
+
+    /// The plan of the chosen candidate in the world frame, with its diagnostics: the samples
+    /// before and after guidance, Φ of the kept sample and the notes.
+    fn assemble_plan(
+        &self,
+        obs: &Observation,
+        chosen: Chosen<'_>,
+        unguided: &[Vec<Pose2>],
+        guidance_iterations: Option<usize>,
+        mut notes: Vec<String>,
+        stages: Stages,
+    ) -> Plan {
+        let Chosen {
+            candidates,
+            origin,
+            phi,
+            index: chosen,
+        } = chosen;
+        let dt = self.settings.dt;
+        let guidance = self.settings.guidance;
         let to_world = |traj: &[Pose2]| -> Vec<Pose2> {
             std::iter::once(obs.ego)
                 .chain(traj.iter().map(|p| obs.ego.compose(*p)))
@@ -594,7 +705,7 @@ impl<M: FlowModel> Human2Nav<M> {
         let guided: Vec<Vec<Pose2>> = if guidance.enabled {
             candidates
                 .iter()
-                .zip(&origin)
+                .zip(origin)
                 .filter(|(_, o)| matches!(o, Source::Sample(_)))
                 .map(|(c, _)| to_world(c))
                 .collect()
@@ -613,12 +724,12 @@ impl<M: FlowModel> Human2Nav<M> {
             error: None,
             stages: Some(stages),
         };
-        Ok(Plan {
+        Plan {
             t0: obs.time,
             dt,
             poses: to_world(&candidates[chosen]),
             info,
-        })
+        }
     }
 
     /// The observation's static obstacles that a plan of `horizon` poses could reach (within
@@ -826,6 +937,15 @@ impl<M: FlowModel> Human2Nav<M> {
             + w.clearance * clearance
             + w.consistency * consistency
     }
+}
+
+/// The candidates of a planning call, where each came from, the Φ before and after
+/// Algorithm 1 of the first ones, and the index of the one selected.
+struct Chosen<'a> {
+    candidates: &'a [Vec<Pose2>],
+    origin: &'a [Source],
+    phi: &'a [(f64, f64)],
+    index: usize,
 }
 
 /// Where a candidate of the selection came from.

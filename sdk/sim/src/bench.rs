@@ -33,8 +33,11 @@ pub type BoxError = Box<dyn std::error::Error + Send + Sync>;
 /// What a method factory gets to build a planner for one episode.
 #[derive(Clone, Copy, Debug)]
 pub struct PlannerContext<'a> {
+    /// The robot the planner drives.
     pub robot: &'a RobotSetup,
+    /// The simulation settings of the run (with the method's replanning rate).
     pub sim: &'a SimConfig,
+    /// The episode the planner is built for.
     pub episode: &'a Episode,
     /// Deterministic per-episode seed for stochastic planners.
     pub seed: u64,
@@ -47,6 +50,7 @@ pub type PlannerFactory =
 /// A benchmarked method: a report name, a planner factory and, optionally, its own
 /// replanning rate.
 pub struct MethodSpec {
+    /// The method's name in the results and the report (unique in a benchmark).
     pub name: String,
     make: Box<PlannerFactory>,
     replan_hz: Option<f64>,
@@ -127,6 +131,7 @@ pub enum SuiteKind {
 }
 
 impl SuiteKind {
+    /// The kind's name in configurations, `results.csv` and the report.
     pub fn as_str(self) -> &'static str {
         match self {
             SuiteKind::Real => "real",
@@ -140,8 +145,11 @@ impl SuiteKind {
 /// A named list of episodes, the crowd model they run with and the methods that run them.
 #[derive(Clone, Debug)]
 pub struct Suite {
+    /// Name in the results and the report (unique in a benchmark).
     pub name: String,
+    /// Where the episodes came from.
     pub kind: SuiteKind,
+    /// The episodes, each run once per robot and method.
     pub episodes: Vec<Episode>,
     /// Anything the report should say about how the suite was obtained (a fallback, say).
     pub note: Option<String>,
@@ -175,18 +183,27 @@ impl Suite {
 /// One result row: an episode × robot × method.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ResultRow {
+    /// Name of the suite the episode belongs to.
     pub suite: String,
+    /// Kind of that suite.
     pub suite_kind: SuiteKind,
+    /// Scenario class of the episode.
     pub scenario: ScenarioClass,
+    /// Episode id.
     pub episode: String,
+    /// Scene (recording) the episode was cut from.
     pub scene: String,
+    /// Robot name.
     pub robot: String,
+    /// Method name.
     pub method: String,
+    /// Seed the method's planner got for this run.
     pub seed: u64,
     /// Pedestrians in the episode.
     pub agents: usize,
     /// Relevant pedestrians (the data crate's density).
     pub density: usize,
+    /// The run's metrics.
     pub metrics: EpisodeMetrics,
 }
 

@@ -11,7 +11,7 @@
 //!
 //! [[methods]]
 //! name = "orca"                                 # name in the report
-//! kind = "plugin"                               # straight | plugin | ... (resolved by the CLI)
+//! kind = "plugin"                               # straight | plugin | ... (human2nav: the experiments crate)
 //! library = "target/{profile}/human2nav_orca"   # plugin library (kind = "plugin")
 //! plugin = "orca"                               # factory name in the library
 //! config = { time_horizon = 5.0 }               # passed to the method, kind-specific
@@ -39,7 +39,7 @@
 //! from another config: each top-level key the file sets replaces the base's.
 //!
 //! A `real` suite whose episode file is missing is an error naming the file, unless the caller
-//! allows the synthetic fallback (the CLI does when the datasets are absent): the suite then
+//! allows the synthetic fallback (the benchmark does when the datasets are absent): the suite then
 //! becomes a `synthetic` suite of the same size, with a warning in its note. An `empty` suite
 //! takes the episodes of the first other suite (or synthetic ones when there is none) and
 //! removes every pedestrian.
@@ -101,6 +101,7 @@ pub struct MethodConfig {
 pub struct SuiteConfig {
     /// Name in the report (unique).
     pub name: String,
+    /// Where the episodes come from: `real`, `synthetic`, `corridor` or `empty`.
     pub kind: SuiteKind,
     /// Episode file of a `real` suite (`EpisodeSuite` JSON), relative to the workspace root.
     #[serde(default)]
@@ -162,8 +163,11 @@ pub struct BenchConfig {
     pub seed: u64,
     /// Robot profiles (`robot.toml`), relative to the workspace root.
     pub robots: Vec<PathBuf>,
+    /// Simulation settings shared by every run (`[sim]`).
     pub sim: SimConfig,
+    /// The methods benchmarked (`[[methods]]`), in report order.
     pub methods: Vec<MethodConfig>,
+    /// The suites run (`[[suites]]`), in report order.
     pub suites: Vec<SuiteConfig>,
     /// Method drawn in the trajectory snapshots; default the first method that is not
     /// `straight`.
@@ -274,116 +278,10 @@ impl BenchConfig {
             ));
         }
         for (i, m) in self.methods.iter().enumerate() {
-            if m.name.is_empty() || self.methods[..i].iter().any(|o| o.name == m.name) {
-                return Err(SimError::setting(
-                    format!("methods[{i}]"),
-                    "name",
-                    format!("`{}` is empty or repeated", m.name),
-                ));
-            }
-            self.sim
-                .with_replan_hz(m.replan_hz)
-                .validate()
-                .map_err(|e| match e {
-                    SimError::Setting { message, .. } => {
-                        SimError::setting(format!("methods[{}]", m.name), "replan_hz", message)
-                    }
-                    other => other,
-                })?;
-            if m.kind == "plugin" && m.library.is_none() {
-                return Err(SimError::setting(
-                    format!("methods[{i}]"),
-                    "library",
-                    "a plugin method names its library",
-                ));
-            }
-            if m.deadline_ms.is_some() && m.kind != "plugin" {
-                return Err(SimError::setting(
-                    format!("methods[{i}]"),
-                    "deadline_ms",
-                    "only a plugin method has a deadline (built-in planners run in the host)",
-                ));
-            }
-            deadline_from_ms(m.deadline_ms)
-                .map_err(|e| SimError::setting(format!("methods[{i}]"), "deadline_ms", e))?;
-            if m.isolation != PluginIsolation::InProcess && m.kind != "plugin" {
-                return Err(SimError::setting(
-                    format!("methods[{i}]"),
-                    "isolation",
-                    "only a plugin method can run in its own process (built-in planners run in \
-                     the host)",
-                ));
-            }
+            self.validate_method(i, m)?;
         }
         for (i, s) in self.suites.iter().enumerate() {
-            let section = format!("suites[{i}]");
-            if s.name.is_empty() || self.suites[..i].iter().any(|o| o.name == s.name) {
-                return Err(SimError::setting(
-                    section,
-                    "name",
-                    format!("`{}` is empty or repeated", s.name),
-                ));
-            }
-            if s.kind == SuiteKind::Real && s.episodes.is_none() {
-                return Err(SimError::setting(
-                    section,
-                    "episodes",
-                    "a real suite needs its episode file",
-                ));
-            }
-            for (field, n) in [
-                ("per_class", s.per_class),
-                ("quick_per_class", s.quick_per_class),
-            ] {
-                if n == 0 || n > MAX_PER_CLASS {
-                    return Err(SimError::setting(
-                        section,
-                        field,
-                        format!("episode counts must be in 1..={MAX_PER_CLASS}, got {n}"),
-                    ));
-                }
-            }
-            match (&s.social_force, s.crowd) {
-                (Some(_), CrowdMode::Replay) => {
-                    return Err(SimError::setting(
-                        section,
-                        "social_force",
-                        "only a suite with crowd = \"reactive\" takes social-force parameters",
-                    ));
-                }
-                (Some(f), CrowdMode::Reactive) => {
-                    f.validate().map_err(|(field, message)| {
-                        SimError::setting(format!("suites[{i}].social_force"), field, message)
-                    })?;
-                }
-                (None, _) => {}
-            }
-            if let Some(methods) = &s.methods {
-                if methods.is_empty() {
-                    return Err(SimError::setting(
-                        section,
-                        "methods",
-                        "list at least one method, or leave the key out for every method",
-                    ));
-                }
-                if let Some(bad) = methods
-                    .iter()
-                    .find(|m| !self.methods.iter().any(|x| &x.name == *m))
-                {
-                    return Err(SimError::setting(
-                        section,
-                        "methods",
-                        format!(
-                            "`{bad}` is not a configured method (they are: {})",
-                            self.methods
-                                .iter()
-                                .map(|m| m.name.as_str())
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                    ));
-                }
-            }
+            self.validate_suite(i, s)?;
         }
         if let Some(m) = &self.snapshot_method {
             if !self.methods.iter().any(|x| &x.name == m) {
@@ -391,6 +289,126 @@ impl BenchConfig {
                     "bench",
                     "snapshot_method",
                     format!("`{m}` is not a configured method"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks `methods[i]`: a unique name, its replanning rate, and the keys only a plugin
+    /// method takes.
+    fn validate_method(&self, i: usize, m: &MethodConfig) -> Result<(), SimError> {
+        if m.name.is_empty() || self.methods[..i].iter().any(|o| o.name == m.name) {
+            return Err(SimError::setting(
+                format!("methods[{i}]"),
+                "name",
+                format!("`{}` is empty or repeated", m.name),
+            ));
+        }
+        self.sim
+            .with_replan_hz(m.replan_hz)
+            .validate()
+            .map_err(|e| match e {
+                SimError::Setting { message, .. } => {
+                    SimError::setting(format!("methods[{}]", m.name), "replan_hz", message)
+                }
+                other => other,
+            })?;
+        if m.kind == "plugin" && m.library.is_none() {
+            return Err(SimError::setting(
+                format!("methods[{i}]"),
+                "library",
+                "a plugin method names its library",
+            ));
+        }
+        if m.deadline_ms.is_some() && m.kind != "plugin" {
+            return Err(SimError::setting(
+                format!("methods[{i}]"),
+                "deadline_ms",
+                "only a plugin method has a deadline (built-in planners run in the host)",
+            ));
+        }
+        deadline_from_ms(m.deadline_ms)
+            .map_err(|e| SimError::setting(format!("methods[{i}]"), "deadline_ms", e))?;
+        if m.isolation != PluginIsolation::InProcess && m.kind != "plugin" {
+            return Err(SimError::setting(
+                format!("methods[{i}]"),
+                "isolation",
+                "only a plugin method can run in its own process (built-in planners run in \
+                 the host)",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Checks `suites[i]`: a unique name, the episode file of a real suite, the episode
+    /// counts, the social-force parameters and the methods it names.
+    fn validate_suite(&self, i: usize, s: &SuiteConfig) -> Result<(), SimError> {
+        let section = format!("suites[{i}]");
+        if s.name.is_empty() || self.suites[..i].iter().any(|o| o.name == s.name) {
+            return Err(SimError::setting(
+                section,
+                "name",
+                format!("`{}` is empty or repeated", s.name),
+            ));
+        }
+        if s.kind == SuiteKind::Real && s.episodes.is_none() {
+            return Err(SimError::setting(
+                section,
+                "episodes",
+                "a real suite needs its episode file",
+            ));
+        }
+        for (field, n) in [
+            ("per_class", s.per_class),
+            ("quick_per_class", s.quick_per_class),
+        ] {
+            if n == 0 || n > MAX_PER_CLASS {
+                return Err(SimError::setting(
+                    section,
+                    field,
+                    format!("episode counts must be in 1..={MAX_PER_CLASS}, got {n}"),
+                ));
+            }
+        }
+        match (&s.social_force, s.crowd) {
+            (Some(_), CrowdMode::Replay) => {
+                return Err(SimError::setting(
+                    section,
+                    "social_force",
+                    "only a suite with crowd = \"reactive\" takes social-force parameters",
+                ));
+            }
+            (Some(f), CrowdMode::Reactive) => {
+                f.validate().map_err(|(field, message)| {
+                    SimError::setting(format!("suites[{i}].social_force"), field, message)
+                })?;
+            }
+            (None, _) => {}
+        }
+        if let Some(methods) = &s.methods {
+            if methods.is_empty() {
+                return Err(SimError::setting(
+                    section,
+                    "methods",
+                    "list at least one method, or leave the key out for every method",
+                ));
+            }
+            if let Some(bad) = methods
+                .iter()
+                .find(|m| !self.methods.iter().any(|x| &x.name == *m))
+            {
+                return Err(SimError::setting(
+                    section,
+                    "methods",
+                    format!(
+                        "`{bad}` is not a configured method (they are: {})",
+                        self.methods
+                            .iter()
+                            .map(|m| m.name.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
                 ));
             }
         }
@@ -463,56 +481,7 @@ pub fn build_suites(
         }
         let seed = s.seed.unwrap_or(cfg.seed);
         let (kind, episodes, note) = match s.kind {
-            SuiteKind::Real => {
-                let file = cfg.resolve(s.episodes.as_deref().unwrap_or(Path::new("")));
-                // Anything at the path is read (a directory or a FIFO is an error naming it);
-                // only a missing file may fall back.
-                if file.exists() {
-                    let loaded = crate::episode::load_episode_file(&file).map_err(|e| {
-                        SimError::Episodes {
-                            suite: s.name.clone(),
-                            message: e.to_string(),
-                        }
-                    })?;
-                    let episodes = take_per_class(&loaded.episodes, n);
-                    let short: Vec<String> = ScenarioClass::ALL
-                        .iter()
-                        .filter_map(|c| {
-                            let k = episodes.iter().filter(|e| e.scenario == *c).count();
-                            (k < n).then(|| format!("{} has {k}", c.name()))
-                        })
-                        .collect();
-                    let note = format!(
-                        "Held-out real episodes from `{}` ({}){}",
-                        file.display(),
-                        loaded.source,
-                        if short.is_empty() {
-                            String::new()
-                        } else {
-                            format!("; fewer than {n} per class: {}", short.join(", "))
-                        }
-                    );
-                    (SuiteKind::Real, episodes, note)
-                } else if let Some(reason) = synthetic_fallback {
-                    let note = format!(
-                        "Warning: the real episode file `{}` is absent ({reason}); this suite fell back \
-                         to {n} synthetic episodes per class",
-                        file.display()
-                    );
-                    (SuiteKind::Synthetic, synthetic_episodes(n, seed)?, note)
-                } else {
-                    return Err(SimError::setting(
-                        format!("suites[{i}]"),
-                        "episodes",
-                        format!(
-                            "suite `{}`: the episode file `{}` does not exist (`human2nav data \
-                             episodes` writes the episode files its data config names)",
-                            s.name,
-                            file.display()
-                        ),
-                    ));
-                }
-            }
+            SuiteKind::Real => real_suite(cfg, i, s, n, seed, synthetic_fallback)?,
             SuiteKind::Synthetic => (
                 SuiteKind::Synthetic,
                 synthetic_episodes(n, seed)?,
@@ -531,32 +500,7 @@ pub fn build_suites(
                      pedestrians on straight lanes), seed {seed}"
                 ),
             ),
-            SuiteKind::Empty => {
-                let source = suites.iter().find(|x| x.kind != SuiteKind::Empty);
-                let (base, from) = match source {
-                    Some(src) => (
-                        take_per_class(&src.episodes, n),
-                        format!("suite `{}`", src.name),
-                    ),
-                    None => (
-                        synthetic_episodes(n, seed)?,
-                        "the synthetic generator".to_string(),
-                    ),
-                };
-                let episodes = base
-                    .into_iter()
-                    .map(|mut e| {
-                        e.agents.clear();
-                        e.density = 0;
-                        e.id = format!("{}-empty", e.id);
-                        e
-                    })
-                    .collect();
-                let note = format!(
-                    "Start, goal and budget of {n} episodes per class of {from}, every pedestrian removed"
-                );
-                (SuiteKind::Empty, episodes, note)
-            }
+            SuiteKind::Empty => empty_suite(&suites, n, seed)?,
         };
         if episodes.is_empty() {
             return Err(SimError::Episodes {
@@ -579,6 +523,99 @@ pub fn build_suites(
         });
     }
     Ok(suites)
+}
+
+/// The episodes of the `real` suite `suites[i]` (`s`), at most `n` per class, and its note;
+/// synthetic ones (kind `synthetic`, a warning note) when its file is missing and
+/// `synthetic_fallback` gives the reason.
+fn real_suite(
+    cfg: &BenchConfig,
+    i: usize,
+    s: &SuiteConfig,
+    n: usize,
+    seed: u64,
+    synthetic_fallback: Option<&str>,
+) -> Result<(SuiteKind, Vec<Episode>, String), SimError> {
+    let file = cfg.resolve(s.episodes.as_deref().unwrap_or(Path::new("")));
+    // Anything at the path is read (a directory or a FIFO is an error naming it);
+    // only a missing file may fall back.
+    if file.exists() {
+        let loaded = crate::episode::load_episode_file(&file).map_err(|e| SimError::Episodes {
+            suite: s.name.clone(),
+            message: e.to_string(),
+        })?;
+        let episodes = take_per_class(&loaded.episodes, n);
+        let short: Vec<String> = ScenarioClass::ALL
+            .iter()
+            .filter_map(|c| {
+                let k = episodes.iter().filter(|e| e.scenario == *c).count();
+                (k < n).then(|| format!("{} has {k}", c.name()))
+            })
+            .collect();
+        let note = format!(
+            "Held-out real episodes from `{}` ({}){}",
+            file.display(),
+            loaded.source,
+            if short.is_empty() {
+                String::new()
+            } else {
+                format!("; fewer than {n} per class: {}", short.join(", "))
+            }
+        );
+        Ok((SuiteKind::Real, episodes, note))
+    } else if let Some(reason) = synthetic_fallback {
+        let note = format!(
+            "Warning: the real episode file `{}` is absent ({reason}); this suite fell back \
+                 to {n} synthetic episodes per class",
+            file.display()
+        );
+        Ok((SuiteKind::Synthetic, synthetic_episodes(n, seed)?, note))
+    } else {
+        Err(SimError::setting(
+            format!("suites[{i}]"),
+            "episodes",
+            format!(
+                "suite `{}`: the episode file `{}` does not exist (`human2nav data \
+                     episodes` writes the episode files its data config names)",
+                s.name,
+                file.display()
+            ),
+        ))
+    }
+}
+
+/// The episodes of an `empty` suite: start, goal and budget of `n` episodes per class of the
+/// first suite built with pedestrians (else of the synthetic generator), every pedestrian
+/// removed; and its note.
+fn empty_suite(
+    suites: &[Suite],
+    n: usize,
+    seed: u64,
+) -> Result<(SuiteKind, Vec<Episode>, String), SimError> {
+    let source = suites.iter().find(|x| x.kind != SuiteKind::Empty);
+    let (base, from) = match source {
+        Some(src) => (
+            take_per_class(&src.episodes, n),
+            format!("suite `{}`", src.name),
+        ),
+        None => (
+            synthetic_episodes(n, seed)?,
+            "the synthetic generator".to_string(),
+        ),
+    };
+    let episodes = base
+        .into_iter()
+        .map(|mut e| {
+            e.agents.clear();
+            e.density = 0;
+            e.id = format!("{}-empty", e.id);
+            e
+        })
+        .collect();
+    let note = format!(
+        "Start, goal and budget of {n} episodes per class of {from}, every pedestrian removed"
+    );
+    Ok((SuiteKind::Empty, episodes, note))
 }
 
 /// Makes sure the episode file of every `real` suite exists: one that is missing is mined and

@@ -20,11 +20,17 @@ use std::time::Instant;
 /// Everything a run needs besides the suites.
 #[derive(Debug)]
 pub struct BenchPlan<'a> {
+    /// The suites run.
     pub suites: &'a [Suite],
+    /// The robots, each running every suite.
     pub robots: &'a [RobotSetup],
+    /// The methods, each running the suites that name it (all by default).
     pub methods: &'a [MethodSpec],
+    /// Simulation settings (a method may override the replanning rate).
     pub sim: &'a SimConfig,
+    /// Master seed: every run's seed derives from it.
     pub seed: u64,
+    /// Quick mode (a few episodes per class); noted in the report.
     pub quick: bool,
     /// Method drawn in the snapshots (default: the first).
     pub snapshot_method: Option<&'a str>,
@@ -45,14 +51,19 @@ pub const MAX_THREADS: usize = 256;
 /// What a run produced.
 #[derive(Debug)]
 pub struct BenchOutcome {
+    /// One row per episode × robot × method.
     pub rows: Vec<ResultRow>,
+    /// Path of the written `results.csv`.
     pub results_csv: PathBuf,
+    /// Path of the written `report.md`.
     pub report_md: PathBuf,
+    /// Paths of the written figures, in the report's order.
     pub figures: Vec<PathBuf>,
     /// `(method, robot, SR)` on the empty-world suites, where SR < 1.
     pub empty_world_failures: Vec<(String, String, f64)>,
     /// Every (method, robot) with failed planner calls (report.md lists them at the top).
     pub planner_failures: Vec<PlannerFailures>,
+    /// Wall time of the episode runs and figures (s).
     pub wall_time: f64,
     /// Thread time per method.
     pub times: MethodTimes,
@@ -73,24 +84,7 @@ pub fn run(
     }
     std::fs::create_dir_all(out_dir).map_err(|e| SimError::io(out_dir, e))?;
     let started = Instant::now();
-    let bench = || {
-        run_bench_timed(
-            plan.suites,
-            plan.robots,
-            plan.methods,
-            plan.sim,
-            plan.seed,
-            progress,
-        )
-    };
-    let (rows, times) = match plan.threads {
-        None => bench()?,
-        Some(n) => rayon::ThreadPoolBuilder::new()
-            .num_threads(n.max(1))
-            .build()
-            .map_err(|e| SimError::setting("bench", "threads", e.to_string()))?
-            .install(bench)?,
-    };
+    let (rows, times) = run_episodes(plan, progress)?;
 
     let results_csv = out_dir.join("results.csv");
     std::fs::write(&results_csv, report::results_csv(&rows))
@@ -98,60 +92,11 @@ pub fn run(
 
     let method_names: Vec<String> = plan.methods.iter().map(|m| m.name.clone()).collect();
     let robot_names: Vec<String> = plan.robots.iter().map(|r| r.name.clone()).collect();
-    let mut figure_list: Vec<(String, String)> = Vec::new();
-    let mut figure_paths = Vec::new();
-    let mut add = |file: String, caption: String| {
-        figure_paths.push(out_dir.join(&file));
-        figure_list.push((file, caption));
-    };
-    for suite in plan.suites.iter().filter(|s| s.kind != SuiteKind::Empty) {
-        let [f6, f7, fd] = suite_figure_files(&suite.name);
-        figures::sr_per_scenario(&out_dir.join(&f6), &rows, &suite.name, &method_names)?;
-        add(
-            f6,
-            format!(
-                "Fig. 6: success rate per scenario and method, suite `{}`, all robots; whiskers: \
-                 95 % Wilson score intervals",
-                suite.name
-            ),
-        );
-        figures::tfs_sr_per_robot(
-            &out_dir.join(&f7),
-            &rows,
-            &suite.name,
-            &robot_names,
-            &method_names,
-        )?;
-        add(
-            f7,
-            format!(
-                "Fig. 7: TFS (left; whiskers: ±1.96 standard errors of the mean of the per-episode \
-                 TFS) and SR (right; whiskers: 95 % Wilson score intervals) per robot and method, \
-                 suite `{}`",
-                suite.name
-            ),
-        );
-        figures::sr_per_density(&out_dir.join(&fd), &rows, &suite.name, &method_names)?;
-        add(
-            fd,
-            format!(
-                "SR against crowd density (relevant pedestrians per episode), suite `{}`, all \
-                 robots and scenarios; whiskers: 95 % Wilson score intervals; under each bin the \
-                 number of episodes in it",
-                suite.name
-            ),
-        );
-    }
-    for suite in plan.suites.iter().filter(|s| s.kind != SuiteKind::Empty) {
-        if let Some((snaps, caption)) = representative_snapshots(plan, suite, &rows)? {
-            let f4 = fig4_file(&suite.name);
-            figures::trajectory_snapshots(&out_dir.join(&f4), &snaps)?;
-            add(f4, caption);
-        }
-        for (file, caption) in failure_figures(plan, &rows, suite, out_dir)? {
-            add(file, caption);
-        }
-    }
+    let figure_list = draw_figures(plan, &rows, out_dir, &method_names, &robot_names)?;
+    let figure_paths = figure_list
+        .iter()
+        .map(|(file, _)| out_dir.join(file))
+        .collect();
 
     let wall_time = started.elapsed().as_secs_f64();
     let ctx = ReportContext {
@@ -159,33 +104,13 @@ pub fn run(
         seed: plan.seed,
         quick: plan.quick,
         sim: sim_table(plan.sim, plan.methods, plan.suites),
-        robots: plan
-            .robots
-            .iter()
-            .map(|r| {
-                let l = &r.limits;
-                format!(
-                    "`{}` ({}): collides as {}; planners' disc r {:.2} m; v_max {:.2} m/s, a_max {:.2} m/s², ω_max {:.2} rad/s, {}",
-                    r.name,
-                    r.embodiment.name(),
-                    r.footprint
-                        .iter()
-                        .map(|s| s.to_string())
-                        .collect::<Vec<_>>()
-                        .join(" + "),
-                    r.footprint_radius,
-                    l.v_max,
-                    l.a_max,
-                    l.omega_max,
-                    match l.kappa_max {
-                        Some(k) => format!("min turning radius {:.2} m", 1.0 / k),
-                        None => "turns in place".into(),
-                    }
-                )
-            })
-            .collect(),
+        robots: plan.robots.iter().map(robot_line).collect(),
         methods: method_names.clone(),
-        suites: plan.suites.iter().map(|s| (s.name.clone(), s.kind, s.episodes.len(), s.note.clone())).collect(),
+        suites: plan
+            .suites
+            .iter()
+            .map(|s| (s.name.clone(), s.kind, s.episodes.len(), s.note.clone()))
+            .collect(),
         robot_names: robot_names.clone(),
         figures: figure_list,
         wall_time: Some(wall_time),
@@ -201,20 +126,7 @@ pub fn run(
     std::fs::write(&report_md, report::report_markdown(&rows, &ctx))
         .map_err(|e| SimError::io(&report_md, e))?;
 
-    let mut empty_world_failures = Vec::new();
-    for s in plan.suites.iter().filter(|s| s.kind == SuiteKind::Empty) {
-        for m in &method_names {
-            for r in &robot_names {
-                let sum = summarize(
-                    rows.iter()
-                        .filter(|x| x.suite == s.name && &x.method == m && &x.robot == r),
-                );
-                if sum.n > 0 && sum.sr < 1.0 {
-                    empty_world_failures.push((m.clone(), r.clone(), sum.sr));
-                }
-            }
-        }
-    }
+    let empty_world_failures = empty_world_failures(plan, &rows, &method_names, &robot_names);
     let planner_failures = report::planner_failures(&rows);
     Ok(BenchOutcome {
         rows,
@@ -226,6 +138,139 @@ pub fn run(
         wall_time,
         times,
     })
+}
+
+/// Every episode run of the plan, on `plan.threads` workers (rayon's default pool when
+/// `None`), with the thread time per method.
+fn run_episodes(
+    plan: &BenchPlan<'_>,
+    progress: &ProgressBar,
+) -> Result<(Vec<ResultRow>, MethodTimes), SimError> {
+    let bench = || {
+        run_bench_timed(
+            plan.suites,
+            plan.robots,
+            plan.methods,
+            plan.sim,
+            plan.seed,
+            progress,
+        )
+    };
+    match plan.threads {
+        None => bench(),
+        Some(n) => rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build()
+            .map_err(|e| SimError::setting("bench", "threads", e.to_string()))?
+            .install(bench),
+    }
+}
+
+/// Draws the figures of every suite with pedestrians (Fig. 6, Fig. 7 and SR against density,
+/// then the snapshots and the failure pictures) into `out_dir`; returns each file's name and
+/// caption, in the report's order.
+fn draw_figures(
+    plan: &BenchPlan<'_>,
+    rows: &[ResultRow],
+    out_dir: &Path,
+    method_names: &[String],
+    robot_names: &[String],
+) -> Result<Vec<(String, String)>, SimError> {
+    let mut figure_list: Vec<(String, String)> = Vec::new();
+    for suite in plan.suites.iter().filter(|s| s.kind != SuiteKind::Empty) {
+        let [f6, f7, fd] = suite_figure_files(&suite.name);
+        figures::sr_per_scenario(&out_dir.join(&f6), rows, &suite.name, method_names)?;
+        figure_list.push((
+            f6,
+            format!(
+                "Fig. 6: success rate per scenario and method, suite `{}`, all robots; whiskers: \
+                 95 % Wilson score intervals",
+                suite.name
+            ),
+        ));
+        figures::tfs_sr_per_robot(
+            &out_dir.join(&f7),
+            rows,
+            &suite.name,
+            robot_names,
+            method_names,
+        )?;
+        figure_list.push((
+            f7,
+            format!(
+                "Fig. 7: TFS (left; whiskers: ±1.96 standard errors of the mean of the per-episode \
+                 TFS) and SR (right; whiskers: 95 % Wilson score intervals) per robot and method, \
+                 suite `{}`",
+                suite.name
+            ),
+        ));
+        figures::sr_per_density(&out_dir.join(&fd), rows, &suite.name, method_names)?;
+        figure_list.push((
+            fd,
+            format!(
+                "SR against crowd density (relevant pedestrians per episode), suite `{}`, all \
+                 robots and scenarios; whiskers: 95 % Wilson score intervals; under each bin the \
+                 number of episodes in it",
+                suite.name
+            ),
+        ));
+    }
+    for suite in plan.suites.iter().filter(|s| s.kind != SuiteKind::Empty) {
+        if let Some((snaps, caption)) = representative_snapshots(plan, suite, rows)? {
+            let f4 = fig4_file(&suite.name);
+            figures::trajectory_snapshots(&out_dir.join(&f4), &snaps)?;
+            figure_list.push((f4, caption));
+        }
+        figure_list.extend(failure_figures(plan, rows, suite, out_dir)?);
+    }
+    Ok(figure_list)
+}
+
+/// The report's line for a robot: embodiment, collision footprint, planners' disc and limits.
+fn robot_line(r: &RobotSetup) -> String {
+    let l = &r.limits;
+    format!(
+        "`{}` ({}): collides as {}; planners' disc r {:.2} m; v_max {:.2} m/s, a_max {:.2} m/s², ω_max {:.2} rad/s, {}",
+        r.name,
+        r.embodiment.name(),
+        r.footprint
+            .iter()
+            .map(|s| s.to_string())
+            .collect::<Vec<_>>()
+            .join(" + "),
+        r.footprint_radius,
+        l.v_max,
+        l.a_max,
+        l.omega_max,
+        match l.kappa_max {
+            Some(k) => format!("min turning radius {:.2} m", 1.0 / k),
+            None => "turns in place".into(),
+        }
+    )
+}
+
+/// `(method, robot, SR)` of every pair that missed SR = 1 on an empty-world suite.
+fn empty_world_failures(
+    plan: &BenchPlan<'_>,
+    rows: &[ResultRow],
+    method_names: &[String],
+    robot_names: &[String],
+) -> Vec<(String, String, f64)> {
+    let mut failures = Vec::new();
+    for s in plan.suites.iter().filter(|s| s.kind == SuiteKind::Empty) {
+        for m in method_names {
+            for r in robot_names {
+                let sum = summarize(
+                    rows.iter()
+                        .filter(|x| x.suite == s.name && &x.method == m && &x.robot == r),
+                );
+                if sum.n > 0 && sum.sr < 1.0 {
+                    failures.push((m.clone(), r.clone(), sum.sr));
+                }
+            }
+        }
+    }
+    failures
 }
 
 impl BenchOutcome {

@@ -8,33 +8,69 @@ pub enum SimError {
     /// A setting is out of range; `section` names the table (`sim`, `straight`, `suites[1]`...).
     #[error("invalid setting `{section}.{field}`: {message}")]
     Setting {
+        /// The table.
         section: String,
+        /// The key in it.
         field: String,
+        /// What is wrong with the value.
         message: String,
     },
+    /// A file could not be parsed.
     #[error("cannot parse `{path}`: {message}")]
-    Parse { path: PathBuf, message: String },
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// The parser's complaint.
+        message: String,
+    },
+    /// A file could not be read or written.
     #[error("cannot read or write `{path}`: {source}")]
     Io {
+        /// The file.
         path: PathBuf,
+        /// The operating system's error.
         #[source]
         source: std::io::Error,
     },
+    /// A robot profile could not be loaded or set up.
     #[error("robot profile `{path}`: {message}")]
-    Robot { path: PathBuf, message: String },
+    Robot {
+        /// The profile (`robot.toml`).
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+    /// A suite's episodes could not be obtained (unreadable file, none selected, ...).
     #[error("episodes of suite `{suite}`: {message}")]
-    Episodes { suite: String, message: String },
+    Episodes {
+        /// The suite.
+        suite: String,
+        /// What went wrong.
+        message: String,
+    },
+    /// A method's factory failed to build a planner.
     #[error(
         "method `{method}` could not build a planner for episode `{episode}` on robot `{robot}`: {message}"
     )]
     Method {
+        /// The method.
         method: String,
+        /// The robot the planner was for.
         robot: String,
+        /// The episode the planner was for.
         episode: String,
+        /// The factory's error.
         message: String,
     },
+    /// A figure could not be drawn or written.
     #[error("cannot draw `{file}`: {message}")]
-    Figure { file: PathBuf, message: String },
+    Figure {
+        /// The figure's file.
+        file: PathBuf,
+        /// The drawing backend's error.
+        message: String,
+    },
+    /// The benchmark has nothing to run; the message says why.
     #[error("nothing to run: {0}")]
     Empty(String),
 }

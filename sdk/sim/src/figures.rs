@@ -26,6 +26,9 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 use std::path::Path;
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+/// A chart in metres on a bitmap.
+type Chart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
 /// Method colours, in method order (colour-blind-safe Tableau-like palette).
 const PALETTE: [RGBColor; 8] = [
@@ -67,8 +70,11 @@ fn text_err(e: impl std::fmt::Display) -> String {
 /// A value and its interval, all in `[0, 1]`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Interval {
+    /// The estimate.
     pub value: f64,
+    /// Lower end of the interval.
     pub lo: f64,
+    /// Upper end of the interval.
     pub hi: f64,
 }
 
@@ -618,9 +624,13 @@ pub fn sr_per_density(
 /// One recorded episode to draw as a trajectory snapshot.
 #[derive(Clone, Debug)]
 pub struct Snapshot {
+    /// The episode run.
     pub episode: Episode,
+    /// What the run recorded (states, plans, outcome).
     pub run: EpisodeRun,
+    /// Robot name, for the title.
     pub robot: String,
+    /// Method name, for the title.
     pub method: String,
     /// The planners' covering disc (drawn as an outline, and the heading arrow's scale).
     pub footprint_radius: f64,
@@ -839,6 +849,8 @@ fn snapshot_view(snap: &Snapshot, plan: Option<&PlanSample>) -> ([f64; 2], f64) 
     (centre, half)
 }
 
+/// One snapshot panel: the crowd, the robot with its path and plan, start and goal, and the
+/// planner's BEV as an inset.
 fn draw_snapshot(area: &Area<'_>, snap: &Snapshot) -> Result<(), String> {
     let ep = &snap.episode;
     let run = &snap.run;
@@ -873,11 +885,34 @@ fn draw_snapshot(area: &Area<'_>, snap: &Snapshot) -> Result<(), String> {
         .bold_line_style(RGBColor(230, 230, 230))
         .draw()
         .map_err(text_err)?;
-    let inside = |p: &[f64; 2]| (p[0] - c[0]).abs() < half && (p[1] - c[1]).abs() < half;
     let err = text_err;
     draw_obstacles(&mut chart, &ep.obstacles)?;
 
-    // Pedestrians: history dots, disc, velocity arrow (0.6 s of velocity).
+    draw_pedestrians(&mut chart, snap, t, c, half)?;
+    let pose = draw_robot(&mut chart, snap, &path, n_t, plan)?;
+    // Start (green star) and goal (blue star), as in the paper.
+    let r = 0.05 * half;
+    chart
+        .draw_series([
+            Polygon::new(star([ep.start.x, ep.start.y], r), START_GREEN.filled()),
+            Polygon::new(star(ep.goal, r), GOAL_BLUE.filled()),
+        ])
+        .map_err(err)?;
+
+    draw_bev_inset(area, &chart, snap, plan, t, pose)
+}
+
+/// The pedestrians at `t` inside the view (centre `c`, half side `half`): history dots, disc
+/// and velocity arrow (0.6 s of velocity).
+fn draw_pedestrians(
+    chart: &mut Chart<'_, '_>,
+    snap: &Snapshot,
+    t: f64,
+    c: [f64; 2],
+    half: f64,
+) -> Result<(), String> {
+    let inside = |p: &[f64; 2]| (p[0] - c[0]).abs() < half && (p[1] - c[1]).abs() < half;
+    let err = text_err;
     for a in pedestrians_at(snap, t) {
         if !inside(&a.position) {
             continue;
@@ -911,10 +946,23 @@ fn draw_snapshot(area: &Area<'_>, snap: &Snapshot) -> Result<(), String> {
         }
     }
 
-    // Robot: whole path faint, path so far solid, plan at t, footprint at t.
+    Ok(())
+}
+
+/// The robot: whole path faint, path so far (up to state `n_t`) solid, the plan at the
+/// snapshot's time, and its footprint and heading at state `n_t`, whose pose it returns.
+fn draw_robot(
+    chart: &mut Chart<'_, '_>,
+    snap: &Snapshot,
+    path: &[(f64, f64)],
+    n_t: usize,
+    plan: Option<&PlanSample>,
+) -> Result<Pose2, String> {
+    let run = &snap.run;
+    let err = text_err;
     chart
         .draw_series(std::iter::once(PathElement::new(
-            path.clone(),
+            path.to_vec(),
             ROBOT_RED.mix(0.25).stroke_width(2),
         )))
         .map_err(err)?;
@@ -959,16 +1007,21 @@ fn draw_snapshot(area: &Area<'_>, snap: &Snapshot) -> Result<(), String> {
         )))
         .map_err(err)?;
 
-    // Start (green star) and goal (blue star), as in the paper.
-    let r = 0.05 * half;
-    chart
-        .draw_series([
-            Polygon::new(star([ep.start.x, ep.start.y], r), START_GREEN.filled()),
-            Polygon::new(star(ep.goal, r), GOAL_BLUE.filled()),
-        ])
-        .map_err(err)?;
+    Ok(pose)
+}
 
-    // The BEV inset, top left: the raster the plan drawn was made from.
+/// The BEV inset, top left of the plotting area: the raster the plan drawn (else the state at
+/// `t`, at `pose`) was made from.
+fn draw_bev_inset(
+    area: &Area<'_>,
+    chart: &Chart<'_, '_>,
+    snap: &Snapshot,
+    plan: Option<&PlanSample>,
+    t: f64,
+    pose: Pose2,
+) -> Result<(), String> {
+    let run = &snap.run;
+    let err = text_err;
     let (t_obs, ego) = match plan {
         Some(p) => (p.t0, run.states[snap.state_index(p.t0)].pose),
         None => (t, pose),
@@ -1046,8 +1099,11 @@ pub fn trajectory_snapshots(path: &Path, snapshots: &[Snapshot]) -> Result<(), S
 /// `fraction` of the training scenes, for one scenario class or (`None`) over all classes.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ScalingPoint {
+    /// Share of the training scenes, in (0, 1].
     pub fraction: f64,
+    /// The scenario class, `None` for all classes together.
     pub scenario: Option<ScenarioClass>,
+    /// Success rate.
     pub sr: f64,
     /// Standard error of `sr` (drawn as shading around the all-class curve).
     pub sr_se: f64,

@@ -16,6 +16,8 @@
 //!   tests, intervals and density bins the report uses.
 //! * [`plan_figure`]: one planning step from an episode, drawn like the paper's Fig. 4.
 
+#![warn(missing_docs)]
+
 pub mod bench;
 pub mod config;
 pub mod crowd;

@@ -32,14 +32,21 @@ pub const PERSONAL_DISTANCE: f64 = 1.2;
 /// The metrics of one episode.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EpisodeMetrics {
+    /// How the episode ended.
     pub outcome: Outcome,
+    /// The goal was reached (outcome `success`).
     pub success: bool,
+    /// The robot touched a pedestrian or an obstacle (outcome `collision`).
     pub collision: bool,
+    /// The budget ran out (outcome `timeout`).
     pub timeout: bool,
     /// `min(tfs_plan, tfs_executed)`.
     pub tfs: f64,
+    /// Trajectory feasibility score of the plans, against the robot's limits.
     pub tfs_plan: f64,
+    /// Trajectory feasibility score of the executed commands (before saturation).
     pub tfs_executed: f64,
+    /// Length of the executed path (m).
     pub path_length: f64,
     /// End time of a successful episode (s).
     pub time_to_goal: Option<f64>,
@@ -74,12 +81,19 @@ pub struct EpisodeMetrics {
 /// How many commands broke each limit (a command can break several), out of `commands`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct LimitCounts {
+    /// Commands checked.
     pub commands: usize,
+    /// Commands whose forward speed exceeds `v_max`.
     pub speed: usize,
+    /// Commands whose reverse speed exceeds `v_reverse_max`.
     pub reverse: usize,
+    /// Commands whose longitudinal acceleration exceeds `a_max`.
     pub acceleration: usize,
+    /// Commands whose yaw rate exceeds `omega_max`.
     pub yaw_rate: usize,
+    /// Commands whose curvature exceeds `kappa_max`.
     pub curvature: usize,
+    /// Commands whose body-frame lateral speed exceeds `lateral_speed_max`.
     pub lateral: usize,
 }
 

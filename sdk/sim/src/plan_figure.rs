@@ -35,6 +35,7 @@ use human2nav_core::obstacle;
 use human2nav_core::tfs;
 use human2nav_core::{AgentState, Limits, Observation, Plan, Pose2, Twist2};
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
@@ -197,6 +198,7 @@ pub struct PlanFigureNumbers {
     pub tfs_before: Option<f64>,
     /// Feasible waypoints / all waypoints of the plan.
     pub feasible: usize,
+    /// Waypoints of the plan.
     pub waypoints: usize,
 }
 
@@ -229,6 +231,9 @@ fn before_guidance<'a>(fig: &PlanFigure<'a>) -> Option<&'a [Pose2]> {
 }
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+/// A chart in metres on a bitmap.
+type Chart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
 const GREY: RGBColor = RGBColor(120, 120, 120);
 const EGO_RED: RGBColor = RGBColor(214, 39, 40);
@@ -335,12 +340,72 @@ fn arrow(from: (f64, f64), to: (f64, f64), head: f64) -> ArrowShape {
     (vec![from, base], tri)
 }
 
+/// Draws the whole figure: titles, the scene with the samples and the plan, the legend and
+/// the BEV inset.
 fn draw(root: &Area<'_>, fig: &PlanFigure<'_>, numbers: &PlanFigureNumbers) -> Result<(), String> {
     let e = |x: &dyn std::fmt::Display| x.to_string();
     let obs = fig.observation;
-    let info = &fig.plan.info;
     let (c, half) = view(fig);
+    let (top, body) = root.split_vertically(64);
+    draw_titles(&top, fig, numbers)?;
 
+    let mut chart = ChartBuilder::on(&body)
+        .margin(10)
+        .margin_right(24)
+        .x_label_area_size(40)
+        .y_label_area_size(50)
+        .build_cartesian_2d((c[0] - half)..(c[0] + half), (c[1] - half)..(c[1] + half))
+        .map_err(|x| e(&x))?;
+    chart
+        .configure_mesh()
+        .x_desc("x (m)")
+        .y_desc("y (m)")
+        .x_labels(12)
+        .y_labels(12)
+        .light_line_style(WHITE)
+        .bold_line_style(RGBColor(222, 222, 222))
+        .label_style(("sans-serif", 14))
+        .draw()
+        .map_err(|x| e(&x))?;
+    let inside = |p: [f64; 2]| (p[0] - c[0]).abs() < half && (p[1] - c[1]).abs() < half;
+    draw_obstacles(&mut chart, &obs.obstacles)?;
+
+    draw_pedestrians(&mut chart, fig, &inside)?;
+    draw_samples(&mut chart, fig)?;
+    draw_plan(&mut chart, fig)?;
+    draw_robot_and_goal(&mut chart, fig, half, &inside)?;
+
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.88))
+        .border_style(RGBColor(160, 160, 160))
+        .label_font(("sans-serif", 15))
+        .margin(8)
+        .draw()
+        .map_err(|x| e(&x))?;
+
+    // The BEV inset in the top-left corner of the plotting area.
+    let (px, py) = chart.plotting_area().get_base_pixel();
+    let (pw, ph) = chart.plotting_area().dim_in_pixel();
+    let size = (INSET_SHARE * f64::from(pw.min(ph))) as u32 - 12;
+    let inset = root
+        .clone()
+        .shrink((px + 6, py + 6), (size, size.saturating_sub(22) + 22));
+    draw_bev_inset(&inset, fig).map_err(|x| e(&x))?;
+    Ok(())
+}
+
+/// The title (robot, guidance, TFS, Φ) and the subtitle (time, crowd, speed, feasible
+/// waypoints, fallback) in the strip `top`.
+fn draw_titles(
+    top: &Area<'_>,
+    fig: &PlanFigure<'_>,
+    numbers: &PlanFigureNumbers,
+) -> Result<(), String> {
+    let e = |x: &dyn std::fmt::Display| x.to_string();
+    let obs = fig.observation;
+    let info = &fig.plan.info;
     let title = format!(
         "{} — guidance {} — TFS {:.2}{} — Φ {} → {}",
         fig.robot,
@@ -352,7 +417,6 @@ fn draw(root: &Area<'_>, fig: &PlanFigure<'_>, numbers: &PlanFigureNumbers) -> R
         fmt_opt(info.phi_before, 3),
         fmt_opt(info.phi_after, 3),
     );
-    let (top, body) = root.split_vertically(64);
     top.draw(&Text::new(
         title,
         (WIDTH as i32 / 2, 8),
@@ -390,28 +454,18 @@ fn draw(root: &Area<'_>, fig: &PlanFigure<'_>, numbers: &PlanFigureNumbers) -> R
     ))
     .map_err(|x| e(&x))?;
 
-    let mut chart = ChartBuilder::on(&body)
-        .margin(10)
-        .margin_right(24)
-        .x_label_area_size(40)
-        .y_label_area_size(50)
-        .build_cartesian_2d((c[0] - half)..(c[0] + half), (c[1] - half)..(c[1] + half))
-        .map_err(|x| e(&x))?;
-    chart
-        .configure_mesh()
-        .x_desc("x (m)")
-        .y_desc("y (m)")
-        .x_labels(12)
-        .y_labels(12)
-        .light_line_style(WHITE)
-        .bold_line_style(RGBColor(222, 222, 222))
-        .label_style(("sans-serif", 14))
-        .draw()
-        .map_err(|x| e(&x))?;
-    let inside = |p: [f64; 2]| (p[0] - c[0]).abs() < half && (p[1] - c[1]).abs() < half;
-    draw_obstacles(&mut chart, &obs.obstacles)?;
+    Ok(())
+}
 
-    // Pedestrians: history dots, disc, heading arrow.
+/// The observed pedestrians inside the view: history dots, disc, heading arrow; and their
+/// legend entry.
+fn draw_pedestrians(
+    chart: &mut Chart<'_, '_>,
+    fig: &PlanFigure<'_>,
+    inside: &dyn Fn([f64; 2]) -> bool,
+) -> Result<(), String> {
+    let e = |x: &dyn std::fmt::Display| x.to_string();
+    let obs = fig.observation;
     for a in &obs.agents {
         if !inside(a.position) {
             continue;
@@ -454,7 +508,13 @@ fn draw(root: &Area<'_>, fig: &PlanFigure<'_>, numbers: &PlanFigureNumbers) -> R
         .label("pedestrian (history dots, heading arrow)")
         .legend(|(x, y)| Circle::new((x + 8, y), 6, GREY.mix(0.65).filled()));
 
-    // Candidates before and after guidance.
+    Ok(())
+}
+
+/// The flow samples before and after guidance, and the kept sample before guidance.
+fn draw_samples(chart: &mut Chart<'_, '_>, fig: &PlanFigure<'_>) -> Result<(), String> {
+    let e = |x: &dyn std::fmt::Display| x.to_string();
+    let info = &fig.plan.info;
     let xy = |p: &[Pose2]| p.iter().map(|q| (q.x, q.y)).collect::<Vec<_>>();
     for (i, cand) in info.candidates.iter().enumerate() {
         let s = chart
@@ -498,7 +558,13 @@ fn draw(root: &Area<'_>, fig: &PlanFigure<'_>, numbers: &PlanFigureNumbers) -> R
             });
     }
 
-    // The plan, segment by segment.
+    Ok(())
+}
+
+/// The plan, segment by segment, coloured by feasibility; and its legend entries.
+fn draw_plan(chart: &mut Chart<'_, '_>, fig: &PlanFigure<'_>) -> Result<(), String> {
+    let e = |x: &dyn std::fmt::Display| x.to_string();
+    let obs = fig.observation;
     let mask = tfs::feasibility_mask(&fig.plan.poses, fig.plan.dt, fig.limits, obs.ego_velocity);
     let segs: Vec<(Vec<(f64, f64)>, bool)> = fig
         .plan
@@ -533,7 +599,19 @@ fn draw(root: &Area<'_>, fig: &PlanFigure<'_>, numbers: &PlanFigureNumbers) -> R
         .label("plan: infeasible segment")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], INFEASIBLE.stroke_width(4)));
 
-    // Robot, start and goal.
+    Ok(())
+}
+
+/// The robot's footprint and heading, the start (when inside the view) and the goal (or,
+/// off the view, a dashed arrow pointing to it).
+fn draw_robot_and_goal(
+    chart: &mut Chart<'_, '_>,
+    fig: &PlanFigure<'_>,
+    half: f64,
+    inside: &dyn Fn([f64; 2]) -> bool,
+) -> Result<(), String> {
+    let e = |x: &dyn std::fmt::Display| x.to_string();
+    let obs = fig.observation;
     let ego = obs.ego;
     chart
         .draw_series(std::iter::once(Polygon::new(
@@ -597,24 +675,6 @@ fn draw(root: &Area<'_>, fig: &PlanFigure<'_>, numbers: &PlanFigureNumbers) -> R
             .map_err(|x| e(&x))?;
     }
 
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
-        .background_style(WHITE.mix(0.88))
-        .border_style(RGBColor(160, 160, 160))
-        .label_font(("sans-serif", 15))
-        .margin(8)
-        .draw()
-        .map_err(|x| e(&x))?;
-
-    // The BEV inset in the top-left corner of the plotting area.
-    let (px, py) = chart.plotting_area().get_base_pixel();
-    let (pw, ph) = chart.plotting_area().dim_in_pixel();
-    let size = (INSET_SHARE * f64::from(pw.min(ph))) as u32 - 12;
-    let inset = root
-        .clone()
-        .shrink((px + 6, py + 6), (size, size.saturating_sub(22) + 22));
-    draw_bev_inset(&inset, fig).map_err(|x| e(&x))?;
     Ok(())
 }
 

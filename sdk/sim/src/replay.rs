@@ -15,9 +15,13 @@ const PRESENCE_EPS: f64 = 1e-9;
 /// One pedestrian's state at a given time.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PedestrianSample {
+    /// The pedestrian's id in the episode.
     pub id: u64,
+    /// Position (m, world frame).
     pub position: [f64; 2],
+    /// Velocity (m/s, world frame).
     pub velocity: [f64; 2],
+    /// Body radius (m).
     pub radius: f64,
 }
 
@@ -28,6 +32,7 @@ pub struct CrowdReplay<'a> {
 }
 
 impl<'a> CrowdReplay<'a> {
+    /// A replay of `episode`'s recorded pedestrians.
     pub fn new(episode: &'a Episode) -> Self {
         Self { episode }
     }

@@ -97,28 +97,39 @@ pub fn results_csv(rows: &[ResultRow]) -> String {
 /// Aggregates over a group of rows.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Summary {
+    /// Rows aggregated.
     pub n: usize,
     /// Success rate.
     pub sr: f64,
     /// Standard error of the success rate, `sqrt(SR·(1 − SR)/n)`.
     pub sr_se: f64,
+    /// Share of runs ending in a collision.
     pub collision_rate: f64,
+    /// Share of runs ending in a timeout.
     pub timeout_rate: f64,
+    /// Mean TFS (`min(plan, executed)` per run).
     pub tfs: f64,
+    /// Mean TFS of the plans.
     pub tfs_plan: f64,
+    /// Mean TFS of the executed commands.
     pub tfs_executed: f64,
+    /// Mean executed path length (m).
     pub path_length: f64,
     /// Mean over successful episodes.
     pub time_to_goal: Option<f64>,
     /// Mean over episodes with pedestrians.
     pub min_clearance: Option<f64>,
+    /// Mean time closer than the intimate distance (s).
     pub time_within_intimate: f64,
+    /// Mean time closer than the personal distance (s).
     pub time_within_personal: f64,
+    /// Mean of the runs' mean jerk (m/s³).
     pub mean_jerk: f64,
     /// Fraction of plans that were fallbacks.
     pub fallback_rate: f64,
     /// Planner calls, and those that failed (see [`PlannerFailures`]).
     pub planner_calls: usize,
+    /// Planner calls that failed.
     pub failed_calls: usize,
 }
 
@@ -168,7 +179,9 @@ pub fn summarize<'a>(rows: impl IntoIterator<Item = &'a ResultRow>) -> Summary {
 /// Failed planner calls of one method on one robot, over every suite of a benchmark.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct PlannerFailures {
+    /// The method.
     pub method: String,
+    /// The robot.
     pub robot: String,
     /// Runs of this method on this robot.
     pub runs: usize,
@@ -255,7 +268,9 @@ fn planner_failure_warning(md: &mut String, rows: &[ResultRow]) {
 pub struct ReportContext {
     /// The command line (or a description) that produced the report.
     pub command: String,
+    /// The benchmark's master seed.
     pub seed: u64,
+    /// Quick mode (a few episodes per class).
     pub quick: bool,
     /// Simulation settings, one `key = value` per line.
     pub sim: Vec<(String, String)>,
@@ -309,9 +324,32 @@ fn opt2(v: Option<f64>) -> String {
     v.map(f2).unwrap_or_else(|| "–".into())
 }
 
-/// Writes `report.md`.
+/// The text of `report.md`: header and warnings, the setup, one section per suite with
+/// pedestrians, the empty-world verdicts and the figures.
 pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
     let mut md = String::new();
+    report_header(&mut md, rows, ctx);
+    setup_section(&mut md, ctx);
+    for (suite, kind, _, _) in ctx.suites.iter().filter(|s| s.1 != SuiteKind::Empty) {
+        let in_suite: Vec<&ResultRow> = rows.iter().filter(|r| &r.suite == suite).collect();
+        suite_section(&mut md, &in_suite, suite, *kind, ctx);
+    }
+    for (suite, _, _, _) in ctx.suites.iter().filter(|s| s.1 == SuiteKind::Empty) {
+        let in_suite: Vec<&ResultRow> = rows.iter().filter(|r| &r.suite == suite).collect();
+        empty_suite_section(&mut md, &in_suite, suite, ctx);
+    }
+    if !ctx.figures.is_empty() {
+        let _ = writeln!(md, "## Figures\n");
+        for (file, caption) in &ctx.figures {
+            let _ = writeln!(md, "![{caption}]({file})\n\n*{caption}*\n");
+        }
+    }
+    md
+}
+
+/// The title, what produced the report, the suites' warnings, failed planner calls and the
+/// wall time.
+fn report_header(md: &mut String, rows: &[ResultRow], ctx: &ReportContext) {
     let _ = writeln!(md, "# Closed-loop crowd-navigation benchmark\n");
     let _ = writeln!(
         md,
@@ -331,7 +369,7 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
             let _ = writeln!(md, "> **Warning** (suite `{name}`):{w}\n");
         }
     }
-    planner_failure_warning(&mut md, rows);
+    planner_failure_warning(md, rows);
     if let Some(w) = ctx.wall_time {
         let _ = write!(md, "Wall time: {w:.1} s for {} episode runs", rows.len());
         let per: Vec<String> = ctx
@@ -345,7 +383,10 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
         }
         let _ = writeln!(md, ".\n");
     }
+}
 
+/// The simulation settings, the robots, the methods, the suites and their composition.
+fn setup_section(md: &mut String, ctx: &ReportContext) {
     let _ = writeln!(md, "## Setup\n");
     let _ = writeln!(md, "| setting | value |\n|---|---|");
     for (k, v) in &ctx.sim {
@@ -364,183 +405,204 @@ pub fn report_markdown(rows: &[ResultRow], ctx: &ReportContext) -> String {
         let _ = writeln!(md);
     }
     let _ = writeln!(md);
-    composition_section(&mut md, &ctx.composition);
+    composition_section(md, &ctx.composition);
+}
 
-    for (suite, kind, _, _) in ctx.suites.iter().filter(|s| s.1 != SuiteKind::Empty) {
-        let in_suite: Vec<&ResultRow> = rows.iter().filter(|r| &r.suite == suite).collect();
-        // The methods that ran this suite (a suite may name its own).
-        let methods: Vec<String> = ctx
-            .methods
-            .iter()
-            .filter(|m| in_suite.iter().any(|r| &r.method == *m))
-            .cloned()
-            .collect();
-        let _ = writeln!(md, "## Suite `{suite}` ({})\n", kind.as_str());
+/// One suite with pedestrians: SR per scenario (Fig. 6) and per robot, TFS and SR per robot
+/// (Fig. 7), the paired tests, SR against density, the other metrics, how collisions happened
+/// and the feasibility violations.
+fn suite_section(
+    md: &mut String,
+    in_suite: &[&ResultRow],
+    suite: &str,
+    kind: SuiteKind,
+    ctx: &ReportContext,
+) {
+    // The methods that ran this suite (a suite may name its own).
+    let methods: Vec<String> = ctx
+        .methods
+        .iter()
+        .filter(|m| in_suite.iter().any(|r| &r.method == *m))
+        .cloned()
+        .collect();
+    let _ = writeln!(md, "## Suite `{suite}` ({})\n", kind.as_str());
+    sr_per_scenario_table(md, in_suite, &methods);
+    sr_per_robot_table(md, in_suite, &ctx.robot_names, &methods);
+    tfs_table(md, in_suite, &ctx.robot_names, &methods);
+    paired_section(md, in_suite, ctx, &methods);
+    density_section(md, in_suite, &methods);
+    other_metrics_table(md, in_suite, &methods);
+    collision_table(md, in_suite, &methods);
+    violation_table(md, in_suite, &ctx.robot_names, &methods);
+    let _ = writeln!(md);
+}
 
-        let _ = writeln!(
-            md,
-            "### Success rate (%) per scenario and method, all robots (Fig. 6)\n"
-        );
-        let _ = write!(md, "| method |");
+/// SR per scenario class and method over all robots (Fig. 6).
+fn sr_per_scenario_table(md: &mut String, in_suite: &[&ResultRow], methods: &[String]) {
+    let _ = writeln!(
+        md,
+        "### Success rate (%) per scenario and method, all robots (Fig. 6)\n"
+    );
+    let _ = write!(md, "| method |");
+    for c in ScenarioClass::ALL {
+        let _ = write!(md, " {} |", c.title());
+    }
+    let _ = writeln!(md, " all |\n|---|---|---|---|---|---|");
+    for m in methods {
+        let _ = write!(md, "| {m} |");
         for c in ScenarioClass::ALL {
-            let _ = write!(md, " {} |", c.title());
+            let s = summarize(
+                in_suite
+                    .iter()
+                    .copied()
+                    .filter(|r| &r.method == m && r.scenario == c),
+            );
+            let _ = write!(md, " {} |", cell_sr(&s));
         }
-        let _ = writeln!(md, " all |\n|---|---|---|---|---|---|");
-        for m in &methods {
-            let _ = write!(md, "| {m} |");
+        let s = summarize(in_suite.iter().copied().filter(|r| &r.method == m));
+        let _ = writeln!(md, " {} |", cell_sr(&s));
+    }
+}
+
+/// SR per robot, scenario class and method.
+fn sr_per_robot_table(
+    md: &mut String,
+    in_suite: &[&ResultRow],
+    robot_names: &[String],
+    methods: &[String],
+) {
+    let _ = writeln!(
+        md,
+        "\n### Success rate (%) per robot, scenario and method\n"
+    );
+    let _ = write!(md, "| robot | method |");
+    for c in ScenarioClass::ALL {
+        let _ = write!(md, " {} |", c.title());
+    }
+    let _ = writeln!(md, "\n|---|---|---|---|---|---|");
+    for robot in robot_names {
+        for m in methods {
+            let _ = write!(md, "| {robot} | {m} |");
             for c in ScenarioClass::ALL {
                 let s = summarize(
                     in_suite
                         .iter()
                         .copied()
-                        .filter(|r| &r.method == m && r.scenario == c),
+                        .filter(|r| &r.robot == robot && &r.method == m && r.scenario == c),
                 );
                 let _ = write!(md, " {} |", cell_sr(&s));
             }
-            let s = summarize(in_suite.iter().copied().filter(|r| &r.method == m));
-            let _ = writeln!(md, " {} |", cell_sr(&s));
+            let _ = writeln!(md);
         }
+    }
+}
 
-        let _ = writeln!(
-            md,
-            "\n### Success rate (%) per robot, scenario and method\n"
-        );
-        let _ = write!(md, "| robot | method |");
-        for c in ScenarioClass::ALL {
-            let _ = write!(md, " {} |", c.title());
-        }
-        let _ = writeln!(md, "\n|---|---|---|---|---|---|");
-        for robot in &ctx.robot_names {
-            for m in &methods {
-                let _ = write!(md, "| {robot} | {m} |");
-                for c in ScenarioClass::ALL {
-                    let s = summarize(
-                        in_suite
-                            .iter()
-                            .copied()
-                            .filter(|r| &r.robot == robot && &r.method == m && r.scenario == c),
-                    );
-                    let _ = write!(md, " {} |", cell_sr(&s));
-                }
-                let _ = writeln!(md);
-            }
-        }
-
-        let _ = writeln!(md, "\n### TFS and SR per robot and method (Fig. 7)\n");
-        let _ = writeln!(
-            md,
-            "| robot | method | n | TFS | TFS plan | TFS executed | SR (%) | failed planner calls |\n\
-             |---|---|---|---|---|---|---|---|"
-        );
-        for robot in &ctx.robot_names {
-            for m in &methods {
-                let s = summarize(
-                    in_suite
-                        .iter()
-                        .copied()
-                        .filter(|r| &r.robot == robot && &r.method == m),
-                );
-                if s.n == 0 {
-                    let _ = writeln!(md, "| {robot} | {m} | 0 | – | – | – | – | – |");
-                    continue;
-                }
-                let failed = if s.failed_calls == 0 {
-                    "0".to_owned()
-                } else {
-                    format!("**{} of {}**", s.failed_calls, s.planner_calls)
-                };
-                let _ = writeln!(
-                    md,
-                    "| {robot} | {m} | {} | {:.3} | {:.3} | {:.3} | {} | {failed} |",
-                    s.n,
-                    s.tfs,
-                    s.tfs_plan,
-                    s.tfs_executed,
-                    pct(s.sr)
-                );
-            }
-        }
-
-        paired_section(&mut md, &in_suite, ctx, &methods);
-        density_section(&mut md, &in_suite, &methods);
-
-        let _ = writeln!(
-            md,
-            "\n### Other metrics per method, all robots (means over episodes)\n"
-        );
-        let _ = writeln!(
-            md,
-            "| method | n | collision (%) | timeout (%) | path length (m) | time to goal (s) | \
-             min clearance (m) | time < 0.45 m (s) | time < 1.2 m (s) | mean jerk (m/s³) | fallback plans (%) |\n\
-             |---|---|---|---|---|---|---|---|---|---|---|"
-        );
-        for m in &methods {
-            let s = summarize(in_suite.iter().copied().filter(|r| &r.method == m));
+/// TFS (overall, plan, executed), SR and failed planner calls per robot and method (Fig. 7).
+fn tfs_table(md: &mut String, in_suite: &[&ResultRow], robot_names: &[String], methods: &[String]) {
+    let _ = writeln!(md, "\n### TFS and SR per robot and method (Fig. 7)\n");
+    let _ = writeln!(
+        md,
+        "| robot | method | n | TFS | TFS plan | TFS executed | SR (%) | failed planner calls |\n\
+         |---|---|---|---|---|---|---|---|"
+    );
+    for robot in robot_names {
+        for m in methods {
+            let s = summarize(
+                in_suite
+                    .iter()
+                    .copied()
+                    .filter(|r| &r.robot == robot && &r.method == m),
+            );
             if s.n == 0 {
-                let _ = writeln!(md, "| {m} | 0 |{}", " – |".repeat(10));
+                let _ = writeln!(md, "| {robot} | {m} | 0 | – | – | – | – | – |");
                 continue;
             }
+            let failed = if s.failed_calls == 0 {
+                "0".to_owned()
+            } else {
+                format!("**{} of {}**", s.failed_calls, s.planner_calls)
+            };
             let _ = writeln!(
                 md,
-                "| {m} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                "| {robot} | {m} | {} | {:.3} | {:.3} | {:.3} | {} | {failed} |",
                 s.n,
-                pct(s.collision_rate),
-                pct(s.timeout_rate),
-                f2(s.path_length),
-                opt2(s.time_to_goal),
-                opt2(s.min_clearance),
-                f2(s.time_within_intimate),
-                f2(s.time_within_personal),
-                f2(s.mean_jerk),
-                pct(s.fallback_rate)
+                s.tfs,
+                s.tfs_plan,
+                s.tfs_executed,
+                pct(s.sr)
             );
         }
-        collision_table(&mut md, &in_suite, &methods);
-        violation_table(&mut md, &in_suite, &ctx.robot_names, &methods);
-        let _ = writeln!(md);
     }
+}
 
-    for (suite, _, _, _) in ctx.suites.iter().filter(|s| s.1 == SuiteKind::Empty) {
-        let in_suite: Vec<&ResultRow> = rows.iter().filter(|r| &r.suite == suite).collect();
-        let _ = writeln!(md, "## Empty-world sanity suite `{suite}`\n");
+/// Collision and timeout rates, path, time, clearance, proxemics, jerk and fallback plans per
+/// method over all robots.
+fn other_metrics_table(md: &mut String, in_suite: &[&ResultRow], methods: &[String]) {
+    let _ = writeln!(
+        md,
+        "\n### Other metrics per method, all robots (means over episodes)\n"
+    );
+    let _ = writeln!(
+        md,
+        "| method | n | collision (%) | timeout (%) | path length (m) | time to goal (s) | \
+         min clearance (m) | time < 0.45 m (s) | time < 1.2 m (s) | mean jerk (m/s³) | fallback plans (%) |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|"
+    );
+    for m in methods {
+        let s = summarize(in_suite.iter().copied().filter(|r| &r.method == m));
+        if s.n == 0 {
+            let _ = writeln!(md, "| {m} | 0 |{}", " – |".repeat(10));
+            continue;
+        }
         let _ = writeln!(
             md,
-            "Every working method must reach SR = 100 % on every robot.\n"
+            "| {m} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            s.n,
+            pct(s.collision_rate),
+            pct(s.timeout_rate),
+            f2(s.path_length),
+            opt2(s.time_to_goal),
+            opt2(s.min_clearance),
+            f2(s.time_within_intimate),
+            f2(s.time_within_personal),
+            f2(s.mean_jerk),
+            pct(s.fallback_rate)
         );
-        let _ = write!(md, "| method |");
-        for robot in &ctx.robot_names {
-            let _ = write!(md, " {robot} |");
-        }
-        let _ = write!(md, " verdict |\n|---|");
-        for _ in &ctx.robot_names {
-            let _ = write!(md, "---|");
-        }
-        let _ = writeln!(md, "---|");
-        for m in &ctx.methods {
-            let _ = write!(md, "| {m} |");
-            let mut all_pass = true;
-            for robot in &ctx.robot_names {
-                let s = summarize(
-                    in_suite
-                        .iter()
-                        .copied()
-                        .filter(|r| &r.robot == robot && &r.method == m),
-                );
-                all_pass &= s.n > 0 && s.sr == 1.0;
-                let _ = write!(md, " {} |", cell_sr(&s));
-            }
-            let _ = writeln!(md, " {} |", if all_pass { "pass" } else { "FAIL" });
-        }
-        let _ = writeln!(md);
     }
+}
 
-    if !ctx.figures.is_empty() {
-        let _ = writeln!(md, "## Figures\n");
-        for (file, caption) in &ctx.figures {
-            let _ = writeln!(md, "![{caption}]({file})\n\n*{caption}*\n");
-        }
+/// The verdict table of an empty-world suite: SR per method and robot, pass only at 100 %.
+fn empty_suite_section(md: &mut String, in_suite: &[&ResultRow], suite: &str, ctx: &ReportContext) {
+    let _ = writeln!(md, "## Empty-world sanity suite `{suite}`\n");
+    let _ = writeln!(
+        md,
+        "Every working method must reach SR = 100 % on every robot.\n"
+    );
+    let _ = write!(md, "| method |");
+    for robot in &ctx.robot_names {
+        let _ = write!(md, " {robot} |");
     }
-    md
+    let _ = write!(md, " verdict |\n|---|");
+    for _ in &ctx.robot_names {
+        let _ = write!(md, "---|");
+    }
+    let _ = writeln!(md, "---|");
+    for m in &ctx.methods {
+        let _ = write!(md, "| {m} |");
+        let mut all_pass = true;
+        for robot in &ctx.robot_names {
+            let s = summarize(
+                in_suite
+                    .iter()
+                    .copied()
+                    .filter(|r| &r.robot == robot && &r.method == m),
+            );
+            all_pass &= s.n > 0 && s.sr == 1.0;
+            let _ = write!(md, " {} |", cell_sr(&s));
+        }
+        let _ = writeln!(md, " {} |", if all_pass { "pass" } else { "FAIL" });
+    }
+    let _ = writeln!(md);
 }
 
 /// A pedestrian whose track began less than this long before the contact (s) appeared next to

@@ -252,6 +252,7 @@ impl SimConfig {
 /// A robot as the simulator needs it: its name, footprint, limits and embodiment.
 #[derive(Clone)]
 pub struct RobotSetup {
+    /// The robot's name (from its profile).
     pub name: String,
     /// Radius of the disc about the robot's reference point that covers its footprint (m):
     /// what planners are told to keep clear with.
@@ -259,9 +260,11 @@ pub struct RobotSetup {
     /// The footprint collisions are checked with (the URDF base collision's xy projection,
     /// base-link frame).
     pub footprint: Vec<FootprintShape>,
+    /// The kinematic limits the planners respect and the TFS checks.
     pub limits: Limits,
     /// Gains of the tracking controller (passed on to plugin planners and embodiments).
     pub gains: ControllerGains,
+    /// Tracks plans, saturates commands and steps the robot's state.
     pub embodiment: Arc<dyn Embodiment>,
 }
 
@@ -323,12 +326,16 @@ impl std::fmt::Debug for RobotSetup {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Outcome {
+    /// The robot came within the goal tolerance before the budget ran out.
     Success,
+    /// The robot's footprint touched a pedestrian or a static obstacle.
     Collision,
+    /// The budget ran out first.
     Timeout,
 }
 
 impl Outcome {
+    /// The outcome's name in `results.csv` and the report.
     pub fn as_str(self) -> &'static str {
         match self {
             Outcome::Success => "success",
@@ -341,8 +348,11 @@ impl Outcome {
 /// One plan the planner returned, with the robot velocity it started from.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PlanSample {
+    /// Time the plan starts at (s).
     pub t0: f64,
+    /// Time between its poses (s).
     pub dt: f64,
+    /// The planned poses, world frame.
     pub poses: Vec<Pose2>,
     /// The robot's body velocity when the plan was requested.
     pub initial_velocity: Twist2,
@@ -353,6 +363,7 @@ pub struct PlanSample {
 /// Everything recorded while running one episode.
 #[derive(Clone, Debug)]
 pub struct EpisodeRun {
+    /// How the episode ended.
     pub outcome: Outcome,
     /// Time at which the episode ended (s).
     pub end_time: f64,
@@ -483,86 +494,30 @@ pub fn run_episode_with(
         let t = n as f64 * dt;
         run.end_time = t;
         // 1-2: clearance, collision, goal, budget.
-        if let Some(states) = run.crowd.as_mut() {
-            states.push(crowd.present().to_vec());
-        }
-        let (clearance, nearest) = nearest_clearance(crowd.present(), state.pose, &robot.footprint);
-        run.clearance.push(clearance);
-        if clearance < 0.0 {
-            run.outcome = Outcome::Collision;
-            run.contact = nearest.and_then(|id| Contact::at(&crowd, &state, id));
-            break;
-        }
-        if let Some(i) = episode
-            .obstacles
-            .iter()
-            .position(|o| footprint_clearance(&robot.footprint, state.pose, o) < 0.0)
-        {
-            run.outcome = Outcome::Collision;
-            run.obstacle_hit = Some(i);
-            break;
-        }
-        let to_goal = (episode.goal[0] - state.pose.x).hypot(episode.goal[1] - state.pose.y);
-        if to_goal <= cfg.goal_tolerance {
-            run.outcome = Outcome::Success;
-            break;
-        }
-        if n == max_steps {
-            run.outcome = Outcome::Timeout;
+        if let Some(outcome) = check_end(
+            episode,
+            robot,
+            cfg,
+            &crowd,
+            &state,
+            n == max_steps,
+            &mut run,
+        ) {
+            run.outcome = outcome;
             break;
         }
         // 3: replanning.
         if n % replan_every == 0 || plan.is_none() {
-            let obs = Observation {
-                time: t,
-                ego: state.pose,
-                ego_velocity: state.velocity,
-                goal: episode.goal,
-                agents: crowd.observe(
-                    [state.pose.x, state.pose.y],
-                    cfg.sensor_range,
-                    cfg.history_len,
-                ),
-                obstacles: obstacle::within(
-                    &episode.obstacles,
-                    [state.pose.x, state.pose.y],
-                    cfg.sensor_range,
-                ),
-                ..Default::default()
-            };
-            let horizon = plan.as_ref().map_or(32, |p| p.poses.len());
-            let result = catch_unwind(AssertUnwindSafe(|| planner.plan(&obs)));
-            let new_plan = match result {
-                Ok(Ok(p)) if p.is_finite() && !p.poses.is_empty() && p.dt > 0.0 => {
-                    // A substitute plan (a plugin planner that missed its deadline) is a
-                    // failed call.
-                    if let Some(e) = &p.info.error {
-                        run.planner_errors.push(e.clone());
-                    }
-                    p
-                }
-                Ok(Ok(_)) => fallback(
-                    &obs,
-                    horizon,
-                    &mut run,
-                    "planner returned an empty or non-finite plan".into(),
-                ),
-                Ok(Err(e)) => fallback(&obs, horizon, &mut run, plan_error_message(&e)),
-                Err(panic) => fallback(
-                    &obs,
-                    horizon,
-                    &mut run,
-                    format!("planner panicked: {}", panic_message(&panic)),
-                ),
-            };
-            run.plans.push(PlanSample {
-                t0: new_plan.t0,
-                dt: new_plan.dt,
-                poses: new_plan.poses.clone(),
-                initial_velocity: state.velocity,
-                fallback: new_plan.info.fallback,
-            });
-            plan = Some(new_plan);
+            plan = Some(replan(
+                planner,
+                episode,
+                cfg,
+                &crowd,
+                &state,
+                t,
+                plan.as_ref(),
+                &mut run,
+            ));
         }
         // 4: track, saturate, step.
         let Some(current) = plan.as_ref() else { break };
@@ -578,6 +533,109 @@ pub fn run_episode_with(
     run
 }
 
+/// Steps 1-2 of a simulation step: records the crowd (when reactive) and the clearance, and
+/// returns the outcome that ends the run here, if any: a collision with a pedestrian (its
+/// contact recorded) or an obstacle (its index recorded), the goal reached, or the budget
+/// spent (`last`).
+fn check_end(
+    episode: &Episode,
+    robot: &RobotSetup,
+    cfg: &SimConfig,
+    crowd: &Crowd<'_>,
+    state: &RobotState,
+    last: bool,
+    run: &mut EpisodeRun,
+) -> Option<Outcome> {
+    if let Some(states) = run.crowd.as_mut() {
+        states.push(crowd.present().to_vec());
+    }
+    let (clearance, nearest) = nearest_clearance(crowd.present(), state.pose, &robot.footprint);
+    run.clearance.push(clearance);
+    if clearance < 0.0 {
+        run.contact = nearest.and_then(|id| Contact::at(crowd, state, id));
+        return Some(Outcome::Collision);
+    }
+    if let Some(i) = episode
+        .obstacles
+        .iter()
+        .position(|o| footprint_clearance(&robot.footprint, state.pose, o) < 0.0)
+    {
+        run.obstacle_hit = Some(i);
+        return Some(Outcome::Collision);
+    }
+    let to_goal = (episode.goal[0] - state.pose.x).hypot(episode.goal[1] - state.pose.y);
+    if to_goal <= cfg.goal_tolerance {
+        return Some(Outcome::Success);
+    }
+    last.then_some(Outcome::Timeout)
+}
+
+/// Step 3 of a simulation step: the planner's plan for what the robot senses at `t`, or the
+/// fallback when the call fails, returns an unusable plan or panics (the reason recorded in
+/// `run`); the plan is sampled into `run.plans`.
+fn replan(
+    planner: &mut dyn Planner,
+    episode: &Episode,
+    cfg: &SimConfig,
+    crowd: &Crowd<'_>,
+    state: &RobotState,
+    t: f64,
+    previous: Option<&Plan>,
+    run: &mut EpisodeRun,
+) -> Plan {
+    let obs = Observation {
+        time: t,
+        ego: state.pose,
+        ego_velocity: state.velocity,
+        goal: episode.goal,
+        agents: crowd.observe(
+            [state.pose.x, state.pose.y],
+            cfg.sensor_range,
+            cfg.history_len,
+        ),
+        obstacles: obstacle::within(
+            &episode.obstacles,
+            [state.pose.x, state.pose.y],
+            cfg.sensor_range,
+        ),
+        ..Default::default()
+    };
+    let horizon = previous.map_or(32, |p| p.poses.len());
+    let result = catch_unwind(AssertUnwindSafe(|| planner.plan(&obs)));
+    let new_plan = match result {
+        Ok(Ok(p)) if p.is_finite() && !p.poses.is_empty() && p.dt > 0.0 => {
+            // A substitute plan (a plugin planner that missed its deadline) is a
+            // failed call.
+            if let Some(e) = &p.info.error {
+                run.planner_errors.push(e.clone());
+            }
+            p
+        }
+        Ok(Ok(_)) => fallback(
+            &obs,
+            horizon,
+            run,
+            "planner returned an empty or non-finite plan".into(),
+        ),
+        Ok(Err(e)) => fallback(&obs, horizon, run, plan_error_message(&e)),
+        Err(panic) => fallback(
+            &obs,
+            horizon,
+            run,
+            format!("planner panicked: {}", panic_message(&panic)),
+        ),
+    };
+    run.plans.push(PlanSample {
+        t0: new_plan.t0,
+        dt: new_plan.dt,
+        poses: new_plan.poses.clone(),
+        initial_velocity: state.velocity,
+        fallback: new_plan.info.fallback,
+    });
+    new_plan
+}
+
+/// The stop-in-place plan that replaces a failed planner call; `why` is recorded in `run`.
 fn fallback(obs: &Observation, horizon: usize, run: &mut EpisodeRun, why: String) -> Plan {
     run.planner_errors.push(why.clone());
     Plan::stop_in_place(obs, human2nav_core::trajectory::DEFAULT_DT, horizon, why)

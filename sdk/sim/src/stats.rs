@@ -222,6 +222,7 @@ pub fn success_pairs<'a>(
 /// A range of crowd densities (the episode's relevant pedestrians), both ends included.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct DensityBin {
+    /// Lowest density in the bin.
     pub lo: usize,
     /// `None`: no upper end.
     pub hi: Option<usize>,
@@ -237,6 +238,7 @@ impl DensityBin {
         }
     }
 
+    /// True when `density` falls in the bin.
     pub fn contains(&self, density: usize) -> bool {
         density >= self.lo && self.hi.is_none_or(|hi| density <= hi)
     }
@@ -299,6 +301,7 @@ pub fn median(values: &[f64]) -> Option<f64> {
 pub struct ClassComposition {
     /// `None`: every class.
     pub class: Option<ScenarioClass>,
+    /// Episodes of the class.
     pub episodes: usize,
     /// Episodes per [`DENSITY_BINS`] entry.
     pub density_histogram: [usize; DENSITY_BINS.len()],
@@ -335,11 +338,14 @@ impl ClassComposition {
 /// What a suite holds: one [`ClassComposition`] per scenario class, then one over all.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SuiteComposition {
+    /// The suite's name.
     pub suite: String,
+    /// One entry per scenario class, then one over all classes.
     pub classes: Vec<ClassComposition>,
 }
 
 impl SuiteComposition {
+    /// The composition of the suite `suite` holding `episodes`.
     pub fn of(suite: &str, episodes: &[Episode]) -> Self {
         Self {
             suite: suite.to_string(),

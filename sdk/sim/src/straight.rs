@@ -40,6 +40,7 @@ impl Default for StraightConfig {
 }
 
 impl StraightConfig {
+    /// Checks every field; the error names the offending one.
     pub fn validate(&self) -> Result<(), SimError> {
         for (field, v) in [
             ("speed", self.speed),
@@ -72,6 +73,7 @@ pub struct StraightPlanner {
 }
 
 impl StraightPlanner {
+    /// A straight-line planner with `cfg`, checked first.
     pub fn new(cfg: StraightConfig) -> Result<Self, SimError> {
         cfg.validate()?;
         Ok(Self { cfg })

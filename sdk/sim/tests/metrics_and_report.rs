@@ -7,7 +7,7 @@ use common::{episode, robot, robots, standing, walking};
 use human2nav_core::embodiment::RobotState;
 use human2nav_core::{Pose2, Twist2};
 use human2nav_sim::bench::{MethodSpec, ResultRow, Suite, SuiteKind, episode_seed, run_bench};
-use human2nav_sim::driver::{self, BenchPlan};
+use human2nav_sim::driver::{self, BenchOutcome, BenchPlan};
 use human2nav_sim::episode::ScenarioClass;
 use human2nav_sim::metrics::{EpisodeMetrics, mean_jerk, tfs_scores};
 use human2nav_sim::report::{CSV_HEADER, results_csv};
@@ -295,6 +295,26 @@ fn driver_writes_csv_report_and_figures() {
     }
     // Every collision is classified: its three classes add up to the method's collisions.
     let hand: Vec<_> = res.rows.iter().filter(|r| r.suite == "hand").collect();
+    check_collision_classes(&report, &hand);
+    let slow_successes = check_figure_list(&res, &report, &hand);
+    for needle in [
+        "Paired comparison with `straight`",
+        "Suite composition",
+        "against crowd density",
+    ] {
+        assert!(report.contains(needle), "report lacks `{needle}`");
+    }
+    check_pngs(&res, &slow_successes);
+    let csv = std::fs::read_to_string(&res.results_csv).unwrap();
+    assert_eq!(csv.lines().count(), res.rows.len() + 1);
+    if keep.is_none() {
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+}
+
+/// Every collision of the `hand` suite is classified: for each method, the report's three
+/// collision classes add up to its collisions.
+fn check_collision_classes(report: &str, hand: &[&ResultRow]) {
     for m in ["straight", "slow"] {
         let n = hand
             .iter()
@@ -305,7 +325,9 @@ fn driver_writes_csv_report_and_figures() {
                 .filter(|r| r.method == m && r.metrics.collision)
                 .all(|r| r.metrics.contact.is_some())
         );
-        let section = &report[report.find("How the collisions happened").unwrap()..];
+        let section = &report[report
+            .find("How the collisions happened")
+            .expect("report has a collisions section")..];
         let line = section
             .lines()
             .find(|l| l.starts_with(&format!("| {m} | {n} |")))
@@ -318,13 +340,18 @@ fn driver_writes_csv_report_and_figures() {
                 c.trim()
                     .split(' ')
                     .next()
-                    .unwrap()
+                    .expect("split yields at least one piece")
                     .parse::<usize>()
                     .unwrap_or(0)
             })
             .sum();
         assert_eq!(counts, n, "{line}");
     }
+}
+
+/// The figures of the run and the report's references to them; returns the scenario classes
+/// where `slow` succeeded on diablo (the Fig. 4 panels).
+fn check_figure_list(res: &BenchOutcome, report: &str, hand: &[&ResultRow]) -> Vec<ScenarioClass> {
     // Fig. 6, 7 and the density figure of the one non-empty suite, Fig. 4 (`slow` succeeded
     // on diablo in some class), and one failure figure per method that failed somewhere in
     // the suite.
@@ -336,7 +363,12 @@ fn driver_writes_csv_report_and_figures() {
     let names: Vec<String> = res
         .figures
         .iter()
-        .map(|f| f.file_name().unwrap().to_string_lossy().into_owned())
+        .map(|f| {
+            f.file_name()
+                .expect("figure path has a file name")
+                .to_string_lossy()
+                .into_owned()
+        })
         .collect();
     assert_eq!(res.figures.len(), 4 + failing, "{names:?}");
     for f in [
@@ -360,18 +392,20 @@ fn driver_writes_csv_report_and_figures() {
         .collect();
     for c in ScenarioClass::ALL {
         let panel = format!("{} `", human2nav_sim::episode::ScenarioTitle::title(c));
-        let fig4 = report.lines().find(|l| l.starts_with("*Fig. 4")).unwrap();
+        let fig4 = report
+            .lines()
+            .find(|l| l.starts_with("*Fig. 4"))
+            .expect("report has a Fig. 4 caption");
         assert_eq!(fig4.contains(&panel), slow_successes.contains(&c), "{fig4}");
     }
-    for needle in [
-        "Paired comparison with `straight`",
-        "Suite composition",
-        "against crowd density",
-    ] {
-        assert!(report.contains(needle), "report lacks `{needle}`");
-    }
+    slow_successes
+}
+
+/// Every figure is a PNG of the expected size: Fig. 4 with one 800 px panel per class where
+/// `slow` succeeded (two per row, a legend strip below), a failure figure with one or two.
+fn check_pngs(res: &BenchOutcome, slow_successes: &[ScenarioClass]) {
     for f in &res.figures {
-        let bytes = std::fs::read(f).unwrap();
+        let bytes = std::fs::read(f).expect("figure is readable");
         assert!(
             bytes.len() > 1000 && bytes.starts_with(b"\x89PNG"),
             "{} is not a PNG",
@@ -382,7 +416,10 @@ fn driver_writes_csv_report_and_figures() {
         let size = |at: usize| {
             u32::from_be_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]])
         };
-        let name = f.file_name().unwrap().to_string_lossy();
+        let name = f
+            .file_name()
+            .expect("figure path has a file name")
+            .to_string_lossy();
         if name.starts_with("fig4") {
             let panels = slow_successes
                 .iter()
@@ -398,11 +435,6 @@ fn driver_writes_csv_report_and_figures() {
             assert!(size(16) == 800 || size(16) == 1600, "{name}");
             assert!((840..1000).contains(&size(20)), "{name}");
         }
-    }
-    let csv = std::fs::read_to_string(&res.results_csv).unwrap();
-    assert_eq!(csv.lines().count(), res.rows.len() + 1);
-    if keep.is_none() {
-        std::fs::remove_dir_all(&out).unwrap();
     }
 }
 

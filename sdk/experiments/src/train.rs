@@ -1,0 +1,671 @@
+//! Training the conditional flow-matching model (`human2nav train`, and each fraction of the
+//! scaling experiment): the `train.toml` settings, training on the tuple cache with checkpoints
+//! and resume, export of the EMA weights with a model card and a loss curve, and the evaluation
+//! on the held-out test scenes. Progress is drawn with indicatif and reported on stderr.
+
+use anyhow::{Context, bail};
+use human2nav_core::flow::FlowCondition;
+use human2nav_core::se2::Pose2;
+use human2nav_data::cache::TupleCache;
+use human2nav_data::tuples::{CompactTuple, Split};
+use human2nav_flow::card::{ComplexityInfo, EvaluationInfo, TrainingInfo};
+use human2nav_flow::eval::{EvalOptions, EvalWindow, evaluate};
+use human2nav_flow::model::CARD_FILE;
+use human2nav_flow::net::{Complexity, parameter_count};
+use human2nav_flow::tch;
+use human2nav_flow::train::{TrainOptions, Trainer};
+use human2nav_flow::{CfmModel, NetConfig, Normalisation};
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// Where the data comes from.
+#[derive(Debug, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DataSection {
+    /// Tuple cache directory (from `human2nav data build`); relative paths start at the
+    /// workspace root.
+    pub cache: PathBuf,
+    /// Fraction of the training scenes to use (seeded choice). Default 1.
+    pub train_fraction: f64,
+}
+
+impl Default for DataSection {
+    fn default() -> Self {
+        Self {
+            cache: PathBuf::from("out/data/cache"),
+            train_fraction: 1.0,
+        }
+    }
+}
+
+/// Run bookkeeping.
+#[derive(Debug, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RunSection {
+    /// Model name in the card.
+    pub name: String,
+    /// Checkpoints and logs. Default `out/train/<name>`.
+    pub out_dir: Option<PathBuf>,
+    /// Where the exported model goes. Default `models/<name>`.
+    pub model_dir: Option<PathBuf>,
+    /// Torch intra-op threads. Default 2.
+    pub threads: usize,
+    /// `auto` (CUDA when available), `cpu` or `cuda`.
+    pub device: String,
+    /// Steps between validation points. Default 250.
+    pub validate_every: u64,
+    /// Steps between checkpoints. Default 1000.
+    pub checkpoint_every: u64,
+    /// Stop (and checkpoint) after this many minutes of this invocation; 0 = no limit.
+    pub max_minutes: f64,
+}
+
+impl Default for RunSection {
+    fn default() -> Self {
+        Self {
+            name: "human2nav-cfm".into(),
+            out_dir: None,
+            model_dir: None,
+            threads: 2,
+            device: "auto".into(),
+            validate_every: 250,
+            checkpoint_every: 1000,
+            max_minutes: 0.0,
+        }
+    }
+}
+
+/// Held-out evaluation.
+#[derive(Debug, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EvalSection {
+    /// Sampled futures per window `K`. Default 20.
+    pub samples: usize,
+    /// Euler steps `N`. Default 10.
+    pub steps: usize,
+    /// Proximity radius, metres. Default 0.3.
+    pub radius: f64,
+    /// Test windows evaluated at most (seeded subsample). Default 2000.
+    pub max_windows: usize,
+    /// Seed of the subsample and of the source noise. Default 0.
+    pub seed: u64,
+    /// Data config used to rebuild the test scenes for the other agents' true futures
+    /// (proximity metric). When the datasets are unavailable, the neighbours stored in the
+    /// cache are extrapolated at constant velocity instead (noted in the card).
+    pub data_config: PathBuf,
+}
+
+impl Default for EvalSection {
+    fn default() -> Self {
+        Self {
+            samples: 20,
+            steps: 10,
+            radius: 0.3,
+            max_windows: 2000,
+            seed: 0,
+            data_config: PathBuf::from("sdk/configs/data.toml"),
+        }
+    }
+}
+
+/// The whole `train.toml`; every section defaults to the values documented on its fields.
+#[derive(Debug, Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainConfig {
+    /// Where the data comes from.
+    pub data: DataSection,
+    /// The network.
+    pub net: NetConfig,
+    /// The optimisation.
+    pub train: TrainOptions,
+    /// Run bookkeeping.
+    pub run: RunSection,
+    /// Held-out evaluation.
+    pub eval: EvalSection,
+}
+
+impl TrainConfig {
+    /// Checks every section; the error names the offending field.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        self.net.validate()?;
+        self.train.validate()?;
+        let f = self.data.train_fraction;
+        if !(f > 0.0 && f <= 1.0) {
+            bail!("data.train_fraction must lie in (0, 1], got {f}");
+        }
+        let max = human2nav_flow::planner::MAX_THREADS;
+        if !(1..=max).contains(&self.run.threads) {
+            bail!("run.threads: {} is not in 1..={max}", self.run.threads);
+        }
+        if self.run.validate_every == 0 || self.run.checkpoint_every == 0 {
+            bail!("run.validate_every and run.checkpoint_every must be positive");
+        }
+        if !matches!(self.run.device.as_str(), "auto" | "cpu" | "cuda") {
+            bail!(
+                "run.device must be auto, cpu or cuda, got `{}`",
+                self.run.device
+            );
+        }
+        if self.run.max_minutes.is_nan() || self.run.max_minutes < 0.0 {
+            bail!("run.max_minutes must be >= 0");
+        }
+        if self.eval.samples == 0
+            || self.eval.steps == 0
+            || self.eval.radius.is_nan()
+            || self.eval.radius <= 0.0
+        {
+            bail!("eval.samples, eval.steps and eval.radius must be positive");
+        }
+        Ok(())
+    }
+}
+
+/// `p` itself when absolute, else `p` under `root`.
+fn resolve(root: &Path, p: &Path) -> PathBuf {
+    if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        root.join(p)
+    }
+}
+
+/// The names of the cache's scenes of `split`, comma-separated.
+fn scene_names(cache: &TupleCache, split: Split) -> String {
+    let m = cache.manifest();
+    let names: Vec<&str> = m
+        .scenes_in(split)
+        .iter()
+        .map(|&i| m.scenes[i as usize].name.as_str())
+        .collect();
+    names.join(", ")
+}
+
+/// Trains (or resumes from `out_dir/checkpoint`) and exports the EMA model with its card.
+pub fn train(
+    cfg: &TrainConfig,
+    cache: &TupleCache,
+    out_dir: &Path,
+    model_dir: &Path,
+    device: tch::Device,
+    fresh: bool,
+) -> anyhow::Result<()> {
+    let load_start = Instant::now();
+    let train_set = cache.load_scenes(Split::Train, cfg.data.train_fraction, cfg.train.seed)?;
+    let val_set = cache.load(Split::Val)?;
+    eprintln!(
+        "loaded {} training and {} validation tuples in {:.1} s",
+        train_set.len(),
+        val_set.len(),
+        load_start.elapsed().as_secs_f64()
+    );
+    if train_set.is_empty() {
+        bail!("the training split of {} is empty", cache.dir().display());
+    }
+
+    let ckpt = out_dir.join("checkpoint");
+    let resume_from = if fresh {
+        None
+    } else {
+        human2nav_flow::train::find_checkpoint(&ckpt)?
+    };
+    let mut trainer = if let Some(set) = resume_from {
+        eprintln!("resuming from {}", set.display());
+        Trainer::resume(&set, &cfg.train, &train_set, &val_set, device)?
+    } else {
+        let norm = Normalisation::estimate(&train_set, cfg.train.seed)?;
+        eprintln!("normalisation: {norm:?}");
+        Trainer::new(&cfg.net, &norm, &cfg.train, &train_set, &val_set, device)?
+    };
+
+    let capped = train_steps(cfg, &mut trainer, out_dir, &ckpt)?;
+    if capped {
+        if trainer.history().last().map(|r| r.step) != Some(trainer.step()) {
+            trainer.record();
+        }
+        trainer.save_checkpoint(&ckpt)?;
+        eprintln!(
+            "stopped at step {} after run.max_minutes = {}; run again to resume",
+            trainer.step(),
+            cfg.run.max_minutes
+        );
+    }
+    export(
+        cfg,
+        cache,
+        &trainer,
+        model_dir,
+        train_set.len(),
+        val_set.len(),
+    )?;
+    Ok(())
+}
+
+/// Steps `trainer` to its total under a progress bar, validating, checkpointing into `ckpt` and
+/// redrawing `out_dir/loss_curve.png` at the configured intervals; returns whether
+/// `run.max_minutes` stopped it early.
+fn train_steps<S: human2nav_flow::train::TrainingSample>(
+    cfg: &TrainConfig,
+    trainer: &mut Trainer<'_, S>,
+    out_dir: &Path,
+    ckpt: &Path,
+) -> anyhow::Result<bool> {
+    let total = trainer.total_steps();
+    let bar = ProgressBar::new(total);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{elapsed_precise} [{wide_bar}] {pos}/{len} steps  ETA {eta_precise}  {msg}",
+        )?
+        .progress_chars("=> "),
+    );
+    bar.set_position(trainer.step());
+    let started = Instant::now();
+    let cap =
+        (cfg.run.max_minutes > 0.0).then(|| Duration::from_secs_f64(cfg.run.max_minutes * 60.0));
+    let batch = cfg.train.batch_size as f64;
+    let mut window_start = Instant::now();
+    let mut window_steps = 0u64;
+    let mut last_val = f64::NAN;
+    let mut tick = Instant::now();
+    let mut capped = false;
+    while trainer.step() < total {
+        trainer.train_step()?;
+        let now = Instant::now();
+        trainer.add_elapsed(now.duration_since(tick).as_secs_f64());
+        tick = now;
+        window_steps += 1;
+        let step = trainer.step();
+        bar.set_position(step);
+        if step % 10 == 0 || step == total {
+            let rate = window_steps as f64 * batch / window_start.elapsed().as_secs_f64().max(1e-9);
+            bar.set_message(format!(
+                "loss {:.4}  val {:.4}  {:.0} samples/s",
+                trainer.running_loss(),
+                last_val,
+                rate
+            ));
+        }
+        if step % cfg.run.validate_every == 0 || step == total {
+            let rec = trainer.record();
+            last_val = rec.val_loss;
+            let line = format!(
+                "step {:>6}  train {:.4}  val {:.4}  lr {:.2e}  {:.0} samples/s  {:.0} s",
+                rec.step,
+                rec.train_loss,
+                rec.val_loss,
+                rec.lr,
+                window_steps as f64 * batch / window_start.elapsed().as_secs_f64().max(1e-9),
+                rec.elapsed_s
+            );
+            // A hidden bar (no terminal, e.g. a log file) swallows println.
+            if bar.is_hidden() {
+                eprintln!("{line}")
+            } else {
+                bar.println(line)
+            }
+            window_start = Instant::now();
+            window_steps = 0;
+            tick = Instant::now();
+        }
+        if step % cfg.run.checkpoint_every == 0 || step == total {
+            checkpoint(cfg, trainer, out_dir, ckpt)?;
+            tick = Instant::now();
+        }
+        if cap.is_some_and(|c| started.elapsed() >= c) {
+            capped = true;
+            break;
+        }
+    }
+    bar.finish();
+    Ok(capped)
+}
+
+/// Saves the checkpoint into `ckpt` and, once a loss is finite, redraws the loss curve.
+fn checkpoint<S: human2nav_flow::train::TrainingSample>(
+    cfg: &TrainConfig,
+    trainer: &Trainer<'_, S>,
+    out_dir: &Path,
+    ckpt: &Path,
+) -> anyhow::Result<()> {
+    trainer.save_checkpoint(ckpt)?;
+    if trainer
+        .history()
+        .iter()
+        .any(|r| r.val_loss.is_finite() || r.train_loss.is_finite())
+    {
+        let _ = human2nav_flow::plot::loss_curve(
+            &out_dir.join("loss_curve.png"),
+            trainer.history(),
+            &format!("{}: conditional flow matching on SE(2)", cfg.run.name),
+        );
+    }
+    Ok(())
+}
+
+/// Writes the exported model (EMA weights) and its card into `model_dir`.
+fn export<S: human2nav_flow::train::TrainingSample>(
+    cfg: &TrainConfig,
+    cache: &TupleCache,
+    trainer: &Trainer<'_, S>,
+    model_dir: &Path,
+    n_train: usize,
+    n_val: usize,
+) -> anyhow::Result<()> {
+    let hist = trainer.history();
+    let best_val = hist
+        .iter()
+        .map(|r| r.val_loss)
+        .filter(|v| v.is_finite())
+        .fold(f64::INFINITY, f64::min);
+    let last = hist.last().copied();
+    let steps = trainer.step();
+    let wall = trainer.elapsed_s();
+    let m = cache.manifest();
+    let sources: std::collections::BTreeSet<&str> =
+        m.scenes.iter().map(|s| s.dataset.as_str()).collect();
+    let info = TrainingInfo {
+        data: format!(
+            "tuple cache `{}` ({} data: {}), BEV {}×{} cells of {} m, {} poses at {} s",
+            cfg.data.cache.display(),
+            m.source,
+            sources.into_iter().collect::<Vec<_>>().join(", "),
+            m.bev.cells,
+            m.bev.cells,
+            m.bev.resolution,
+            m.horizon,
+            m.dt
+        ),
+        split: format!(
+            "by scene, as in the cache manifest; train fraction {}; train scenes: {}; val scenes: {}; test scenes: {}",
+            cfg.data.train_fraction,
+            scene_names(cache, Split::Train),
+            scene_names(cache, Split::Val),
+            scene_names(cache, Split::Test)
+        ),
+        train_tuples: n_train,
+        val_tuples: n_val,
+        steps,
+        batch_size: cfg.train.batch_size,
+        epochs: steps as f64 * cfg.train.batch_size as f64 / n_train.max(1) as f64,
+        seed: cfg.train.seed,
+        time_distribution: format!(
+            "t = s·(1 − u), u ~ Beta({}, {}), s = {}",
+            cfg.train.time.alpha, cfg.train.time.beta, cfg.train.time.s
+        ),
+        path_sigma: cfg.train.path_sigma,
+        optimiser: cfg.train.describe_optimiser(),
+        wall_time_s: wall,
+        threads: cfg.run.threads,
+        samples_per_s: steps as f64 * cfg.train.batch_size as f64 / wall.max(1e-9),
+        final_val_loss: last.map(|r| r.val_loss).unwrap_or(f64::NAN),
+        best_val_loss: best_val,
+        final_train_loss: last.map(|r| r.train_loss).unwrap_or(f64::NAN),
+    };
+    // The EMA weights are what ships; copy them into a fresh model with the card filled in.
+    let ema = trainer.ema_model();
+    let tmp = model_dir.join(".export");
+    ema.save(&tmp)?;
+    let mut model = CfmModel::load(&tmp, tch::Device::Cpu)?;
+    let _ = std::fs::remove_dir_all(&tmp);
+    let card = model.card_mut();
+    card.name = cfg.run.name.clone();
+    card.description =
+        "Conditional flow-matching model on SE(2) (Human2Nav §III-A): a 1-D temporal \
+        U-Net with FiLM conditioning on an ego-centred BEV raster, the goal and the ego velocity, \
+        predicting per-waypoint body velocities for 32 poses over 3.2 s. EMA weights."
+            .into();
+    card.training = Some(info);
+    card.bev = Some(m.bev);
+    card.source.steps = cfg.eval.steps;
+    let cx = Complexity::of(&card.net);
+    let params = parameter_count(model.var_store());
+    let (checksum, bytes) = model.save(model_dir)?;
+    model.card_mut().weights_fnv64 = Some(checksum);
+    model.card_mut().complexity = Some(ComplexityInfo {
+        parameters: params,
+        unet_flops_per_trajectory: 2 * cx.unet_macs,
+        condition_flops: 2 * cx.condition_macs,
+        weights_bytes: bytes,
+    });
+    model.card().save(&model_dir.join(CARD_FILE))?;
+    human2nav_flow::plot::loss_curve(
+        &model_dir.join("loss_curve.png"),
+        hist,
+        &format!("{}: conditional flow matching on SE(2)", cfg.run.name),
+    )?;
+    eprintln!(
+        "exported {} ({} parameters, {} bytes) to {}",
+        cfg.run.name,
+        params,
+        bytes,
+        model_dir.display()
+    );
+    Ok(())
+}
+
+/// Test windows with the other agents' true futures: the test scenes are rebuilt from the
+/// datasets with the data config and the cache's tuple options, and must reproduce the cache's
+/// test tuples exactly (same count).
+fn true_future_windows(
+    cfg: &TrainConfig,
+    cache: &TupleCache,
+    root: &Path,
+) -> anyhow::Result<Vec<EvalWindow>> {
+    use human2nav_data::config::DataConfig;
+    use human2nav_data::pipeline::{Locations, discover, load_source};
+    use human2nav_data::resample::resample;
+    let path = resolve(root, &cfg.eval.data_config);
+    let dcfg = DataConfig::load(&path)?;
+    let loc = Locations::resolve(&dcfg, &path);
+    if !loc.data_root.is_dir() {
+        bail!("datasets not found at {}", loc.data_root.display());
+    }
+    let m = cache.manifest();
+    let (sources, _) = discover(&loc.data_root, &dcfg);
+    let mut windows = Vec::new();
+    for i in m.scenes_in(Split::Test) {
+        let name = &m.scenes[i as usize].name;
+        let src = sources.iter().find(|s| &s.name == name).with_context(|| {
+            format!(
+                "test scene {name} not found under {}",
+                loc.data_root.display()
+            )
+        })?;
+        let scene = resample(&load_source(src, &dcfg)?, &dcfg.resample);
+        windows.extend(human2nav_flow::eval::scene_windows(
+            &scene, i, &m.bev, &m.tuples,
+        )?);
+    }
+    let expected = m.counts.get(&Split::Test).copied().unwrap_or(0);
+    if windows.len() != expected {
+        bail!(
+            "rebuilt {} test windows, the cache has {expected}",
+            windows.len()
+        );
+    }
+    human2nav_flow::eval::subsample(&mut windows, cfg.eval.max_windows, cfg.eval.seed);
+    Ok(windows)
+}
+
+/// Test windows from the cache alone, see [`cache_windows`].
+fn test_windows(cfg: &TrainConfig, cache: &TupleCache) -> anyhow::Result<Vec<EvalWindow>> {
+    cache_windows(cache, Split::Test, cfg.eval.max_windows, cfg.eval.seed)
+}
+
+/// At most `max` windows of `split` (seeded subsample) from the cache alone: the cache stores
+/// the other agents only at the planning instant, so their future positions are extrapolated
+/// at constant velocity.
+pub fn cache_windows(
+    cache: &TupleCache,
+    split: Split,
+    max: usize,
+    seed: u64,
+) -> anyhow::Result<Vec<EvalWindow>> {
+    let mut compact: Vec<CompactTuple> = cache.load_compact(split)?;
+    human2nav_flow::eval::subsample(&mut compact, max, seed);
+    let spec = cache.manifest().bev;
+    let dt = cache.manifest().dt;
+    Ok(compact
+        .iter()
+        .map(|c| {
+            let t = c.to_tuple(&spec);
+            let others = c
+                .agents
+                .iter()
+                .map(|a| {
+                    (1..=t.future.len())
+                        .map(|j| {
+                            let s = j as f64 * dt;
+                            Some([a[0] as f64 + a[2] as f64 * s, a[1] as f64 + a[3] as f64 * s])
+                        })
+                        .collect()
+                })
+                .collect();
+            EvalWindow {
+                cond: FlowCondition {
+                    bev: t.bev,
+                    goal: [t.goal[0] as f64, t.goal[1] as f64],
+                    velocity: [t.velocity[0] as f64, t.velocity[1] as f64],
+                },
+                future: t
+                    .future
+                    .iter()
+                    .map(|p| Pose2::new(p[0] as f64, p[1] as f64, p[2] as f64))
+                    .collect(),
+                others,
+            }
+        })
+        .collect())
+}
+
+/// Evaluates `model` on the test windows (with the other agents' true futures when the
+/// datasets are present, see `eval.data_config`, else extrapolated from the cache) and returns
+/// the card's evaluation record; `root` resolves `eval.data_config`.
+pub fn run_evaluation(
+    cfg: &TrainConfig,
+    cache: &TupleCache,
+    model: &CfmModel,
+    root: &Path,
+) -> anyhow::Result<EvaluationInfo> {
+    let (windows, neighbours) = match true_future_windows(cfg, cache, root) {
+        Ok(w) => (
+            w,
+            "other agents' true future positions, from the test scenes rebuilt with the data \
+             config (windows identical to the cache's test tuples)",
+        ),
+        Err(e) => {
+            eprintln!(
+                "note: true neighbour futures unavailable ({e:#}); extrapolating the cache's"
+            );
+            (
+                test_windows(cfg, cache)?,
+                "other agents' future positions extrapolated at constant velocity from their \
+                 state at the planning instant (the tuple cache stores neighbours only then)",
+            )
+        }
+    };
+    if windows.is_empty() {
+        bail!("the test split of {} is empty", cache.dir().display());
+    }
+    let opts = EvalOptions {
+        samples: cfg.eval.samples,
+        steps: cfg.eval.steps,
+        dt: cache.manifest().dt,
+        radius: cfg.eval.radius,
+        seed: cfg.eval.seed,
+    };
+    let bar = ProgressBar::new(windows.len() as u64);
+    bar.set_style(ProgressStyle::with_template(
+        "evaluating [{wide_bar}] {pos}/{len} windows  ETA {eta}",
+    )?);
+    let m = evaluate(model, &windows, &opts, |i| bar.set_position(i as u64))?;
+    bar.finish_and_clear();
+    let info = EvaluationInfo {
+        protocol: format!(
+            "{} windows drawn (seed {}) from the test split ({}); {} samples per window, {} Euler steps; \
+             best-of-{} ADE/FDE against the true 3.2 s future; constant velocity = ego velocity held",
+            m.windows,
+            cfg.eval.seed,
+            scene_names(cache, Split::Test),
+            opts.samples,
+            opts.steps,
+            opts.samples
+        ),
+        windows: m.windows,
+        samples_per_window: opts.samples,
+        steps: opts.steps,
+        min_ade: m.min_ade,
+        min_fde: m.min_fde,
+        mean_ade: m.mean_ade,
+        cv_ade: m.cv_ade,
+        cv_fde: m.cv_fde,
+        ade_improvement: 1.0 - m.min_ade / m.cv_ade,
+        proximity_radius: opts.radius,
+        proximity_model: m.proximity_model,
+        proximity_truth: m.proximity_truth,
+        proximity_note: format!(
+            "{neighbours}; constant-velocity ego prediction within the radius: {:.4}",
+            m.proximity_cv
+        ),
+    };
+    eprintln!(
+        "test: best-of-{} ADE {:.3} m FDE {:.3} m | constant velocity ADE {:.3} m FDE {:.3} m | ADE {:.1} % lower | \
+         within {} m of another agent: model {:.3}, truth {:.3}, cv {:.3}",
+        opts.samples,
+        m.min_ade,
+        m.min_fde,
+        m.cv_ade,
+        m.cv_fde,
+        100.0 * info.ade_improvement,
+        opts.radius,
+        m.proximity_model,
+        m.proximity_truth,
+        m.proximity_cv
+    );
+    Ok(info)
+}
+
+/// The libtorch device of `run.device`: `cpu`, `cuda` (an error without CUDA), else CUDA when
+/// available.
+pub fn device_of(name: &str) -> anyhow::Result<tch::Device> {
+    Ok(match name {
+        "cpu" => tch::Device::Cpu,
+        "cuda" => {
+            if !tch::Cuda::is_available() {
+                bail!("run.device = \"cuda\" but CUDA is not available");
+            }
+            tch::Device::Cuda(0)
+        }
+        _ => tch::Device::cuda_if_available(),
+    })
+}
+
+/// Opens the tuple cache at `cache_dir` and checks that its horizon and raster size match the
+/// network of `cfg` (read from `config_path`, named in the error).
+pub fn open_cache(
+    cache_dir: &Path,
+    cfg: &TrainConfig,
+    config_path: &Path,
+) -> anyhow::Result<TupleCache> {
+    let cache = TupleCache::open(cache_dir).with_context(|| {
+        format!(
+            "opening the tuple cache {} (build it with `human2nav data build`)",
+            cache_dir.display()
+        )
+    })?;
+    let manifest = cache.manifest();
+    if manifest.horizon != cfg.net.horizon || manifest.bev.cells != cfg.net.bev_cells {
+        bail!(
+            "the cache {} has horizon {} and {}×{} rasters; {} has net.horizon = {} and net.bev_cells = {}",
+            cache_dir.display(),
+            manifest.horizon,
+            manifest.bev.cells,
+            manifest.bev.cells,
+            config_path.display(),
+            cfg.net.horizon,
+            cfg.net.bev_cells
+        );
+    }
+    Ok(cache)
+}

@@ -76,7 +76,7 @@ fn quick(config: &str) -> Quick {
         match builtin_method(m, &cfg, &host) {
             Ok(Some(spec)) => methods.push(spec),
             Ok(None) => eprintln!(
-                "{config}: method `{}` (kind `{}`) needs the CLI; left out",
+                "{config}: method `{}` (kind `{}`) needs libtorch (human2nav-experiments); left out",
                 m.name, m.kind
             ),
             Err(e) => panic!(

@@ -4,8 +4,6 @@
 //! on the held-out test scenes. Progress is drawn with indicatif and reported on stderr.
 
 use anyhow::{Context, bail};
-use human2nav_core::flow::FlowCondition;
-use human2nav_core::se2::Pose2;
 use human2nav_data::cache::TupleCache;
 use human2nav_data::tuples::{CompactTuple, Split};
 use human2nav_flow::card::{ComplexityInfo, EvaluationInfo, TrainingInfo};
@@ -522,19 +520,7 @@ pub fn cache_windows(
                         .collect()
                 })
                 .collect();
-            EvalWindow {
-                cond: FlowCondition {
-                    bev: t.bev,
-                    goal: [t.goal[0] as f64, t.goal[1] as f64],
-                    velocity: [t.velocity[0] as f64, t.velocity[1] as f64],
-                },
-                future: t
-                    .future
-                    .iter()
-                    .map(|p| Pose2::new(p[0] as f64, p[1] as f64, p[2] as f64))
-                    .collect(),
-                others,
-            }
+            EvalWindow::from_tuple(t, others)
         })
         .collect())
 }

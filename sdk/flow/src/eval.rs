@@ -23,7 +23,7 @@ use human2nav_core::se2::Twist2;
 use human2nav_core::{Limits, tfs};
 use human2nav_data::resample::Scene;
 use human2nav_data::track::AgentClass;
-use human2nav_data::tuples::{TupleOptions, scene_tuples};
+use human2nav_data::tuples::{TrainingTuple, TupleOptions, scene_tuples};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::collections::BTreeSet;
@@ -38,6 +38,26 @@ pub struct EvalWindow {
     /// Other agents' positions over the same `T` future steps, ego frame; `None` where an
     /// agent is not observed. Empty when unknown.
     pub others: Vec<Vec<Option<[f64; 2]>>>,
+}
+
+impl EvalWindow {
+    /// The window of a training tuple (its BEV, goal, velocity and future) with the other
+    /// agents' future positions `others`.
+    pub fn from_tuple(t: TrainingTuple, others: Vec<Vec<Option<[f64; 2]>>>) -> Self {
+        Self {
+            cond: FlowCondition {
+                bev: t.bev,
+                goal: [t.goal[0] as f64, t.goal[1] as f64],
+                velocity: [t.velocity[0] as f64, t.velocity[1] as f64],
+            },
+            future: t
+                .future
+                .iter()
+                .map(|p| Pose2::new(p[0] as f64, p[1] as f64, p[2] as f64))
+                .collect(),
+            others,
+        }
+    }
 }
 
 /// Options of [`evaluate`].
@@ -200,20 +220,7 @@ pub fn scene_windows(
                     .collect()
             })
             .collect();
-        let dense = tup.to_tuple(spec);
-        out.push(EvalWindow {
-            cond: FlowCondition {
-                bev: dense.bev,
-                goal: [tup.goal[0] as f64, tup.goal[1] as f64],
-                velocity: [tup.velocity[0] as f64, tup.velocity[1] as f64],
-            },
-            future: tup
-                .future
-                .iter()
-                .map(|p| Pose2::new(p[0] as f64, p[1] as f64, p[2] as f64))
-                .collect(),
-            others,
-        });
+        out.push(EvalWindow::from_tuple(tup.to_tuple(spec), others));
     }
     Ok(out)
 }

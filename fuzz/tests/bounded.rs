@@ -1,5 +1,7 @@
 //! The bounded run: every target on a fixed seed for `HUMAN2NAV_FUZZ_CASES` cases (default
-//! 256), or for `HUMAN2NAV_FUZZ_SECONDS` seconds. A panic in a reader fails its test.
+//! 256), or for `HUMAN2NAV_FUZZ_SECONDS` seconds. A panic in a reader fails its test. The
+//! `model` targets need the default feature of that name (libtorch); `plugin_observation` needs
+//! the plugin libraries built (`cargo build --workspace`).
 
 use human2nav_fuzz::{run_bounded, targets};
 
@@ -10,15 +12,24 @@ fn run(name: &str) {
 }
 
 macro_rules! bounded {
-    ($($name:ident),* $(,)?) => {
+    ($($name:ident),* $(,)?; model: $($model:ident),* $(,)?) => {
         $(#[test]
         fn $name() {
             run(stringify!($name));
         })*
 
+        $(#[cfg(feature = "model")]
+        #[test]
+        fn $model() {
+            run(stringify!($model));
+        })*
+
         #[test]
         fn every_target_has_a_test() {
+            #[allow(unused_mut)]
             let mut tested = vec![$(stringify!($name)),*];
+            #[cfg(feature = "model")]
+            tested.extend([$(stringify!($model)),*]);
             let mut all: Vec<_> = targets::all().iter().map(|t| t.name).collect();
             tested.sort_unstable();
             all.sort_unstable();
@@ -45,4 +56,8 @@ bounded!(
     plugin_file,
     plugin_entry,
     plugin_vtable,
+    tuple_cache,
+    plugin_observation;
+    model: model_card,
+    planner_config,
 );

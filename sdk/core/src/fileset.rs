@@ -262,7 +262,10 @@ mod tests {
         commit(&ck, &FILES, 3, |d| write_both(d, "one")).unwrap();
         assert_eq!(find_complete(&ck, &FILES).unwrap(), Some(ck.clone()));
         commit(&ck, &FILES, 7, |d| write_both(d, "two")).unwrap();
-        assert_eq!(std::fs::read_to_string(ck.join("a.bin")).unwrap(), "a.bin two");
+        assert_eq!(
+            std::fs::read_to_string(ck.join("a.bin")).unwrap(),
+            "a.bin two"
+        );
         let manifest = std::fs::read_to_string(ck.join(MANIFEST_FILE)).unwrap();
         assert!(manifest.contains("step = 7"), "{manifest}");
         assert!(!sibling(&ck, "partial").exists() && !sibling(&ck, "old").exists());
@@ -281,7 +284,10 @@ mod tests {
         .unwrap_err();
         assert!(err.to_string().contains("disk full"), "{err}");
         assert_eq!(find_complete(&ck, &FILES).unwrap(), Some(ck.clone()));
-        assert_eq!(std::fs::read_to_string(ck.join("a.bin")).unwrap(), "a.bin one");
+        assert_eq!(
+            std::fs::read_to_string(ck.join("a.bin")).unwrap(),
+            "a.bin one"
+        );
         let _ = std::fs::remove_dir_all(&root);
     }
 
@@ -293,7 +299,10 @@ mod tests {
         // An altered file: its size and checksum disagree with the manifest.
         std::fs::write(ck.join("b.toml"), "changed!").unwrap();
         let err = find_complete(&ck, &FILES).unwrap_err().to_string();
-        assert!(err.contains("b.toml has 8 bytes") && err.contains("incomplete"), "{err}");
+        assert!(
+            err.contains("b.toml has 8 bytes") && err.contains("incomplete"),
+            "{err}"
+        );
         // A missing file.
         std::fs::remove_file(ck.join("b.toml")).unwrap();
         let err = find_complete(&ck, &FILES).unwrap_err().to_string();

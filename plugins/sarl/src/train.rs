@@ -227,8 +227,11 @@ impl TrainConfig {
     pub fn validate(&self) -> Result<(), SarlError> {
         self.env.validate()?;
         self.net.validate()?;
-        if self.threads == 0 {
-            return Err(SarlError::config("threads", "must be ≥ 1"));
+        if !(1..=MAX_THREADS).contains(&self.threads) {
+            return Err(SarlError::config(
+                "threads",
+                format!("{} is not in 1..={MAX_THREADS}", self.threads),
+            ));
         }
         let o = &self.optim;
         if !(o.gamma > 0.0 && o.gamma <= 1.0) {
@@ -442,6 +445,10 @@ impl Observer for Silent {
     fn tick(&mut self, _: u64, _: &str) {}
     fn note(&mut self, _: &str) {}
 }
+
+/// Largest `threads` accepted: libtorch starts that many intra-op threads, each with its own
+/// stack (`threads = 100000` overflowed before this bound); the flow trainer has the same.
+pub const MAX_THREADS: usize = 256;
 
 /// Names of the checkpoint files inside the run directory.
 const CKPT_DIR: &str = "checkpoint";
@@ -1230,5 +1237,14 @@ mod tests {
         assert_eq!(cfg.net, NetConfig::default());
         let err = toml::from_str::<TrainConfig>("[rl]\nepisodez = 3").unwrap_err();
         assert!(err.to_string().contains("episodez"), "{err}");
+        // Thread counts are bounded (libtorch would start them all).
+        for threads in [0, MAX_THREADS + 1, 100_000] {
+            let c = TrainConfig {
+                threads,
+                ..cfg.clone()
+            };
+            let err = c.validate().unwrap_err().to_string();
+            assert!(err.contains("threads") && err.contains("1..=256"), "{err}");
+        }
     }
 }

@@ -61,3 +61,27 @@ bounded!(
     model: model_card,
     planner_config,
 );
+
+/// The observation target reaches both plugins (not only the host's input checks): over the
+/// bounded run's inputs, some plans come back and some constraint calls evaluate, and some
+/// inputs are refused.
+#[test]
+fn observations_reach_the_plugins() {
+    use human2nav_fuzz::targets::observe::run_observation;
+    let t = targets::by_name("plugin_observation").expect("target exists");
+    let seeds = (t.seeds)();
+    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(17);
+    let (mut planned, mut evaluated, n) = (0, 0, 256);
+    let mut errors = std::collections::BTreeSet::new();
+    for _ in 0..n {
+        let r = run_observation(&human2nav_fuzz::next_input(&mut rng, &seeds));
+        planned += usize::from(r.planned);
+        evaluated += usize::from(r.evaluated);
+        errors.extend(r.plan_error.map(|e| e.chars().take(80).collect::<String>()));
+    }
+    assert!(
+        planned > 0 && planned < n && evaluated > 0 && evaluated < n,
+        "{planned} plans and {evaluated} evaluations of {n} inputs; planner errors: {errors:#?}"
+    );
+    eprintln!("plugin_observation: {planned} plans, {evaluated} evaluations of {n} inputs");
+}

@@ -10,7 +10,7 @@
 use crate::{Scratch, Target};
 use human2nav_core::constraint::{ConstraintContext, ConstraintTerm, TrajBatch};
 use human2nav_core::obstacle::Obstacle;
-use human2nav_core::{AgentState, Limits, Observation, PlanError, Planner, Pose2, Twist2};
+use human2nav_core::{AgentState, Limits, Observation, Planner, Pose2, Twist2};
 use human2nav_plugin::resolve::resolve_library_path;
 use human2nav_plugin::{PluginConstraint, PluginHost, PluginPlanner};
 use std::path::PathBuf;
@@ -102,6 +102,9 @@ fn fresh_constraint(host: &PluginHost) -> PluginConstraint {
 struct Draw<'a> {
     b: &'a [u8],
     i: usize,
+    /// One value in `hostile` is an extreme (NaN, inf, 1e300, raw bits, ...); 0: none. Set per
+    /// input, so that some observations are entirely ordinary and reach the plugin.
+    hostile: u8,
 }
 
 impl Draw<'_> {
@@ -116,9 +119,13 @@ impl Draw<'_> {
     fn u64(&mut self) -> u64 {
         (0..8).fold(0u64, |v, _| (v << 8) | u64::from(self.u8()))
     }
-    /// A value: mostly ordinary (metres, m/s), else an extreme or raw bits.
+    /// A value: ordinary (metres, m/s, within ±16), or (one in `hostile`) an extreme.
     fn f64(&mut self) -> f64 {
-        match self.u8() % 16 {
+        let extreme = self.hostile != 0 && self.u8() % self.hostile == 0;
+        if !extreme {
+            return (f64::from(self.u16()) - 32768.0) / 2048.0;
+        }
+        match self.u8() % 8 {
             0 => f64::NAN,
             1 => f64::INFINITY,
             2 => f64::NEG_INFINITY,
@@ -126,8 +133,7 @@ impl Draw<'_> {
             4 => f64::MIN_POSITIVE / 4.0,
             5 => -0.0,
             6 => 1e6 + f64::from(self.u8()),
-            7 => f64::from_bits(self.u64()),
-            _ => (f64::from(self.u16()) - 32768.0) / 2048.0,
+            _ => f64::from_bits(self.u64()),
         }
     }
     /// A count: mostly small, sometimes large.
@@ -184,8 +190,32 @@ fn observation(d: &mut Draw<'_>) -> Observation {
     }
 }
 
+/// How far one input got: whether the planner returned a plan and the constraint evaluated
+/// (rather than the host refusing the input). The bounded test checks inputs get that far.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Reached {
+    /// The planner's error, when it returned one.
+    pub plan_error: Option<String>,
+    /// The orca plugin returned a (finite) plan.
+    pub planned: bool,
+    /// The personal_space plugin returned a cost and gradient.
+    pub evaluated: bool,
+}
+
 fn plugin_observation(_: &Scratch, input: &[u8]) {
-    let mut d = Draw { b: input, i: 0 };
+    let _ = run_observation(input);
+}
+
+/// Feeds one input to both plugins (module docs); panics on a crash-class outcome (a NaN or
+/// non-finite plan, NaN from finite inputs, wrong output sizes accepted).
+pub fn run_observation(input: &[u8]) -> Reached {
+    let mut reached = Reached::default();
+    let hostile = [0, 0, 64, 16, 4, 1][usize::from(input.first().copied().unwrap_or(0) % 6)];
+    let mut d = Draw {
+        b: input.get(1..).unwrap_or(&[]),
+        i: 0,
+        hostile,
+    };
     let obs = observation(&mut d);
     let mut guard = loaded().lock().unwrap_or_else(|p| p.into_inner());
     let l = &mut *guard;
@@ -196,14 +226,14 @@ fn plugin_observation(_: &Scratch, input: &[u8]) {
         l.planner.reset();
     }
     match l.planner.plan(&obs) {
-        Ok(plan) => assert!(
-            plan.is_finite() && !plan.poses.is_empty(),
-            "the host returned an empty or non-finite plan: {plan:?}"
-        ),
-        Err(PlanError::InvalidObservation(_)) => {}
-        Err(e) => {
-            let _ = e.to_string();
+        Ok(plan) => {
+            assert!(
+                plan.is_finite() && !plan.poses.is_empty(),
+                "the host returned an empty or non-finite plan: {plan:?}"
+            );
+            reached.planned = true;
         }
+        Err(e) => reached.plan_error = Some(e.to_string()),
     }
 
     // The same agents around a batch of trajectories for the constraint plugin.
@@ -233,7 +263,7 @@ fn plugin_observation(_: &Scratch, input: &[u8]) {
     let mut cost = vec![0.0; batch + wrong];
     let mut grad = vec![0.0; values];
     let Ok(traj) = TrajBatch::new(&data, batch, horizon) else {
-        return;
+        return reached;
     };
     if l.constraint
         .evaluate(traj, &ctx, &mut cost, &mut grad)
@@ -248,5 +278,7 @@ fn plugin_observation(_: &Scratch, input: &[u8]) {
             wrong == 0 && (!finite_in || cost.iter().chain(&grad).all(|v| !v.is_nan())),
             "the constraint returned NaN for finite inputs (or accepted wrong output sizes)"
         );
+        reached.evaluated = true;
     }
+    reached
 }

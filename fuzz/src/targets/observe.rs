@@ -233,7 +233,16 @@ pub fn run_observation(input: &[u8]) -> Reached {
             );
             reached.planned = true;
         }
-        Err(e) => reached.plan_error = Some(e.to_string()),
+        Err(e) => {
+            // The export layer turns a panic into an error and poisons the instance: for a
+            // shipped plugin that is a bug all the same.
+            let message = e.to_string();
+            assert!(
+                !message.contains("panicked:"),
+                "the orca plugin panicked: {message}"
+            );
+            reached.plan_error = Some(message);
+        }
     }
 
     // The same agents around a batch of trajectories for the constraint plugin.
@@ -265,10 +274,15 @@ pub fn run_observation(input: &[u8]) -> Reached {
     let Ok(traj) = TrajBatch::new(&data, batch, horizon) else {
         return reached;
     };
-    if l.constraint
-        .evaluate(traj, &ctx, &mut cost, &mut grad)
-        .is_ok()
-    {
+    let evaluated = l.constraint.evaluate(traj, &ctx, &mut cost, &mut grad);
+    if let Err(e) = &evaluated {
+        let message = e.to_string();
+        assert!(
+            !message.contains("panicked:"),
+            "the personal_space plugin panicked: {message}"
+        );
+    }
+    if evaluated.is_ok() {
         let finite_in = data.iter().all(|v| v.is_finite())
             && ctx.dt.is_finite()
             && obs.agents.iter().all(|a| {

@@ -1,5 +1,7 @@
 //! The bounded run: every target on a fixed seed for `HUMAN2NAV_FUZZ_CASES` cases (default
-//! 256), or for `HUMAN2NAV_FUZZ_SECONDS` seconds. A panic in a reader fails its test.
+//! 256), or for `HUMAN2NAV_FUZZ_SECONDS` seconds. A panic in a reader fails its test. The
+//! `model` targets need the default feature of that name (libtorch); `plugin_observation` needs
+//! the plugin libraries built (`cargo build --workspace`).
 
 use human2nav_fuzz::{run_bounded, targets};
 
@@ -10,15 +12,24 @@ fn run(name: &str) {
 }
 
 macro_rules! bounded {
-    ($($name:ident),* $(,)?) => {
+    ($($name:ident),* $(,)?; model: $($model:ident),* $(,)?) => {
         $(#[test]
         fn $name() {
             run(stringify!($name));
         })*
 
+        $(#[cfg(feature = "model")]
+        #[test]
+        fn $model() {
+            run(stringify!($model));
+        })*
+
         #[test]
         fn every_target_has_a_test() {
+            #[allow(unused_mut)]
             let mut tested = vec![$(stringify!($name)),*];
+            #[cfg(feature = "model")]
+            tested.extend([$(stringify!($model)),*]);
             let mut all: Vec<_> = targets::all().iter().map(|t| t.name).collect();
             tested.sort_unstable();
             all.sort_unstable();
@@ -45,4 +56,32 @@ bounded!(
     plugin_file,
     plugin_entry,
     plugin_vtable,
+    tuple_cache,
+    plugin_observation;
+    model: model_card,
+    planner_config,
 );
+
+/// The observation target reaches both plugins (not only the host's input checks): over the
+/// bounded run's inputs, some plans come back and some constraint calls evaluate, and some
+/// inputs are refused.
+#[test]
+fn observations_reach_the_plugins() {
+    use human2nav_fuzz::targets::observe::run_observation;
+    let t = targets::by_name("plugin_observation").expect("target exists");
+    let seeds = (t.seeds)();
+    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(17);
+    let (mut planned, mut evaluated, n) = (0, 0, 256);
+    let mut errors = std::collections::BTreeSet::new();
+    for _ in 0..n {
+        let r = run_observation(&human2nav_fuzz::next_input(&mut rng, &seeds));
+        planned += usize::from(r.planned);
+        evaluated += usize::from(r.evaluated);
+        errors.extend(r.plan_error.map(|e| e.chars().take(80).collect::<String>()));
+    }
+    assert!(
+        planned > 0 && planned < n && evaluated > 0 && evaluated < n,
+        "{planned} plans and {evaluated} evaluations of {n} inputs; planner errors: {errors:#?}"
+    );
+    eprintln!("plugin_observation: {planned} plans, {evaluated} evaluations of {n} inputs");
+}

@@ -120,7 +120,108 @@ pub(crate) fn targets() -> Vec<Target> {
             seeds: episode_seeds,
             exec: episodes_json,
         },
+        Target {
+            name: "tuple_cache",
+            covers: "a tuple cache (manifest.json and train/val/test.bin, parts of one input) \
+                     through TupleCache::open, load_compact, load (rasters) and pick_scenes",
+            seeds: cache_seeds,
+            exec: tuple_cache,
+        },
     ]
+}
+
+/// Separates the parts of a `tuple_cache` input: the manifest, then one file per split.
+const PART: &[u8] = b"\n--8<--\n";
+
+/// A cache of two scenes (train and test) with a few tuples each, as `TupleCache::write` writes
+/// it, as one input.
+fn cache_seeds() -> Vec<Vec<u8>> {
+    use human2nav_data::tuples::{CompactTuple, Split, TupleOptions, TupleStats};
+    use human2nav_data::{Manifest, SceneInfo, TupleCache};
+    let Ok(scratch) = Scratch::new("cache-seed") else {
+        return Vec::new();
+    };
+    let scene = |name: &str, split| SceneInfo {
+        name: format!("eth/{name}"),
+        dataset: "eth".into(),
+        format: "eth".into(),
+        split,
+        duration: 12.0,
+        tracks: 3,
+        tuples: 2,
+        median_speed: Some(1.2),
+        skipped: Default::default(),
+    };
+    let tuple = |scene: u16, k: usize| CompactTuple {
+        scene,
+        class: None,
+        goal: [3.0, 0.5 * k as f32],
+        velocity: [1.0, 0.0],
+        future: (1..=4)
+            .map(|i| [0.1 * i as f32, 0.0, 0.01 * k as f32])
+            .collect(),
+        agents: (0..k)
+            .map(|a| [1.0 + a as f32, -0.5, 0.3, 0.0, 0.3])
+            .collect(),
+    };
+    let manifest = Manifest {
+        version: human2nav_data::cache::CACHE_VERSION,
+        source: "real".into(),
+        bev: Default::default(),
+        horizon: 4,
+        dt: 0.1,
+        tuples: TupleOptions::default(),
+        scenes: vec![scene("hotel", Split::Train), scene("univ", Split::Test)],
+        counts: Default::default(),
+        stats: TupleStats::default(),
+        file_bytes: Default::default(),
+    };
+    let splits = [
+        (Split::Train, vec![tuple(0, 0), tuple(0, 2)]),
+        (Split::Val, Vec::new()),
+        (Split::Test, vec![tuple(1, 3)]),
+    ];
+    let dir = scratch.dir().join("cache");
+    if TupleCache::write(&dir, manifest, &splits).is_err() {
+        return Vec::new();
+    }
+    let mut input = std::fs::read(dir.join("manifest.json")).unwrap_or_default();
+    for split in Split::ALL {
+        input.extend_from_slice(PART);
+        input.extend(std::fs::read(dir.join(format!("{}.bin", split.name()))).unwrap_or_default());
+    }
+    vec![input]
+}
+
+fn tuple_cache(s: &Scratch, input: &[u8]) {
+    use human2nav_data::TupleCache;
+    use human2nav_data::tuples::Split;
+    let mut parts = Vec::new();
+    let mut rest = input;
+    while let Some(at) = rest.windows(PART.len()).position(|w| w == PART) {
+        parts.push(&rest[..at]);
+        rest = &rest[at + PART.len()..];
+    }
+    parts.push(rest);
+    let dir = s.dir().join("cache");
+    let _ = std::fs::remove_dir_all(&dir);
+    s.write("cache/manifest.json", parts[0]);
+    for (split, bytes) in Split::ALL.iter().zip(parts.iter().skip(1)) {
+        s.write(&format!("cache/{}.bin", split.name()), bytes);
+    }
+    let Ok(cache) = TupleCache::open(&dir) else {
+        return;
+    };
+    for split in Split::ALL {
+        if let Ok(tuples) = cache.load_compact(split) {
+            let _ = TupleCache::class_counts(&tuples);
+            // Dense rasters of small splits only (each is 3·H·W floats).
+            if tuples.len() <= 64 {
+                let _ = cache.load(split);
+            }
+        }
+        let _ = cache.pick_scenes(split, 0.5, 7);
+    }
 }
 
 fn resampled(scene: Result<RawScene, human2nav_data::DataError>) {

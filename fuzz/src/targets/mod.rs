@@ -2,6 +2,9 @@
 
 pub mod config;
 pub mod data;
+#[cfg(feature = "model")]
+pub mod model;
+pub mod observe;
 pub mod plugin;
 
 use crate::Target;
@@ -9,8 +12,11 @@ use crate::Target;
 /// Every target, in the order the runs report them.
 pub fn all() -> Vec<Target> {
     let mut t = config::targets();
+    #[cfg(feature = "model")]
+    t.extend(model::targets());
     t.extend(data::targets());
     t.extend(plugin::targets());
+    t.extend(observe::targets());
     t
 }
 

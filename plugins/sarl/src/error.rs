@@ -24,6 +24,9 @@ pub enum SarlError {
     /// A checkpoint is inconsistent with the configuration it is resumed under.
     #[error("{path}: cannot resume: {message}")]
     Resume { path: PathBuf, message: String },
+    /// A checkpoint set could not be written or read (see `human2nav_core::fileset`).
+    #[error(transparent)]
+    Set(#[from] human2nav_core::fileset::SetError),
     /// A libtorch operation failed.
     #[error("libtorch: {0}")]
     Torch(#[from] tch::TchError),

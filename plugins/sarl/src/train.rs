@@ -18,6 +18,11 @@
 //! or epoch index, so a run is deterministic given the seed (with one libtorch thread) and a
 //! resumed run continues exactly: a checkpoint holds the network, the target network, the
 //! momentum buffers, the memory and the progress (`progress.toml`).
+//!
+//! A checkpoint is one set (`human2nav_core::fileset`): its five files go into
+//! `checkpoint.partial/`, `manifest.toml` (size and checksum of each) last, then the folder
+//! replaces `checkpoint/`. [`Trainer::resume`] continues from the newest complete set and
+//! refuses a partial one, naming the missing or altered file; it never starts over silently.
 
 use crate::action::ActionSpace;
 use crate::card::{
@@ -29,6 +34,7 @@ use crate::eval::{EvalStats, Policy, SeedStream, episode_rng, evaluate, run_epis
 use crate::net::{NetConfig, SarlNet};
 use crate::policy::LookAhead;
 use crate::state::JOINT_DIM;
+use human2nav_core::fileset::{self, SetError};
 use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -221,8 +227,11 @@ impl TrainConfig {
     pub fn validate(&self) -> Result<(), SarlError> {
         self.env.validate()?;
         self.net.validate()?;
-        if self.threads == 0 {
-            return Err(SarlError::config("threads", "must be ≥ 1"));
+        if !(1..=MAX_THREADS).contains(&self.threads) {
+            return Err(SarlError::config(
+                "threads",
+                format!("{} is not in 1..={MAX_THREADS}", self.threads),
+            ));
         }
         let o = &self.optim;
         if !(o.gamma > 0.0 && o.gamma <= 1.0) {
@@ -437,6 +446,10 @@ impl Observer for Silent {
     fn note(&mut self, _: &str) {}
 }
 
+/// Largest `threads` accepted: libtorch starts that many intra-op threads, each with its own
+/// stack (`threads = 100000` overflowed before this bound); the flow trainer has the same.
+pub const MAX_THREADS: usize = 256;
+
 /// Names of the checkpoint files inside the run directory.
 const CKPT_DIR: &str = "checkpoint";
 const CKPT_MODEL: &str = "model.safetensors";
@@ -444,6 +457,14 @@ const CKPT_TARGET: &str = "target.safetensors";
 const CKPT_MOMENTUM: &str = "momentum.safetensors";
 const CKPT_MEMORY: &str = "memory.safetensors";
 const CKPT_PROGRESS: &str = "progress.toml";
+/// Every file of a checkpoint set, all listed in its manifest.
+const CKPT_FILES: [&str; 5] = [
+    CKPT_MODEL,
+    CKPT_TARGET,
+    CKPT_MOMENTUM,
+    CKPT_MEMORY,
+    CKPT_PROGRESS,
+];
 
 /// The two-stage SARL trainer.
 #[derive(Debug)]
@@ -492,15 +513,29 @@ impl Trainer {
         })
     }
 
-    /// Resumes from the checkpoint under `out_dir`; `None` when there is none.
+    /// Resumes from the newest complete checkpoint set under `out_dir` (`checkpoint/`, or
+    /// `checkpoint.old/` when a save was cut between its renames); `None` when there is no
+    /// checkpoint at all. A partial set (a file missing, or not the size and checksum its
+    /// manifest records) is an error naming the file.
     pub fn resume(cfg: TrainConfig, out_dir: PathBuf) -> Result<Option<Self>, SarlError> {
-        let dir = out_dir.join(CKPT_DIR);
+        let ckpt = out_dir.join(CKPT_DIR);
+        let dir = match fileset::find_complete(&ckpt, &CKPT_FILES) {
+            Ok(Some(dir)) => dir,
+            Ok(None) => return Ok(None),
+            Err(SetError::Incomplete { path, reason }) => {
+                return Err(SarlError::Resume {
+                    path,
+                    message: format!(
+                        "{reason}; the checkpoint set is incomplete (restore it, or start \
+                         afresh without --resume)"
+                    ),
+                });
+            }
+            Err(e) => return Err(e.into()),
+        };
         let progress_path = dir.join(CKPT_PROGRESS);
-        if !progress_path.is_file() {
-            return Ok(None);
-        }
         let mut t = Self::new(cfg, out_dir)?;
-        let text = std::fs::read_to_string(&progress_path)
+        let text = read_user_file(&progress_path, "SARL training progress", MAX_CONFIG_BYTES)
             .map_err(|e| SarlError::io(&progress_path, e))?;
         let progress: Progress = toml::from_str(&text).map_err(|e| SarlError::Parse {
             path: progress_path.clone(),
@@ -830,10 +865,17 @@ impl Trainer {
         Ok(s)
     }
 
-    /// Writes the checkpoint (atomically per file).
+    /// Writes the checkpoint as one set (module docs): a crash at any point leaves a complete
+    /// set behind, the new one or the previous one.
     pub fn checkpoint(&mut self) -> Result<(), SarlError> {
-        let dir = self.out_dir.join(CKPT_DIR);
-        std::fs::create_dir_all(&dir).map_err(|e| SarlError::io(&dir, e))?;
+        self.progress.memory_next = self.memory.next;
+        let step = (self.progress.il_epochs_done + self.progress.rl_episodes_done) as u64;
+        let ckpt = self.out_dir.join(CKPT_DIR);
+        fileset::commit(&ckpt, &CKPT_FILES, step, |dir| self.write_checkpoint(dir))
+    }
+
+    /// Writes the checkpoint's files into `dir` (no manifest).
+    fn write_checkpoint(&self, dir: &Path) -> Result<(), SarlError> {
         self.model.save(&dir.join(CKPT_MODEL))?;
         self.target.save(&dir.join(CKPT_TARGET))?;
         let named: Vec<(String, Tensor)> = self
@@ -857,7 +899,6 @@ impl Trainer {
                 ("values".to_string(), values),
             ],
         )?;
-        self.progress.memory_next = m.next;
         let path = dir.join(CKPT_PROGRESS);
         let text = toml::to_string(&self.progress).map_err(|e| SarlError::Parse {
             path: path.clone(),
@@ -1100,6 +1141,72 @@ mod tests {
         let _ = std::fs::remove_dir_all(&out);
     }
 
+    /// A run stopped after imitation (no TD episodes): its checkpoint is a complete set.
+    fn stopped_run(name: &str) -> (TrainConfig, PathBuf) {
+        let (mut c, out) = small(name);
+        c.rl.episodes = 0;
+        c.run.eval_episodes = 0;
+        Trainer::new(c.clone(), out.clone())
+            .unwrap()
+            .run(&mut Silent)
+            .unwrap();
+        (c, out)
+    }
+
+    #[test]
+    fn checkpoints_are_sets_with_a_manifest() {
+        let (c, out) = stopped_run("set");
+        let ckpt = out.join(CKPT_DIR);
+        let manifest = std::fs::read_to_string(ckpt.join(fileset::MANIFEST_FILE)).unwrap();
+        for f in CKPT_FILES {
+            assert!(manifest.contains(&format!("[files.\"{f}\"]")), "{manifest}");
+        }
+        assert!(!fileset::sibling(&ckpt, "partial").exists());
+        let t = Trainer::resume(c.clone(), out.clone()).unwrap().unwrap();
+        assert_eq!(t.progress().il_epochs_done, 4);
+        // Killed between the two renames of a later save: `checkpoint.old` is the last complete
+        // set, and the half-filled `checkpoint` beside it is ignored.
+        let old = fileset::sibling(&ckpt, "old");
+        std::fs::rename(&ckpt, &old).unwrap();
+        std::fs::create_dir_all(&ckpt).unwrap();
+        std::fs::copy(old.join(CKPT_MODEL), ckpt.join(CKPT_MODEL)).unwrap();
+        let t = Trainer::resume(c, out.clone()).unwrap().unwrap();
+        assert_eq!(t.progress().il_epochs_done, 4);
+        let _ = std::fs::remove_dir_all(&out);
+    }
+
+    #[test]
+    fn a_partial_checkpoint_is_refused_naming_the_file() {
+        let (c, out) = stopped_run("partial");
+        let ckpt = out.join(CKPT_DIR);
+        // The progress file gone: this resumed as "no checkpoint" (a silent restart) before.
+        std::fs::remove_file(ckpt.join(CKPT_PROGRESS)).unwrap();
+        let err = Trainer::resume(c.clone(), out.clone()).unwrap_err();
+        assert!(
+            matches!(&err, SarlError::Resume { .. })
+                && err.to_string().contains("progress.toml is missing")
+                && err.to_string().contains("without --resume"),
+            "{err}"
+        );
+        // An altered memory file: named with its size and the manifest's.
+        let (c2, out2) = stopped_run("altered");
+        let mem = out2.join(CKPT_DIR).join(CKPT_MEMORY);
+        let mut bytes = std::fs::read(&mem).unwrap();
+        bytes.truncate(bytes.len() / 2);
+        std::fs::write(&mem, &bytes).unwrap();
+        let err = Trainer::resume(c2, out2.clone()).unwrap_err().to_string();
+        assert!(
+            err.contains("memory.safetensors has") && err.contains("the manifest says"),
+            "{err}"
+        );
+        // Without a manifest, the files of an older checkpoint: missing ones are named too.
+        std::fs::remove_file(ckpt.join(fileset::MANIFEST_FILE)).unwrap();
+        let err = Trainer::resume(c, out.clone()).unwrap_err().to_string();
+        assert!(err.contains("progress.toml is missing"), "{err}");
+        let _ = std::fs::remove_dir_all(&out);
+        let _ = std::fs::remove_dir_all(&out2);
+    }
+
     #[test]
     fn epsilon_schedule() {
         let r = RlConfig::default();
@@ -1130,5 +1237,14 @@ mod tests {
         assert_eq!(cfg.net, NetConfig::default());
         let err = toml::from_str::<TrainConfig>("[rl]\nepisodez = 3").unwrap_err();
         assert!(err.to_string().contains("episodez"), "{err}");
+        // Thread counts are bounded (libtorch would start them all).
+        for threads in [0, MAX_THREADS + 1, 100_000] {
+            let c = TrainConfig {
+                threads,
+                ..cfg.clone()
+            };
+            let err = c.validate().unwrap_err().to_string();
+            assert!(err.contains("threads") && err.contains("1..=256"), "{err}");
+        }
     }
 }

@@ -3,7 +3,9 @@
 //! * [`se2`]: the SE(2) Lie group used for every pose and trajectory.
 //! * [`trajectory`]: fixed-step pose sequences and their derived speed, acceleration, yaw rate,
 //!   curvature and lateral speed.
-//! * [`input`]: reading user-named files (regular files only, with a size cap).
+//! * [`input`]: reading user-named files (regular files only, with a size cap); [`fileset`]:
+//!   folders of files committed as one set with a manifest written last; [`lock`]: one writer
+//!   per output folder.
 //! * [`robot`]: robot profiles (`robot.toml` + URDF) with their [`limits`].
 //! * [`embodiment`]: kinematic models, command saturation and tracking controllers.
 //! * [`constraint`]: constraint terms, the soft-margin penalty of Eq. 8 and Φ of Eq. 9.
@@ -22,6 +24,7 @@ pub mod ablation;
 pub mod bev;
 pub mod constraint;
 pub mod embodiment;
+pub mod fileset;
 pub mod flow;
 pub mod frames;
 pub mod guidance;

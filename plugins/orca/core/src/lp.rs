@@ -123,7 +123,9 @@ pub fn linear_program1(
     let line = lines[line_no];
     let dot = line.point.dot(line.direction);
     let discriminant = dot * dot + radius * radius - line.point.norm_sq();
-    if discriminant < 0.0 {
+    // A NaN (a line computed from overflowing inputs) counts as infeasible too, rather than
+    // reaching `clamp` below with NaN bounds, which panics.
+    if discriminant.is_nan() || discriminant < 0.0 {
         // The speed disc lies entirely on the forbidden side of this line.
         return None;
     }
@@ -149,7 +151,7 @@ pub fn linear_program1(
             // `other` bounds this line on the left.
             t_left = t_left.max(t);
         }
-        if t_left > t_right {
+        if t_left.is_nan() || t_right.is_nan() || t_left > t_right {
             return None;
         }
     }
@@ -292,6 +294,27 @@ mod tests {
             point: Vec2::new(px, py),
             direction: Vec2::new(dx, dy).normalized(),
         }
+    }
+
+    /// Found by the `plugin_observation` fuzz target: a finite observation far out (1e300 m)
+    /// made a line whose discriminant was NaN, and `clamp` panicked on NaN bounds inside the
+    /// plugin. Such a line is infeasible now, whatever the solver does with it next.
+    #[test]
+    fn lines_from_overflowing_inputs_are_infeasible_not_a_panic() {
+        let far = Line {
+            point: Vec2::new(1e300, 1e300),
+            direction: Vec2::new(1.0, 0.0),
+        };
+        assert_eq!(linear_program1(&[far], 0, 1.0, Vec2::ZERO, false), None);
+        let nan = Line {
+            point: Vec2::new(0.0, 0.0),
+            direction: Vec2::new(f64::NAN, 0.0),
+        };
+        let lines = [line(0.0, -0.5, 1.0, 0.0), nan];
+        assert_eq!(linear_program1(&lines, 1, 1.0, Vec2::ZERO, false), None);
+        let ok = [line(0.0, -0.5, 1.0, 0.0), line(0.5, 0.0, 0.0, 1.0)];
+        let _ = solve(&[far, nan], 1.0, Vec2::new(0.3, 0.0));
+        assert!(linear_program1(&ok, 1, 1.0, Vec2::ZERO, false).is_some());
     }
 
     #[test]

@@ -1671,7 +1671,7 @@ fn resume_cases() -> Vec<Case> {
             a,
             "flow checkpoint folder with stray files only",
             NR,
-            &["checkpoint", "no state.safetensors or state.toml"],
+            &["checkpoint", "none of state.safetensors, state.toml"],
             flow_checkpoint(&[("notes.txt", "x")], false),
         ),
         accepted(

@@ -144,6 +144,17 @@ pub enum CfmError {
     },
 }
 
+impl From<human2nav_core::fileset::SetError> for CfmError {
+    fn from(e: human2nav_core::fileset::SetError) -> Self {
+        use human2nav_core::fileset::SetError;
+        match e {
+            SetError::Io { path, source } => Self::Io { path, source },
+            SetError::Manifest { path, message } => Self::Toml { path, message },
+            SetError::Incomplete { path, reason } => Self::Checkpoint { path, reason },
+        }
+    }
+}
+
 impl CfmError {
     pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Self::Io {

@@ -12,7 +12,8 @@ use crate::error::CfmError;
 use crate::model::{
     CfmModel, normalise_condition, read_safetensors, trajectory_features, write_safetensors,
 };
-use human2nav_core::input::{MAX_CONFIG_BYTES, fnv1a64, read_user_file};
+use human2nav_core::fileset::{self, SetError};
+use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use human2nav_core::se2::{Pose2, Twist2};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -623,24 +624,9 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
     /// `ckpt` by two renames (the previous set is kept as `<ckpt>.old` between them). A crash at
     /// any point leaves a complete set behind: the new one, the old one or `<ckpt>.old`.
     pub fn save_checkpoint(&self, ckpt: &Path) -> Result<(), CfmError> {
-        let partial = sibling(ckpt, "partial");
-        let old = sibling(ckpt, "old");
-        if partial.exists() {
-            std::fs::remove_dir_all(&partial).map_err(|e| CfmError::io(&partial, e))?;
-        }
-        self.save_state(&partial)?;
-        write_manifest(&partial, self.step)?;
-        if ckpt.exists() {
-            if old.exists() {
-                std::fs::remove_dir_all(&old).map_err(|e| CfmError::io(&old, e))?;
-            }
-            std::fs::rename(ckpt, &old).map_err(|e| CfmError::io(ckpt, e))?;
-        }
-        std::fs::rename(&partial, ckpt).map_err(|e| CfmError::io(ckpt, e))?;
-        if old.exists() {
-            std::fs::remove_dir_all(&old).map_err(|e| CfmError::io(&old, e))?;
-        }
-        Ok(())
+        fileset::commit(ckpt, &CHECKPOINT_FILES, self.step, |dir| {
+            self.save_state(dir)
+        })
     }
 
     /// Writes weights, EMA weights, AdamW moments (`state.safetensors`) and the step, options
@@ -917,79 +903,9 @@ pub fn evaluate_loss<S: TrainingSample>(
 /// Files of a checkpoint, all listed in its manifest.
 const CHECKPOINT_FILES: [&str; 2] = ["state.safetensors", "state.toml"];
 /// The manifest of a checkpoint, written after every other file.
-pub const MANIFEST_FILE: &str = "manifest.toml";
+pub use human2nav_core::fileset::MANIFEST_FILE;
 
-fn sibling(dir: &Path, suffix: &str) -> PathBuf {
-    let mut name = dir
-        .file_name()
-        .map(|n| n.to_os_string())
-        .unwrap_or_default();
-    name.push(format!(".{suffix}"));
-    dir.with_file_name(name)
-}
-
-#[derive(Debug, Serialize, Deserialize)]
-struct ManifestEntry {
-    bytes: u64,
-    fnv64: String,
-}
-
-#[derive(Debug, Serialize, Deserialize)]
-struct Manifest {
-    step: u64,
-    files: std::collections::BTreeMap<String, ManifestEntry>,
-}
-
-fn file_entry(path: &Path) -> Result<ManifestEntry, CfmError> {
-    let bytes = std::fs::read(path).map_err(|e| CfmError::io(path, e))?;
-    Ok(ManifestEntry {
-        bytes: bytes.len() as u64,
-        fnv64: format!("{:016x}", fnv1a64(&bytes)),
-    })
-}
-
-fn write_manifest(dir: &Path, step: u64) -> Result<(), CfmError> {
-    let mut files = std::collections::BTreeMap::new();
-    for name in CHECKPOINT_FILES {
-        files.insert(name.to_string(), file_entry(&dir.join(name))?);
-    }
-    let path = dir.join(MANIFEST_FILE);
-    let text = toml::to_string_pretty(&Manifest { step, files }).map_err(|e| CfmError::Toml {
-        path: path.clone(),
-        message: e.to_string(),
-    })?;
-    std::fs::write(&path, text).map_err(|e| CfmError::io(&path, e))
-}
-
-/// Why the set in `dir` is not complete (`None` when it is).
-fn incomplete(dir: &Path) -> Result<Option<String>, CfmError> {
-    let path = dir.join(MANIFEST_FILE);
-    let text = read_user_file(&path, "checkpoint manifest", MAX_CONFIG_BYTES)
-        .map_err(|e| CfmError::io(&path, e))?;
-    let manifest: Manifest = toml::from_str(&text).map_err(|e| CfmError::Toml {
-        path: path.clone(),
-        message: e.to_string(),
-    })?;
-    for name in CHECKPOINT_FILES {
-        let Some(want) = manifest.files.get(name) else {
-            return Ok(Some(format!("{MANIFEST_FILE} does not list {name}")));
-        };
-        let file = dir.join(name);
-        if !file.is_file() {
-            return Ok(Some(format!("{name} is missing")));
-        }
-        let have = file_entry(&file)?;
-        if have.bytes != want.bytes || have.fnv64 != want.fnv64 {
-            return Ok(Some(format!(
-                "{name} has {} bytes (checksum {}), the manifest says {} bytes ({})",
-                have.bytes, have.fnv64, want.bytes, want.fnv64
-            )));
-        }
-    }
-    Ok(None)
-}
-
-/// The complete checkpoint set to resume from at `ckpt`, if any.
+/// The complete checkpoint set to resume from at `ckpt`, if any ([`fileset::find_complete`]):
 ///
 /// * `ckpt` with a manifest that matches its files: that set;
 /// * otherwise `<ckpt>.old` with a matching manifest (a save was interrupted between its two
@@ -1000,51 +916,15 @@ fn incomplete(dir: &Path) -> Result<Option<String>, CfmError> {
 /// * anything else (a file missing, sizes or checksums that disagree): an error naming the
 ///   folder and what is wrong. Training never restarts from step 0 on its own.
 pub fn find_checkpoint(ckpt: &Path) -> Result<Option<PathBuf>, CfmError> {
-    let complaint = |reason: String| CfmError::Checkpoint {
-        path: ckpt.to_path_buf(),
-        reason: format!("{reason}; the set is incomplete (restore it, or start over with --fresh)"),
-    };
-    let has_manifest = ckpt.join(MANIFEST_FILE).is_file();
-    let ckpt_problem = if has_manifest {
-        match incomplete(ckpt)? {
-            None => return Ok(Some(ckpt.to_path_buf())),
-            Some(why) => Some(why),
-        }
-    } else {
-        None
-    };
-    let old = sibling(ckpt, "old");
-    if old.join(MANIFEST_FILE).is_file() && incomplete(&old)?.is_none() {
-        return Ok(Some(old));
-    }
-    if let Some(why) = ckpt_problem {
-        return Err(complaint(why));
-    }
-    let present: Vec<&str> = CHECKPOINT_FILES
-        .into_iter()
-        .filter(|n| ckpt.join(n).exists())
-        .collect();
-    match present.len() {
-        0 => {
-            let empty = std::fs::read_dir(ckpt).map_or(true, |mut d| d.next().is_none());
-            if empty {
-                Ok(None)
-            } else {
-                Err(complaint(format!(
-                    "no {} in a non-empty folder",
-                    CHECKPOINT_FILES.join(" or ")
-                )))
-            }
-        }
-        n if n == CHECKPOINT_FILES.len() => Ok(Some(ckpt.to_path_buf())),
-        _ => {
-            let missing: Vec<&str> = CHECKPOINT_FILES
-                .into_iter()
-                .filter(|n| !present.contains(n))
-                .collect();
-            Err(complaint(format!("{} is missing", missing.join(" and "))))
-        }
-    }
+    fileset::find_complete(ckpt, &CHECKPOINT_FILES).map_err(|e| match e {
+        SetError::Incomplete { path, reason } => CfmError::Checkpoint {
+            path,
+            reason: format!(
+                "{reason}; the set is incomplete (restore it, or start over with --fresh)"
+            ),
+        },
+        other => other.into(),
+    })
 }
 
 #[cfg(test)]
@@ -1189,7 +1069,10 @@ mod tests {
         tr.save_checkpoint(&ckpt).unwrap();
         tr.train_step().unwrap();
         tr.save_checkpoint(&ckpt).unwrap();
-        assert!(!sibling(&ckpt, "old").exists() && !sibling(&ckpt, "partial").exists());
+        assert!(
+            !fileset::sibling(&ckpt, "old").exists()
+                && !fileset::sibling(&ckpt, "partial").exists()
+        );
         let err = |dir: &Path| find_checkpoint(dir).unwrap_err().to_string();
 
         // A truncated tensor file.
@@ -1215,8 +1098,8 @@ mod tests {
         assert_eq!(find_checkpoint(&ckpt).unwrap(), Some(ckpt.clone()));
 
         // Interrupted between the two renames: only `<ckpt>.old` is complete.
-        write_manifest(&ckpt, tr.step()).unwrap();
-        let old = sibling(&ckpt, "old");
+        fileset::write_manifest(&ckpt, &CHECKPOINT_FILES, tr.step()).unwrap();
+        let old = fileset::sibling(&ckpt, "old");
         std::fs::rename(&ckpt, &old).unwrap();
         std::fs::create_dir_all(&ckpt).unwrap();
         std::fs::write(ckpt.join("state.toml"), "half").unwrap();

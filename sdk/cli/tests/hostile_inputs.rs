@@ -953,11 +953,11 @@ fn data_cases() -> Vec<Case> {
             &["start"],
             episode_edit(|e| e["start"]["x"] = 1e300.into()),
         ),
-        accepted(
+        err(
             a,
             "episode with an unknown field",
-            NR,
-            "accepted: unknown fields are ignored (not changed here)",
+            "accepted: unknown fields were ignored",
+            &["episodes.json", "budgett"],
             episode_edit(|e| e["budgett"] = 1.0.into()),
         ),
         err(
@@ -1242,11 +1242,11 @@ fn model_cases() -> Vec<Case> {
             &["[bev]", "resolution"],
             card_edit("resolution = 0.3", "resolution = -0.3"),
         ),
-        accepted(
+        err(
             a,
             "card `bev_cells = 16` (and `[bev] cells = 16`) over weights trained at 32",
-            "accepted",
-            "accepted: every tensor shape still fits, and the checksum covers the weights, not the card (not changed here)",
+            "accepted: every tensor shape still fits, and the checksum covers the weights, not the card",
+            &["model.safetensors", "bev_cells = 32", "the model card says 16"],
             |d| {
                 model_with(
                     d,
@@ -1341,7 +1341,7 @@ fn model_cases() -> Vec<Case> {
             NR,
             &["model.safetensors"],
             |d| {
-                let card = edit(CARD, "weights_fnv64 = \"4cd3496e761eacef\"\n", "");
+                let card = edit(CARD, "weights_fnv64 = \"f89533487dbd0735\"\n", "");
                 model_with(d, &card, Some(b"not safetensors at all"))
             },
         ),

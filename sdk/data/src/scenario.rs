@@ -205,6 +205,7 @@ pub fn classify(
 
 /// A non-reactive agent replayed during an episode.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct AgentTrack {
     /// The agent's identity in its scene.
     pub id: u64,
@@ -218,6 +219,7 @@ pub struct AgentTrack {
 
 /// One benchmark episode: a robot start, a goal, a time budget and a replayed crowd.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Episode {
     /// Unique id within its suite (scene, ego and start time for mined episodes).
     pub id: String,
@@ -353,6 +355,7 @@ pub const EPISODES_VERSION: u32 = 1;
 
 /// An episode suite as stored on disk (`episodes.json`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct EpisodeSuite {
     /// File format version ([`EPISODES_VERSION`]).
     pub version: u32,

@@ -217,17 +217,55 @@ impl ModelCard {
         format!("{:016x}", fnv1a64(bytes))
     }
 
-    /// Checks the weights file's bytes against the card's checksum, when it has one.
+    /// Checks the weights file's bytes against the card: its checksum, when the card has one,
+    /// and the training settings the file records in its safetensors metadata
+    /// ([`Self::trained_on`]), when it records them. A file written before weights carried
+    /// that metadata passes the second check unverified.
     pub fn verify_weights(&self, path: &Path, bytes: &[u8]) -> Result<(), CfmError> {
-        match &self.weights_fnv64 {
-            Some(want) if *want != Self::checksum(bytes) => Err(CfmError::WeightsChecksum {
-                path: path.to_path_buf(),
-                found: Self::checksum(bytes),
-                expected: want.clone(),
-                bytes: bytes.len(),
-            }),
-            _ => Ok(()),
+        if let Some(want) = &self.weights_fnv64 {
+            if *want != Self::checksum(bytes) {
+                return Err(CfmError::WeightsChecksum {
+                    path: path.to_path_buf(),
+                    found: Self::checksum(bytes),
+                    expected: want.clone(),
+                    bytes: bytes.len(),
+                });
+            }
         }
+        // A file whose header does not parse is reported by the weight loader, with the file
+        // named; here only well-formed metadata is compared.
+        let Ok((_, header)) = safetensors::SafeTensors::read_metadata(bytes) else {
+            return Ok(());
+        };
+        let Some(recorded) = header.metadata() else {
+            return Ok(());
+        };
+        for (key, card) in self.trained_on() {
+            if let Some(weights) = recorded.get(key) {
+                if *weights != card {
+                    return Err(CfmError::WeightsTrainedOn {
+                        path: path.to_path_buf(),
+                        key: key.to_string(),
+                        weights: weights.clone(),
+                        card,
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The settings the weights depend on without their tensor shapes showing it, as the
+    /// exporter records them in the weights file's safetensors metadata: the horizon, the BEV
+    /// raster's cells per side and its resolution (the raster encoder is convolutional, so a
+    /// card naming another raster would load and silently see a different world).
+    pub fn trained_on(&self) -> Vec<(&'static str, String)> {
+        let bev = self.bev.unwrap_or_default();
+        vec![
+            ("horizon", self.net.horizon.to_string()),
+            ("bev_cells", self.net.bev_cells.to_string()),
+            ("bev_resolution", bev.resolution.to_string()),
+        ]
     }
 
     /// Writes the card as TOML.

@@ -125,6 +125,23 @@ pub enum CfmError {
         bytes: usize,
     },
 
+    /// The weights file records a training setting (its safetensors metadata) that the model
+    /// card contradicts.
+    #[error(
+        "{path}: the weights were trained with {key} = {weights}, the model card says {card}: \
+         the card does not describe these weights"
+    )]
+    WeightsTrainedOn {
+        /// The weights file.
+        path: PathBuf,
+        /// The setting (`horizon`, `bev_cells`, `bev_resolution`).
+        key: String,
+        /// Its value in the weights file's metadata.
+        weights: String,
+        /// Its value in the card.
+        card: String,
+    },
+
     /// A training checkpoint is not a complete set.
     #[error("checkpoint {path}: {reason}")]
     Checkpoint {

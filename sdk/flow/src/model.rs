@@ -151,11 +151,9 @@ impl CfmModel {
             .map(Path::to_path_buf)
             .unwrap_or_default();
         let weights = dir.join(&card.weights);
-        if card.weights_fnv64.is_some() {
-            let bytes = read_user_bytes(&weights, "weights file", MAX_WEIGHTS_BYTES)
-                .map_err(|e| CfmError::io(&weights, e))?;
-            card.verify_weights(&weights, &bytes)?;
-        }
+        let bytes = read_user_bytes(&weights, "weights file", MAX_WEIGHTS_BYTES)
+            .map_err(|e| CfmError::io(&weights, e))?;
+        card.verify_weights(&weights, &bytes)?;
         let model = Self::from_card(card, device);
         model.load_weights(&weights, "")?;
         Ok(model)
@@ -218,6 +216,7 @@ impl CfmModel {
         std::fs::create_dir_all(dir).map_err(|e| CfmError::io(dir, e))?;
         let weights = dir.join(&self.card.weights);
         write_safetensors(&weights, &self.named_tensors(""))?;
+        record_metadata(&weights, &self.card.trained_on())?;
         let bytes = std::fs::read(&weights).map_err(|e| CfmError::io(&weights, e))?;
         let checksum = ModelCard::checksum(&bytes);
         let mut card = self.card.clone();
@@ -539,6 +538,24 @@ pub(crate) fn write_safetensors(path: &Path, tensors: &[(String, Tensor)]) -> Re
     std::fs::rename(&tmp, path).map_err(|e| CfmError::io(path, e))
 }
 
+/// Rewrites the safetensors file at `path` with `settings` as its header metadata (the tensors
+/// unchanged; atomically: temporary file, then rename). See [`ModelCard::trained_on`].
+fn record_metadata(path: &Path, settings: &[(&'static str, String)]) -> Result<(), CfmError> {
+    let corrupt = |e: safetensors::SafeTensorError| CfmError::Corrupt {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    };
+    let bytes = std::fs::read(path).map_err(|e| CfmError::io(path, e))?;
+    let file = safetensors::SafeTensors::deserialize(&bytes).map_err(corrupt)?;
+    let metadata = settings
+        .iter()
+        .map(|(k, v)| ((*k).to_string(), v.clone()))
+        .collect();
+    let tmp = path.with_extension("safetensors.tmp");
+    safetensors::serialize_to_file(file.tensors(), Some(metadata), &tmp).map_err(corrupt)?;
+    std::fs::rename(&tmp, path).map_err(|e| CfmError::io(path, e))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -738,6 +755,30 @@ mod tests {
         model.velocity(&x, 0.2, &cond, &mut a).unwrap();
         loaded.velocity(&x, 0.2, &cond, &mut b).unwrap();
         assert_eq!(a, b);
+
+        // The weights file records the raster it was trained on; a card naming another one is
+        // refused by both backends, even with its two raster fields in agreement (the
+        // convolutional encoder's shapes do not show the raster) and the right checksum.
+        let (_, header) = safetensors::SafeTensors::read_metadata(&weights).unwrap();
+        let recorded = header.metadata().clone().unwrap();
+        assert_eq!(recorded.get("bev_cells"), Some(&cfg.bev_cells.to_string()));
+        assert_eq!(recorded.get("horizon"), Some(&cfg.horizon.to_string()));
+        let mut other = expected.clone();
+        other.net.bev_cells = 16;
+        if let Some(bev) = other.bev.as_mut() {
+            bev.cells = 16;
+        }
+        other.save(&dir.join(CARD_FILE)).unwrap();
+        for load in [
+            |d: &Path| CfmModel::load(d, Device::Cpu).map(|_| ()),
+            |d: &Path| crate::NativeCfm::load(d).map(|_| ()),
+        ] {
+            let err = load(&dir).unwrap_err();
+            assert!(matches!(err, CfmError::WeightsTrainedOn { .. }), "{err}");
+            let msg = err.to_string();
+            assert!(msg.contains("bev_cells = 8") && msg.contains("says 16"), "{msg}");
+        }
+        expected.save(&dir.join(CARD_FILE)).unwrap();
 
         // A card whose architecture differs from the weights: shape mismatch.
         let mut card = ModelCard::load(&dir.join(CARD_FILE)).unwrap();

@@ -163,6 +163,7 @@ fn robot_edit(from: &'static str, to: &'static str) -> impl Fn(&Path) -> Result<
     }
 }
 
+/// The cases of robot profiles: a table, one entry per case, hence longer than a function should be.
 fn robot_cases() -> Vec<Case> {
     let a = "robot profiles";
     vec![
@@ -484,6 +485,7 @@ fn sarl_edit(from: &'static str, to: &'static str) -> impl Fn(&Path) -> Result<(
     }
 }
 
+/// The cases of configs: a table, one entry per case, hence longer than a function should be.
 fn config_cases() -> Vec<Case> {
     let a = "configs";
     vec![
@@ -901,6 +903,7 @@ fn vsp(dir: &Path, text: &str) -> Result<(), String> {
     ))
 }
 
+/// The cases of data and episodes: a table, one entry per case, hence longer than a function should be.
 fn data_cases() -> Vec<Case> {
     let a = "data and episodes";
     vec![
@@ -1211,6 +1214,7 @@ fn shipped_weights() -> Vec<u8> {
     std::fs::read(root().join("models/human2nav-cfm/model.safetensors")).expect("shipped weights")
 }
 
+/// The cases of the model folder: a table, one entry per case, hence longer than a function should be.
 fn model_cases() -> Vec<Case> {
     let a = "model folder";
     vec![
@@ -1246,7 +1250,11 @@ fn model_cases() -> Vec<Case> {
             a,
             "card `bev_cells = 16` (and `[bev] cells = 16`) over weights trained at 32",
             "accepted: every tensor shape still fits, and the checksum covers the weights, not the card",
-            &["model.safetensors", "bev_cells = 32", "the model card says 16"],
+            &[
+                "model.safetensors",
+                "bev_cells = 32",
+                "the model card says 16",
+            ],
             |d| {
                 model_with(
                     d,
@@ -1382,6 +1390,7 @@ fn orca_with(config: &'static str) -> impl Fn(&Path) -> Result<(), String> {
     move |_| fail(PluginHost::new().planner(&plugin_lib("human2nav_orca"), "orca", config, None))
 }
 
+/// The cases of plugins: a table, one entry per case, hence longer than a function should be.
 fn plugin_cases() -> Vec<Case> {
     let a = "plugins";
     vec![
@@ -1638,6 +1647,7 @@ fn cli(args: &[&str]) -> Result<(), String> {
     }
 }
 
+/// The cases of kill -9 and resume: a table, one entry per case, hence longer than a function should be.
 fn resume_cases() -> Vec<Case> {
     let a = "kill -9 and resume";
     let c = "concurrent runs";

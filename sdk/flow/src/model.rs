@@ -776,7 +776,10 @@ mod tests {
             let err = load(&dir).unwrap_err();
             assert!(matches!(err, CfmError::WeightsTrainedOn { .. }), "{err}");
             let msg = err.to_string();
-            assert!(msg.contains("bev_cells = 8") && msg.contains("says 16"), "{msg}");
+            assert!(
+                msg.contains("bev_cells = 8") && msg.contains("says 16"),
+                "{msg}"
+            );
         }
         expected.save(&dir.join(CARD_FILE)).unwrap();
 

@@ -60,6 +60,9 @@ bounded!(
     plugin_observation;
     model: model_card,
     planner_config,
+    train_toml,
+    scaling_toml,
+    sarl_toml,
 );
 
 /// The observation target reaches both plugins (not only the host's input checks): over the

@@ -6,7 +6,6 @@
 
 use anyhow::Context;
 use clap::Args;
-use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use human2nav_core::lock::DirLock;
 use human2nav_experiments::train::{TrainConfig, device_of, open_cache, run_evaluation, train};
 use human2nav_flow::CfmModel;
@@ -62,10 +61,7 @@ fn resolve(root: &Path, p: &Path) -> PathBuf {
 
 /// Runs `human2nav train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
-    let text = read_user_file(&args.config, "configuration", MAX_CONFIG_BYTES)
-        .with_context(|| format!("reading {}", args.config.display()))?;
-    let mut cfg: TrainConfig =
-        toml::from_str(&text).with_context(|| format!("parsing {}", args.config.display()))?;
+    let mut cfg = TrainConfig::load(&args.config)?;
     if let Some(t) = args.threads {
         cfg.run.threads = t;
     }

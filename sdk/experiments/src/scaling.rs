@@ -108,7 +108,7 @@ pub struct ScalingOutcome {
 /// The whole `scaling.toml`.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
-struct ScalingConfig {
+pub struct ScalingConfig {
     /// Training configuration (network, optimiser, tuple cache). Default
     /// `sdk/configs/train.toml`.
     train: PathBuf,
@@ -165,6 +165,17 @@ fn fraction_name(f: f64) -> String {
 }
 
 impl ScalingConfig {
+    /// Reads, parses and checks a `scaling.toml`; the error names the file and the field.
+    pub fn load(path: &Path) -> anyhow::Result<Self> {
+        let text = read_user_file(path, "configuration", MAX_CONFIG_BYTES)
+            .with_context(|| format!("reading {}", path.display()))?;
+        let cfg: Self =
+            toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+        cfg.validate()
+            .with_context(|| format!("in {}", path.display()))?;
+        Ok(cfg)
+    }
+
     /// Checks every field; the error names the first offending one.
     fn validate(&self) -> anyhow::Result<()> {
         if self.fractions.is_empty() {
@@ -392,12 +403,7 @@ pub fn run(request: &ScalingRequest, multi: &MultiProgress) -> anyhow::Result<Sc
 
 /// Reads, parses and checks the scaling configuration and the request's options.
 fn load_config(request: &ScalingRequest) -> anyhow::Result<ScalingConfig> {
-    let text = read_user_file(&request.config, "configuration", MAX_CONFIG_BYTES)
-        .with_context(|| format!("reading {}", request.config.display()))?;
-    let cfg: ScalingConfig =
-        toml::from_str(&text).with_context(|| format!("parsing {}", request.config.display()))?;
-    cfg.validate()
-        .with_context(|| format!("in {}", request.config.display()))?;
+    let cfg = ScalingConfig::load(&request.config)?;
     if request.threads == Some(0) {
         bail!("--threads must be at least 1");
     }

@@ -4,6 +4,7 @@
 //! on the held-out test scenes. Progress is drawn with indicatif and reported on stderr.
 
 use anyhow::{Context, bail};
+use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use human2nav_data::cache::TupleCache;
 use human2nav_data::tuples::{CompactTuple, Split};
 use human2nav_flow::card::{ComplexityInfo, EvaluationInfo, TrainingInfo};
@@ -125,6 +126,14 @@ pub struct TrainConfig {
 }
 
 impl TrainConfig {
+    /// Reads and parses a `train.toml` (not validated: callers apply their overrides, then
+    /// call [`Self::validate`]).
+    pub fn load(path: &Path) -> anyhow::Result<Self> {
+        let text = read_user_file(path, "configuration", MAX_CONFIG_BYTES)
+            .with_context(|| format!("reading {}", path.display()))?;
+        toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))
+    }
+
     /// Checks every section; the error names the offending field.
     pub fn validate(&self) -> anyhow::Result<()> {
         self.net.validate()?;

@@ -245,9 +245,7 @@ impl ModelCard {
                 if *weights != card {
                     return Err(CfmError::WeightsTrainedOn {
                         path: path.to_path_buf(),
-                        key: key.to_string(),
-                        weights: weights.clone(),
-                        card,
+                        setting: format!("{key} = {weights}, the model card says {card}"),
                     });
                 }
             }

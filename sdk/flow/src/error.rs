@@ -128,18 +128,13 @@ pub enum CfmError {
     /// The weights file records a training setting (its safetensors metadata) that the model
     /// card contradicts.
     #[error(
-        "{path}: the weights were trained with {key} = {weights}, the model card says {card}: \
-         the card does not describe these weights"
+        "{path}: the weights were trained with {setting}: the card does not describe these weights"
     )]
     WeightsTrainedOn {
         /// The weights file.
         path: PathBuf,
-        /// The setting (`horizon`, `bev_cells`, `bev_resolution`).
-        key: String,
-        /// Its value in the weights file's metadata.
-        weights: String,
-        /// Its value in the card.
-        card: String,
+        /// The setting with both values: `bev_cells = 32, the model card says 16`.
+        setting: String,
     },
 
     /// A training checkpoint is not a complete set.

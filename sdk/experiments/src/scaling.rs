@@ -356,8 +356,6 @@ struct Setup {
 /// The training side of a [`Setup`].
 struct TrainSettings {
     path: PathBuf,
-    /// The train config's text, parsed afresh for every fraction.
-    text: String,
     cfg: TrainConfig,
     device: tch::Device,
     cache_dir: PathBuf,
@@ -443,10 +441,7 @@ fn train_settings(
     root: &Path,
 ) -> anyhow::Result<TrainSettings> {
     let path = resolve(root, &cfg.train);
-    let text = read_user_file(&path, "training configuration", MAX_CONFIG_BYTES)
-        .with_context(|| format!("reading {}", path.display()))?;
-    let mut tcfg: TrainConfig =
-        toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+    let mut tcfg = TrainConfig::load(&path)?;
     tcfg.train.steps = if request.quick {
         cfg.quick_steps
     } else {
@@ -468,7 +463,6 @@ fn train_settings(
     let cache = train::open_cache(&cache_dir, &tcfg, &path)?;
     Ok(TrainSettings {
         path,
-        text,
         cfg: tcfg,
         device,
         cache_dir,
@@ -664,7 +658,7 @@ impl Setup {
             }
             let _ = std::fs::remove_file(&stamp_path);
             let _ = std::fs::remove_file(self.out.join(&name).join(CLOSED_LOOP_FILE));
-            let fcfg = self.fraction_train_config(fraction, &name)?;
+            let fcfg = self.fraction_train_config(fraction, &name);
             say(
                 multi,
                 format!(
@@ -705,19 +699,13 @@ impl Setup {
         })
     }
 
-    /// A fresh parse of the train config (every other setting kept) with the overrides of the
-    /// fraction `name`.
-    fn fraction_train_config(&self, fraction: f64, name: &str) -> anyhow::Result<TrainConfig> {
-        let tr = &self.train;
-        let mut fcfg: TrainConfig =
-            toml::from_str(&tr.text).with_context(|| format!("parsing {}", tr.path.display()))?;
-        fcfg.net = tr.cfg.net.clone();
-        fcfg.train = tr.cfg.train.clone();
+    /// The train config (with the scaling overrides of [`train_settings`]) for the fraction
+    /// `name`: its share of the training scenes and its own run name.
+    fn fraction_train_config(&self, fraction: f64, name: &str) -> TrainConfig {
+        let mut fcfg = self.train.cfg.clone();
         fcfg.data.train_fraction = fraction;
-        fcfg.run.threads = tr.cfg.run.threads;
-        fcfg.run.max_minutes = 0.0;
-        fcfg.run.name = format!("{}-{name}", tr.cfg.run.name);
-        Ok(fcfg)
+        fcfg.run.name = format!("{}-{name}", self.train.cfg.run.name);
+        fcfg
     }
 
     /// Writes the fraction's planner config, runs its closed loop (unless the stored rows

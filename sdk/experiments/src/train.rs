@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 /// Where the data comes from.
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct DataSection {
     /// Tuple cache directory (from `human2nav data build`); relative paths start at the
@@ -40,7 +40,7 @@ impl Default for DataSection {
 }
 
 /// Run bookkeeping.
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RunSection {
     /// Model name in the card.
@@ -77,7 +77,7 @@ impl Default for RunSection {
 }
 
 /// Held-out evaluation.
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct EvalSection {
     /// Sampled futures per window `K`. Default 20.
@@ -110,7 +110,7 @@ impl Default for EvalSection {
 }
 
 /// The whole `train.toml`; every section defaults to the values documented on its fields.
-#[derive(Debug, Default, Deserialize)]
+#[derive(Clone, Debug, Default, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TrainConfig {
     /// Where the data comes from.

@@ -540,12 +540,7 @@ impl<M: FlowModel> Human2Nav<M> {
         notes: &mut Vec<String>,
     ) -> Result<Option<GuidanceResult>, String> {
         let guidance = self.settings.guidance;
-        let ctx = ConstraintContext {
-            dt: self.settings.dt,
-            limits: &self.robot.limits,
-            initial_velocity: obs.ego_velocity,
-            agents,
-        };
+        let ctx = phi_context(self.settings.dt, &self.robot.limits, obs, agents);
         let plain = GuidanceSettings {
             enabled: false,
             ..guidance
@@ -595,12 +590,7 @@ impl<M: FlowModel> Human2Nav<M> {
         notes: &mut Vec<String>,
     ) -> Result<GuidanceResult, String> {
         let guidance = self.settings.guidance;
-        let ctx = ConstraintContext {
-            dt: self.settings.dt,
-            limits: &self.robot.limits,
-            initial_velocity: obs.ego_velocity,
-            agents,
-        };
+        let ctx = phi_context(self.settings.dt, &self.robot.limits, obs, agents);
         let result = guidance::guide_subset_until(
             &self.model,
             cond,
@@ -1096,6 +1086,21 @@ impl<M: FlowModel + Send> Planner for Human2Nav<M> {
     }
 }
 
+/// Φ's context at a planning instant: the plan step, the robot's limits, its velocity and the
+/// nearby pedestrians (a free function so that it borrows the limits, not the whole planner).
+fn phi_context<'a>(
+    dt: f64,
+    limits: &'a Limits,
+    obs: &Observation,
+    agents: &'a [AgentState],
+) -> ConstraintContext<'a> {
+    ConstraintContext {
+        dt,
+        limits,
+        initial_velocity: obs.ego_velocity,
+        agents,
+    }
+}
 #[cfg(test)]
 mod tests {
     use super::*;

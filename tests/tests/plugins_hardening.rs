@@ -58,6 +58,7 @@ fn limits() -> Limits {
         omega_max: 1.5,
         kappa_max: None,
         lateral_speed_max: 0.05,
+        coupled: None,
     }
 }
 
@@ -172,6 +173,25 @@ fn a_null_required_slot_is_an_error_naming_file_table_and_slot() {
             .contains("the embodiment vtable of `null_step` has a null `step`"),
         "{err}"
     );
+    // A coupled limit with a negative bound is refused, naming the slot and the field.
+    let err = host
+        .embodiment(&library, "bad_coupled", "", &robot)
+        .expect_err("negative coupled bound");
+    assert!(
+        err.to_string()
+            .contains("embodiment `bad_coupled`: coupled_limit: max = -1 must be finite and > 0"),
+        "{err}"
+    );
+    // A table of the first version ends before `coupled_limit`: the host reads no further
+    // (the bad slot that follows it in memory is never called) and the robot has no coupled
+    // limit.
+    let e = host
+        .embodiment(&library, "first_version", "", &robot)
+        .expect("a first-version embodiment table is accepted");
+    assert_eq!(
+        human2nav_core::embodiment::Embodiment::coupled_limit(&e),
+        None
+    );
 }
 
 #[test]
@@ -267,6 +287,7 @@ fn inspect_reports_what_it_checked() {
             "constraint `short_vtable` instance",
             "embodiment `null_step` instance",
             "constraint `huge_name` instance",
+            "embodiment `bad_coupled` instance",
         ],
         "{text}"
     );

@@ -163,7 +163,7 @@ fn a_profile_naming_a_missing_plugin_fails_with_the_library_path() {
 
 #[test]
 fn the_add_robot_example_profile_loads() {
-    let p = RobotProfile::load(&workspace_root().join("examples/add_robot/cart/robot.toml"))
+    let mut p = RobotProfile::load(&workspace_root().join("examples/add_robot/cart/robot.toml"))
         .expect("examples/add_robot/cart/robot.toml loads");
     assert_eq!(p.name, "cart");
     // The README's claim: the URDF wheels cap v_max at 15 rad/s × 0.08 m.
@@ -174,7 +174,87 @@ fn the_add_robot_example_profile_loads() {
         max_relative = 1e-9
     );
     let e = PluginHost::new()
-        .robot_embodiment(&p)
+        .robot_embodiment(&mut p)
         .expect("built-in embodiment");
     assert_eq!(e.name(), "differential_drive");
+    assert_eq!(p.limits.coupled, None);
+}
+
+/// The example: at v = 1.2 m/s, ω = 1.2 rad/s each of the tracked base's box limits
+/// holds, but the outer track needs 1.2 + 0.345·1.2 = 1.61 m/s of its 1.4. The embodiment
+/// declares the track limit, loading the robot adds it to the profile, and TFS, Φ and the
+/// planner's last-step correction all see it.
+#[test]
+fn the_track_speed_limit_reaches_tfs_phi_and_the_correction() {
+    use human2nav_core::projection::{ProjectionSettings, project};
+    use human2nav_core::tfs::tfs_plan;
+    let host = PluginHost::new();
+    let mut p = profile();
+    assert_eq!(
+        p.limits.coupled, None,
+        "RobotProfile::load alone knows no plugin"
+    );
+    let boxed = p.limits;
+    host.robot_embodiment(&mut p).expect("skid_steer loads");
+    let c = p
+        .limits
+        .coupled
+        .expect("the embodiment declares its track limit");
+    assert_relative_eq!(c.omega, 0.5 * 1.5 * 0.46, max_relative = 1e-12);
+    assert_eq!((c.v, c.lateral, c.max), (1.0, 0.0, 1.4));
+
+    let twist = Twist2::new(1.2, 0.0, 1.2);
+    let mut arc = vec![Pose2::IDENTITY];
+    for _ in 0..32 {
+        let last = arc[arc.len() - 1];
+        arc.push(last.euler_step(twist, 0.1));
+    }
+    assert_eq!(
+        tfs_plan(&arc, 0.1, &boxed, twist),
+        1.0,
+        "the box limits pass it"
+    );
+    assert_eq!(
+        tfs_plan(&arc, 0.1, &p.limits, twist),
+        0.0,
+        "the tracks do not"
+    );
+
+    let phi_of = |limits: &human2nav_core::Limits| {
+        let phi = human2nav_core::constraint::Phi::from_weights(&p.guidance, limits);
+        let data: Vec<f64> = arc.iter().flat_map(|q| q.to_array()).collect();
+        let ctx = ConstraintContext {
+            dt: 0.1,
+            limits,
+            initial_velocity: twist,
+            agents: &[],
+        };
+        let mut cost = [0.0];
+        let mut grad = vec![0.0; data.len()];
+        phi.evaluate(
+            TrajBatch::new(&data, 1, arc.len()).unwrap(),
+            &ctx,
+            &mut cost,
+            &mut grad,
+            &mut PhiScratch::default(),
+        )
+        .unwrap();
+        cost[0]
+    };
+    assert!(
+        phi_of(&p.limits) > phi_of(&boxed) + 0.1,
+        "Φ penalises the outer track"
+    );
+
+    let out = project(
+        &arc[1..],
+        0.1,
+        &p.limits,
+        twist,
+        &ProjectionSettings::default(),
+    )
+    .expect("a plan within the track limit exists");
+    let mut corrected = vec![Pose2::IDENTITY];
+    corrected.extend(out.poses);
+    assert_eq!(tfs_plan(&corrected, 0.1, &p.limits, twist), 1.0);
 }

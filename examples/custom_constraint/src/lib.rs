@@ -213,6 +213,7 @@ mod tests {
             omega_max: 2.0,
             kappa_max: None,
             lateral_speed_max: 0.05,
+            coupled: None,
         };
         let agents = [
             AgentState {

@@ -260,6 +260,7 @@ pub fn run_observation(input: &[u8]) -> Reached {
         omega_max: 1.5,
         kappa_max: if d.u8() % 2 == 0 { None } else { Some(d.f64()) },
         lateral_speed_max: 0.05,
+        coupled: None,
     };
     let ctx = ConstraintContext {
         dt: d.f64(),

@@ -233,6 +233,7 @@ mod tests {
             omega_max: 1.5,
             kappa_max: None,
             lateral_speed_max: 0.05,
+            coupled: None,
         }
     }
 

@@ -162,6 +162,7 @@ fn robot() -> RobotContext {
             omega_max: 2.0,
             kappa_max: None,
             lateral_speed_max: 0.05,
+            coupled: None,
         },
         gains: ControllerGains::default(),
         footprint_radius: 0.35,

@@ -21,6 +21,9 @@
 //!   `ω` (the yaw acceleration one track alone gives at `a_max`); the track-speed box is applied
 //!   once more.
 //! * `step`: exact integration on SE(2), `X ← X·exp(dt·[v, 0, ω])`.
+//! * `coupled_limit`: the track box as `|v| + (χ·B/2)·|ω| ≤ track_speed_max`, which the host
+//!   adds to the robot's limits: TFS counts a plan that asks one track for more, Φ penalises
+//!   it and the planner's last-step correction keeps plans inside it.
 //! * `track`: a Kanayama-style PD tracker, with the same reference convention as the SDK's
 //!   built-in embodiments: the plan's pose `P(t)` (geodesic interpolation) and the feed-forward
 //!   twist `ξ = log(P(t)⁻¹·P(t + h)) / h` over the look-ahead `h`. With `e = pose⁻¹·P(t)` and
@@ -37,7 +40,7 @@
 //! ```
 
 use human2nav_core::embodiment::{Embodiment, RobotState, bound_feedback, plan_pose_at};
-use human2nav_core::{ControllerGains, Limits, Plan, Pose2, Twist2};
+use human2nav_core::{ControllerGains, CoupledLimit, Limits, Plan, Pose2, Twist2};
 use human2nav_plugin::{InitError, PluginInit};
 use serde::Deserialize;
 
@@ -93,11 +96,27 @@ impl SkidSteer {
         gains: ControllerGains,
     ) -> Result<Self, InitError> {
         config.validate()?;
-        Ok(Self {
+        let mut base = Self {
             config,
             limits,
             gains,
-        })
+        };
+        // The tracking controller's feedback respects the track limit too (`bound_feedback`).
+        base.limits.coupled = Some(base.track_limit());
+        Ok(base)
+    }
+
+    /// The track-speed box as a coupled twist limit: the faster track's speed
+    /// `|v| + (χ·B/2)·|ω|` at most `track_speed_max`. Declared to the host through
+    /// [`Embodiment::coupled_limit`], so that TFS, Φ and the planner's correction see what
+    /// `saturate` enforces.
+    pub fn track_limit(&self) -> CoupledLimit {
+        CoupledLimit {
+            v: 1.0,
+            lateral: 0.0,
+            omega: self.half_track(),
+            max: self.config.track_speed_max,
+        }
     }
 
     /// The plugin factory: needs the robot context (limits and gains) and a TOML config.
@@ -212,6 +231,10 @@ impl Embodiment for SkidSteer {
             g.lookahead,
         )
     }
+
+    fn coupled_limit(&self) -> Option<CoupledLimit> {
+        Some(self.track_limit())
+    }
 }
 
 human2nav_plugin::export_plugin! {
@@ -239,6 +262,7 @@ mod tests {
             omega_max: 1.5,
             kappa_max: None,
             lateral_speed_max: 0.05,
+            coupled: None,
         };
         let gains = ControllerGains {
             k_x: 1.5,

@@ -424,12 +424,12 @@ fn finite(name: &str, values: &[f64]) -> Result<(), Failure> {
 
 /// Builds the planner from a loaded profile, a configuration and a model folder.
 fn build(
-    profile: RobotProfile,
+    mut profile: RobotProfile,
     config: PlannerConfig,
     model_dir: &str,
 ) -> Result<Box<h2n_planner>, Failure> {
     let embodiment = PluginHost::new()
-        .robot_embodiment(&profile)
+        .robot_embodiment(&mut profile)
         .map_err(|e| Failure::new(h2n_status::Plugin, e.to_string()))?;
     if config.backend == Backend::Torch {
         human2nav_flow::tch::set_num_threads(i32::try_from(config.threads).unwrap_or(1));

@@ -31,9 +31,10 @@ fn check(paths: &[PathBuf]) -> ExitCode {
     for (i, path) in paths.iter().enumerate() {
         let resolved = RobotProfile::load(path)
             .map_err(|e| e.to_string())
-            .and_then(|p| match host.resolve_robot(&p) {
-                Ok(r) => Ok((p, r)),
-                Err(e) => Err(e.to_string()),
+            .and_then(|mut p| {
+                let r = host.resolve_robot(&p).map_err(|e| e.to_string())?;
+                host.robot_embodiment(&mut p).map_err(|e| e.to_string())?;
+                Ok((p, r))
             });
         match resolved {
             Ok((profile, resolution)) => {
@@ -145,6 +146,13 @@ fn describe(p: &RobotProfile, resolution: &RobotResolution) -> String {
             e.name, value, e.unit, e.source
         );
     }
+    if let Some(c) = &p.limits.coupled {
+        let _ = writeln!(
+            s,
+            "  {:<18} {:.4}·|v_x| + {:.4}·|v_y| + {:.4}·|omega| <= {:.4} m/s  [declared by the embodiment]",
+            "coupled", c.v, c.lateral, c.omega, c.max
+        );
+    }
     if p.min_turning_radius > 0.0 {
         let _ = writeln!(
             s,
@@ -167,13 +175,14 @@ fn describe(p: &RobotProfile, resolution: &RobotResolution) -> String {
     let _ = writeln!(
         s,
         "guidance    lambda_v {}, lambda_a {}, lambda_omega {}, lambda_kappa {}, lambda_lateral {}, \
-         lambda_reverse {}, gamma {}, delta {}  [{}]",
+         lambda_reverse {}, lambda_coupled {}, gamma {}, delta {}  [{}]",
         g.lambda_v,
         g.lambda_a,
         g.lambda_omega,
         g.lambda_kappa,
         g.lambda_lateral,
         g.lambda_reverse,
+        g.lambda_coupled,
         g.gamma,
         g.delta,
         origin(p.guidance_source)

@@ -27,6 +27,7 @@ fn limits() -> Limits {
         omega_max: 1.0,
         kappa_max: Some(1.0),
         lateral_speed_max: 0.1,
+        coupled: None,
     }
 }
 

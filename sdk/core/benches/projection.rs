@@ -42,6 +42,7 @@ fn bench_projection(c: &mut Criterion) {
         omega_max: 2.0,
         kappa_max: None,
         lateral_speed_max: 0.05,
+        coupled: None,
     };
     let car = Limits {
         omega_max: 1.0,

@@ -104,7 +104,7 @@ impl std::fmt::Display for Arm {
 
 /// Share of `violations` that break each limit, in the order of [`Violations::NAMES`] (all
 /// zero for an empty slice).
-pub fn limit_shares(violations: &[Violations]) -> [f64; 6] {
+pub fn limit_shares(violations: &[Violations]) -> [f64; tfs::LIMIT_COUNT] {
     let n = violations.len().max(1) as f64;
     Violations::count(violations).map(|c| c as f64 / n)
 }
@@ -117,7 +117,7 @@ pub struct ArmStep {
     /// Plan TFS ([`tfs::tfs_plan`]; pose 0 is the robot with its current velocity).
     pub tfs: f64,
     /// Share of the plan's waypoints that violate each limit ([`Violations::NAMES`] order).
-    pub violations: [f64; 6],
+    pub violations: [f64; tfs::LIMIT_COUNT],
     /// Φ of the kept sample before Algorithm 1 (`None` when the plan follows no sample, e.g.
     /// braking to a stop).
     pub phi_before: Option<f64>,
@@ -218,7 +218,7 @@ pub struct ArmSummary {
     /// Share of steps whose plan is entirely feasible (TFS = 1).
     pub all_feasible: f64,
     /// Mean share of waypoints violating each limit ([`Violations::NAMES`] order).
-    pub violations: [f64; 6],
+    pub violations: [f64; tfs::LIMIT_COUNT],
     /// Mean Φ of the kept sample before Algorithm 1, over the steps that kept one.
     pub phi_before: f64,
     /// Mean Φ of the kept sample after Algorithm 1, over the steps that kept one.
@@ -249,7 +249,7 @@ impl ArmSummary {
                 sum / count as f64
             }
         };
-        let mut shares = [0.0; 6];
+        let mut shares = [0.0; tfs::LIMIT_COUNT];
         for s in &steps {
             for (acc, v) in shares.iter_mut().zip(s.violations) {
                 *acc += v / n as f64;
@@ -355,6 +355,7 @@ mod tests {
             omega_max: 2.0,
             kappa_max: None,
             lateral_speed_max: 0.05,
+            coupled: None,
         };
         let mut slow = Straight {
             speed: 1.0,
@@ -375,8 +376,9 @@ mod tests {
         assert_eq!(steps[0].tfs, 1.0);
         assert_eq!(steps[0].displacement, 0.0);
         assert_eq!(steps[1].tfs, 0.0);
-        let share =
-            |name: &str, v: [f64; 6]| v[Violations::NAMES.iter().position(|n| *n == name).unwrap()];
+        let share = |name: &str, v: [f64; tfs::LIMIT_COUNT]| {
+            v[Violations::NAMES.iter().position(|n| *n == name).unwrap()]
+        };
         assert_eq!(share("speed", steps[1].violations), 1.0);
         assert_eq!(share("lateral", steps[1].violations), 0.0);
         assert!(share("acceleration", steps[1].violations) > 0.0);

@@ -34,6 +34,14 @@ pub trait Embodiment: Send + Sync {
 
     /// The tracking controller: the (unsaturated) command that follows `plan` at time `t`.
     fn track(&self, state: &RobotState, plan: &Plan, t: f64) -> Twist2;
+
+    /// A limit coupling the twist's components that `saturate` applies and the box limits of
+    /// the profile cannot express (a tracked base's track speed, see
+    /// [`CoupledLimit`](crate::limits::CoupledLimit)). Loading the robot copies it into the
+    /// profile's limits, so that TFS, Φ and the last-step correction see it. Default: none.
+    fn coupled_limit(&self) -> Option<crate::limits::CoupledLimit> {
+        None
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -181,7 +189,10 @@ pub fn plan_feedforward(plan: &Plan, t: f64, current: Twist2, h: f64) -> Twist2 
 ///   `|v_y − current_y| ≤ sqrt((a_max·h)² − (v_x − current_x)²)` (the robot limits the change
 ///   of `(v_x, v_y)` in norm; the executed TFS checks `v_x`'s);
 /// * with a curvature limit, `|ω| ≤ max(κ_max, |κ_ff|)·sqrt(v_x² + ε_κ²)` (the curvature as
-///   [`crate::tfs`] measures it, for the clipped `v_x`).
+///   [`crate::tfs`] measures it, for the clipped `v_x`);
+/// * with a coupled limit `a·|v_x| + b·|v_y| + c·|ω| ≤ max`, the command's value at most
+///   `max(max, value of ff)`: `ω` gives way first, then `v_y` (changes of `v_x` are what the
+///   acceleration check sees).
 ///
 /// Each interval contains the feed-forward, so a plan that asks for more than a limit still
 /// gets it, and is still counted against it by the executed TFS; a feasible plan is followed
@@ -212,7 +223,26 @@ pub fn bound_feedback(cmd: Twist2, ff: Twist2, current: Twist2, limits: &Limits,
         let kappa_ff = curvature(ff.vx, ff.omega).abs();
         yaw = yaw.min(kappa_max.max(kappa_ff) * vx.hypot(KAPPA_EPS));
     }
-    Twist2::new(vx, vy, cmd.omega.clamp(-yaw, yaw))
+    let omega = cmd.omega.clamp(-yaw, yaw);
+    match &l.coupled {
+        Some(c) => {
+            let cap = c.max.max(c.value(ff.vx, ff.vy, ff.omega));
+            let omega = give_way(omega, c.omega, cap - c.value(vx, vy, 0.0));
+            let vy = give_way(vy, c.lateral, cap - c.value(vx, 0.0, omega));
+            Twist2::new(vx, vy, omega)
+        }
+        None => Twist2::new(vx, vy, omega),
+    }
+}
+
+/// `x` clipped so that `coef·|x| ≤ room` (left as is when `coef` is 0; 0 when `room < 0`).
+fn give_way(x: f64, coef: f64, room: f64) -> f64 {
+    if coef > 0.0 {
+        let r = room.max(0.0) / coef;
+        x.clamp(-r, r)
+    } else {
+        x
+    }
 }
 
 /// The plan's pose at time `t` (clamped to the plan), by geodesic interpolation (Eq. 4).

@@ -41,7 +41,7 @@ pub mod tfs;
 pub mod trajectory;
 
 pub use flow::{FlowCondition, FlowError, FlowModel};
-pub use limits::{ControllerGains, GuidanceWeights, Limits};
+pub use limits::{ControllerGains, CoupledLimit, GuidanceWeights, Limits};
 pub use planner::{
     AgentState, Deadline, Observation, Plan, PlanError, PlanInfo, Planner, Stage, StageProgress,
     Stages,

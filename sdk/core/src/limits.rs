@@ -24,6 +24,63 @@ pub struct Limits {
     /// Maximum body-frame lateral speed (m/s). For non-holonomic robots this is a small slip
     /// tolerance, for omnidirectional ones the real sideways limit.
     pub lateral_speed_max: f64,
+    /// A limit on a weighted sum of the twist's magnitudes that the box limits above cannot
+    /// express, declared by the embodiment ([`crate::embodiment::Embodiment::coupled_limit`]);
+    /// `None` for the built-in embodiments.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coupled: Option<CoupledLimit>,
+}
+
+/// A coupled twist limit `v·|v_x| + lateral·|v_y| + omega·|ω| ≤ max`: the wheel or track speed
+/// of a base whose wheels share their speed between driving and turning. A skid-steered base
+/// with track speed limit `s` and effective half track `χ·B/2` has
+/// `|v| + (χ·B/2)·|ω| ≤ s` (the faster track's speed), so at full speed it cannot also turn.
+///
+/// TFS checks it (flag `coupled`), Φ has a soft-margin term on it (`λ_coupled`) and the
+/// last-step correction keeps plans inside it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CoupledLimit {
+    /// Coefficient of `|v_x|` (dimensionless, `>= 0`).
+    pub v: f64,
+    /// Coefficient of `|v_y|` (dimensionless, `>= 0`).
+    pub lateral: f64,
+    /// Coefficient of `|ω|` (m/rad, `>= 0`).
+    pub omega: f64,
+    /// The bound (m/s, `> 0`).
+    pub max: f64,
+}
+
+impl CoupledLimit {
+    /// `v·|v_x| + lateral·|v_y| + omega·|ω|`, the quantity bounded by `max`.
+    #[inline]
+    pub fn value(&self, vx: f64, vy: f64, omega: f64) -> f64 {
+        self.v * vx.abs() + self.lateral * vy.abs() + self.omega * omega.abs()
+    }
+
+    /// Checks the coefficients (finite, `>= 0`, at least one `> 0`) and the bound (finite,
+    /// `> 0`); the error names the field.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        for (field, c) in [
+            ("v", self.v),
+            ("lateral", self.lateral),
+            ("omega", self.omega),
+        ] {
+            if !(c.is_finite() && c >= 0.0) {
+                return Err((field, format!("{c} must be finite and >= 0")));
+            }
+        }
+        if self.v == 0.0 && self.lateral == 0.0 && self.omega == 0.0 {
+            return Err((
+                "v",
+                "every coefficient is 0: the limit bounds nothing".into(),
+            ));
+        }
+        if !(self.max.is_finite() && self.max > 0.0) {
+            return Err(("max", format!("{} must be finite and > 0", self.max)));
+        }
+        Ok(())
+    }
 }
 
 /// Gains of the embodiment's PD tracking controller (see [`crate::embodiment`]).
@@ -46,7 +103,8 @@ pub struct ControllerGains {
 }
 
 /// Weights and shape of the feasibility penalty: `λ_v, λ_a, λ_ω, λ_κ` of Eq. 9, the same for the
-/// lateral-speed and reverse-speed terms, and the softplus sharpness `γ` and margin `δ` of Eq. 8.
+/// lateral-speed, reverse-speed and coupled-limit terms, and the softplus sharpness `γ` and
+/// margin `δ` of Eq. 8.
 ///
 /// Defaults: every `lambda_* = 1.0`, `gamma = 10.0`, `delta = 0.05`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -64,6 +122,9 @@ pub struct GuidanceWeights {
     pub lambda_lateral: f64,
     /// Weight of the reverse-speed term (against `v_reverse_max`).
     pub lambda_reverse: f64,
+    /// Weight of the coupled-limit term (against the embodiment's [`CoupledLimit`]; no cost
+    /// without one).
+    pub lambda_coupled: f64,
     /// Softplus sharpness `γ` (Eq. 8).
     pub gamma: f64,
     /// Tolerance margin `δ` (Eq. 8): the penalty starts rising at `(1 − δ)·limit`.
@@ -91,6 +152,7 @@ impl Default for GuidanceWeights {
             lambda_kappa: 1.0,
             lambda_lateral: 1.0,
             lambda_reverse: 1.0,
+            lambda_coupled: 1.0,
             gamma: 10.0,
             delta: 0.05,
         }

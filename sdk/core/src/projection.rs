@@ -27,6 +27,9 @@
 //! * `|vy_k| ≤ s·lateral_speed_max`, `|ω_k| ≤ s·ω_max`;
 //! * `|ω_k| ≤ s·κ_max·c_min·σ·v_k` when the robot has a curvature limit (the measured
 //!   curvature divides by `sqrt((c_k·v_k)² + ε_κ²) ≥ c_min·|v_k|`);
+//! * `a·σ·v_k ± b·vy_k ± c·ω_k ≤ s·max` (every sign) when the embodiment declares a coupled
+//!   limit `a·|v| + b·|vy| + c·|ω| ≤ max`: with the gear fixed, `|v_k| = σ·v_k`, and the
+//!   measured `c_k·|v_k|`, `c_k·|vy_k|` are no larger;
 //! * `|v_k − v_{k−1}| ≤ s_a·a_max·dt − (1 − c_min)·v_top` (`s_a = 1 − acceleration_margin`,
 //!   `v_top = max(v_max, v_reverse_max)`): the measured change `c_k·v_k − c_{k−1}·v_{k−1}`
 //!   differs from `v_k − v_{k−1}` by at most `(1 − c_min)·v_top` (2.5 % of diablo's
@@ -217,7 +220,7 @@ pub fn project(
 /// keeps one per robot; the scaling of the first problem is reused for the later ones.
 #[derive(Default)]
 pub struct ProjectionSolver {
-    cached: Option<((usize, bool), DefaultSolver<f64>)>,
+    cached: Option<(QpStructure, DefaultSolver<f64>)>,
 }
 
 impl std::fmt::Debug for ProjectionSolver {
@@ -330,7 +333,11 @@ fn solve_step(
         b,
         equalities: n,
     };
-    let key = (target.len(), limits.kappa_max.is_some());
+    let key = QpStructure {
+        horizon: target.len(),
+        curvature: limits.kappa_max.is_some(),
+        coupled_rows: coupled_signs(limits).len(),
+    };
     let infeasible = |status: String| ProjectionError::Infeasible {
         speed: initial_velocity.vx,
         status,
@@ -448,6 +455,16 @@ fn limit_rows(
             push(&[(iw, 1.0), (iv, -kv)], 0.0);
             push(&[(iw, -1.0), (iv, -kv)], 0.0);
         }
+        if let Some(c) = &limits.coupled {
+            for [sy, sw] in coupled_signs(limits) {
+                let row: Vec<(usize, f64)> =
+                    [(iv, c.v * dir), (ivy, sy * c.lateral), (iw, sw * c.omega)]
+                        .into_iter()
+                        .filter(|(_, a)| *a != 0.0)
+                        .collect();
+                push(&row, s * c.max);
+            }
+        }
         if k == 0 {
             push(&[(iv, 1.0)], da_first + initial_velocity.vx);
             push(&[(iv, -1.0)], da_first - initial_velocity.vx);
@@ -458,6 +475,33 @@ fn limit_rows(
         }
     }
     rhs
+}
+
+/// The signs `(of vy, of ω)` of the coupled limit's rows per segment: both signs of each
+/// magnitude whose coefficient is not 0 (1, 2 or 4 rows; none without a coupled limit).
+fn coupled_signs(limits: &Limits) -> Vec<[f64; 2]> {
+    let Some(c) = &limits.coupled else {
+        return Vec::new();
+    };
+    let signs = |coef: f64| {
+        if coef == 0.0 {
+            vec![1.0]
+        } else {
+            vec![1.0, -1.0]
+        }
+    };
+    signs(c.lateral)
+        .into_iter()
+        .flat_map(|sy| signs(c.omega).into_iter().map(move |sw| [sy, sw]))
+        .collect()
+}
+
+/// What fixes the sparsity of a correction's QP: a cached solver is reused only for the same.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct QpStructure {
+    horizon: usize,
+    curvature: bool,
+    coupled_rows: usize,
 }
 
 /// The speed-change bounds of [`limit_rows`] and the segments that brake first.
@@ -517,7 +561,7 @@ struct Qp {
 /// then cached. Returns the solution, all finite.
 fn solve_cached<'c>(
     cache: &'c mut ProjectionSolver,
-    key: (usize, bool),
+    key: QpStructure,
     qp: &Qp,
     infeasible: impl Fn(String) -> ProjectionError,
 ) -> Result<&'c [f64], ProjectionError> {
@@ -629,6 +673,7 @@ mod tests {
             omega_max: 2.0,
             kappa_max: None,
             lateral_speed_max: 0.05,
+            coupled: None,
         }
     }
 
@@ -640,6 +685,7 @@ mod tests {
             omega_max: 1.0,
             kappa_max: Some(1.0 / 1.6),
             lateral_speed_max: 0.05,
+            coupled: None,
         }
     }
 
@@ -752,6 +798,59 @@ mod tests {
             // The jitter is ±3 cm per coordinate: the correction removes about that much.
             eprintln!("{name}: worst mean displacement {worst:.4} m");
             assert!(worst < 0.05, "{name}: displacement {worst}");
+        }
+    }
+
+    /// The tracked base of `robots/tracked`: v_max 1.2, ω_max 1.2, tracks of 1.4 m/s each
+    /// over an effective half track of 0.345 m.
+    fn tracked() -> Limits {
+        Limits {
+            v_max: 1.2,
+            v_reverse_max: 0.6,
+            a_max: 0.8,
+            omega_max: 1.2,
+            kappa_max: None,
+            lateral_speed_max: 0.05,
+            coupled: Some(crate::limits::CoupledLimit {
+                v: 1.0,
+                lateral: 0.0,
+                omega: 0.345,
+                max: 1.4,
+            }),
+        }
+    }
+
+    /// An arc at v = 1.2 m/s, ω = 1.2 rad/s is within the box limits but asks 1.614 m/s of the
+    /// outer track: TFS flags it, the correction brings every segment inside the track limit,
+    /// and one solver serves robots with and without the coupled rows.
+    #[test]
+    fn a_coupled_limit_is_checked_and_kept_by_the_correction() {
+        let arc = rollout(
+            &(0..32).flat_map(|_| [1.2, 0.0, 1.2]).collect::<Vec<f64>>(),
+            0.1,
+        );
+        let v0 = Twist2::new(1.2, 0.0, 1.2);
+        let mut boxed = tracked();
+        boxed.coupled = None;
+        assert_eq!(tfs_of(&arc, &boxed, v0), 1.0);
+        assert_eq!(tfs_of(&arc, &tracked(), v0), 0.0);
+        let mut solver = ProjectionSolver::default();
+        let settings = ProjectionSettings::default();
+        for limits in [diablo(), tracked(), diablo(), tracked()] {
+            let out = project_with(&arc, 0.1, &limits, v0, &settings, &mut solver).unwrap();
+            assert_eq!(tfs_of(&out.poses, &limits, v0), 1.0);
+            if limits.coupled.is_some() {
+                let worst = std::iter::once(Pose2::IDENTITY)
+                    .chain(out.poses.iter().copied())
+                    .collect::<Vec<_>>()
+                    .windows(2)
+                    .map(|w| {
+                        let xi = w[0].between(w[1]).log().scale(10.0);
+                        xi.vx.abs() + 0.345 * xi.omega.abs()
+                    })
+                    .fold(0.0f64, f64::max);
+                assert!(worst <= 1.4 * 0.99 + 1e-6, "outer track {worst}");
+            }
         }
     }
 

@@ -11,6 +11,8 @@
 //! * `|ω| ≤ ω_max`,
 //! * `|vy| ≤ lateral_speed_max`,
 //! * `|κ| ≤ κ_max` when the robot has a curvature limit,
+//! * `a·|v| + b·|vy| + c·|ω| ≤ max` when the embodiment declares a coupled limit
+//!   ([`crate::limits::CoupledLimit`], e.g. a tracked base's track speed),
 //!
 //! and the acceleration ending at segment `k − 1` satisfies `|a| ≤ a_max`: for `k = 1` that is
 //! the initial acceleration `(v_0 − v_init)/dt` from the current speed, for `k ≥ 2`
@@ -22,7 +24,8 @@
 //!
 //! For the commands the planner's tracking controller asked for (before saturation), command
 //! `j` is feasible iff `v_x ≤ v_max`, `−v_x ≤ v_reverse_max`, `|ω| ≤ ω_max`,
-//! `|v_y| ≤ lateral_speed_max`, `|κ| = |ω|/sqrt(v_x² + ε_κ²) ≤ κ_max` (when limited) and, for
+//! `|v_y| ≤ lateral_speed_max`, `|κ| = |ω|/sqrt(v_x² + ε_κ²) ≤ κ_max` (when limited), the
+//! coupled limit (when declared) and, for
 //! `j ≥ 1`, `|v_x,j − v_x,j−1|/dt ≤ a_max`, with the same tolerance. The paper reports
 //! `min(plan TFS, executed TFS)` ([`tfs_min`]).
 //!
@@ -35,6 +38,9 @@ use crate::trajectory::{curvature, segment_values};
 /// Relative tolerance of every TFS comparison: a quantity is within its limit when
 /// `|q| ≤ (1 + TFS_TOLERANCE)·limit` (2 %).
 pub const TFS_TOLERANCE: f64 = 0.02;
+
+/// How many limits TFS checks ([`Violations::NAMES`]).
+pub const LIMIT_COUNT: usize = 7;
 
 /// Which limits one waypoint (or command) violates.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -51,21 +57,24 @@ pub struct Violations {
     pub curvature: bool,
     /// The body-frame lateral speed `|v_y|` exceeds `lateral_speed_max`.
     pub lateral: bool,
+    /// The coupled limit `a·|v| + b·|vy| + c·|ω| ≤ max` is exceeded (never set without one).
+    pub coupled: bool,
 }
 
 impl Violations {
     /// The limits' names, in the order of [`Self::flags`] and [`Self::count`].
-    pub const NAMES: [&'static str; 6] = [
+    pub const NAMES: [&'static str; LIMIT_COUNT] = [
         "speed",
         "reverse",
         "acceleration",
         "yaw_rate",
         "curvature",
         "lateral",
+        "coupled",
     ];
 
     /// Which limits are violated, in the order of [`Self::NAMES`].
-    pub fn flags(&self) -> [bool; 6] {
+    pub fn flags(&self) -> [bool; LIMIT_COUNT] {
         [
             self.speed,
             self.reverse,
@@ -73,12 +82,13 @@ impl Violations {
             self.yaw_rate,
             self.curvature,
             self.lateral,
+            self.coupled,
         ]
     }
 
     /// How many of `violations` break each limit, in the order of [`Self::NAMES`].
-    pub fn count(violations: &[Violations]) -> [usize; 6] {
-        let mut out = [0; 6];
+    pub fn count(violations: &[Violations]) -> [usize; LIMIT_COUNT] {
+        let mut out = [0; LIMIT_COUNT];
         for v in violations {
             for (n, f) in out.iter_mut().zip(v.flags()) {
                 *n += usize::from(f);
@@ -89,12 +99,7 @@ impl Violations {
 
     /// True when no limit is violated.
     pub fn feasible(&self) -> bool {
-        !(self.speed
-            || self.reverse
-            || self.acceleration
-            || self.yaw_rate
-            || self.curvature
-            || self.lateral)
+        !self.flags().contains(&true)
     }
 }
 
@@ -116,6 +121,9 @@ pub fn check(v: f64, vy: f64, omega: f64, a: Option<f64>, limits: &Limits, tol: 
             .kappa_max
             .is_some_and(|k| !within(curvature(v, omega).abs(), k, tol)),
         lateral: !within(vy.abs(), limits.lateral_speed_max, tol),
+        coupled: limits
+            .coupled
+            .is_some_and(|c| !within(c.value(v, vy, omega), c.max, tol)),
     }
 }
 
@@ -240,6 +248,7 @@ mod tests {
             omega_max: 1.0,
             kappa_max: kappa,
             lateral_speed_max: 0.05,
+            coupled: None,
         }
     }
 
@@ -311,6 +320,32 @@ mod tests {
             let viol = plan_violations(&poses, dt, &l, tw);
             assert!(viol.iter().all(which), "{tw:?}: {viol:?}");
             assert_relative_eq!(tfs_plan(&poses, dt, &l, tw), 0.0);
+        }
+        // A coupled limit |v| + 0.5·|ω| ≤ 1: each of v = 0.8 and ω = 0.8 is within its own
+        // limit, together they are not; v = 0.5 with ω = 0.8 is fine.
+        let mut coupled = limits(None);
+        coupled.coupled = Some(crate::limits::CoupledLimit {
+            v: 1.0,
+            lateral: 0.0,
+            omega: 0.5,
+            max: 1.0,
+        });
+        for (tw, over) in [
+            (Twist2::new(0.8, 0.0, 0.8), true),
+            (Twist2::new(0.5, 0.0, 0.8), false),
+        ] {
+            let poses = integrate(&[tw; 4], dt);
+            let viol = plan_violations(&poses, dt, &coupled, tw);
+            assert!(viol.iter().all(|v| v.coupled == over), "{tw:?}: {viol:?}");
+            assert!(
+                viol.iter().all(|v| !(v.speed || v.yaw_rate)),
+                "{tw:?}: {viol:?}"
+            );
+            assert!(
+                plan_violations(&poses, dt, &limits(None), tw)
+                    .iter()
+                    .all(|v| !v.coupled)
+            );
         }
         // Without a curvature limit the same gentle arc is fine.
         let arc = integrate(&[Twist2::new(0.5, 0.0, 0.5); 4], dt);

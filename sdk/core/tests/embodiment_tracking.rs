@@ -36,6 +36,7 @@ fn limits(kappa_max: Option<f64>) -> Limits {
         omega_max: 2.0,
         kappa_max,
         lateral_speed_max: 0.4,
+        coupled: None,
     }
 }
 
@@ -469,16 +470,30 @@ fn replanned_accelerating_plans_give_commands_within_a_max() {
 fn feedback_is_bounded_by_the_limits_the_plan_respects() {
     use human2nav_core::embodiment::bound_feedback;
     use human2nav_core::tfs::{TFS_TOLERANCE, check};
-    let l = limits(Some(0.5));
     let h = DT;
     let current = Twist2::new(1.0, 0.1, 0.3);
-    // A feasible feed-forward and a large feedback in every direction.
+    // A feasible feed-forward and a large feedback in every direction, with and without a
+    // coupled limit (1.02 + 0.5·0.1 + 0.345·0.3 = 1.17 ≤ 1.25: the feed-forward respects it).
     let ff = Twist2::new(1.02, 0.1, 0.3);
-    for fb in [
-        Twist2::new(2.0, 1.0, 3.0),
-        Twist2::new(-2.0, -1.0, -3.0),
-        Twist2::new(0.3, -0.6, 0.9),
-    ] {
+    let tracks = human2nav_core::CoupledLimit {
+        v: 1.0,
+        lateral: 0.5,
+        omega: 0.345,
+        max: 1.25,
+    };
+    let coupled = Limits {
+        coupled: Some(tracks),
+        ..limits(Some(0.5))
+    };
+    for (l, fb) in [limits(Some(0.5)), coupled].into_iter().flat_map(|l| {
+        [
+            Twist2::new(2.0, 1.0, 3.0),
+            Twist2::new(-2.0, -1.0, -3.0),
+            Twist2::new(0.3, -0.6, 0.9),
+            Twist2::new(0.0, 0.0, 2.0),
+        ]
+        .map(|fb| (l, fb))
+    }) {
         let cmd = Twist2::new(ff.vx + fb.vx, ff.vy + fb.vy, ff.omega + fb.omega);
         let out = bound_feedback(cmd, ff, current, &l, h);
         let a = (out.vx - current.vx) / h;
@@ -491,6 +506,7 @@ fn feedback_is_bounded_by_the_limits_the_plan_respects() {
             "{fb:?} -> {out:?}: step {step}"
         );
     }
+    let l = coupled;
     // A command inside every bound is left alone.
     let inside = Twist2::new(1.01, 0.07, 0.2);
     assert_eq!(bound_feedback(inside, ff, current, &l, h), inside);
@@ -498,6 +514,7 @@ fn feedback_is_bounded_by_the_limits_the_plan_respects() {
     // passes through unchanged.
     let over = Twist2::new(1.8, 0.1, 1.7);
     assert_eq!(bound_feedback(over, over, current, &l, h), over);
+    assert!(!check(over.vx, over.vy, over.omega, None, &l, TFS_TOLERANCE).feasible());
     // Non-finite input is not the bound's business.
     let nan = Twist2::new(f64::NAN, 0.0, 0.0);
     assert!(!bound_feedback(nan, ff, current, &l, h).is_finite());

@@ -28,6 +28,7 @@ fn limits() -> Limits {
         omega_max: 1.0,
         kappa_max: None,
         lateral_speed_max: 0.05,
+        coupled: None,
     }
 }
 

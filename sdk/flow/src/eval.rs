@@ -479,6 +479,7 @@ mod tests {
             omega_max: 1.0,
             kappa_max: None,
             lateral_speed_max: 0.1,
+            coupled: None,
         };
         let future: Vec<Pose2> = (1..=8)
             .map(|k| Pose2::new(0.2 * k as f64, 0.0, 0.0))

@@ -356,12 +356,20 @@ pub fn robot_model(profile: &RobotProfile, phi: Phi) -> RobotModel {
     }
 }
 
-/// Loads a robot profile, naming the file in the error.
+/// Loads a robot profile, naming the file in the error, with its limits completed by its
+/// embodiment (a plugin embodiment's coupled limit, see [`PluginHost::robot_embodiment`]).
 pub fn load_profile(path: &Path) -> Result<RobotProfile, PlannerError> {
-    RobotProfile::load(path).map_err(|e| PlannerError::Profile {
+    let mut profile = RobotProfile::load(path).map_err(|e| PlannerError::Profile {
         path: path.to_path_buf(),
         message: e.to_string(),
-    })
+    })?;
+    PluginHost::new()
+        .robot_embodiment(&mut profile)
+        .map_err(|e| PlannerError::Plugin {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+    Ok(profile)
 }
 
 /// Loads a model folder for `backend` (libtorch on the CPU), naming the folder in the error.

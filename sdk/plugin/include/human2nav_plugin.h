@@ -7,10 +7,12 @@
  *
  *  - export `const H2nPluginEntry *human2nav_plugin_entry(void)`; its table starts with
  *    `abi_version`, which the host checks before reading anything else;
- *  - tables are append-only and carry their own size (the host refuses one smaller than its
- *    own table or larger than 4096 bytes; the factories of the array are struct_size apart);
+ *  - tables are append-only and carry their own size (the host refuses one smaller than the
+ *    table's first version or larger than 4096 bytes; slots appended later, such as the
+ *    embodiment's coupled_limit, are absent from a table that ends before them; the factories
+ *    of the array are struct_size apart);
  *  - function pointers may be NULL only in the optional slots: find_factory (not called by
- *    the Rust host), last_error, name and reset; a NULL required slot makes the host refuse
+ *    the Rust host), last_error, name, reset and coupled_limit; a NULL required slot makes the host refuse
  *    the library or instance, naming the file, the table and the slot;
  *  - counts and lengths are capped by the host: 256 factories, 256-byte names and versions,
  *    4096-byte descriptions, 10000-pose plans;
@@ -185,6 +187,15 @@ typedef struct H2nPlanView {
     size_t pose_count;
 } H2nPlanView;
 
+/* A coupled twist limit v*|vx| + lateral*|vy| + omega*|omega| <= max (a tracked base's track
+ * speed). All zeros means none. */
+typedef struct H2nCoupledLimit {
+    double v;
+    double lateral;
+    double omega;
+    double max;
+} H2nCoupledLimit;
+
 typedef struct H2nEmbodimentVTable {
     uint32_t struct_size;
     uint32_t reserved;
@@ -198,6 +209,9 @@ typedef struct H2nEmbodimentVTable {
                       double dt, H2nRobotState *out);
     H2nStatus (*track)(void *instance, const H2nRobotState *state, const H2nPlanView *plan,
                        double t, H2nTwist *out);
+    /* Optional, appended after the first version of this table (a struct_size that ends
+     * before it: none). Writes the coupled limit into `out`, zeroed by the host; called once. */
+    H2nStatus (*coupled_limit)(void *instance, H2nCoupledLimit *out);
 } H2nEmbodimentVTable;
 
 typedef struct H2nObservation {

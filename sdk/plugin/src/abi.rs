@@ -12,13 +12,15 @@
 //!   else and refuses the library when it differs from [`ABI_VERSION`].
 //! * Every table starts with a `struct_size` (or is versioned by the entry's): tables are
 //!   append-only, so a newer plugin may add fields at the end and an older host ignores them.
-//!   The host refuses a `struct_size` below its own table's or above
+//!   The host refuses a `struct_size` below the table's first version (its own size, except
+//!   for a table that has grown since: [`H2nEmbodimentVTable::coupled_limit`] was appended,
+//!   and a table that ends before it has no such slot) or above
 //!   [`crate::validate::MAX_TABLE_BYTES`]. The factories of the entry's array are
 //!   `struct_size` bytes apart, and all have the same `struct_size`.
 //! * Function slots are nullable (`Option<extern "C" fn>`, the layout of a C function pointer).
 //!   Each table says which slots are **required** (the host refuses an instance or library
 //!   with a null one, naming the file, the table and the slot, and calls nothing of it) and
-//!   which are **optional** (`find_factory`, `last_error`, `name`, `reset`).
+//!   which are **optional** (`find_factory`, `last_error`, `name`, `reset`, `coupled_limit`).
 //! * Counts and lengths a plugin hands over are capped ([`crate::validate`]): factories,
 //!   names, descriptions, plan lengths, messages.
 //! * Strings are [`H2nStr`] (UTF-8, pointer and length, no terminator required); arrays are
@@ -37,7 +39,7 @@
 //!   once (and if) its late call returns.
 //! * Libraries are never unloaded, so static data may be referenced by the host for ever.
 
-use human2nav_core::{ControllerGains, Limits, Pose2, Twist2};
+use human2nav_core::{ControllerGains, CoupledLimit, Limits, Pose2, Twist2};
 use std::ffi::c_void;
 
 /// The version of this ABI. Bumped on any incompatible change; appending a field to the end of a
@@ -103,6 +105,9 @@ pub type TrackFn = unsafe extern "C" fn(
     t: f64,
     out: *mut H2nTwist,
 ) -> H2nStatus;
+/// `H2nEmbodimentVTable::coupled_limit`.
+pub type CoupledLimitFn =
+    unsafe extern "C" fn(instance: *mut c_void, out: *mut H2nCoupledLimit) -> H2nStatus;
 /// `H2nPlannerVTable::reset`.
 pub type ResetFn = unsafe extern "C" fn(instance: *mut c_void) -> H2nStatus;
 /// `H2nPlannerVTable::plan`.
@@ -466,6 +471,49 @@ pub struct H2nPlanView {
     pub pose_count: usize,
 }
 
+/// A coupled twist limit `v·|v_x| + lateral·|v_y| + omega·|ω| ≤ max`
+/// ([`human2nav_core::CoupledLimit`]). All zeros means "none".
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct H2nCoupledLimit {
+    /// Coefficient of `|v_x|` (`>= 0`).
+    pub v: f64,
+    /// Coefficient of `|v_y|` (`>= 0`).
+    pub lateral: f64,
+    /// Coefficient of `|ω|` (m/rad, `>= 0`).
+    pub omega: f64,
+    /// The bound (m/s, `> 0` unless every field is 0).
+    pub max: f64,
+}
+
+impl From<&CoupledLimit> for H2nCoupledLimit {
+    fn from(c: &CoupledLimit) -> Self {
+        Self {
+            v: c.v,
+            lateral: c.lateral,
+            omega: c.omega,
+            max: c.max,
+        }
+    }
+}
+
+impl H2nCoupledLimit {
+    /// `None` for all zeros, else the limit, checked ([`CoupledLimit::validate`]: the error
+    /// names the field).
+    pub fn to_limit(&self) -> Result<Option<CoupledLimit>, (&'static str, String)> {
+        if *self == Self::default() {
+            return Ok(None);
+        }
+        let c = CoupledLimit {
+            v: self.v,
+            lateral: self.lateral,
+            omega: self.omega,
+            max: self.max,
+        };
+        c.validate().map(|()| Some(c))
+    }
+}
+
 /// Vtable of an embodiment ([`human2nav_core::embodiment::Embodiment`]).
 #[repr(C)]
 #[derive(Debug)]
@@ -489,6 +537,12 @@ pub struct H2nEmbodimentVTable {
     /// The tracking controller's (unsaturated) command that follows `plan` at time `t`.
     /// **Required.**
     pub track: Option<TrackFn>,
+    /// Writes the embodiment's coupled twist limit into `out` (which the host zeroes first;
+    /// left all zeros: none). Called once, when the instance is created; the host checks the
+    /// values and adds the limit to the robot's limits, which TFS, Φ and the last-step
+    /// correction use. **Optional**, and appended after the first version of this table: a
+    /// table whose `struct_size` ends before it has none.
+    pub coupled_limit: Option<CoupledLimitFn>,
 }
 
 /// What a planner sees at one planning instant ([`human2nav_core::Observation`]).
@@ -610,8 +664,9 @@ pub fn layout() -> Vec<StructLayout> {
         entry!(H2nConstraintVTable { struct_size, reserved, destroy, last_error, name, evaluate }),
         entry!(H2nRobotState { pose, velocity }),
         entry!(H2nPlanView { t0, dt, poses, pose_count }),
+        entry!(H2nCoupledLimit { v, lateral, omega, max }),
         entry!(H2nEmbodimentVTable { struct_size, reserved, destroy, last_error, name, holonomic,
-            saturate, step, track }),
+            saturate, step, track, coupled_limit }),
         entry!(H2nObservation { struct_size, reserved, time, ego, ego_velocity, goal, agents,
             agent_count }),
         entry!(H2nPlanOut { t0, dt, poses, capacity, len, fallback, reserved, note }),
@@ -644,6 +699,8 @@ impl From<&H2nLimits> for Limits {
             omega_max: l.omega_max,
             kappa_max: (l.has_kappa_max != 0).then_some(l.kappa_max),
             lateral_speed_max: l.lateral_speed_max,
+            // Not carried by the ABI's limits: the embodiment declares it (`coupled_limit`).
+            coupled: None,
         }
     }
 }

@@ -513,6 +513,25 @@ unsafe extern "C" fn embodiment_track<T: Embodiment + 'static>(
     }
 }
 
+unsafe extern "C" fn embodiment_coupled_limit<T: Embodiment + 'static>(
+    instance: *mut c_void,
+    out: *mut H2nCoupledLimit,
+) -> H2nStatus {
+    // SAFETY: the host upholds the ABI contract for every pointer; `call` checks `instance`.
+    unsafe {
+        call::<T>(instance, |e| {
+            let out = output(out, "output")?;
+            out.write(
+                e.coupled_limit()
+                    .as_ref()
+                    .map(Into::into)
+                    .unwrap_or_default(),
+            );
+            Ok(())
+        })
+    }
+}
+
 /// Creates an embodiment through `ctor` (used by `export_plugin!`).
 ///
 /// # Safety
@@ -538,6 +557,7 @@ where
             saturate: Some(embodiment_saturate::<T>),
             step: Some(embodiment_step::<T>),
             track: Some(embodiment_track::<T>),
+            coupled_limit: Some(embodiment_coupled_limit::<T>),
         }
     };
     // SAFETY: forwarded contract.
@@ -1160,9 +1180,10 @@ mod tests {
                 ),
                 (vt.step.expect("step"))(obj.instance, &state, &cmd, 0.1, std::ptr::null_mut()),
                 (vt.track.expect("track"))(obj.instance, &state, &plan, 0.0, std::ptr::null_mut()),
+                (vt.coupled_limit.expect("coupled_limit"))(obj.instance, std::ptr::null_mut()),
             ]
         };
-        assert_eq!(statuses, [H2N_INVALID_ARGUMENT; 4]);
+        assert_eq!(statuses, [H2N_INVALID_ARGUMENT; 5]);
         assert_eq!(message(vt.last_error, obj.instance), "output is null");
         // SAFETY: destroyed exactly once.
         unsafe { (vt.destroy.expect("destroy"))(obj.instance) };

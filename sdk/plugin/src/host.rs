@@ -31,7 +31,9 @@ use crate::validate::{
 use human2nav_core::constraint::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
 use human2nav_core::embodiment::{Embodiment, RobotState};
 use human2nav_core::robot::PluginIsolation;
-use human2nav_core::{AgentState, Observation, Plan, PlanError, PlanInfo, Planner, Pose2, Twist2};
+use human2nav_core::{
+    AgentState, CoupledLimit, Observation, Plan, PlanError, PlanInfo, Planner, Pose2, Twist2,
+};
 use std::collections::HashMap;
 use std::ffi::c_void;
 use std::fmt;
@@ -589,11 +591,23 @@ fn one_line(s: &str) -> String {
 /// A vtable kind: its slots, for validation.
 pub(crate) trait VTable: Sized + 'static {
     const KIND: PluginKind;
+    /// The size of the table's first version: the smallest `struct_size` accepted. Slots
+    /// appended since are absent (null) from a table that ends before them.
+    const MIN_SIZE: usize = std::mem::size_of::<Self>();
     /// `(slot, set, required)` of the slots after the common three, in table order.
     fn own_slots(&self) -> Vec<(&'static str, bool, bool)>;
     fn destroy_fn(&self) -> Option<DestroyFn>;
     fn last_error_fn(&self) -> Option<LastErrorFn>;
     fn name_fn(&self) -> Option<NameFn>;
+
+    /// What a probe of a fresh instance reports beyond the table (`plugin inspect`); an error
+    /// makes the probe fail. Default: nothing.
+    ///
+    /// # Safety
+    /// `instance` is a live instance of this table.
+    unsafe fn probe_instance(&self, _instance: *mut c_void) -> Result<String, String> {
+        Ok(String::new())
+    }
 
     /// `(slot, set, required)` in table order: `destroy` (required), `last_error` and `name`
     /// (optional), then the kind's own.
@@ -634,13 +648,34 @@ impl VTable for H2nConstraintVTable {
 
 impl VTable for H2nEmbodimentVTable {
     const KIND: PluginKind = PluginKind::Embodiment;
+    const MIN_SIZE: usize = std::mem::offset_of!(H2nEmbodimentVTable, coupled_limit);
     fn own_slots(&self) -> Vec<(&'static str, bool, bool)> {
         vec![
             ("holonomic", self.holonomic.is_some(), true),
             ("saturate", self.saturate.is_some(), true),
             ("step", self.step.is_some(), true),
             ("track", self.track.is_some(), true),
+            ("coupled_limit", self.coupled_limit.is_some(), false),
         ]
+    }
+    unsafe fn probe_instance(&self, instance: *mut c_void) -> Result<String, String> {
+        let Some(f) = self.coupled_limit else {
+            return Ok(String::new());
+        };
+        let mut out = H2nCoupledLimit::default();
+        // SAFETY: a live instance of this table (the caller's contract); valid output.
+        let status = unsafe { f(instance, &mut out) };
+        if status != H2N_OK {
+            return Err(format!("coupled_limit returned {}", status_name(status)));
+        }
+        match out.to_limit() {
+            Ok(Some(c)) => Ok(format!(
+                "; coupled limit {:.4}·|v_x| + {:.4}·|v_y| + {:.4}·|ω| ≤ {:.4}",
+                c.v, c.lateral, c.omega, c.max
+            )),
+            Ok(None) => Ok("; no coupled limit".to_owned()),
+            Err((field, message)) => Err(format!("coupled_limit: {field} = {message}")),
+        }
     }
     common_slots!();
 }
@@ -658,17 +693,18 @@ impl VTable for H2nPlannerVTable {
 }
 
 /// Checks the vtable an instance of factory `factory` came with (see [`crate::validate`]) and
-/// returns it with a description of what was checked. On failure nothing of the table is
+/// returns a copy of it with a description of what was checked: the table's declared bytes,
+/// and null slots for those appended after its version. On failure nothing of the table is
 /// called (the instance is leaked: destroying it would call into the broken table).
 ///
 /// # Safety
-/// `ptr` is null or points to readable static memory of the library, starting with a `u32`
-/// size, and at least that many bytes when the size is accepted.
+/// `ptr` is null or points to readable memory of the library, starting with a `u32` size, and
+/// at least that many bytes when the size is accepted.
 pub(crate) unsafe fn checked_vtable<T: VTable>(
     lib: &PluginLibrary,
     factory: &str,
     ptr: *const c_void,
-) -> Result<(&'static T, String), PluginError> {
+) -> Result<(T, String), PluginError> {
     let table = format!("{} vtable of `{factory}`", T::KIND);
     if ptr.is_null() || !ptr.cast::<T>().is_aligned() {
         return Err(PluginError::Malformed {
@@ -678,11 +714,11 @@ pub(crate) unsafe fn checked_vtable<T: VTable>(
     }
     // SAFETY: non-null and aligned; every vtable starts with its `u32` size.
     let size = unsafe { ptr.cast::<u32>().read() };
-    let min = std::mem::size_of::<T>();
+    let min = T::MIN_SIZE;
     table_size(&lib.path, &table, size, min)?;
-    // SAFETY: at least a v1 table of this kind (the factory's kind), in static memory; its
-    // function slots are `Option`s, valid for any pointer value.
-    let vt: &'static T = unsafe { &*ptr.cast::<T>() };
+    // SAFETY: aligned (checked), a table of this kind (the factory's) of `size >= MIN_SIZE`
+    // readable bytes.
+    let vt = unsafe { read_table::<T>(ptr, size as usize) };
     let slots = vt.slots();
     if let Some((slot, _, _)) = slots.iter().find(|(_, set, required)| *required && !*set) {
         return Err(PluginError::NullSlot {
@@ -718,6 +754,22 @@ pub(crate) unsafe fn checked_vtable<T: VTable>(
             }
         ),
     ))
+}
+
+/// A copy of the first `size` bytes of a table of kind `T` (at most the whole `T`), the rest
+/// zero: slots the plugin's version of the table does not have read as null.
+///
+/// # Safety
+/// `ptr` is aligned for `T` and points to at least `min(size, size_of::<T>())` readable bytes
+/// of a table of this kind, whose size is at least `T::MIN_SIZE`.
+unsafe fn read_table<T: VTable>(ptr: *const c_void, size: usize) -> T {
+    let mut out = std::mem::MaybeUninit::<T>::zeroed();
+    let n = size.min(std::mem::size_of::<T>());
+    // SAFETY: `n` bytes are readable at `ptr` and fit in `out`; the two do not overlap.
+    unsafe { std::ptr::copy_nonoverlapping(ptr.cast::<u8>(), out.as_mut_ptr().cast::<u8>(), n) };
+    // SAFETY: every field of a vtable is an integer or an `Option` of a function pointer, for
+    // which both the plugin's bytes and zero (`None`) are valid values.
+    unsafe { out.assume_init() }
 }
 
 /// The name an instance reports through its (optional) `name` slot, else `fallback`.
@@ -764,12 +816,14 @@ pub(crate) fn probe_factory(
         let (vt, detail) = unsafe { checked_vtable::<T>(lib, &info.name, obj.vtable) }?;
         // SAFETY: a live instance of this vtable.
         let name = unsafe { instance_name(vt.name_fn(), obj.instance, &info.name) };
+        // SAFETY: as above.
+        let extra = unsafe { vt.probe_instance(obj.instance) };
         if let Some(destroy) = vt.destroy_fn() {
             // SAFETY: the instance is live and destroyed exactly once, here.
             unsafe { destroy(obj.instance) };
         }
-        match name {
-            Ok(n) => Ok(Ok(format!("{detail}; instance name `{n}`"))),
+        match name.and_then(|n| extra.map(|e| (n, e))) {
+            Ok((n, e)) => Ok(Ok(format!("{detail}; instance name `{n}`{e}"))),
             Err(m) => Err(PluginError::Malformed {
                 path: lib.path.clone(),
                 message: format!("{} `{}`: {m}", T::KIND, info.name),
@@ -940,7 +994,7 @@ pub struct PluginHost {
 /// A created instance with its checked vtable.
 struct Created<T: 'static> {
     handle: Handle,
-    vtable: &'static T,
+    vtable: T,
     name: String,
     label: String,
 }
@@ -1160,10 +1214,21 @@ impl PluginHost {
             step: c.vtable.step.ok_or_else(|| null("step"))?,
             track: c.vtable.track.ok_or_else(|| null("track"))?,
         };
+        let coupled = match c.vtable.coupled_limit {
+            // SAFETY: a live instance of this vtable.
+            Some(f) => unsafe { read_coupled_limit(f, &c.handle) }.map_err(|message| {
+                PluginError::Malformed {
+                    path: library.to_path_buf(),
+                    message: format!("embodiment `{plugin}`: coupled_limit: {message}"),
+                }
+            })?,
+            None => None,
+        };
         Ok(PluginEmbodiment {
             handle: c.handle,
             name: c.name,
             fns,
+            coupled,
         })
     }
 
@@ -1636,6 +1701,25 @@ struct EmbodimentFns {
     track: TrackFn,
 }
 
+/// Calls an embodiment's `coupled_limit` slot and checks what it wrote: `Ok(None)` when it left
+/// the output zeroed, an error naming the field for a bad value or the failure for a bad status.
+///
+/// # Safety
+/// `handle` is a live instance of the vtable `f` came from.
+unsafe fn read_coupled_limit(
+    f: CoupledLimitFn,
+    handle: &Handle,
+) -> Result<Option<CoupledLimit>, String> {
+    let mut out = H2nCoupledLimit::default();
+    // SAFETY: live instance (the caller's contract), valid output pointer.
+    let status = unsafe { f(handle.ptr(), &mut out) };
+    if status != H2N_OK {
+        return Err(handle.failure(status));
+    }
+    out.to_limit()
+        .map_err(|(field, message)| format!("{field} = {message}"))
+}
+
 /// An embodiment living in a plugin library.
 ///
 /// The [`Embodiment`] methods cannot return errors; when the plugin fails or panics the proxy
@@ -1646,6 +1730,7 @@ pub struct PluginEmbodiment {
     handle: Handle,
     name: String,
     fns: EmbodimentFns,
+    coupled: Option<CoupledLimit>,
 }
 
 impl fmt::Debug for PluginEmbodiment {
@@ -1679,6 +1764,11 @@ impl PluginEmbodiment {
 impl Embodiment for PluginEmbodiment {
     fn name(&self) -> &str {
         &self.name
+    }
+
+    /// What the plugin's `coupled_limit` slot reported when the instance was created.
+    fn coupled_limit(&self) -> Option<CoupledLimit> {
+        self.coupled
     }
 
     fn holonomic(&self) -> bool {

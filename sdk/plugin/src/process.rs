@@ -232,6 +232,7 @@ impl<'a> Dec<'a> {
             omega_max,
             kappa_max,
             lateral_speed_max: self.f64()?,
+            coupled: None,
         })
     }
     pub(crate) fn agents(&mut self) -> Result<Vec<AgentState>, String> {
@@ -1099,6 +1100,7 @@ pub(crate) fn serve(input: &mut dyn Read, out: &mut dyn Write) -> std::io::Resul
                     omega_max: 0.0,
                     kappa_max: None,
                     lateral_speed_max: 0.0,
+                    coupled: None,
                 });
                 let ctx = ConstraintContext {
                     dt: eval.dt,

@@ -182,14 +182,19 @@ impl PluginHost {
         )
     }
 
-    /// The embodiment a profile describes: built-in, or created from its plugin.
+    /// The embodiment a profile describes: built-in, or created from its plugin. The
+    /// profile's limits are completed with what a plugin embodiment declares beyond them (its
+    /// coupled limit, [`Embodiment::coupled_limit`]), so that TFS, Φ and the planner built
+    /// from the profile afterwards see it.
     pub fn robot_embodiment(
         &self,
-        profile: &RobotProfile,
+        profile: &mut RobotProfile,
     ) -> Result<Box<dyn Embodiment>, PluginError> {
         match &profile.embodiment {
             EmbodimentSpec::Plugin(r) => {
-                Ok(Box::new(self.embodiment_ref(r, &robot_context(profile))?))
+                let e = self.embodiment_ref(r, &robot_context(profile))?;
+                profile.limits.coupled = e.coupled_limit();
+                Ok(Box::new(e))
             }
             EmbodimentSpec::Builtin(_) => match profile.builtin_embodiment() {
                 Some(e) => Ok(e),
@@ -203,8 +208,8 @@ impl PluginHost {
 
     /// Instantiates everything a loaded profile names: its embodiment and its plugin
     /// constraint terms (each created with the robot's limits, gains and footprint).
-    pub fn load_robot(&self, profile: RobotProfile) -> Result<LoadedRobot, PluginError> {
-        let embodiment = self.robot_embodiment(&profile)?;
+    pub fn load_robot(&self, mut profile: RobotProfile) -> Result<LoadedRobot, PluginError> {
+        let embodiment = self.robot_embodiment(&mut profile)?;
         let ctx = robot_context(&profile);
         let mut plugin_terms: Vec<(f64, Box<dyn ConstraintTerm>)> =
             Vec::with_capacity(profile.constraints.len());

@@ -72,6 +72,7 @@ fn limits() -> Limits {
         omega_max: 1.5,
         kappa_max: Some(2.0),
         lateral_speed_max: 0.05,
+        coupled: None,
     }
 }
 

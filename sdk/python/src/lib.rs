@@ -81,9 +81,9 @@ struct PyRobot {
 }
 
 impl PyRobot {
-    fn new(profile: RobotProfile) -> PyResult<Self> {
+    fn new(mut profile: RobotProfile) -> PyResult<Self> {
         let embodiment = PluginHost::new()
-            .robot_embodiment(&profile)
+            .robot_embodiment(&mut profile)
             .map_err(sdk_error)?;
         Ok(Self {
             profile,

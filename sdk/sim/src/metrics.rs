@@ -95,16 +95,26 @@ pub struct LimitCounts {
     pub curvature: usize,
     /// Commands whose body-frame lateral speed exceeds `lateral_speed_max`.
     pub lateral: usize,
+    /// Commands over the embodiment's coupled limit (a tracked base's track speed).
+    #[serde(default)]
+    pub coupled: usize,
 }
 
 impl LimitCounts {
     /// The names of the limits, in the order of [`LimitCounts::per_limit`].
-    pub const NAMES: [&'static str; 6] = tfs::Violations::NAMES;
+    pub const NAMES: [&'static str; tfs::LIMIT_COUNT] = tfs::Violations::NAMES;
 
     /// Counts the violations of each limit.
     pub fn of(violations: &[tfs::Violations]) -> Self {
-        let [speed, reverse, acceleration, yaw_rate, curvature, lateral] =
-            tfs::Violations::count(violations);
+        let [
+            speed,
+            reverse,
+            acceleration,
+            yaw_rate,
+            curvature,
+            lateral,
+            coupled,
+        ] = tfs::Violations::count(violations);
         Self {
             commands: violations.len(),
             speed,
@@ -113,11 +123,12 @@ impl LimitCounts {
             yaw_rate,
             curvature,
             lateral,
+            coupled,
         }
     }
 
     /// The counts in the order of [`LimitCounts::NAMES`].
-    pub fn per_limit(&self) -> [usize; 6] {
+    pub fn per_limit(&self) -> [usize; tfs::LIMIT_COUNT] {
         [
             self.speed,
             self.reverse,
@@ -125,6 +136,7 @@ impl LimitCounts {
             self.yaw_rate,
             self.curvature,
             self.lateral,
+            self.coupled,
         ]
     }
 }

@@ -930,6 +930,7 @@ mod tests {
             omega_max: 1.0,
             kappa_max: None,
             lateral_speed_max: 0.05,
+            coupled: None,
         }
     }
 

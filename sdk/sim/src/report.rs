@@ -16,7 +16,7 @@ pub const CSV_HEADER: &str = "suite,suite_kind,scenario,episode,scene,robot,meth
 success,collision,timeout,tfs,tfs_plan,tfs_executed,path_length,time_to_goal,duration,budget,min_clearance,\
 time_within_0_45,time_within_1_2,mean_jerk,plans,fallbacks,planner_errors,contact_robot_closing,\
 contact_pedestrian_closing,contact_pedestrian_age,commands,exec_over_speed,exec_over_reverse,\
-exec_over_acceleration,exec_over_yaw_rate,exec_over_curvature,exec_over_lateral";
+exec_over_acceleration,exec_over_yaw_rate,exec_over_curvature,exec_over_lateral,exec_over_coupled";
 
 fn num(v: f64) -> String {
     if v.is_finite() {
@@ -1017,6 +1017,7 @@ mod tests {
                     yaw_rate: 4,
                     curvature: 5,
                     lateral: 6,
+                    coupled: 0,
                 },
             },
         }

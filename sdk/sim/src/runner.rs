@@ -288,11 +288,11 @@ impl RobotSetup {
             path: path.to_path_buf(),
             message,
         };
-        let profile = RobotProfile::load(path).map_err(|e| fail(e.to_string()))?;
+        let mut profile = RobotProfile::load(path).map_err(|e| fail(e.to_string()))?;
         host.resolve_robot(&profile)
             .map_err(|e| fail(e.to_string()))?;
         let embodiment = host
-            .robot_embodiment(&profile)
+            .robot_embodiment(&mut profile)
             .map_err(|e| fail(e.to_string()))?;
         Ok(Self::from_profile(&profile, Arc::from(embodiment)))
     }

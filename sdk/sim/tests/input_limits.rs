@@ -99,6 +99,7 @@ fn a_run_budget_is_bounded_whatever_the_robot() {
         omega_max: 1.0,
         kappa_max: None,
         lateral_speed_max: 1e-6,
+        coupled: None,
     };
     let ep = common::episode("far", ScenarioClass::CoFlow, 0.0, Vec::new());
     let budget = SimConfig::default().budget_for(&ep, &slow);

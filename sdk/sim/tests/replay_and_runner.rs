@@ -106,6 +106,7 @@ fn empty_world_time_matches_closed_form() {
         omega_max: 2.0,
         kappa_max: None,
         lateral_speed_max: 0.05,
+        coupled: None,
     };
     // 5 m, tolerance 0.3: 4.7 m, ramp v²/2a = 1.125 m < 4.7 → 4.7/1.5 + 1.5/2.
     let ep = episode("t", ScenarioClass::CoFlow, 1.0, vec![]);

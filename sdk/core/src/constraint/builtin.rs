@@ -1,5 +1,5 @@
 //! The built-in soft-margin terms of Eq. 8 (speed, reverse speed, acceleration, yaw rate,
-//! curvature, lateral speed).
+//! curvature, lateral speed, and the embodiment's coupled limit).
 //!
 //! Each term is the mean over its quantity's samples of the soft margin
 //!
@@ -22,6 +22,7 @@
 //! | [`BuiltinKind::YawRate`] | `ω_i`, `T − 1` | `γ(|ω|_ε/ω_max − 1 + δ)` |
 //! | [`BuiltinKind::Curvature`] | `κ_i`, `T − 1` | `γ(|κ|_ε/κ_max − 1 + δ)`; no cost when `κ_max` is `None` |
 //! | [`BuiltinKind::Lateral`] | `vy_i`, `T − 1` | `γ(|vy|_ε/lateral_speed_max − 1 + δ)` |
+//! | [`BuiltinKind::Coupled`] | `(v_i, vy_i, ω_i)`, `T − 1` | `γ((a·|v|_ε + b·|vy|_ε + c·|ω|_ε)/max − 1 + δ)` with the embodiment's [`CoupledLimit`](crate::limits::CoupledLimit); no cost without one |
 //!
 //! The acceleration term always includes the initial acceleration from
 //! `ctx.initial_velocity.vx`, so a plan that starts at a speed the robot cannot reach in one
@@ -95,17 +96,21 @@ pub enum BuiltinKind {
     Curvature,
     /// Body-frame lateral speed against `lateral_speed_max`.
     Lateral,
+    /// The embodiment's coupled limit `a·|v| + b·|vy| + c·|ω|` against its `max` (nothing when
+    /// the robot has none).
+    Coupled,
 }
 
 impl BuiltinKind {
     /// All kinds, in the order Φ lists them.
-    pub const ALL: [BuiltinKind; 6] = [
+    pub const ALL: [BuiltinKind; 7] = [
         BuiltinKind::Speed,
         BuiltinKind::Reverse,
         BuiltinKind::Acceleration,
         BuiltinKind::YawRate,
         BuiltinKind::Curvature,
         BuiltinKind::Lateral,
+        BuiltinKind::Coupled,
     ];
 
     /// The stable name used by [`ConstraintTerm::name`] and in reports.
@@ -117,6 +122,7 @@ impl BuiltinKind {
             BuiltinKind::YawRate => "yaw_rate",
             BuiltinKind::Curvature => "curvature",
             BuiltinKind::Lateral => "lateral",
+            BuiltinKind::Coupled => "coupled",
         }
     }
 }
@@ -143,7 +149,7 @@ impl BuiltinTerm {
         }
     }
 
-    /// The limit this term uses, `None` when the robot has none (curvature only).
+    /// The limit this term uses, `None` when the robot has none (curvature, coupled).
     fn limit(
         &self,
         ctx: &ConstraintContext<'_>,
@@ -159,6 +165,15 @@ impl BuiltinTerm {
                 None => return Ok(None),
             },
             BuiltinKind::Lateral => (l.lateral_speed_max, "lateral_speed_max"),
+            BuiltinKind::Coupled => match &l.coupled {
+                Some(c) => {
+                    c.validate().map_err(|(field, message)| {
+                        self.fail(format!("coupled limit: {field} = {message}"))
+                    })?;
+                    (c.max, "coupled.max")
+                }
+                None => return Ok(None),
+            },
         };
         if !(value.is_finite() && value > 0.0) {
             return Err(self.fail(format!(
@@ -173,7 +188,8 @@ impl BuiltinTerm {
     fn penalty(&self, q: f64, limit: f64) -> (f64, f64) {
         let inv = 1.0 / limit;
         let (p, dp) = match self.kind {
-            BuiltinKind::Speed => self.margin.upper(q * inv),
+            // The coupled quantity is a sum of smoothed magnitudes, never negative.
+            BuiltinKind::Speed | BuiltinKind::Coupled => self.margin.upper(q * inv),
             BuiltinKind::Reverse => {
                 let (p, dp) = self.margin.upper(-q * inv);
                 (p, -dp)
@@ -185,8 +201,12 @@ impl BuiltinTerm {
 
     /// The quantity of a segment and its gradient over the segment's six coordinates.
     #[inline]
-    fn quantity(&self, jet: &SegmentJet) -> (f64, [f64; 6]) {
+    fn quantity(&self, jet: &SegmentJet, ctx: &ConstraintContext<'_>) -> (f64, [f64; 6]) {
         match self.kind {
+            BuiltinKind::Coupled => match &ctx.limits.coupled {
+                Some(c) => coupled_quantity(jet, c),
+                None => (0.0, [0.0; 6]),
+            },
             BuiltinKind::Speed | BuiltinKind::Reverse => (jet.v, jet.dv),
             BuiltinKind::YawRate => (jet.omega, jet.domega),
             BuiltinKind::Lateral => (jet.vy, jet.dvy),
@@ -238,7 +258,7 @@ impl BuiltinTerm {
         } else {
             for i in 0..n_seg {
                 let jet = segment_jet(&traj[3 * i..3 * i + 3], &traj[3 * i + 3..3 * i + 6], dt);
-                let (q, dq) = self.quantity(&jet);
+                let (q, dq) = self.quantity(&jet, ctx);
                 let (p, dp) = self.penalty(q, limit);
                 cost += p;
                 let g = dp * inv_n;
@@ -250,6 +270,31 @@ impl BuiltinTerm {
         }
         cost * inv_n
     }
+}
+
+/// `a·|v|_ε + b·|vy|_ε + c·|ω|_ε` of a segment and its gradient, each magnitude smoothed as in
+/// [`SoftMargin::abs`] with `ε` relative to the limit's `max` (exactly 0 at rest).
+#[inline]
+fn coupled_quantity(jet: &SegmentJet, c: &crate::limits::CoupledLimit) -> (f64, [f64; 6]) {
+    let eps = SMOOTH_ABS_EPS * c.max;
+    let mut q = 0.0;
+    let mut dq = [0.0; 6];
+    for (coef, x, dx) in [
+        (c.v, jet.v, &jet.dv),
+        (c.lateral, jet.vy, &jet.dvy),
+        (c.omega, jet.omega, &jet.domega),
+    ] {
+        if coef == 0.0 {
+            continue;
+        }
+        let s = (x * x + eps * eps).sqrt();
+        q += coef * (s - eps);
+        let g = coef * x / s;
+        for (d, dxj) in dq.iter_mut().zip(dx) {
+            *d += g * dxj;
+        }
+    }
+    (q, dq)
 }
 
 /// Checks the buffers against the batch and the context's time step.

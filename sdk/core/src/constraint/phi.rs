@@ -36,9 +36,10 @@ impl Phi {
         Self::default()
     }
 
-    /// The built-in terms weighted by `λ_v, λ_reverse, λ_a, λ_ω, λ_κ, λ_lateral` with the soft
-    /// margin `(γ, δ)` of `weights`. Terms of weight 0 are left out, and so is the curvature
-    /// term when `limits.kappa_max` is `None`.
+    /// The built-in terms weighted by `λ_v, λ_reverse, λ_a, λ_ω, λ_κ, λ_lateral, λ_coupled` with
+    /// the soft margin `(γ, δ)` of `weights`. Terms of weight 0 are left out, and so are the
+    /// curvature term when `limits.kappa_max` is `None` and the coupled term when
+    /// `limits.coupled` is.
     pub fn from_weights(weights: &GuidanceWeights, limits: &Limits) -> Self {
         let margin = SoftMargin {
             gamma: weights.gamma,
@@ -54,6 +55,8 @@ impl Phi {
                 BuiltinKind::Curvature if limits.kappa_max.is_none() => continue,
                 BuiltinKind::Curvature => weights.lambda_kappa,
                 BuiltinKind::Lateral => weights.lambda_lateral,
+                BuiltinKind::Coupled if limits.coupled.is_none() => continue,
+                BuiltinKind::Coupled => weights.lambda_coupled,
             };
             if w != 0.0 {
                 phi.terms

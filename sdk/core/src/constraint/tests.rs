@@ -1,6 +1,6 @@
 use super::*;
 use crate::guidance::analytic::demo_batch;
-use crate::limits::GuidanceWeights;
+use crate::limits::{CoupledLimit, GuidanceWeights};
 use crate::se2::Pose2;
 use approx::assert_relative_eq;
 
@@ -12,6 +12,7 @@ fn limits(kappa: Option<f64>) -> Limits {
         omega_max: 1.0,
         kappa_max: kappa,
         lateral_speed_max: 0.1,
+        coupled: None,
     }
 }
 
@@ -23,6 +24,7 @@ fn weights() -> GuidanceWeights {
         lambda_kappa: 0.7,
         lambda_lateral: 1.5,
         lambda_reverse: 3.0,
+        lambda_coupled: 0.8,
         gamma: 10.0,
         delta: 0.05,
     }
@@ -172,14 +174,78 @@ fn curvature_term_is_silent_without_a_limit() {
     assert!(phi.terms().all(|(_, n)| n != "curvature"));
     assert_eq!(phi.len(), 5);
     assert_eq!(Phi::from_weights(&weights(), &limits(Some(1.0))).len(), 6);
+    assert_eq!(
+        Phi::from_weights(&weights(), &with_tracks(limits(Some(1.0)))).len(),
+        7
+    );
+}
+
+/// A tracked base's limit: `|v| + 0.345·|ω| ≤ 1.4` (χ·B/2 = 0.345 m), with a lateral part so
+/// that every coefficient is exercised.
+const TRACKS: CoupledLimit = CoupledLimit {
+    v: 1.0,
+    lateral: 0.5,
+    omega: 0.345,
+    max: 1.4,
+};
+
+fn with_tracks(mut l: Limits) -> Limits {
+    l.coupled = Some(TRACKS);
+    l
+}
+
+#[test]
+fn coupled_term_closed_form_on_an_arc_and_silent_without_a_limit() {
+    // An arc at v = 1.2 m/s, ω = 1.2 rad/s: 1.2 + 0.345·1.2 = 1.614 > 1.4, the faster track
+    // over its limit, though v and ω are each within theirs (v_max 1.2 on a tracked base).
+    let t = 8;
+    let dt = 0.1;
+    let mut pose = Pose2::IDENTITY;
+    let mut data = Vec::new();
+    for _ in 0..t {
+        data.extend(pose.to_array());
+        pose = pose.euler_step(Twist2::new(1.2, 0.0, 1.2), dt);
+    }
+    let term = BuiltinTerm::new(BuiltinKind::Coupled, MARGIN);
+    let l = with_tracks(limits(None));
+    let (cost, _) = eval(&term, &data, 1, t, &ctx(&l));
+    // Segment speeds are chords (c = sinc(0.06) ≈ 0.9994 of 1.2); every segment is the same.
+    let (v, vy, w) = crate::trajectory::segment_values(&data[0..3], &data[3..6], dt);
+    let eps = SMOOTH_ABS_EPS * TRACKS.max;
+    let sabs = |x: f64| (x * x + eps * eps).sqrt() - eps;
+    let q = sabs(v) + 0.5 * sabs(vy) + 0.345 * sabs(w);
+    assert!(q > 1.6 && q < 1.62, "{q}");
+    assert_relative_eq!(
+        cost[0],
+        softplus(10.0 * (q / 1.4 - 1.0 + 0.05)) / 10.0,
+        epsilon = 1e-9
+    );
+    let (silent, grad) = eval(&term, &data, 1, t, &ctx(&limits(None)));
+    assert!(silent[0] == 0.0 && grad.iter().all(|g| *g == 0.0));
+    // A bad limit is an error naming the field.
+    let mut bad = l;
+    bad.coupled = Some(CoupledLimit {
+        max: -1.0,
+        ..TRACKS
+    });
+    let mut c = vec![0.0];
+    let mut g = vec![0.0; data.len()];
+    let err = term
+        .evaluate(
+            TrajBatch::new(&data, 1, t).unwrap(),
+            &ctx(&bad),
+            &mut c,
+            &mut g,
+        )
+        .unwrap_err();
+    assert!(err.to_string().contains("coupled limit: max"), "{err}");
 }
 
 #[test]
 fn every_builtin_gradient_matches_finite_differences() {
     let (b, t) = (6, 12);
     let data = demo_batch(b, t, 0.1);
-    for kappa in [Some(0.8), None] {
-        let l = limits(kappa);
+    for l in [limits(Some(0.8)), limits(None), with_tracks(limits(None))] {
         let c = ctx(&l);
         for kind in BuiltinKind::ALL {
             let term = BuiltinTerm::new(kind, MARGIN);
@@ -194,7 +260,7 @@ fn every_builtin_gradient_matches_finite_differences() {
 #[test]
 fn gradients_at_rest_and_turning_in_place_are_finite_and_correct() {
     // v = 0 and ω = 0 are where |·| and κ would be non-smooth without the ε's.
-    let l = limits(Some(0.5));
+    let l = with_tracks(limits(Some(0.5)));
     let c = ConstraintContext {
         initial_velocity: Twist2::ZERO,
         ..ctx(&l)
@@ -215,7 +281,7 @@ fn gradients_at_rest_and_turning_in_place_are_finite_and_correct() {
 fn phi_is_the_weighted_sum_and_its_gradient_matches_finite_differences() {
     let (b, t) = (5, 10);
     let data = demo_batch(b, t, 0.1);
-    let l = limits(Some(1.2));
+    let l = with_tracks(limits(Some(1.2)));
     let c = ctx(&l);
     let w = weights();
     let phi = Phi::from_weights(&w, &l);
@@ -234,6 +300,7 @@ fn phi_is_the_weighted_sum_and_its_gradient_matches_finite_differences() {
         (w.lambda_omega, BuiltinKind::YawRate),
         (w.lambda_kappa, BuiltinKind::Curvature),
         (w.lambda_lateral, BuiltinKind::Lateral),
+        (w.lambda_coupled, BuiltinKind::Coupled),
     ] {
         let (ct, _) = eval(&BuiltinTerm::new(kind, MARGIN), &data, b, t, &c);
         for k in 0..b {

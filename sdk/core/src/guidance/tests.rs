@@ -25,6 +25,7 @@ fn weights() -> GuidanceWeights {
         lambda_kappa: 1.0,
         lambda_lateral: 1.0,
         lambda_reverse: 1.0,
+        lambda_coupled: 1.0,
         gamma: 10.0,
         delta: 0.05,
     }
@@ -39,6 +40,7 @@ fn limits(kappa: Option<f64>) -> Limits {
         omega_max: 1.0,
         kappa_max: kappa,
         lateral_speed_max: 0.1,
+        coupled: None,
     }
 }
 

@@ -80,6 +80,7 @@ impl Checker<'_> {
         self.non_negative("guidance.lambda_kappa", w.lambda_kappa)?;
         self.non_negative("guidance.lambda_lateral", w.lambda_lateral)?;
         self.non_negative("guidance.lambda_reverse", w.lambda_reverse)?;
+        self.non_negative("guidance.lambda_coupled", w.lambda_coupled)?;
         self.positive("guidance.gamma", w.gamma)?;
         self.non_negative("guidance.delta", w.delta)?;
         if w.delta >= 1.0 {
@@ -471,6 +472,7 @@ pub(super) fn limits(
             omega_max,
             kappa_max: (r_min > 0.0).then(|| 1.0 / r_min),
             lateral_speed_max: given.lateral_speed_max,
+            coupled: None,
         },
         sources: LimitProvenance {
             v_max: v_max_src,

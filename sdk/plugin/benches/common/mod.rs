@@ -61,6 +61,7 @@ pub fn limits() -> Limits {
         omega_max: 1.5,
         kappa_max: None,
         lateral_speed_max: 0.05,
+        coupled: None,
     }
 }
 

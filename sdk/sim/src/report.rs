@@ -576,7 +576,8 @@ fn empty_suite_section(md: &mut String, in_suite: &[&ResultRow], suite: &str, ct
     let _ = writeln!(md, "## Empty-world sanity suite `{suite}`\n");
     let _ = writeln!(
         md,
-        "Every working method must reach SR = 100 % on every robot.\n"
+        "Every working method must reach SR = 100 % on every robot (the methods the suite's \
+         `methods` list leaves out are not run here).\n"
     );
     let _ = write!(md, "| method |");
     for robot in &ctx.robot_names {
@@ -588,6 +589,10 @@ fn empty_suite_section(md: &mut String, in_suite: &[&ResultRow], suite: &str, ct
     }
     let _ = writeln!(md, "---|");
     for m in &ctx.methods {
+        // A method the suite's `methods` list leaves out is not held to the check.
+        if !in_suite.iter().any(|r| &r.method == m) {
+            continue;
+        }
         let _ = write!(md, "| {m} |");
         let mut all_pass = true;
         for robot in &ctx.robot_names {

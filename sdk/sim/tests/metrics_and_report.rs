@@ -243,13 +243,17 @@ fn a_method_can_replan_at_its_own_rate() {
 
 #[test]
 fn driver_writes_csv_report_and_figures() {
-    let suites = [small_suite(), empty_suite()];
+    // The empty suite leaves a third method out: it is neither run there nor judged.
+    let mut empty = empty_suite();
+    empty.methods = Some(vec!["straight".into(), "slow".into()]);
+    let suites = [small_suite(), empty];
     let robots = [robot("diablo"), robot("ackermann")];
     let methods = [
         MethodSpec::straight("straight", &toml::Table::new()).unwrap(),
         MethodSpec::straight("slow", &toml::toml! { speed = 0.5 })
             .unwrap()
             .with_replan_hz(Some(5.0)),
+        MethodSpec::straight("crawl", &toml::toml! { speed = 0.05 }).unwrap(),
     ];
     let sim = SimConfig::default();
     let plan = BenchPlan {
@@ -271,13 +275,20 @@ fn driver_writes_csv_report_and_figures() {
         std::env::temp_dir().join(format!("h2n-sim-driver-{}", std::process::id()))
     });
     let res = driver::run(&plan, &out, &ProgressBar::hidden()).unwrap();
-    assert_eq!(res.rows.len(), 2 * 2 * 2 * 4);
+    assert_eq!(res.rows.len(), 2 * 2 * 2 * 4 + 2 * 4);
+    assert!(
+        !res.rows
+            .iter()
+            .any(|r| r.suite == "empty" && r.method == "crawl")
+    );
     assert!(
         res.empty_world_failures.is_empty(),
         "{:?}",
         res.empty_world_failures
     );
     let report = std::fs::read_to_string(&res.report_md).unwrap();
+    let sanity = &report[report.find("Empty-world sanity").unwrap()..];
+    assert!(!sanity[..sanity.find("\n## ").unwrap_or(sanity.len())].contains("| crawl |"));
     for needle in [
         "Fig. 6",
         "Fig. 7",
@@ -355,7 +366,7 @@ fn check_figure_list(res: &BenchOutcome, report: &str, hand: &[&ResultRow]) -> V
     // Fig. 6, 7 and the density figure of the one non-empty suite, Fig. 4 (`slow` succeeded
     // on diablo in some class), and one failure figure per method that failed somewhere in
     // the suite.
-    let failing = ["straight", "slow"]
+    let failing = ["straight", "slow", "crawl"]
         .iter()
         .filter(|m| hand.iter().any(|r| &r.method == *m && !r.metrics.success))
         .count();

@@ -1,13 +1,17 @@
 //! Cost of the exact last-step correction ([`human2nav_core::projection`]) on one plan of 32
 //! poses with centimetre jitter (what the trained flow model produces), for a differential
 //! drive and for a car with a curvature limit, with the default settings: a fresh solver per
-//! plan (`project`), and the solver a planner keeps from plan to plan (`project_with`, cycling
-//! through differently jittered plans so that every QP has new values).
+//! plan (`project`), the solver a planner keeps from plan to plan (`project_with`, cycling
+//! through differently jittered plans so that every QP has new values), and that kept solver
+//! with every QP handed to Clarabel (`_clarabel`, at the fallback's tolerance), the reference
+//! of the structured solver.
 //!
 //! Run: `cargo bench -p human2nav-core --bench projection`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use human2nav_core::projection::{ProjectionSettings, ProjectionSolver, project, project_with};
+use human2nav_core::projection::{
+    CLARABEL_TOLERANCE, ProjectionSettings, ProjectionSolver, project, project_with,
+};
 use human2nav_core::{Limits, Pose2, Twist2};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -53,21 +57,28 @@ fn bench_projection(c: &mut Criterion) {
         c.bench_function(&format!("projection/{name}_t32"), |b| {
             b.iter(|| project(black_box(&plan), 0.1, &limits, v0, &settings))
         });
-        let mut solver = ProjectionSolver::default();
-        let mut i = 0;
-        c.bench_function(&format!("projection/{name}_t32_kept_solver"), |b| {
-            b.iter(|| {
-                i = (i + 1) % plans.len();
-                project_with(
-                    black_box(&plans[i]),
-                    0.1,
-                    &limits,
-                    v0,
-                    &settings,
-                    &mut solver,
-                )
-            })
-        });
+        for (suffix, mut solver) in [
+            ("", ProjectionSolver::default()),
+            (
+                "_clarabel",
+                ProjectionSolver::clarabel_only(CLARABEL_TOLERANCE),
+            ),
+        ] {
+            let mut i = 0;
+            c.bench_function(&format!("projection/{name}_t32_kept_solver{suffix}"), |b| {
+                b.iter(|| {
+                    i = (i + 1) % plans.len();
+                    project_with(
+                        black_box(&plans[i]),
+                        0.1,
+                        &limits,
+                        v0,
+                        &settings,
+                        &mut solver,
+                    )
+                })
+            });
+        }
     }
 }
 

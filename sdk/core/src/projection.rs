@@ -224,7 +224,7 @@ pub fn project(
 /// symbolic factorisation (Clarabel's data updates), instead of building them again. A planner
 /// keeps one per robot; the scaling of the first problem is reused for the later ones.
 ///
-/// Each QP is first solved by its structure ([`lq`]: an interior-point method whose Newton
+/// Each QP is first solved by its structure (`projection/lq.rs`: an interior-point method whose Newton
 /// steps are Riccati recursions over the horizon, about ten times faster than the general
 /// sparse solver); Clarabel solves it only when that gives up (no convergence, which is also
 /// what an infeasible problem gives: Clarabel then certifies it).

@@ -158,6 +158,10 @@ fn two_fractions_end_to_end_then_resumed() {
 
     let (header, rows) = csv_rows(&out_dir.join("scaling.csv"));
     assert_eq!(rows.len(), 2, "one row per fraction");
+    let hours_col = column(&header, "recorded_hours");
+    let hours: Vec<f64> = rows.iter().map(|r| r[hours_col].parse().unwrap()).collect();
+    // Fig. 5's x-axis: the recorded time of the chosen scenes, more for more scenes.
+    assert!(hours[0] > 0.0 && hours[0] < hours[1], "{hours:?}");
     let (f, sr, n, scenes, steps, model) = (
         column(&header, "fraction"),
         column(&header, "sr"),
@@ -180,8 +184,14 @@ fn two_fractions_end_to_end_then_resumed() {
     let png = std::fs::metadata(out_dir.join("fig5_sr_vs_training_data.png")).unwrap();
     assert!(png.len() > 1000, "figure of {} bytes", png.len());
     let report = std::fs::read_to_string(out_dir.join("report.md")).unwrap();
-    assert!(report.contains("| 50 % | 4 |"), "{report}");
-    assert!(report.contains("| 100 % | 8 |"), "{report}");
+    assert!(
+        report.contains(&format!("| 50 % | {:.2} | 4 |", hours[0])),
+        "{report}"
+    );
+    assert!(
+        report.contains(&format!("| 100 % | {:.2} | 8 |", hours[1])),
+        "{report}"
+    );
     for frac in ["frac-050", "frac-100"] {
         assert!(
             out_dir

@@ -4,7 +4,9 @@
 //! the flow model is retrained with the settings of the train config, then Human2Nav with
 //! guidance (the planner config with its `model` replaced) runs closed loop on one benchmark
 //! suite, and the success rates per fraction go into `scaling.csv`, `report.md` and
-//! `fig5_sr_vs_training_data.png`.
+//! `fig5_sr_vs_training_data.png`, plotted as in the paper against the hours of recorded human
+//! data trained on (the recorded time of the chosen scenes' tracks, from the cache manifest),
+//! with ±1 standard error shaded.
 //!
 //! [`run`] takes a [`ScalingRequest`] and the caller's [`MultiProgress`], and returns a
 //! [`ScalingOutcome`].
@@ -295,6 +297,8 @@ pub struct FractionResult {
     pub name: String,
     /// The training scenes chosen.
     pub scenes: Vec<String>,
+    /// Recorded time of those scenes' tracks, hours (the x-axis of Fig. 5, as in the paper).
+    pub recorded_hours: f64,
     /// Training tuples of the exported model (from its card; 0 when the card has no record).
     pub train_tuples: usize,
     /// Optimiser steps of the exported model (from its card).
@@ -367,6 +371,7 @@ struct TrainedModel {
     name: String,
     model_dir: PathBuf,
     scenes: Vec<String>,
+    recorded_hours: f64,
     stamp: Stamp,
     /// The model folder was complete and reused.
     complete: bool,
@@ -623,12 +628,18 @@ impl Setup {
         let name = fraction_name(fraction);
         let model_dir = self.out.join("models").join(&name);
         let run_dir = self.out.join("train").join(&name);
-        let scenes: Vec<String> = tr
+        let picked = tr
             .cache
-            .pick_scenes(Split::Train, fraction, tr.cfg.train.seed)?
-            .into_iter()
-            .map(|i| manifest.scenes[i as usize].name.clone())
+            .pick_scenes(Split::Train, fraction, tr.cfg.train.seed)?;
+        let scenes: Vec<String> = picked
+            .iter()
+            .map(|&i| manifest.scenes[i as usize].name.clone())
             .collect();
+        let recorded_hours = picked
+            .iter()
+            .map(|&i| manifest.scenes[i as usize].duration)
+            .sum::<f64>()
+            / 3600.0;
 
         stages.set_message(format!("training {name} ({} scenes)", scenes.len()));
         let stamp = Stamp {
@@ -692,6 +703,7 @@ impl Setup {
             name,
             model_dir,
             scenes,
+            recorded_hours,
             stamp,
             complete,
             train_stage_s,
@@ -799,6 +811,7 @@ impl Setup {
             training_time_s: info.map(|i| i.wall_time_s).unwrap_or(f64::NAN),
             name: model.name,
             scenes: model.scenes,
+            recorded_hours: model.recorded_hours,
             trained: !model.complete,
             measured,
             train_stage_s: model.train_stage_s,
@@ -843,7 +856,7 @@ impl Setup {
     ) -> anyhow::Result<ScalingOutcome> {
         let runs: Vec<(f64, Vec<ResultRow>)> = results
             .iter()
-            .map(|r| (r.fraction, r.rows.clone()))
+            .map(|r| (r.recorded_hours, r.rows.clone()))
             .collect();
         let points = scaling_points(&runs, &self.suite.name, METHOD);
         let png = self.out.join("fig5_sr_vs_training_data.png");
@@ -1024,7 +1037,7 @@ fn closed_loop(
 /// `scaling.csv`: one row per fraction (SR overall and per scenario class, over every robot).
 fn scaling_csv(results: &[FractionResult]) -> String {
     let mut out = String::from(
-        "fraction,train_scenes,train_tuples,steps,final_val_loss,episode_runs,sr,sr_se,\
+        "fraction,train_scenes,recorded_hours,train_tuples,steps,final_val_loss,episode_runs,sr,sr_se,\
          sr_co_flow,sr_cross_flow,sr_counter_flow,sr_multidirection_flow,tfs,collision_rate,\
          timeout_rate,model,closed_loop,training_time_s,train_stage_s,bench_stage_s\n",
     );
@@ -1043,9 +1056,10 @@ fn scaling_csv(results: &[FractionResult]) -> String {
             .collect();
         let _ = writeln!(
             out,
-            "{},{},{},{},{:.6},{},{:.6},{:.6},{},{:.6},{:.6},{:.6},{},{},{:.1},{:.1},{:.1}",
+            "{},{},{:.4},{},{},{:.6},{},{:.6},{:.6},{},{:.6},{:.6},{:.6},{},{},{:.1},{:.1},{:.1}",
             r.fraction,
             r.scenes.len(),
+            r.recorded_hours,
             r.train_tuples,
             r.steps,
             r.final_val_loss,
@@ -1124,8 +1138,9 @@ fn report_intro(md: &mut String, settings: &[(String, String)], quick: bool, wal
 /// rates.
 fn sr_table(md: &mut String, results: &[FractionResult]) {
     let _ = writeln!(md, "\n## SR per fraction of the training scenes\n");
-    let mut header = String::from("| training data | scenes | tuples | n | SR (%) |");
-    let mut rule = String::from("|---|---|---|---|---|");
+    let mut header =
+        String::from("| training data | recorded hours | scenes | tuples | n | SR (%) |");
+    let mut rule = String::from("|---|---|---|---|---|---|");
     for c in ScenarioClass::ALL {
         let _ = write!(header, " {} (%) |", c.title());
         rule.push_str("---|");
@@ -1136,8 +1151,9 @@ fn sr_table(md: &mut String, results: &[FractionResult]) {
     for r in results {
         let s = summarize(&r.rows);
         let mut line = format!(
-            "| {:.0} % | {} | {} | {} | {} ± {} |",
+            "| {:.0} % | {:.2} | {} | {} | {} | {} ± {} |",
             100.0 * r.fraction,
+            r.recorded_hours,
             r.scenes.len(),
             r.train_tuples,
             s.n,

@@ -456,21 +456,22 @@ fn data_scaling_points_and_figure() {
     let suites = [small_suite()];
     let robots = [robot("go2")];
     let sim = SimConfig::default();
-    // Three "trainings" stand in as three speeds of the straight baseline.
-    let runs: Vec<(f64, Vec<_>)> = [(0.1, 0.3), (0.5, 0.8), (1.0, 1.5)]
+    // Three "trainings" (on 0.4, 2 and 4 hours of data) stand in as three speeds of the
+    // straight baseline.
+    let runs: Vec<(f64, Vec<_>)> = [(0.4, 0.3), (2.0, 0.8), (4.0, 1.5)]
         .into_iter()
-        .map(|(fraction, speed)| {
+        .map(|(hours, speed)| {
             let table: toml::Table = toml::from_str(&format!("speed = {speed}")).unwrap();
             let methods = [MethodSpec::straight("m", &table).unwrap()];
             let rows =
                 run_bench(&suites, &robots, &methods, &sim, 1, &ProgressBar::hidden()).unwrap();
-            (fraction, rows)
+            (hours, rows)
         })
         .collect();
     let points = scaling_points(&runs, "hand", "m");
     assert_eq!(points.len(), 3 * 5);
     for p in &points {
-        let rows = &runs.iter().find(|(f, _)| *f == p.fraction).unwrap().1;
+        let rows = &runs.iter().find(|(h, _)| *h == p.hours).unwrap().1;
         let s = summarize(
             rows.iter()
                 .filter(|r| p.scenario.is_none_or(|c| r.scenario == c)),

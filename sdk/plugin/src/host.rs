@@ -662,19 +662,15 @@ impl VTable for H2nEmbodimentVTable {
         let Some(f) = self.coupled_limit else {
             return Ok(String::new());
         };
-        let mut out = H2nCoupledLimit::default();
-        // SAFETY: a live instance of this table (the caller's contract); valid output.
-        let status = unsafe { f(instance, &mut out) };
-        if status != H2N_OK {
-            return Err(format!("coupled_limit returned {}", status_name(status)));
-        }
-        match out.to_limit() {
+        // SAFETY: a live instance of this table (the caller's contract).
+        match unsafe { call_coupled_limit(f, instance) } {
             Ok(Some(c)) => Ok(format!(
                 "; coupled limit {:.4}·|v_x| + {:.4}·|v_y| + {:.4}·|ω| ≤ {:.4}",
                 c.v, c.lateral, c.omega, c.max
             )),
             Ok(None) => Ok("; no coupled limit".to_owned()),
-            Err((field, message)) => Err(format!("coupled_limit: {field} = {message}")),
+            Err(Ok(message)) => Err(message),
+            Err(Err(status)) => Err(format!("coupled_limit returned {}", status_name(status))),
         }
     }
     common_slots!();
@@ -1216,10 +1212,13 @@ impl PluginHost {
         };
         let coupled = match c.vtable.coupled_limit {
             // SAFETY: a live instance of this vtable.
-            Some(f) => unsafe { read_coupled_limit(f, &c.handle) }.map_err(|message| {
+            Some(f) => unsafe { call_coupled_limit(f, c.handle.ptr()) }.map_err(|e| {
+                let message = e.unwrap_or_else(|status| {
+                    format!("coupled_limit: {}", c.handle.failure(status))
+                });
                 PluginError::Malformed {
                     path: library.to_path_buf(),
-                    message: format!("embodiment `{plugin}`: coupled_limit: {message}"),
+                    message: format!("embodiment `{plugin}`: {message}"),
                 }
             })?,
             None => None,
@@ -1702,22 +1701,23 @@ struct EmbodimentFns {
 }
 
 /// Calls an embodiment's `coupled_limit` slot and checks what it wrote: `Ok(None)` when it left
-/// the output zeroed, an error naming the field for a bad value or the failure for a bad status.
+/// the output zeroed; `Err(Err(status))` for a failed call, `Err(Ok(message))` naming the field
+/// of a bad value.
 ///
 /// # Safety
-/// `handle` is a live instance of the vtable `f` came from.
-unsafe fn read_coupled_limit(
+/// `instance` is a live instance of the vtable `f` came from.
+unsafe fn call_coupled_limit(
     f: CoupledLimitFn,
-    handle: &Handle,
-) -> Result<Option<CoupledLimit>, String> {
+    instance: *mut c_void,
+) -> Result<Option<CoupledLimit>, Result<String, H2nStatus>> {
     let mut out = H2nCoupledLimit::default();
     // SAFETY: live instance (the caller's contract), valid output pointer.
-    let status = unsafe { f(handle.ptr(), &mut out) };
+    let status = unsafe { f(instance, &mut out) };
     if status != H2N_OK {
-        return Err(handle.failure(status));
+        return Err(Err(status));
     }
     out.to_limit()
-        .map_err(|(field, message)| format!("{field} = {message}"))
+        .map_err(|(field, message)| Ok(format!("coupled_limit: {field} = {message}")))
 }
 
 /// An embodiment living in a plugin library.

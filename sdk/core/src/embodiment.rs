@@ -191,8 +191,8 @@ pub fn plan_feedforward(plan: &Plan, t: f64, current: Twist2, h: f64) -> Twist2 
 /// * with a curvature limit, `|ω| ≤ max(κ_max, |κ_ff|)·sqrt(v_x² + ε_κ²)` (the curvature as
 ///   [`crate::tfs`] measures it, for the clipped `v_x`);
 /// * with a coupled limit `a·|v_x| + b·|v_y| + c·|ω| ≤ max`, the command's value at most
-///   `max(max, value of ff)`: `ω` gives way first, then `v_y` (changes of `v_x` are what the
-///   acceleration check sees).
+///   `max(max, value of ff)` as far as `ω` and then `v_y` can give way; `v_x` is left as the
+///   bounds above made it (its changes are what the acceleration check sees).
 ///
 /// Each interval contains the feed-forward, so a plan that asks for more than a limit still
 /// gets it, and is still counted against it by the executed TFS; a feasible plan is followed

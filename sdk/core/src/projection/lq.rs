@@ -97,7 +97,8 @@ pub(super) struct LqWorkspace {
     inv_s: Vec<f64>,
     lam: Vec<f64>,
     e: Vec<[f64; 3]>,
-    cu: Vec<f64>,
+    /// Per row, the weight of its coefficients in the Newton step's linear term.
+    y: Vec<f64>,
     rd: Vec<[f64; 3]>,
     rp: Vec<f64>,
     rc: Vec<f64>,
@@ -214,7 +215,7 @@ impl LqWorkspace {
             &mut self.s,
             &mut self.inv_s,
             &mut self.lam,
-            &mut self.cu,
+            &mut self.y,
             &mut self.rp,
             &mut self.rc,
             &mut self.ds,
@@ -339,19 +340,13 @@ fn step_length(ws: &LqWorkspace) -> f64 {
 /// adjoint recursion).
 fn residuals(p: &LqProblem<'_>, ws: &mut LqWorkspace) {
     let t = p.a.len();
-    let mut prev = [0.0; 3];
+    let mut x = [0.0; 4];
     for k in 0..t {
-        let (a, b, u) = (&p.a[k], &p.b[k], &ws.u[k]);
-        let mut e = [0.0; 3];
-        for r in 0..3 {
-            e[r] = (0..3).map(|c| a[r][c] * prev[c] + b[r][c] * u[c]).sum();
-        }
-        ws.e[k] = e;
-        prev = e;
+        x = step(&p.a[k], &p.b[k], &x, &ws.u[k]);
+        ws.e[k] = [x[0], x[1], x[2]];
     }
     for (i, r) in p.rows.iter().enumerate() {
-        ws.cu[i] = row_value(r, &ws.u);
-        ws.rp[i] = ws.cu[i] + ws.s[i] - r.b;
+        ws.rp[i] = row_value(r, &ws.u) + ws.s[i] - r.b;
         ws.inv_s[i] = 1.0 / ws.s[i];
     }
     // Co-state of e_k: c_k = W·e_k + q_k + A_{k+1}ᵀ·c_{k+1}; ∂f/∂u_k = ρ·u_k + B_kᵀ·c_k.
@@ -484,18 +479,11 @@ fn factor(p: &LqProblem<'_>, ws: &mut LqWorkspace) -> Result<(), LqError> {
 fn newton(p: &LqProblem<'_>, ws: &mut LqWorkspace) {
     let t = p.a.len();
     // g = r_d − Cᵀ((r_c − λ∘r_p)/s).
-    for k in 0..t {
-        ws.g[k] = ws.rd[k];
+    ws.g.copy_from_slice(&ws.rd);
+    for i in 0..p.rows.len() {
+        ws.y[i] = (ws.lam[i] * ws.rp[i] - ws.rc[i]) * ws.inv_s[i];
     }
-    for (i, r) in p.rows.iter().enumerate() {
-        let y = (ws.lam[i] * ws.rp[i] - ws.rc[i]) * ws.inv_s[i];
-        for c in 0..3 {
-            ws.g[r.stage][c] += r.u[c] * y;
-        }
-        if r.stage > 0 {
-            ws.g[r.stage - 1][0] += r.p * y;
-        }
-    }
+    add_ct(p.rows, &ws.y, &mut ws.g);
     // Backward: the value's linear term v (over the augmented state) and the feed-forward.
     let mut v = [0.0; 4];
     for k in (0..t).rev() {

@@ -205,7 +205,7 @@ fn build_methods(
             Some(spec) => methods.push(spec),
             None if m.kind == "human2nav" => methods.push(human2nav_method(m, cfg)?),
             None => bail!(
-                "method `{}`: unknown kind `{}` (this build knows `straight`, `plugin` and `human2nav`)",
+                "method `{}`: unknown kind `{}` (this build knows `straight`, `oracle`, `plugin` and `human2nav`)",
                 m.name,
                 m.kind
             ),

@@ -15,6 +15,7 @@ use crate::episode::{Episode, ScenarioClass};
 use crate::error::SimError;
 use crate::metrics::EpisodeMetrics;
 use crate::runner::{EpisodeRun, RobotSetup, SimConfig, run_episode_with};
+use crate::oracle::{OracleConfig, OraclePlanner};
 use crate::straight::{StraightConfig, StraightPlanner};
 use human2nav_core::Planner;
 use indicatif::ProgressBar;
@@ -94,6 +95,27 @@ impl MethodSpec {
     /// Builds the planner for one episode.
     pub fn make(&self, ctx: &PlannerContext<'_>) -> Result<Box<dyn Planner>, BoxError> {
         (self.make)(ctx)
+    }
+
+    /// The clairvoyant yardstick `oracle` ([`crate::oracle`]): it reads each episode's
+    /// recorded crowd. Keys of `table` override [`OracleConfig`]; `goal_tolerance` defaults to
+    /// the simulation's.
+    pub fn oracle(name: impl Into<String>, table: &toml::Table) -> Result<Self, BoxError> {
+        let base: OracleConfig = table.clone().try_into()?;
+        base.validate()?;
+        let has_tolerance = table.contains_key("goal_tolerance");
+        Ok(Self::new(name, move |ctx| {
+            let mut cfg = base.clone();
+            if !has_tolerance {
+                cfg.goal_tolerance = ctx.sim.goal_tolerance;
+            }
+            Ok(Box::new(OraclePlanner::new(
+                cfg,
+                ctx.robot.limits,
+                ctx.robot.footprint.clone(),
+                ctx.episode.clone(),
+            )?) as Box<dyn Planner>)
+        }))
     }
 
     /// The built-in `straight` baseline. Keys of `table` override [`StraightConfig`]; `speed`

@@ -11,7 +11,7 @@
 //!
 //! [[methods]]
 //! name = "orca"                                 # name in the report
-//! kind = "plugin"                               # straight | plugin | ... (human2nav: the experiments crate)
+//! kind = "plugin"                               # straight | oracle | plugin | ... (human2nav: the experiments crate)
 //! library = "target/{profile}/human2nav_orca"   # plugin library (kind = "plugin")
 //! plugin = "orca"                               # factory name in the library
 //! config = { time_horizon = 5.0 }               # passed to the method, kind-specific
@@ -714,6 +714,7 @@ pub fn load_robots_with(cfg: &BenchConfig, host: &PluginHost) -> Result<Vec<Robo
 /// Builds the methods whose kind the simulator knows without libtorch:
 ///
 /// * `straight`: [`MethodSpec::straight`] with the method's `config`;
+/// * `oracle`: [`MethodSpec::oracle`] (the clairvoyant yardstick) with the method's `config`;
 /// * `plugin`: a planner from the plugin library `library` (factory `plugin`, default the
 ///   method's name), created per episode through `host` with the robot's limits, gains and
 ///   footprint and the method's `config` as its TOML, its calls under the method's
@@ -740,6 +741,9 @@ fn builtin_planner(
     let section = || format!("methods[{}]", m.name);
     match m.kind.as_str() {
         "straight" => MethodSpec::straight(&m.name, &m.config)
+            .map(Some)
+            .map_err(|e| SimError::setting(section(), "config", e.to_string())),
+        "oracle" => MethodSpec::oracle(&m.name, &m.config)
             .map(Some)
             .map_err(|e| SimError::setting(section(), "config", e.to_string())),
         "plugin" => {

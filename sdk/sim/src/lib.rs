@@ -10,6 +10,7 @@
 //! * [`runner`]: the closed loop, collision/goal/budget rules ([`runner::SimConfig`]).
 //! * [`metrics`]: per-episode metrics.
 //! * [`straight`]: the straight-to-goal sanity baseline.
+//! * [`oracle`]: the clairvoyant yardstick (reads the recorded crowd's future).
 //! * [`bench`]: methods as planner factories, suites, the parallel deterministic runner.
 //! * [`config`]: the benchmark TOML and suite building.
 //! * [`report`], [`figures`]: `results.csv`, `report.md` and the PNGs; [`stats`]: the paired
@@ -26,6 +27,7 @@ pub mod episode;
 pub mod error;
 pub mod figures;
 pub mod metrics;
+pub mod oracle;
 pub mod plan_figure;
 pub mod replay;
 pub mod report;

@@ -1,0 +1,404 @@
+//! `oracle`: a clairvoyant reference planner. It reads the episode's recorded crowd, so in a
+//! replayed suite it knows where every pedestrian will be for the next seconds, and searches the
+//! robot's own motions for one that keeps clear of all of them.
+//!
+//! It is not a method to compare planners with but a yardstick for the suites: on a replayed
+//! crowd, which does not react to the robot, some collisions cannot be avoided at all (a
+//! pedestrian walking straight at a robot that cannot get out of the way in time), and the
+//! oracle's success rate estimates how many episodes can be solved with perfect prediction.
+//! It is a search over a finite set of motions, so it bounds the attainable success rate from
+//! below: an episode it fails may still have a solution outside its candidate set. In a reactive
+//! suite the crowd departs from its recording near the robot, so there its knowledge is only
+//! approximately right.
+//!
+//! Each call rolls out a set of two-segment motions from the robot's current pose and body
+//! velocity: for the first `switch_time` seconds the twist ramps (at `a_max`) toward one target
+//! of a grid, then toward a second one, up to `horizon` seconds. The grid spans forward speeds
+//! from `-v_reverse_max` to `v_max` (`speed_levels` values, 0 among them), turn fractions from
+//! −1 to 1 of the yaw rate the robot can use at that speed (`ω_max`, and `κ_max·|v|` for a car;
+//! `turn_levels` values) and, for an omnidirectional robot (lateral limit above a fifth of
+//! `v_max`), `lateral_levels` sideways speeds; a coupled limit scales the yaw rate, then the
+//! speeds, back inside it. Every pair of targets is tried, or `max_candidates` of them spread
+//! evenly over all pairs when there are more. Every rolled-out motion is within the robot's
+//! limits, so the simulator's tracking follows it closely.
+//!
+//! A motion is scored by its first contact: a pose whose footprint comes within `margin` of a
+//! pedestrian's disc (at that pose's time, from the recording) or of a static obstacle. Motions
+//! without contact beat every motion with one; among those, a later contact is better. Ties are
+//! broken by the closest approach to the goal along the motion (0 once within `goal_tolerance`,
+//! where the motion ends: no contact after it counts), then by how early it comes.
+
+use crate::episode::Episode;
+use crate::error::SimError;
+use crate::replay::CrowdReplay;
+use human2nav_core::obstacle::footprint_clearance;
+use human2nav_core::robot::footprint::{FootprintShape, clearance_at};
+use human2nav_core::{Limits, Observation, Plan, PlanError, PlanInfo, Planner, Pose2, Twist2};
+use serde::{Deserialize, Serialize};
+
+/// Settings of the clairvoyant planner.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OracleConfig {
+    /// How far ahead a motion is rolled out and checked (s). Default 4.
+    pub horizon: f64,
+    /// Spacing of the plan's poses (s). Default 0.1.
+    pub plan_dt: f64,
+    /// Duration of the first segment (s). Default 1.
+    pub switch_time: f64,
+    /// Forward speed targets per segment (at least 2). Default 7.
+    pub speed_levels: usize,
+    /// Turn targets per segment (odd, so that straight is one; at least 1). Default 7.
+    pub turn_levels: usize,
+    /// Sideways speed targets per segment for an omnidirectional robot (odd; at least 1).
+    /// Default 3.
+    pub lateral_levels: usize,
+    /// Clearance below which a pose counts as a contact (m). Default 0.05.
+    pub margin: f64,
+    /// Most motions rolled out per call. Default 3000.
+    pub max_candidates: usize,
+    /// A motion that comes this close to the goal ends there: contacts after it do not count
+    /// (m). Default 0.3; the benchmark sets its goal tolerance.
+    pub goal_tolerance: f64,
+}
+
+impl Default for OracleConfig {
+    fn default() -> Self {
+        Self {
+            horizon: 4.0,
+            plan_dt: 0.1,
+            switch_time: 1.0,
+            speed_levels: 7,
+            turn_levels: 7,
+            lateral_levels: 3,
+            margin: 0.05,
+            max_candidates: 3000,
+            goal_tolerance: 0.3,
+        }
+    }
+}
+
+/// Largest number of plan poses ([`OracleConfig::horizon`] / [`OracleConfig::plan_dt`]).
+pub const MAX_POSES: usize = 1000;
+
+/// Largest number of levels of one grid axis.
+pub const MAX_LEVELS: usize = 101;
+
+/// Largest [`OracleConfig::max_candidates`].
+pub const MAX_CANDIDATES: usize = 1_000_000;
+
+impl OracleConfig {
+    /// Checks every field; the error names the offending one.
+    pub fn validate(&self) -> Result<(), SimError> {
+        let bad = |field: &str, msg: String| Err(SimError::setting("oracle", field, msg));
+        for (field, v) in [
+            ("horizon", self.horizon),
+            ("plan_dt", self.plan_dt),
+            ("switch_time", self.switch_time),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(field, format!("must be finite and > 0, got {v}"));
+            }
+        }
+        for (field, v) in [("margin", self.margin), ("goal_tolerance", self.goal_tolerance)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(field, format!("must be finite and >= 0, got {v}"));
+            }
+        }
+        let poses = self.poses();
+        if !(2..=MAX_POSES).contains(&poses) {
+            return bad(
+                "horizon",
+                format!("horizon / plan_dt must give 1 to {} steps, got {poses} poses", MAX_POSES - 1),
+            );
+        }
+        if !(2..=MAX_LEVELS).contains(&self.speed_levels) {
+            return bad(
+                "speed_levels",
+                format!("must be in 2..={MAX_LEVELS}, got {}", self.speed_levels),
+            );
+        }
+        for (field, n) in [
+            ("turn_levels", self.turn_levels),
+            ("lateral_levels", self.lateral_levels),
+        ] {
+            if n % 2 == 0 || n > MAX_LEVELS {
+                return bad(field, format!("must be odd and at most {MAX_LEVELS}, got {n}"));
+            }
+        }
+        if !(1..=MAX_CANDIDATES).contains(&self.max_candidates) {
+            return bad(
+                "max_candidates",
+                format!("must be in 1..={MAX_CANDIDATES}, got {}", self.max_candidates),
+            );
+        }
+        Ok(())
+    }
+
+    /// Number of plan poses, `poses[0]` (the robot now) included.
+    fn poses(&self) -> usize {
+        (self.horizon / self.plan_dt).round() as usize + 1
+    }
+}
+
+/// One segment's target: forward speed, sideways speed and the turn as a fraction of the yaw
+/// rate the robot can use at its speed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Target {
+    vx: f64,
+    vy: f64,
+    turn: f64,
+}
+
+/// `n` values from `lo` to `hi`, evenly spaced (`n = 1`: the midpoint).
+fn levels(lo: f64, hi: f64, n: usize) -> Vec<f64> {
+    if n == 1 {
+        return vec![0.5 * (lo + hi)];
+    }
+    (0..n)
+        .map(|i| lo + (hi - lo) * i as f64 / (n - 1) as f64)
+        .collect()
+}
+
+/// The clairvoyant planner (name `oracle`) of one episode.
+#[derive(Clone, Debug)]
+pub struct OraclePlanner {
+    cfg: OracleConfig,
+    limits: Limits,
+    footprint: Vec<FootprintShape>,
+    /// Radius about the base-link origin that covers the footprint (broad phase).
+    cover: f64,
+    episode: Episode,
+    targets: Vec<Target>,
+}
+
+impl OraclePlanner {
+    /// The oracle of `episode` for a robot with `limits` and `footprint` (base-link frame).
+    pub fn new(
+        cfg: OracleConfig,
+        limits: Limits,
+        footprint: Vec<FootprintShape>,
+        episode: Episode,
+    ) -> Result<Self, SimError> {
+        cfg.validate()?;
+        if footprint.is_empty() {
+            return Err(SimError::setting("oracle", "footprint", "the robot has no footprint"));
+        }
+        let cover = footprint
+            .iter()
+            .map(FootprintShape::reach)
+            .fold(0.0, f64::max);
+        // Speeds: reverse (when the robot can), standstill, then forward up to v_max.
+        let mut speeds = Vec::with_capacity(cfg.speed_levels);
+        let forward = if limits.v_reverse_max > 0.0 && cfg.speed_levels >= 3 {
+            speeds.push(-limits.v_reverse_max);
+            cfg.speed_levels - 2
+        } else {
+            cfg.speed_levels - 1
+        };
+        speeds.push(0.0);
+        speeds.extend((1..=forward).map(|j| limits.v_max * j as f64 / forward as f64));
+        let holonomic = limits.lateral_speed_max > 0.2 * limits.v_max;
+        let laterals = if holonomic {
+            levels(-limits.lateral_speed_max, limits.lateral_speed_max, cfg.lateral_levels)
+        } else {
+            vec![0.0]
+        };
+        let turns = levels(-1.0, 1.0, cfg.turn_levels);
+        let mut targets = Vec::new();
+        for &vx in &speeds {
+            for &vy in &laterals {
+                for &turn in &turns {
+                    targets.push(Target { vx, vy, turn });
+                }
+            }
+        }
+        Ok(Self {
+            cfg,
+            limits,
+            footprint,
+            cover,
+            episode,
+            targets,
+        })
+    }
+
+    /// The twist one control step moves `now` to on the way to `target`: speeds ramp at
+    /// `a_max`, the yaw rate is the target's fraction of what the robot can use at the new
+    /// speed, and a coupled limit scales the twist back inside it.
+    fn step_twist(&self, now: Twist2, target: Target) -> Twist2 {
+        let l = &self.limits;
+        let dv = l.a_max * self.cfg.plan_dt;
+        let vx = now.vx + (target.vx - now.vx).clamp(-dv, dv);
+        let vy = now.vy + (target.vy - now.vy).clamp(-dv, dv);
+        let omega_cap = match l.kappa_max {
+            Some(k) => l.omega_max.min(k * vx.abs()),
+            None => l.omega_max,
+        };
+        let mut twist = Twist2 {
+            vx,
+            vy,
+            omega: target.turn * omega_cap,
+        };
+        if let Some(c) = l.coupled {
+            let value = c.value(twist.vx, twist.vy, twist.omega);
+            if value > c.max {
+                // The yaw rate gives way first, then the speeds.
+                let linear = c.value(twist.vx, twist.vy, 0.0);
+                if linear < c.max && c.omega > 0.0 {
+                    twist.omega = twist.omega.signum() * (c.max - linear) / c.omega;
+                } else {
+                    twist.omega = 0.0;
+                    let s = if linear > 0.0 { c.max / linear } else { 0.0 };
+                    twist.vx *= s;
+                    twist.vy *= s;
+                }
+            }
+        }
+        twist
+    }
+
+    /// Rolls out the motion toward `first` then `second` into `poses` (`poses[0]` is the robot).
+    fn rollout(&self, obs: &Observation, first: Target, second: Target, poses: &mut Vec<Pose2>) {
+        let n = self.cfg.poses();
+        let switch = (self.cfg.switch_time / self.cfg.plan_dt).round().max(1.0) as usize;
+        poses.clear();
+        poses.push(obs.ego);
+        let mut twist = obs.ego_velocity;
+        let mut pose = obs.ego;
+        for k in 1..n {
+            let target = if k <= switch { first } else { second };
+            twist = self.step_twist(twist, target);
+            pose = pose.euler_step(twist, self.cfg.plan_dt);
+            poses.push(pose);
+        }
+    }
+
+    /// Index of the first pose of `poses` up to `last` that touches a pedestrian or an
+    /// obstacle (`crowd[k]`: the pedestrians at pose `k`'s time).
+    fn first_contact(
+        &self,
+        obs: &Observation,
+        crowd: &[Vec<([f64; 2], f64)>],
+        poses: &[Pose2],
+        last: usize,
+    ) -> Option<usize> {
+        let margin = self.cfg.margin;
+        (1..=last.min(poses.len() - 1)).find(|&k| {
+            let p = poses[k];
+            let hits_person = crowd[k].iter().any(|&(q, r)| {
+                let reach = self.cover + r + margin;
+                let (dx, dy) = (q[0] - p.x, q[1] - p.y);
+                dx * dx + dy * dy < reach * reach && clearance_at(&self.footprint, p, q, r) < margin
+            });
+            hits_person
+                || obs
+                    .obstacles
+                    .iter()
+                    .any(|o| footprint_clearance(&self.footprint, p, o) < margin)
+        })
+    }
+}
+
+/// A motion's score: lower is better (module docs).
+#[derive(Clone, Copy, Debug, PartialEq, PartialOrd)]
+struct Score {
+    /// 0 without contact, else `1 / (index of the first contact)`.
+    contact: f64,
+    /// Closest distance to the goal along the motion (m).
+    goal_distance: f64,
+    /// Index of that pose.
+    when: usize,
+}
+
+impl Planner for OraclePlanner {
+    fn name(&self) -> &str {
+        "oracle"
+    }
+
+    fn plan(&mut self, obs: &Observation) -> Result<Plan, PlanError> {
+        obs.validate()?;
+        let n = self.cfg.poses();
+        // Where everybody will be at each pose's time, from the recording.
+        let replay = CrowdReplay::new(&self.episode);
+        let crowd: Vec<Vec<([f64; 2], f64)>> = (0..n)
+            .map(|k| {
+                let t = obs.time + k as f64 * self.cfg.plan_dt;
+                replay
+                    .at(t)
+                    .into_iter()
+                    .map(|s| (s.position, s.radius))
+                    .collect()
+            })
+            .collect();
+        let m = self.targets.len();
+        let pairs = m * m;
+        let count = pairs.min(self.cfg.max_candidates);
+        // Spread `count` pairs evenly over all of them: a stride coprime with their number.
+        let stride = if count == pairs {
+            1
+        } else {
+            let mut s = pairs / count;
+            while gcd(s, pairs) != 1 {
+                s += 1;
+            }
+            s
+        };
+        let mut poses = Vec::with_capacity(n);
+        let mut best: Option<(Score, Vec<Pose2>)> = None;
+        for i in 0..count {
+            let pair = (i * stride) % pairs;
+            let (first, second) = (self.targets[pair / m], self.targets[pair % m]);
+            self.rollout(obs, first, second, &mut poses);
+            let distance = |p: &Pose2| (p.x - obs.goal[0]).hypot(p.y - obs.goal[1]);
+            // A motion that arrives ends there (distance 0 from then on); else its closest
+            // approach counts.
+            let (when, goal_distance) =
+                match poses.iter().position(|p| distance(p) <= self.cfg.goal_tolerance) {
+                    Some(k) => (k, 0.0),
+                    None => poses
+                        .iter()
+                        .enumerate()
+                        .map(|(k, p)| (k, distance(p)))
+                        .min_by(|a, b| a.1.total_cmp(&b.1))
+                        .unwrap_or((0, f64::INFINITY)),
+                };
+            let last = if goal_distance == 0.0 { when } else { n - 1 };
+            let contact = self
+                .first_contact(obs, &crowd, &poses, last)
+                .map_or(0.0, |k| 1.0 / k as f64);
+            let score = Score {
+                contact,
+                goal_distance,
+                when,
+            };
+            if best.as_ref().is_none_or(|(b, _)| score < *b) {
+                best = Some((score, poses.clone()));
+            }
+        }
+        let (score, poses) = best.ok_or_else(|| PlanError::Failed {
+            planner: "oracle".into(),
+            message: "no candidate motions".into(),
+        })?;
+        let mut info = PlanInfo::default();
+        if score.contact > 0.0 {
+            info.notes.push(format!(
+                "every motion touches someone; the first contact is {:.1} s away at best",
+                self.cfg.plan_dt / score.contact
+            ));
+        }
+        Ok(Plan {
+            t0: obs.time,
+            dt: self.cfg.plan_dt,
+            poses,
+            info,
+        })
+    }
+}
+
+fn gcd(mut a: usize, mut b: usize) -> usize {
+    while b != 0 {
+        (a, b) = (b, a % b);
+    }
+    a
+}

@@ -1,0 +1,117 @@
+//! The clairvoyant yardstick: feasible plans, avoidance of what the recording holds, the note
+//! when nothing avoids it, and settings errors that name the field.
+
+mod common;
+
+use common::{episode, robot, robots, walking};
+use human2nav_core::tfs::tfs_plan;
+use human2nav_core::{Observation, Planner, Pose2, Twist2};
+use human2nav_sim::episode::ScenarioClass;
+use human2nav_sim::oracle::{OracleConfig, OraclePlanner};
+use human2nav_sim::straight::{StraightConfig, StraightPlanner};
+use human2nav_sim::{MethodSpec, Outcome, SimConfig, run_episode};
+use std::f64::consts::PI;
+
+fn oracle_for(r: &human2nav_sim::RobotSetup, ep: &human2nav_sim::episode::Episode) -> OraclePlanner {
+    OraclePlanner::new(
+        OracleConfig::default(),
+        r.limits,
+        r.footprint.clone(),
+        ep.clone(),
+    )
+    .expect("valid oracle")
+}
+
+#[test]
+fn the_oracle_reaches_empty_world_goals_with_feasible_plans() {
+    let cfg = SimConfig::default();
+    for r in robots() {
+        for k in 0..4 {
+            let a = 2.0 * PI * k as f64 / 4.0 + 0.3;
+            let mut ep = episode("empty", ScenarioClass::CoFlow, 0.0, vec![]);
+            ep.goal = [5.0 * a.cos(), 5.0 * a.sin()];
+            let mut oracle = oracle_for(&r, &ep);
+            // Its first plan is within the robot's limits from rest.
+            let obs = Observation {
+                ego: ep.start,
+                goal: ep.goal,
+                ..Default::default()
+            };
+            let plan = oracle.plan(&obs).unwrap();
+            let local: Vec<Pose2> = plan.poses.iter().map(|p| ep.start.between(*p)).collect();
+            assert_eq!(tfs_plan(&local, plan.dt, &r.limits, Twist2::ZERO), 1.0, "{}", r.name);
+            let run = run_episode(&ep, &r, &mut oracle, &cfg);
+            assert_eq!(run.outcome, Outcome::Success, "{} toward {a:.2} rad", r.name);
+            assert!(run.planner_errors.is_empty());
+        }
+    }
+}
+
+#[test]
+fn the_oracle_avoids_a_walker_that_straight_runs_into() {
+    let cfg = SimConfig::default();
+    for r in robots() {
+        // Head-on along the robot's line, from beyond the goal at 1.2 m/s.
+        let ep = episode(
+            "head-on",
+            ScenarioClass::CounterFlow,
+            0.0,
+            vec![walking(7, [7.0, 0.0], [-1.2, 0.0], 200)],
+        );
+        let straight = StraightPlanner::new(StraightConfig {
+            speed: r.limits.v_max,
+            accel: r.limits.a_max,
+            ..StraightConfig::default()
+        })
+        .unwrap();
+        let run = run_episode(&ep, &r, &mut { straight }, &cfg);
+        assert_eq!(run.outcome, Outcome::Collision, "{}: straight", r.name);
+        let run = run_episode(&ep, &r, &mut oracle_for(&r, &ep), &cfg);
+        assert_eq!(run.outcome, Outcome::Success, "{}: oracle", r.name);
+        assert!(run.clearance.iter().all(|&c| c > 0.0));
+    }
+}
+
+#[test]
+fn a_closing_ring_leaves_no_motion_and_the_plan_says_so() {
+    let r = robot("diablo");
+    // Twelve people converge on the robot from 2 m at 1.5 m/s: everyone meets within 1.3 s.
+    let ring = (0..12)
+        .map(|i| {
+            let a = 2.0 * PI * i as f64 / 12.0;
+            walking(i, [2.0 * a.cos(), 2.0 * a.sin()], [-1.5 * a.cos(), -1.5 * a.sin()], 40)
+        })
+        .collect();
+    let ep = episode("ring", ScenarioClass::MultidirectionFlow, 0.0, ring);
+    let obs = Observation {
+        ego: ep.start,
+        goal: ep.goal,
+        ..Default::default()
+    };
+    let plan = oracle_for(&r, &ep).plan(&obs).unwrap();
+    assert!(plan.is_finite());
+    assert!(
+        plan.info.notes.iter().any(|n| n.starts_with("every motion touches someone")),
+        "{:?}",
+        plan.info.notes
+    );
+}
+
+#[test]
+fn bad_oracle_settings_name_the_field() {
+    for (table, field) in [
+        ("horizon = 0.0", "horizon"),
+        ("turn_levels = 4", "turn_levels"),
+        ("speed_levels = 1", "speed_levels"),
+        ("margin = -1.0", "margin"),
+        ("max_candidates = 0", "max_candidates"),
+        ("horizon = 1000.0", "horizon"),
+    ] {
+        let t: toml::Table = toml::from_str(table).unwrap();
+        let err = MethodSpec::oracle("oracle", &t).unwrap_err().to_string();
+        assert!(err.contains(field), "{table}: {err}");
+    }
+    let t: toml::Table = toml::from_str("horizons = 3.0").unwrap();
+    let err = MethodSpec::oracle("oracle", &t).unwrap_err().to_string();
+    assert!(err.contains("horizons"), "{err}");
+}

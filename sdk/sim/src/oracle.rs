@@ -12,7 +12,8 @@
 //! approximately right.
 //!
 //! Each call rolls out a set of two-segment motions from the robot's current pose and body
-//! velocity: for the first `switch_time` seconds the twist ramps (at `a_max`) toward one target
+//! velocity: for the first `switch_time` seconds the twist ramps (at `a_max`; segment means, so
+//! the first lies `a_max·dt/2` from the current speed) toward one target
 //! of a grid, then toward a second one, up to `horizon` seconds. The grid spans forward speeds
 //! from `-v_reverse_max` to `v_max` (`speed_levels` values, 0 among them), turn fractions from
 //! −1 to 1 of the yaw rate the robot can use at that speed (`ω_max`, and `κ_max·|v|` for a car;
@@ -21,6 +22,10 @@
 //! speeds, back inside it. Every pair of targets is tried, or `max_candidates` of them spread
 //! evenly over all pairs when there are more. Every rolled-out motion is within the robot's
 //! limits, so the simulator's tracking follows it closely.
+//!
+//! With `prediction = "constant_velocity"` the same search sees only what a planner sees: the
+//! pedestrians of the observation, each extrapolated at its observed velocity. The two settings
+//! separate what prediction is worth from what the search over motions is worth.
 //!
 //! A motion is scored by its first contact: a pose whose footprint comes within `margin` of a
 //! pedestrian's disc (at that pose's time, from the recording) or of a static obstacle. Motions
@@ -36,10 +41,23 @@ use human2nav_core::robot::footprint::{FootprintShape, clearance_at};
 use human2nav_core::{Limits, Observation, Plan, PlanError, PlanInfo, Planner, Pose2, Twist2};
 use serde::{Deserialize, Serialize};
 
+/// Where the search takes the pedestrians' future from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Prediction {
+    /// The episode's recording (exact in a replayed crowd): the oracle.
+    #[default]
+    Recorded,
+    /// The observed pedestrians at their observed velocities: what a planner can know.
+    ConstantVelocity,
+}
+
 /// Settings of the clairvoyant planner.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct OracleConfig {
+    /// Where the pedestrians' future comes from. Default `recorded`.
+    pub prediction: Prediction,
     /// How far ahead a motion is rolled out and checked (s). Default 4.
     pub horizon: f64,
     /// Spacing of the plan's poses (s). Default 0.1.
@@ -65,6 +83,7 @@ pub struct OracleConfig {
 impl Default for OracleConfig {
     fn default() -> Self {
         Self {
+            prediction: Prediction::Recorded,
             horizon: 4.0,
             plan_dt: 0.1,
             switch_time: 1.0,
@@ -170,6 +189,8 @@ pub struct OraclePlanner {
     cover: f64,
     episode: Episode,
     targets: Vec<Target>,
+    /// Lateral limit above a fifth of `v_max`: sideways targets are searched.
+    holonomic: bool,
 }
 
 impl OraclePlanner {
@@ -220,15 +241,19 @@ impl OraclePlanner {
             cover,
             episode,
             targets,
+            holonomic,
         })
     }
 
     /// The twist one control step moves `now` to on the way to `target`: speeds ramp at
-    /// `a_max`, the yaw rate is the target's fraction of what the robot can use at the new
+    /// `a_max` (half a step for the first segment), the yaw rate is the target's fraction of what the robot can use at the new
     /// speed, and a coupled limit scales the twist back inside it.
-    fn step_twist(&self, now: Twist2, target: Target) -> Twist2 {
+    fn step_twist(&self, now: Twist2, target: Target, first: bool) -> Twist2 {
         let l = &self.limits;
-        let dv = l.a_max * self.cfg.plan_dt;
+        // A segment's twist is its mean: along a ramp at a_max the means differ by a_max·dt,
+        // and the first one lies a_max·dt/2 from the current speed (what the tracking
+        // controller's feed-forward needs to stay within a_max across replanning).
+        let dv = l.a_max * self.cfg.plan_dt * if first { 0.5 } else { 1.0 };
         let vx = now.vx + (target.vx - now.vx).clamp(-dv, dv);
         let vy = now.vy + (target.vy - now.vy).clamp(-dv, dv);
         let omega_cap = match l.kappa_max {
@@ -265,10 +290,13 @@ impl OraclePlanner {
         poses.clear();
         poses.push(obs.ego);
         let mut twist = obs.ego_velocity;
+        if !self.holonomic {
+            twist.vy = 0.0;
+        }
         let mut pose = obs.ego;
         for k in 1..n {
             let target = if k <= switch { first } else { second };
-            twist = self.step_twist(twist, target);
+            twist = self.step_twist(twist, target, k == 1);
             pose = pose.euler_step(twist, self.cfg.plan_dt);
             poses.push(pose);
         }
@@ -313,22 +341,35 @@ struct Score {
 
 impl Planner for OraclePlanner {
     fn name(&self) -> &str {
-        "oracle"
+        match self.cfg.prediction {
+            Prediction::Recorded => "oracle",
+            Prediction::ConstantVelocity => "search-cv",
+        }
     }
 
     fn plan(&mut self, obs: &Observation) -> Result<Plan, PlanError> {
         obs.validate()?;
         let n = self.cfg.poses();
-        // Where everybody will be at each pose's time, from the recording.
+        // Where everybody will be at each pose's time.
         let replay = CrowdReplay::new(&self.episode);
         let crowd: Vec<Vec<([f64; 2], f64)>> = (0..n)
             .map(|k| {
-                let t = obs.time + k as f64 * self.cfg.plan_dt;
-                replay
-                    .at(t)
-                    .into_iter()
-                    .map(|s| (s.position, s.radius))
-                    .collect()
+                let dt = k as f64 * self.cfg.plan_dt;
+                match self.cfg.prediction {
+                    Prediction::Recorded => replay
+                        .at(obs.time + dt)
+                        .into_iter()
+                        .map(|s| (s.position, s.radius))
+                        .collect(),
+                    Prediction::ConstantVelocity => obs
+                        .agents
+                        .iter()
+                        .map(|a| {
+                            let p = a.position;
+                            ([p[0] + a.velocity[0] * dt, p[1] + a.velocity[1] * dt], a.radius)
+                        })
+                        .collect(),
+                }
             })
             .collect();
         let m = self.targets.len();

@@ -7,9 +7,11 @@ use common::{episode, robot, robots, walking};
 use human2nav_core::tfs::tfs_plan;
 use human2nav_core::{Observation, Planner, Pose2, Twist2};
 use human2nav_sim::episode::ScenarioClass;
-use human2nav_sim::oracle::{OracleConfig, OraclePlanner};
+use human2nav_sim::oracle::{OracleConfig, OraclePlanner, Prediction};
+use human2nav_core::robot::footprint::clearance_at;
+use human2nav_sim::episode::AgentTrack;
 use human2nav_sim::straight::{StraightConfig, StraightPlanner};
-use human2nav_sim::{MethodSpec, Outcome, SimConfig, run_episode};
+use human2nav_sim::{EpisodeMetrics, MethodSpec, Outcome, SimConfig, run_episode};
 use std::f64::consts::PI;
 
 fn oracle_for(r: &human2nav_sim::RobotSetup, ep: &human2nav_sim::episode::Episode) -> OraclePlanner {
@@ -43,6 +45,10 @@ fn the_oracle_reaches_empty_world_goals_with_feasible_plans() {
             let run = run_episode(&ep, &r, &mut oracle, &cfg);
             assert_eq!(run.outcome, Outcome::Success, "{} toward {a:.2} rad", r.name);
             assert!(run.planner_errors.is_empty());
+            // Across replanning too: the commands the tracking controller sent are within the
+            // limits (segment means that ramp from the current speed).
+            let m = EpisodeMetrics::compute(&run, &r.limits);
+            assert!(m.tfs_executed >= 0.99, "{}: executed TFS {}", r.name, m.tfs_executed);
         }
     }
 }
@@ -114,4 +120,43 @@ fn bad_oracle_settings_name_the_field() {
     let t: toml::Table = toml::from_str("horizons = 3.0").unwrap();
     let err = MethodSpec::oracle("oracle", &t).unwrap_err().to_string();
     assert!(err.contains("horizons"), "{err}");
+}
+
+#[test]
+fn the_constant_velocity_search_knows_only_the_observation() {
+    let r = robot("diablo");
+    // Somebody steps onto the line at (2.5, 0) 1.5 s in and stays: not yet in the observation.
+    let late = AgentTrack {
+        id: 9,
+        start_step: 15,
+        positions: vec![[2.5, 0.0]; 100],
+        radius: 0.3,
+    };
+    let ep = episode("late", ScenarioClass::CrossFlow, 0.0, vec![late]);
+    let obs = Observation {
+        ego: ep.start,
+        goal: ep.goal,
+        ..Default::default()
+    };
+    let closest = |prediction: Prediction| {
+        let cfg = OracleConfig {
+            prediction,
+            ..OracleConfig::default()
+        };
+        let mut p = OraclePlanner::new(cfg, r.limits, r.footprint.clone(), ep.clone()).unwrap();
+        let plan = p.plan(&obs).unwrap();
+        // Closest approach to the late pedestrian once it is there.
+        plan.poses[15..]
+            .iter()
+            .map(|q| clearance_at(&r.footprint, *q, [2.5, 0.0], 0.3))
+            .fold(f64::INFINITY, f64::min)
+    };
+    assert!(closest(Prediction::Recorded) >= 0.05);
+    assert!(closest(Prediction::ConstantVelocity) < 0.0, "it cannot know");
+    let cfg = OracleConfig {
+        prediction: Prediction::ConstantVelocity,
+        ..OracleConfig::default()
+    };
+    let p = OraclePlanner::new(cfg, r.limits, r.footprint.clone(), ep).unwrap();
+    assert_eq!(p.name(), "search-cv");
 }

@@ -81,8 +81,8 @@ pub struct PlanArgs {
     /// Output PNG [default: out/plan/<robot>-<episode index>.png under the workspace root].
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Measure planning latency: this many timed calls, guided and unguided, over the first
-    /// windows of the episode file (p50/p95 and where the time goes).
+    /// Measure planning latency: this many timed calls per guidance-ablation arm (raw, qp,
+    /// alg1+qp), over the first windows of the episode file (p50/p95 and where the time goes).
     #[arg(long, value_name = "CALLS")]
     pub bench: Option<usize>,
     /// Planning budget of a call in milliseconds (overrides the configuration's `budget_ms`):
@@ -588,13 +588,14 @@ fn bench(
         None => vec![Backend::Torch, Backend::Native],
     };
     println!(
-        "planning latency: {} ({} windows), model {}, one thread, K = {}, N = {}, M ≤ {}, guided samples {}",
+        "planning latency: {} ({} windows), model {}, one thread, K = {}, N = {}, M ≤ {} (alg1+qp: {}), guided samples {}",
         robot.display(),
         wins.len(),
         model_dir.display(),
         cfg.human2nav.samples,
         cfg.human2nav.guidance.steps_n,
         cfg.human2nav.guidance.iterations_m,
+        Arm::Both.settings(&cfg.human2nav).guidance.iterations_m,
         cfg.human2nav.guided_samples
     );
     let card = human2nav_flow::ModelCard::load(&model_dir.join(human2nav_flow::model::CARD_FILE))?;
@@ -611,12 +612,17 @@ fn bench(
         "| mode | backend | calls | p50 (ms) | p95 (ms) | mean (ms) | network calls (fwd + VJP) | network (ms) | rest (ms) | MFLOP/call | limit (ms) | p50 / limit |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
-    for guided in [false, true] {
+    // The ablation's arms that change the call's cost: no guidance stage, the correction alone
+    // and Algorithm 1 + correction (its M = 3 when the configuration runs no iterations).
+    for arm in [Arm::Raw, Arm::Qp, Arm::Both] {
+        let settings = arm.settings(&cfg.human2nav);
+        let mode = if settings == cfg.human2nav {
+            format!("{} (configured)", arm.key())
+        } else {
+            arm.key().to_string()
+        };
         for &backend in &backends {
-            let mut settings = cfg.human2nav;
-            settings.guidance.enabled = guided;
             let (mut planner, stats) = timed_planner(robot, model_dir, backend, settings)?;
-            let mode = if guided { "guided" } else { "unguided" };
             let pb = bar(calls, &format!("{mode} calls ({backend})"));
             let lock = || {
                 stats
@@ -653,7 +659,9 @@ fn bench(
         }
     }
     println!(
-        "per call: network = flow-network calls (the condition encoding included in the first); rest = everything \
+        "modes: the guidance ablation's arms (raw = no guidance stage; qp = shortlist, slowed and stop candidates \
+         and the last-step correction; alg1+qp = Algorithm 1's iterations before it). \
+         per call: network = flow-network calls (the condition encoding included in the first); rest = everything \
          else (BEV, sampling arithmetic, Φ, adjoint, last-step correction QPs, selection). MFLOP/call counts the \
          network's convolutions (a VJP is its forward pass plus the transposed products); limit = MFLOP/call at \
          the SGEMM rate above, so p50 / limit is how far a call is from the machine's arithmetic bound."

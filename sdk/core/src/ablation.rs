@@ -5,13 +5,18 @@
 //! |---|---|---|
 //! | [`Arm::Raw`] | off | off (the planner without guidance: selection among all `K` samples) |
 //! | [`Arm::Alg1`] | on | off |
-//! | [`Arm::Qp`] | on with `M = 0` (shortlist, slowed and stop candidates, no iteration) | on |
-//! | [`Arm::Both`] | on | on (the shipped planner) |
+//! | [`Arm::Qp`] | on with `M = 0` (shortlist, slowed and stop candidates, no iteration) | on (the shipped planner) |
+//! | [`Arm::Both`] | on | on |
+//!
+//! "On" runs the configured `iterations_m`, or Algorithm 1's tuned default
+//! ([`GuidanceSettings::default`]) when the configured planner runs none, as the shipped one
+//! does.
 //!
 //! [`ablation_step`] plans one observation with one planner per arm, each reset first so that
 //! no warm start carries over; with the same seed every arm draws the same source samples, so
 //! the differences are the stages' alone. [`ArmSummary`] aggregates the steps of one arm.
 
+use crate::guidance::GuidanceSettings;
 use crate::human2nav::Human2NavSettings;
 use crate::limits::Limits;
 use crate::planner::{Observation, Plan, PlanError, Planner};
@@ -57,9 +62,13 @@ impl Arm {
     }
 
     /// `base` (the configured planner) with this arm's stages switched on or off; every other
-    /// setting is kept, so the arms differ in the stages alone.
+    /// setting is kept, so the arms differ in the stages alone. Algorithm 1 "on" with a base of
+    /// `iterations_m = 0` runs [`GuidanceSettings::default`]'s iterations.
     pub fn settings(self, base: &Human2NavSettings) -> Human2NavSettings {
         let mut s = *base;
+        if s.guidance.iterations_m == 0 && matches!(self, Arm::Alg1 | Arm::Both) {
+            s.guidance.iterations_m = GuidanceSettings::default().iterations_m;
+        }
         match self {
             Arm::Raw => {
                 s.guidance.enabled = false;
@@ -334,16 +343,26 @@ mod tests {
         let base = Human2NavSettings::default();
         let raw = Arm::Raw.settings(&base);
         assert!(!raw.guidance.enabled && !raw.projection.enabled);
+        // The shipped planner runs no Algorithm 1 iterations: it is the QP arm, and the arms
+        // with Algorithm 1 run its tuned count.
+        assert_eq!(base.guidance.iterations_m, 0);
+        assert_eq!(Arm::Qp.settings(&base), base);
+        let tuned = GuidanceSettings::default().iterations_m;
+        assert!(tuned > 0);
         let alg1 = Arm::Alg1.settings(&base);
         assert!(alg1.guidance.enabled && !alg1.projection.enabled);
-        assert_eq!(alg1.guidance.iterations_m, base.guidance.iterations_m);
-        let qp = Arm::Qp.settings(&base);
-        assert!(qp.guidance.enabled && qp.projection.enabled);
-        assert_eq!(qp.guidance.iterations_m, 0);
+        assert_eq!(alg1.guidance.iterations_m, tuned);
         let both = Arm::Both.settings(&base);
         assert!(both.guidance.enabled && both.projection.enabled);
+        assert_eq!(both.guidance.iterations_m, tuned);
         assert_eq!(both.samples, base.samples);
         assert_eq!(both.selection, base.selection);
+        // A configured count is kept by the arms that run Algorithm 1 and dropped by QP only.
+        let mut five = base;
+        five.guidance.iterations_m = 5;
+        assert_eq!(Arm::Alg1.settings(&five).guidance.iterations_m, 5);
+        assert_eq!(Arm::Both.settings(&five).guidance.iterations_m, 5);
+        assert_eq!(Arm::Qp.settings(&five).guidance.iterations_m, 0);
     }
 
     #[test]

@@ -251,8 +251,10 @@ impl Default for PaperSettings {
 
 /// Parameters of Algorithm 1 (TOML table, every field optional).
 ///
-/// Defaults: the shipped planner's (`sdk/configs/planner.toml`, where the measurements behind
-/// them are): `variant = "adaptive"`, `enabled = true`, `steps_n = 5`, `iterations_m = 3`,
+/// Defaults: Algorithm 1 as tuned for the shipped planner (`sdk/configs/planner.toml`, where the
+/// measurements behind them are; the planner itself ships with `iterations_m = 0`, see
+/// [`Human2NavSettings`](crate::Human2NavSettings)): `variant = "adaptive"`, `enabled = true`,
+/// `steps_n = 5`, `iterations_m = 3`,
 /// `learning_rate = 0.1`, `momentum = 1.0`, `clip = 10.0`, `tolerance = 0.01`,
 /// `precondition = false` (on the trained model every preconditioned update raised Φ),
 /// `adaptive_step = true`, `last_step_iterations = 0`, `last_step_rate = 0.01`, and the
@@ -307,8 +309,9 @@ pub struct GuidanceSettings {
 /// hang.
 pub const MAX_STEPS_N: usize = 1000;
 
-/// Largest number of guidance iterations `M` ([`GuidanceSettings::iterations_m`]); the planner
-/// uses 3 (the default). Each iteration costs `2N` network calls (see [`MAX_STEPS_N`]).
+/// Largest number of guidance iterations `M` ([`GuidanceSettings::iterations_m`]); Algorithm 1
+/// as tuned uses 3 (the default), the shipped planner 0. Each iteration costs `2N` network calls
+/// (see [`MAX_STEPS_N`]).
 pub const MAX_ITERATIONS_M: usize = 1000;
 
 /// Largest number of last-step iterations ([`GuidanceSettings::last_step_iterations`]). One

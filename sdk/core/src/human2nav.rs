@@ -165,6 +165,8 @@ pub struct Human2NavSettings {
     pub budget_ms: f64,
     /// Algorithm 1's parameters; `guidance.enabled = false` is the "w/o guidance" ablation
     /// (it also turns the last-step correction and the slowed, stop and goal candidates off).
+    /// Default: [`GuidanceSettings::default`] with `iterations_m = 0` (the shortlist and the
+    /// extra candidates without Algorithm 1's iterations, as `planner.toml` ships).
     pub guidance: GuidanceSettings,
     /// The exact last-step correction applied after Algorithm 1 ([`crate::projection`]).
     pub projection: ProjectionSettings,
@@ -185,7 +187,14 @@ impl Default for Human2NavSettings {
             stop_candidate: true,
             goal_approach: 1.0,
             budget_ms: 0.0,
-            guidance: GuidanceSettings::default(),
+            // Algorithm 1's iterations are off in the shipped planner: on the validation suite
+            // the correction alone succeeded more often (ARCHITECTURE.md, "The guidance
+            // ablation"); the guidance stage still shortlists and offers slowed and stop
+            // candidates.
+            guidance: GuidanceSettings {
+                iterations_m: 0,
+                ..GuidanceSettings::default()
+            },
             projection: ProjectionSettings::default(),
             selection: SelectionWeights::default(),
         }

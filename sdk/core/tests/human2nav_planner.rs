@@ -4,6 +4,7 @@
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] functions unwrap too
 
 use approx::assert_relative_eq;
+use human2nav_core::ablation::Arm;
 use human2nav_core::bev::BevSpec;
 use human2nav_core::constraint::Phi;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
@@ -191,7 +192,7 @@ fn the_default_pipeline_guides_a_shortlist_and_ends_feasible() {
 
 #[test]
 fn the_paper_variant_guides_every_sample() {
-    let mut settings = Human2NavSettings::default();
+    let mut settings = Arm::Both.settings(&Human2NavSettings::default());
     settings.guidance.variant = GuidanceVariant::Paper;
     assert_eq!(settings.guided_samples, 4);
     let mut p = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings).unwrap();
@@ -585,13 +586,15 @@ fn calls_without_deadline(settings: Human2NavSettings) -> usize {
 fn a_deadline_anywhere_in_the_call_gives_a_feasible_plan_and_no_late_network_call() {
     let obs = observation();
     let tfs = |p: &[Pose2]| tfs_plan(&ego_frame(p, obs.ego), 0.1, &limits(), obs.ego_velocity);
-    let mut paper = Human2NavSettings::default();
+    // The shipped planner (no Algorithm 1 iterations), and Algorithm 1 on in both variants.
+    let alg1 = Arm::Both.settings(&Human2NavSettings::default());
+    let mut paper = alg1;
     paper.guidance.variant = GuidanceVariant::Paper;
     let no_stop = Human2NavSettings {
         stop_candidate: false,
-        ..Default::default()
+        ..alg1
     };
-    for settings in [Human2NavSettings::default(), paper, no_stop] {
+    for settings in [Human2NavSettings::default(), alg1, paper, no_stop] {
         let n = settings.guidance.steps_n;
         let total = calls_without_deadline(settings);
         // N plain steps, then M iterations of N VJPs (N − 1 when μ_0 is not needed) and N

@@ -1,6 +1,8 @@
-//! Latency of one Human2Nav planning call (BEV, K samples, guidance, selection) with and
-//! without guidance, with the network run natively and by libtorch (one thread by default):
-//! `plan/{guided,unguided}/{native,torch}`. Before the timings it prints each configuration's
+//! Latency of one Human2Nav planning call (BEV, K samples, guidance, selection) for the
+//! guidance ablation's arms that change its cost (`raw`: no guidance stage; `qp`: the shipped
+//! planner, shortlist and last-step correction; `alg1+qp`: Algorithm 1's iterations before the
+//! correction), with the network run natively and by libtorch (one thread by default):
+//! `plan/{raw,qp,alg1+qp}/{native,torch}`. Before the timings it prints each configuration's
 //! network operations per call, this machine's single-thread SGEMM rate and the resulting
 //! lower bound on a call's time, so the criterion medians can be read as ratios to it.
 //!
@@ -15,6 +17,7 @@
 //! `human2nav plan --bench <calls>` reports p50/p95 and the time split on the same setup.
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use human2nav_core::ablation::Arm;
 use human2nav_core::human2nav::Human2NavSettings;
 use human2nav_core::{AgentState, Observation, Planner, Pose2, Twist2};
 use human2nav_data::{Episode, EpisodeSuite, ScenarioClass};
@@ -27,6 +30,9 @@ use human2nav_flow::{CfmModel, NetConfig, Normalisation};
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use tch::Device;
+
+/// The arms timed, in table order.
+const ARMS: [Arm; 3] = [Arm::Raw, Arm::Qp, Arm::Both];
 
 fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -124,9 +130,8 @@ fn bench_planning(c: &mut Criterion) {
             .map(|c| c.human2nav)
             .unwrap_or_default();
     let peak = human2nav_flow::native::sgemm_gflops(512, 21);
-    for guided in [false, true] {
-        let mut settings = base;
-        settings.guidance.enabled = guided;
+    for arm in ARMS {
+        let settings = arm.settings(&base);
         let model = load_model(&dir, Backend::Native).expect("model");
         let macs = Complexity::of(&model.card().net).unet_macs;
         let bev = human2nav_flow::planner::bev_spec(model.card()).0;
@@ -147,7 +152,7 @@ fn bench_planning(c: &mut Criterion) {
         let flops = stats.lock().expect("stats").network_flops(macs) / obs.len() as f64;
         eprintln!(
             "plan/{}: {:.0} MFLOP of network per call; single-thread SGEMM {peak:.1} GFLOP/s; limit {:.2} ms",
-            if guided { "guided" } else { "unguided" },
+            arm.key(),
             flops / 1e6,
             flops / (peak * 1e9) * 1e3
         );
@@ -156,15 +161,13 @@ fn bench_planning(c: &mut Criterion) {
     group
         .sample_size(20)
         .measurement_time(std::time::Duration::from_secs(10));
-    for guided in [false, true] {
+    for arm in ARMS {
         for backend in [Backend::Native, Backend::Torch] {
-            let mut settings = base;
-            settings.guidance.enabled = guided;
+            let settings = arm.settings(&base);
             let model = load_model(&dir, backend).expect("model");
             let mut rp = RobotPlanner::new(profile.clone(), model, settings).expect("planner");
             let mut i = 0usize;
-            let mode = if guided { "guided" } else { "unguided" };
-            let name = format!("{mode}/{backend}");
+            let name = format!("{}/{backend}", arm.key());
             group.bench_function(name, |b| {
                 b.iter(|| {
                     rp.planner.reset();

@@ -786,10 +786,13 @@ mod tests {
     fn planner_from_profile_and_model_folder() {
         let dir = small_model_dir("e2e");
         let robot = workspace().join("robots/diablo/robot.toml");
-        let settings = Human2NavSettings {
+        // Algorithm 1's iterations on (the shipped planner runs none), so that its plumbing
+        // and call counts are exercised.
+        let settings = Arm::Both.settings(&Human2NavSettings {
             samples: 6,
             ..Human2NavSettings::default()
-        };
+        });
+        assert!(settings.guidance.iterations_m > 0);
         let mut guided = RobotPlanner::load(&robot, &dir, settings).unwrap();
         assert_eq!(guided.profile.name, "diablo");
         assert_eq!(guided.bev.cells, 16);

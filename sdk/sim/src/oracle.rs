@@ -119,7 +119,10 @@ impl OracleConfig {
                 return bad(field, format!("must be finite and > 0, got {v}"));
             }
         }
-        for (field, v) in [("margin", self.margin), ("goal_tolerance", self.goal_tolerance)] {
+        for (field, v) in [
+            ("margin", self.margin),
+            ("goal_tolerance", self.goal_tolerance),
+        ] {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(field, format!("must be finite and >= 0, got {v}"));
             }
@@ -128,7 +131,10 @@ impl OracleConfig {
         if !(2..=MAX_POSES).contains(&poses) {
             return bad(
                 "horizon",
-                format!("horizon / plan_dt must give 1 to {} steps, got {poses} poses", MAX_POSES - 1),
+                format!(
+                    "horizon / plan_dt must give 1 to {} steps, got {poses} poses",
+                    MAX_POSES - 1
+                ),
             );
         }
         if !(2..=MAX_LEVELS).contains(&self.speed_levels) {
@@ -142,13 +148,19 @@ impl OracleConfig {
             ("lateral_levels", self.lateral_levels),
         ] {
             if n % 2 == 0 || n > MAX_LEVELS {
-                return bad(field, format!("must be odd and at most {MAX_LEVELS}, got {n}"));
+                return bad(
+                    field,
+                    format!("must be odd and at most {MAX_LEVELS}, got {n}"),
+                );
             }
         }
         if !(1..=MAX_CANDIDATES).contains(&self.max_candidates) {
             return bad(
                 "max_candidates",
-                format!("must be in 1..={MAX_CANDIDATES}, got {}", self.max_candidates),
+                format!(
+                    "must be in 1..={MAX_CANDIDATES}, got {}",
+                    self.max_candidates
+                ),
             );
         }
         Ok(())
@@ -203,7 +215,11 @@ impl OraclePlanner {
     ) -> Result<Self, SimError> {
         cfg.validate()?;
         if footprint.is_empty() {
-            return Err(SimError::setting("oracle", "footprint", "the robot has no footprint"));
+            return Err(SimError::setting(
+                "oracle",
+                "footprint",
+                "the robot has no footprint",
+            ));
         }
         let cover = footprint
             .iter()
@@ -221,7 +237,11 @@ impl OraclePlanner {
         speeds.extend((1..=forward).map(|j| limits.v_max * j as f64 / forward as f64));
         let holonomic = limits.lateral_speed_max > 0.2 * limits.v_max;
         let laterals = if holonomic {
-            levels(-limits.lateral_speed_max, limits.lateral_speed_max, cfg.lateral_levels)
+            levels(
+                -limits.lateral_speed_max,
+                limits.lateral_speed_max,
+                cfg.lateral_levels,
+            )
         } else {
             vec![0.0]
         };
@@ -366,7 +386,10 @@ impl Planner for OraclePlanner {
                         .iter()
                         .map(|a| {
                             let p = a.position;
-                            ([p[0] + a.velocity[0] * dt, p[1] + a.velocity[1] * dt], a.radius)
+                            (
+                                [p[0] + a.velocity[0] * dt, p[1] + a.velocity[1] * dt],
+                                a.radius,
+                            )
                         })
                         .collect(),
                 }
@@ -394,16 +417,18 @@ impl Planner for OraclePlanner {
             let distance = |p: &Pose2| (p.x - obs.goal[0]).hypot(p.y - obs.goal[1]);
             // A motion that arrives ends there (distance 0 from then on); else its closest
             // approach counts.
-            let (when, goal_distance) =
-                match poses.iter().position(|p| distance(p) <= self.cfg.goal_tolerance) {
-                    Some(k) => (k, 0.0),
-                    None => poses
-                        .iter()
-                        .enumerate()
-                        .map(|(k, p)| (k, distance(p)))
-                        .min_by(|a, b| a.1.total_cmp(&b.1))
-                        .unwrap_or((0, f64::INFINITY)),
-                };
+            let (when, goal_distance) = match poses
+                .iter()
+                .position(|p| distance(p) <= self.cfg.goal_tolerance)
+            {
+                Some(k) => (k, 0.0),
+                None => poses
+                    .iter()
+                    .enumerate()
+                    .map(|(k, p)| (k, distance(p)))
+                    .min_by(|a, b| a.1.total_cmp(&b.1))
+                    .unwrap_or((0, f64::INFINITY)),
+            };
             let last = if goal_distance == 0.0 { when } else { n - 1 };
             let contact = self
                 .first_contact(obs, &crowd, &poses, last)

@@ -4,17 +4,20 @@
 mod common;
 
 use common::{episode, robot, robots, walking};
+use human2nav_core::robot::footprint::clearance_at;
 use human2nav_core::tfs::tfs_plan;
 use human2nav_core::{Observation, Planner, Pose2, Twist2};
+use human2nav_sim::episode::AgentTrack;
 use human2nav_sim::episode::ScenarioClass;
 use human2nav_sim::oracle::{OracleConfig, OraclePlanner, Prediction};
-use human2nav_core::robot::footprint::clearance_at;
-use human2nav_sim::episode::AgentTrack;
 use human2nav_sim::straight::{StraightConfig, StraightPlanner};
 use human2nav_sim::{EpisodeMetrics, MethodSpec, Outcome, SimConfig, run_episode};
 use std::f64::consts::PI;
 
-fn oracle_for(r: &human2nav_sim::RobotSetup, ep: &human2nav_sim::episode::Episode) -> OraclePlanner {
+fn oracle_for(
+    r: &human2nav_sim::RobotSetup,
+    ep: &human2nav_sim::episode::Episode,
+) -> OraclePlanner {
     OraclePlanner::new(
         OracleConfig::default(),
         r.limits,
@@ -41,14 +44,29 @@ fn the_oracle_reaches_empty_world_goals_with_feasible_plans() {
             };
             let plan = oracle.plan(&obs).unwrap();
             let local: Vec<Pose2> = plan.poses.iter().map(|p| ep.start.between(*p)).collect();
-            assert_eq!(tfs_plan(&local, plan.dt, &r.limits, Twist2::ZERO), 1.0, "{}", r.name);
+            assert_eq!(
+                tfs_plan(&local, plan.dt, &r.limits, Twist2::ZERO),
+                1.0,
+                "{}",
+                r.name
+            );
             let run = run_episode(&ep, &r, &mut oracle, &cfg);
-            assert_eq!(run.outcome, Outcome::Success, "{} toward {a:.2} rad", r.name);
+            assert_eq!(
+                run.outcome,
+                Outcome::Success,
+                "{} toward {a:.2} rad",
+                r.name
+            );
             assert!(run.planner_errors.is_empty());
             // Across replanning too: the commands the tracking controller sent are within the
             // limits (segment means that ramp from the current speed).
             let m = EpisodeMetrics::compute(&run, &r.limits);
-            assert!(m.tfs_executed >= 0.99, "{}: executed TFS {}", r.name, m.tfs_executed);
+            assert!(
+                m.tfs_executed >= 0.99,
+                "{}: executed TFS {}",
+                r.name,
+                m.tfs_executed
+            );
         }
     }
 }
@@ -85,7 +103,12 @@ fn a_closing_ring_leaves_no_motion_and_the_plan_says_so() {
     let ring = (0..12)
         .map(|i| {
             let a = 2.0 * PI * i as f64 / 12.0;
-            walking(i, [2.0 * a.cos(), 2.0 * a.sin()], [-1.5 * a.cos(), -1.5 * a.sin()], 40)
+            walking(
+                i,
+                [2.0 * a.cos(), 2.0 * a.sin()],
+                [-1.5 * a.cos(), -1.5 * a.sin()],
+                40,
+            )
         })
         .collect();
     let ep = episode("ring", ScenarioClass::MultidirectionFlow, 0.0, ring);
@@ -97,7 +120,10 @@ fn a_closing_ring_leaves_no_motion_and_the_plan_says_so() {
     let plan = oracle_for(&r, &ep).plan(&obs).unwrap();
     assert!(plan.is_finite());
     assert!(
-        plan.info.notes.iter().any(|n| n.starts_with("every motion touches someone")),
+        plan.info
+            .notes
+            .iter()
+            .any(|n| n.starts_with("every motion touches someone")),
         "{:?}",
         plan.info.notes
     );
@@ -152,7 +178,10 @@ fn the_constant_velocity_search_knows_only_the_observation() {
             .fold(f64::INFINITY, f64::min)
     };
     assert!(closest(Prediction::Recorded) >= 0.05);
-    assert!(closest(Prediction::ConstantVelocity) < 0.0, "it cannot know");
+    assert!(
+        closest(Prediction::ConstantVelocity) < 0.0,
+        "it cannot know"
+    );
     let cfg = OracleConfig {
         prediction: Prediction::ConstantVelocity,
         ..OracleConfig::default()

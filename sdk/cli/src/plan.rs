@@ -81,8 +81,9 @@ pub struct PlanArgs {
     /// Output PNG [default: out/plan/<robot>-<episode index>.png under the workspace root].
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Measure planning latency: this many timed calls per guidance-ablation arm (raw, qp,
-    /// alg1+qp), over the first windows of the episode file (p50/p95 and where the time goes).
+    /// Measure planning latency: this many timed calls of the configured planner and of the
+    /// guidance-ablation arms raw, qp and alg1+qp, over the first windows of the episode file
+    /// (p50/p95 and where the time goes).
     #[arg(long, value_name = "CALLS")]
     pub bench: Option<usize>,
     /// Planning budget of a call in milliseconds (overrides the configuration's `budget_ms`):
@@ -612,15 +613,14 @@ fn bench(
         "| mode | backend | calls | p50 (ms) | p95 (ms) | mean (ms) | network calls (fwd + VJP) | network (ms) | rest (ms) | MFLOP/call | limit (ms) | p50 / limit |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
-    // The ablation's arms that change the call's cost: no guidance stage, the correction alone
-    // and Algorithm 1 + correction (its M = 3 when the configuration runs no iterations).
-    for arm in [Arm::Raw, Arm::Qp, Arm::Both] {
-        let settings = arm.settings(&cfg.human2nav);
-        let mode = if settings == cfg.human2nav {
-            format!("{} (configured)", arm.key())
-        } else {
-            arm.key().to_string()
-        };
+    // The configured planner, then the ablation's arms that change the call's cost: no
+    // guidance stage, the correction alone and Algorithm 1 + correction (its M = 3 when the
+    // configuration runs no iterations), each without the robot's own motions.
+    let modes = std::iter::once(("configured".to_string(), cfg.human2nav)).chain(
+        [Arm::Raw, Arm::Qp, Arm::Both]
+            .map(|arm| (arm.key().to_string(), arm.settings(&cfg.human2nav))),
+    );
+    for (mode, settings) in modes {
         for &backend in &backends {
             let (mut planner, stats) = timed_planner(robot, model_dir, backend, settings)?;
             let pb = bar(calls, &format!("{mode} calls ({backend})"));
@@ -659,8 +659,9 @@ fn bench(
         }
     }
     println!(
-        "modes: the guidance ablation's arms (raw = no guidance stage; qp = shortlist, slowed and stop candidates \
-         and the last-step correction; alg1+qp = Algorithm 1's iterations before it). \
+        "modes: the configured planner, and the guidance ablation's arms without the robot's own motions (raw = no \
+         guidance stage; qp = shortlist, slowed and stop candidates and the last-step correction; alg1+qp = \
+         Algorithm 1's iterations before it). \
          per call: network = flow-network calls (the condition encoding included in the first); rest = everything \
          else (BEV, sampling arithmetic, Φ, adjoint, last-step correction QPs, selection). MFLOP/call counts the \
          network's convolutions (a VJP is its forward pass plus the transposed products); limit = MFLOP/call at \

@@ -5,9 +5,11 @@
 //! |---|---|---|
 //! | [`Arm::Raw`] | off | off (the planner without guidance: selection among all `K` samples) |
 //! | [`Arm::Alg1`] | on | off |
-//! | [`Arm::Qp`] | on with `M = 0` (shortlist, slowed and stop candidates, no iteration) | on (the shipped planner) |
+//! | [`Arm::Qp`] | on with `M = 0` (shortlist, slowed and stop candidates, no iteration) | on (the shipped planner, bar its own motions) |
 //! | [`Arm::Both`] | on | on |
 //!
+//! No arm offers the robot's own motions (`Human2NavSettings::motions`, a lever of the
+//! selection, not a guidance stage), so the shipped planner is `qp` plus those motions.
 //! "On" runs the configured `iterations_m`, or Algorithm 1's tuned default
 //! ([`GuidanceSettings::default`]) when the configured planner runs none, as the shipped one
 //! does.
@@ -66,6 +68,9 @@ impl Arm {
     /// `iterations_m = 0` runs [`GuidanceSettings::default`]'s iterations.
     pub fn settings(self, base: &Human2NavSettings) -> Human2NavSettings {
         let mut s = *base;
+        // The arms measure the guidance stages on the model's samples: the robot's own motions
+        // (a separate lever of the selection) are off in every arm.
+        s.motions = 0;
         if s.guidance.iterations_m == 0 && matches!(self, Arm::Alg1 | Arm::Both) {
             s.guidance.iterations_m = GuidanceSettings::default().iterations_m;
         }
@@ -346,7 +351,12 @@ mod tests {
         // The shipped planner runs no Algorithm 1 iterations: it is the QP arm, and the arms
         // with Algorithm 1 run its tuned count.
         assert_eq!(base.guidance.iterations_m, 0);
-        assert_eq!(Arm::Qp.settings(&base), base);
+        assert!(base.motions > 0);
+        assert_eq!(
+            Arm::Qp.settings(&base),
+            Human2NavSettings { motions: 0, ..base }
+        );
+        assert!(Arm::ALL.iter().all(|a| a.settings(&base).motions == 0));
         let tuned = GuidanceSettings::default().iterations_m;
         assert!(tuned > 0);
         let alg1 = Arm::Alg1.settings(&base);

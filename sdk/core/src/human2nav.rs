@@ -44,7 +44,11 @@
 //! for one to pass, and in the benchmark's counter- and co-flows the robot otherwise drove into
 //! pedestrians it had predicted. Within [`Human2NavSettings::goal_approach`] of the goal it
 //! also sees "straight to the goal" ([`goal_approach`]): the model, trained on goals metres
-//! away, walks past one that close, and the robot circled it until its time ran out.
+//! away, walks past one that close, and the robot circled it until its time ran out. With
+//! [`Human2NavSettings::motions`] it also sees that many of the robot's own motions
+//! ([`crate::motions`]: backing off, sidestepping, turning away, waiting), which are within the
+//! limits as they are and skip the correction: the model proposes ways forward among people,
+//! rarely a way out of someone's path.
 //!
 //! # Planning under a deadline
 //! [`Planner::plan_within`] (or [`Planner::plan`] with [`Human2NavSettings::budget_ms`] set)
@@ -76,6 +80,7 @@ use crate::guidance::{
     self, GuidanceError, GuidanceResult, GuidanceSettings, GuidanceVariant, GuidanceWorkspace,
 };
 use crate::limits::Limits;
+use crate::motions::{GridLevels, MotionGrid};
 use crate::obstacle::{self, Obstacle};
 use crate::planner::{
     AgentState, Deadline, Observation, Plan, PlanError, PlanInfo, Planner, Stage, StageProgress,
@@ -128,6 +133,13 @@ impl Default for SelectionWeights {
 /// an error rather than an allocation of gigabytes.
 pub const MAX_SAMPLES: usize = 1024;
 
+/// Largest [`Human2NavSettings::motions`]: each is scored against every agent at every
+/// waypoint, and the grid has 2,401 (a car) to 21,609 (go2) pairs.
+pub const MAX_MOTIONS: usize = 25_000;
+
+/// Duration of a motion's first segment (s) ([`crate::motions`]).
+pub const MOTION_SWITCH_S: f64 = 1.0;
+
 /// Largest [`Human2NavSettings::budget_ms`]: a minute is no planning budget but a typo.
 pub const MAX_BUDGET_MS: f64 = 60_000.0;
 
@@ -159,6 +171,13 @@ pub struct Human2NavSettings {
     /// to it at half of `v_max`, stopping there ([`goal_approach`]). The model's samples walk
     /// past a goal that close (it was trained on goals metres away). 0: never. Default 1.
     pub goal_approach: f64,
+    /// Also offer this many of the robot's own motions ([`crate::motions`]: two-segment twist
+    /// profiles within its limits, spread evenly over the grid) to the selection, beside the
+    /// model's samples: backing off, sidestepping, turning away and waiting, which the model,
+    /// trained on people walking to a goal, rarely proposes. 0: none (at most
+    /// [`MAX_MOTIONS`]). Default 500 (`planner.toml` says which validation run chose it). A
+    /// call whose deadline has passed offers none.
+    pub motions: usize,
     /// Time budget of one [`Planner::plan`] call in milliseconds (0: none). The call then
     /// returns the best plan found within it (module docs, "Planning under a deadline").
     /// [`Planner::plan_within`] takes a deadline per call instead. Default 0.
@@ -186,6 +205,7 @@ impl Default for Human2NavSettings {
             slowdown: 0.5,
             stop_candidate: true,
             goal_approach: 1.0,
+            motions: 500,
             budget_ms: 0.0,
             // Algorithm 1's iterations are off in the shipped planner: on the validation suite
             // the correction alone succeeded more often (ARCHITECTURE.md, "The guidance
@@ -238,6 +258,12 @@ impl Human2NavSettings {
         }
         if !(self.goal_approach.is_finite() && self.goal_approach >= 0.0) {
             return bad("goal_approach", "must be finite and ≥ 0");
+        }
+        if self.motions > MAX_MOTIONS {
+            return bad(
+                "motions",
+                &format!("must be at most {MAX_MOTIONS}, got {}", self.motions),
+            );
         }
         if !(self.budget_ms.is_finite() && (0.0..=MAX_BUDGET_MS).contains(&self.budget_ms)) {
             return bad(
@@ -298,6 +324,8 @@ pub struct Human2Nav<M> {
     /// The static obstacles near the robot in the ego frame of the current call (explicit ones
     /// and occupied grid cells), for the selection.
     obstacles: Vec<Obstacle>,
+    /// The robot's own motions offered to the selection ([`Human2NavSettings::motions`]).
+    motion_grid: MotionGrid,
 }
 
 impl<M> std::fmt::Debug for Human2Nav<M> {
@@ -340,6 +368,7 @@ impl<M: FlowModel> Human2Nav<M> {
             raster: vec![0.0; bev.len()],
             obstacles: Vec::new(),
             rng: ChaCha8Rng::seed_from_u64(settings.seed),
+            motion_grid: MotionGrid::new(robot.limits, GridLevels::default()),
             model,
             robot,
             bev,
@@ -500,6 +529,14 @@ impl<M: FlowModel> Human2Nav<M> {
                     &mut notes,
                 );
             }
+            // The robot's own motions are within its limits as they are: no correction. Not
+            // after the deadline: scoring them takes milliseconds.
+            if stages.cut_short.is_none() && !deadline.passed() {
+                self.push_motions(obs.ego_velocity, horizon, &mut candidates, &mut origin);
+            }
+            if !corrected.is_empty() {
+                corrected.resize(candidates.len(), true);
+            }
         } else {
             candidates = unguided.clone();
             origin = (0..unguided.len()).map(Source::Sample).collect();
@@ -655,6 +692,26 @@ impl<M: FlowModel> Human2Nav<M> {
         }
     }
 
+    /// [`Human2NavSettings::motions`] of the robot's own motions from its velocity `v0`, ego
+    /// frame, `horizon` poses each.
+    fn push_motions(
+        &self,
+        v0: Twist2,
+        horizon: usize,
+        candidates: &mut Vec<Vec<Pose2>>,
+        origin: &mut Vec<Source>,
+    ) {
+        let dt = self.settings.dt;
+        let switch = ((MOTION_SWITCH_S / dt).round() as usize).max(1);
+        let mut poses = Vec::with_capacity(horizon);
+        for pair in self.motion_grid.spread(self.settings.motions) {
+            self.motion_grid
+                .rollout(Pose2::IDENTITY, v0, pair, switch, dt, horizon, &mut poses);
+            candidates.push(poses.clone());
+            origin.push(Source::Motion);
+        }
+    }
+
     /// The plan of the chosen candidate in the world frame, with its diagnostics: the samples
     /// before and after guidance, Φ of the kept sample and the notes.
     fn assemble_plan(
@@ -700,6 +757,7 @@ impl<M: FlowModel> Human2Nav<M> {
             Source::Stop => notes.push("braking to a stop".into()),
             Source::Goal => notes.push("straight to the goal".into()),
             Source::Previous => notes.push("kept the previous plan".into()),
+            Source::Motion => notes.push("one of the robot's own motions".into()),
         }
         let guided: Vec<Vec<Pose2>> = if guidance.enabled {
             candidates
@@ -960,6 +1018,8 @@ enum Source {
     Goal,
     /// The previous plan, shifted to now (the warm start).
     Previous,
+    /// One of the robot's own motions ([`Human2NavSettings::motions`]).
+    Motion,
 }
 
 impl Source {
@@ -967,7 +1027,7 @@ impl Source {
     fn sample(self) -> Option<usize> {
         match self {
             Source::Sample(i) | Source::Slowed(i) => Some(i),
-            Source::Stop | Source::Goal | Source::Previous => None,
+            Source::Stop | Source::Goal | Source::Previous | Source::Motion => None,
         }
     }
 }

@@ -32,6 +32,7 @@ pub mod human2nav;
 pub mod input;
 pub mod limits;
 pub mod lock;
+pub mod motions;
 pub mod obstacle;
 pub mod planner;
 pub mod projection;

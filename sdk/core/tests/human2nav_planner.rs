@@ -158,6 +158,7 @@ fn tfs_pair(guided: &mut Human2Nav<HumanFuture>) -> (f64, f64, f64, f64, usize) 
 fn algorithm_1_alone_makes_an_infeasible_human_trajectory_feasible() {
     let mut settings = Human2NavSettings {
         guided_samples: 0,
+        motions: 0,
         ..Default::default()
     };
     settings.projection.enabled = false;
@@ -416,11 +417,13 @@ fn predicted_gap(plan: &[Pose2], obs: &Observation) -> f64 {
 fn a_pedestrian_in_the_way_makes_the_planner_stop_instead_of_driving_into_them() {
     let obs = blocked();
     // Without the slowed copies and the stop candidate every candidate drives straight at
-    // the model's pace (corrected to v_max): through the pedestrian.
+    // the model's pace (corrected to v_max): through the pedestrian. (The robot's own motions
+    // are off here; `the_robots_own_motions_steer_round_what_the_samples_run_into` has them.)
     let mut only_samples = Human2NavSettings {
         slowdown: 1.0,
         stop_candidate: false,
         warm_start: false,
+        motions: 0,
         ..Default::default()
     };
     only_samples.guidance.enabled = true;
@@ -430,8 +433,15 @@ fn a_pedestrian_in_the_way_makes_the_planner_stop_instead_of_driving_into_them()
         .unwrap();
     let gap_through = predicted_gap(&through.poses, &obs);
     assert!(gap_through < 0.0, "gap {gap_through}");
-    // With them (the default), the planner brakes in front of the pedestrian.
-    let stops = planner(true).plan(&obs).unwrap();
+    // With them, the planner brakes in front of the pedestrian.
+    let with_stop = Human2NavSettings {
+        motions: 0,
+        ..Default::default()
+    };
+    let stops = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), with_stop)
+        .unwrap()
+        .plan(&obs)
+        .unwrap();
     let gap = predicted_gap(&stops.poses, &obs);
     assert!(gap > 0.0, "gap {gap}; notes {:?}", stops.info.notes);
     assert!(
@@ -464,8 +474,10 @@ fn a_goal_close_by_is_approached_directly() {
         ..Default::default()
     };
     let end_gap = |approach: f64| {
+        // The robot's own motions off: some of them end near the goal too.
         let settings = Human2NavSettings {
             goal_approach: approach,
+            motions: 0,
             ..Human2NavSettings::default()
         };
         let mut p = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings).unwrap();
@@ -786,4 +798,71 @@ fn a_wall_or_an_occupied_grid_column_across_the_way_stops_the_plan_short_of_it()
     }
     let err = planner(true).plan(&broken).unwrap_err().to_string();
     assert!(err.contains("occupancy: data holds"), "{err}");
+}
+
+#[test]
+fn the_robots_own_motions_steer_round_what_the_samples_run_into() {
+    // Somebody stands 2 m straight ahead, where every sample of the model goes.
+    let ego = Pose2::new(0.0, 0.0, 0.0);
+    let obs = Observation {
+        time: 0.0,
+        ego,
+        ego_velocity: Twist2::new(0.5, 0.0, 0.0),
+        goal: [6.0, 0.0],
+        agents: vec![AgentState {
+            id: 1,
+            position: [2.0, 0.0],
+            velocity: [0.0, 0.0],
+            radius: 0.3,
+            history: vec![],
+        }],
+        ..Default::default()
+    };
+    let plan_with = |motions: usize| {
+        let settings = Human2NavSettings {
+            motions,
+            ..Human2NavSettings::default()
+        };
+        let mut p = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings).unwrap();
+        p.plan(&obs).unwrap()
+    };
+    let progress = |plan: &human2nav_core::Plan| plan.poses.last().unwrap().x;
+    let clear = |plan: &human2nav_core::Plan| {
+        plan.poses
+            .iter()
+            .all(|q| (q.x - 2.0).hypot(q.y) > ROBOT_RADIUS + 0.3)
+    };
+    // Without them the planner can only slow down or stop in front of the person.
+    let without = plan_with(0);
+    assert!(
+        clear(&without) && progress(&without) < 1.5,
+        "{:?}",
+        without.info.notes
+    );
+    // With them it goes round, within the limits, and says where the plan came from.
+    let with = plan_with(500);
+    assert!(clear(&with), "{:?}", with.poses);
+    assert!(
+        progress(&with) > progress(&without) + 0.5,
+        "{} against {}",
+        progress(&with),
+        progress(&without)
+    );
+    assert!(
+        with.info
+            .notes
+            .iter()
+            .any(|n| n == "one of the robot's own motions"),
+        "{:?}",
+        with.info.notes
+    );
+    let local = ego_frame(&with.poses, ego);
+    assert_eq!(tfs_plan(&local, 0.1, &limits(), obs.ego_velocity), 1.0);
+    // A count beyond the bound is an error naming the field.
+    let settings = Human2NavSettings {
+        motions: human2nav_core::human2nav::MAX_MOTIONS + 1,
+        ..Human2NavSettings::default()
+    };
+    let err = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings).unwrap_err();
+    assert!(err.to_string().contains("motions"), "{err}");
 }

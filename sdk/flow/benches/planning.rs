@@ -1,8 +1,8 @@
 //! Latency of one Human2Nav planning call (BEV, K samples, guidance, selection) for the
-//! guidance ablation's arms that change its cost (`raw`: no guidance stage; `qp`: the shipped
-//! planner, shortlist and last-step correction; `alg1+qp`: Algorithm 1's iterations before the
-//! correction), with the network run natively and by libtorch (one thread by default):
-//! `plan/{raw,qp,alg1+qp}/{native,torch}`. Before the timings it prints each configuration's
+//! configured planner and the guidance ablation's arms that change its cost (`raw`: no guidance
+//! stage; `qp`: shortlist and last-step correction; `alg1+qp`: Algorithm 1's iterations before
+//! the correction; the arms without the robot's own motions), with the network run natively and
+//! by libtorch (one thread by default): `plan/{configured,raw,qp,alg1+qp}/{native,torch}`. Before the timings it prints each configuration's
 //! network operations per call, this machine's single-thread SGEMM rate and the resulting
 //! lower bound on a call's time, so the criterion medians can be read as ratios to it.
 //!
@@ -31,8 +31,13 @@ use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use tch::Device;
 
-/// The arms timed, in table order.
-const ARMS: [Arm; 3] = [Arm::Raw, Arm::Qp, Arm::Both];
+/// What is timed, in table order: the configured planner, then the guidance ablation's arms
+/// that change the cost (each without the robot's own motions).
+fn modes(base: &Human2NavSettings) -> Vec<(String, Human2NavSettings)> {
+    std::iter::once(("configured".to_string(), *base))
+        .chain([Arm::Raw, Arm::Qp, Arm::Both].map(|a| (a.key().to_string(), a.settings(base))))
+        .collect()
+}
 
 fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -130,8 +135,7 @@ fn bench_planning(c: &mut Criterion) {
             .map(|c| c.human2nav)
             .unwrap_or_default();
     let peak = human2nav_flow::native::sgemm_gflops(512, 21);
-    for arm in ARMS {
-        let settings = arm.settings(&base);
+    for (mode, settings) in modes(&base) {
         let model = load_model(&dir, Backend::Native).expect("model");
         let macs = Complexity::of(&model.card().net).unet_macs;
         let bev = human2nav_flow::planner::bev_spec(model.card()).0;
@@ -151,8 +155,7 @@ fn bench_planning(c: &mut Criterion) {
         }
         let flops = stats.lock().expect("stats").network_flops(macs) / obs.len() as f64;
         eprintln!(
-            "plan/{}: {:.0} MFLOP of network per call; single-thread SGEMM {peak:.1} GFLOP/s; limit {:.2} ms",
-            arm.key(),
+            "plan/{mode}: {:.0} MFLOP of network per call; single-thread SGEMM {peak:.1} GFLOP/s; limit {:.2} ms",
             flops / 1e6,
             flops / (peak * 1e9) * 1e3
         );
@@ -161,13 +164,12 @@ fn bench_planning(c: &mut Criterion) {
     group
         .sample_size(20)
         .measurement_time(std::time::Duration::from_secs(10));
-    for arm in ARMS {
+    for (mode, settings) in modes(&base) {
         for backend in [Backend::Native, Backend::Torch] {
-            let settings = arm.settings(&base);
             let model = load_model(&dir, backend).expect("model");
             let mut rp = RobotPlanner::new(profile.clone(), model, settings).expect("planner");
             let mut i = 0usize;
-            let name = format!("{}/{backend}", arm.key());
+            let name = format!("{mode}/{backend}");
             group.bench_function(name, |b| {
                 b.iter(|| {
                     rp.planner.reset();

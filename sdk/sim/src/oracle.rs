@@ -11,17 +11,12 @@
 //! suite the crowd departs from its recording near the robot, so there its knowledge is only
 //! approximately right.
 //!
-//! Each call rolls out a set of two-segment motions from the robot's current pose and body
-//! velocity: for the first `switch_time` seconds the twist ramps (at `a_max`; segment means, so
-//! the first lies `a_max·dt/2` from the current speed) toward one target
-//! of a grid, then toward a second one, up to `horizon` seconds. The grid spans forward speeds
-//! from `-v_reverse_max` to `v_max` (`speed_levels` values, 0 among them), turn fractions from
-//! −1 to 1 of the yaw rate the robot can use at that speed (`ω_max`, and `κ_max·|v|` for a car;
-//! `turn_levels` values) and, for an omnidirectional robot (lateral limit above a fifth of
-//! `v_max`), `lateral_levels` sideways speeds; a coupled limit scales the yaw rate, then the
-//! speeds, back inside it. Every pair of targets is tried, or `max_candidates` of them spread
-//! evenly over all pairs when there are more. Every rolled-out motion is within the robot's
-//! limits, so the simulator's tracking follows it closely.
+//! Each call rolls out the robot's own motions ([`human2nav_core::motions`]: two-segment twist
+//! profiles from its current pose and body velocity, the first segment `switch_time` long, up to
+//! `horizon` seconds; `speed_levels`, `turn_levels` and `lateral_levels` size the grid). Every
+//! pair of targets is tried, or `max_candidates` of them spread evenly over all pairs when there
+//! are more. Every rolled-out motion is within the robot's limits, so the simulator's tracking
+//! follows it closely.
 //!
 //! With `prediction = "constant_velocity"` the same search sees only what a planner sees: the
 //! pedestrians of the observation, each extrapolated at its observed velocity. The two settings
@@ -36,9 +31,10 @@
 use crate::episode::Episode;
 use crate::error::SimError;
 use crate::replay::CrowdReplay;
+use human2nav_core::motions::{GridLevels, MotionGrid, Target};
 use human2nav_core::obstacle::footprint_clearance;
 use human2nav_core::robot::footprint::{FootprintShape, clearance_at};
-use human2nav_core::{Limits, Observation, Plan, PlanError, PlanInfo, Planner, Pose2, Twist2};
+use human2nav_core::{Limits, Observation, Plan, PlanError, PlanInfo, Planner, Pose2};
 use serde::{Deserialize, Serialize};
 
 /// Where the search takes the pedestrians' future from.
@@ -172,37 +168,15 @@ impl OracleConfig {
     }
 }
 
-/// One segment's target: forward speed, sideways speed and the turn as a fraction of the yaw
-/// rate the robot can use at its speed.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct Target {
-    vx: f64,
-    vy: f64,
-    turn: f64,
-}
-
-/// `n` values from `lo` to `hi`, evenly spaced (`n = 1`: the midpoint).
-fn levels(lo: f64, hi: f64, n: usize) -> Vec<f64> {
-    if n == 1 {
-        return vec![0.5 * (lo + hi)];
-    }
-    (0..n)
-        .map(|i| lo + (hi - lo) * i as f64 / (n - 1) as f64)
-        .collect()
-}
-
 /// The clairvoyant planner (name `oracle`) of one episode.
 #[derive(Clone, Debug)]
 pub struct OraclePlanner {
     cfg: OracleConfig,
-    limits: Limits,
+    grid: MotionGrid,
     footprint: Vec<FootprintShape>,
     /// Radius about the base-link origin that covers the footprint (broad phase).
     cover: f64,
     episode: Episode,
-    targets: Vec<Target>,
-    /// Lateral limit above a fifth of `v_max`: sideways targets are searched.
-    holonomic: bool,
 }
 
 impl OraclePlanner {
@@ -225,101 +199,37 @@ impl OraclePlanner {
             .iter()
             .map(FootprintShape::reach)
             .fold(0.0, f64::max);
-        // Speeds: reverse (when the robot can), standstill, then forward up to v_max.
-        let mut speeds = Vec::with_capacity(cfg.speed_levels);
-        let forward = if limits.v_reverse_max > 0.0 && cfg.speed_levels >= 3 {
-            speeds.push(-limits.v_reverse_max);
-            cfg.speed_levels - 2
-        } else {
-            cfg.speed_levels - 1
-        };
-        speeds.push(0.0);
-        speeds.extend((1..=forward).map(|j| limits.v_max * j as f64 / forward as f64));
-        let holonomic = limits.lateral_speed_max > 0.2 * limits.v_max;
-        let laterals = if holonomic {
-            levels(
-                -limits.lateral_speed_max,
-                limits.lateral_speed_max,
-                cfg.lateral_levels,
-            )
-        } else {
-            vec![0.0]
-        };
-        let turns = levels(-1.0, 1.0, cfg.turn_levels);
-        let mut targets = Vec::new();
-        for &vx in &speeds {
-            for &vy in &laterals {
-                for &turn in &turns {
-                    targets.push(Target { vx, vy, turn });
-                }
-            }
-        }
+        let grid = MotionGrid::new(
+            limits,
+            GridLevels {
+                speed: cfg.speed_levels,
+                turn: cfg.turn_levels,
+                lateral: cfg.lateral_levels,
+            },
+        );
         Ok(Self {
             cfg,
-            limits,
+            grid,
             footprint,
             cover,
             episode,
-            targets,
-            holonomic,
         })
     }
 
-    /// The twist one control step moves `now` to on the way to `target`: speeds ramp at
-    /// `a_max` (half a step for the first segment), the yaw rate is the target's fraction of what the robot can use at the new
-    /// speed, and a coupled limit scales the twist back inside it.
-    fn step_twist(&self, now: Twist2, target: Target, first: bool) -> Twist2 {
-        let l = &self.limits;
-        // A segment's twist is its mean: along a ramp at a_max the means differ by a_max·dt,
-        // and the first one lies a_max·dt/2 from the current speed (what the tracking
-        // controller's feed-forward needs to stay within a_max across replanning).
-        let dv = l.a_max * self.cfg.plan_dt * if first { 0.5 } else { 1.0 };
-        let vx = now.vx + (target.vx - now.vx).clamp(-dv, dv);
-        let vy = now.vy + (target.vy - now.vy).clamp(-dv, dv);
-        let omega_cap = match l.kappa_max {
-            Some(k) => l.omega_max.min(k * vx.abs()),
-            None => l.omega_max,
-        };
-        let mut twist = Twist2 {
-            vx,
-            vy,
-            omega: target.turn * omega_cap,
-        };
-        if let Some(c) = l.coupled {
-            let value = c.value(twist.vx, twist.vy, twist.omega);
-            if value > c.max {
-                // The yaw rate gives way first, then the speeds.
-                let linear = c.value(twist.vx, twist.vy, 0.0);
-                if linear < c.max && c.omega > 0.0 {
-                    twist.omega = twist.omega.signum() * (c.max - linear) / c.omega;
-                } else {
-                    twist.omega = 0.0;
-                    let s = if linear > 0.0 { c.max / linear } else { 0.0 };
-                    twist.vx *= s;
-                    twist.vy *= s;
-                }
-            }
-        }
-        twist
-    }
-
-    /// Rolls out the motion toward `first` then `second` into `poses` (`poses[0]` is the robot).
-    fn rollout(&self, obs: &Observation, first: Target, second: Target, poses: &mut Vec<Pose2>) {
-        let n = self.cfg.poses();
+    /// Rolls out `pair` into `poses` (`poses[0]` is the robot).
+    fn rollout(&self, obs: &Observation, pair: (Target, Target), poses: &mut Vec<Pose2>) {
         let switch = (self.cfg.switch_time / self.cfg.plan_dt).round().max(1.0) as usize;
-        poses.clear();
-        poses.push(obs.ego);
-        let mut twist = obs.ego_velocity;
-        if !self.holonomic {
-            twist.vy = 0.0;
-        }
-        let mut pose = obs.ego;
-        for k in 1..n {
-            let target = if k <= switch { first } else { second };
-            twist = self.step_twist(twist, target, k == 1);
-            pose = pose.euler_step(twist, self.cfg.plan_dt);
-            poses.push(pose);
-        }
+        let steps = self.cfg.poses() - 1;
+        self.grid.rollout(
+            obs.ego,
+            obs.ego_velocity,
+            pair,
+            switch,
+            self.cfg.plan_dt,
+            steps,
+            poses,
+        );
+        poses.insert(0, obs.ego);
     }
 
     /// Index of the first pose of `poses` up to `last` that touches a pedestrian or an
@@ -395,25 +305,10 @@ impl Planner for OraclePlanner {
                 }
             })
             .collect();
-        let m = self.targets.len();
-        let pairs = m * m;
-        let count = pairs.min(self.cfg.max_candidates);
-        // Spread `count` pairs evenly over all of them: a stride coprime with their number.
-        let stride = if count == pairs {
-            1
-        } else {
-            let mut s = pairs / count;
-            while gcd(s, pairs) != 1 {
-                s += 1;
-            }
-            s
-        };
         let mut poses = Vec::with_capacity(n);
         let mut best: Option<(Score, Vec<Pose2>)> = None;
-        for i in 0..count {
-            let pair = (i * stride) % pairs;
-            let (first, second) = (self.targets[pair / m], self.targets[pair % m]);
-            self.rollout(obs, first, second, &mut poses);
+        for pair in self.grid.spread(self.cfg.max_candidates) {
+            self.rollout(obs, pair, &mut poses);
             let distance = |p: &Pose2| (p.x - obs.goal[0]).hypot(p.y - obs.goal[1]);
             // A motion that arrives ends there (distance 0 from then on); else its closest
             // approach counts.
@@ -460,11 +355,4 @@ impl Planner for OraclePlanner {
             info,
         })
     }
-}
-
-fn gcd(mut a: usize, mut b: usize) -> usize {
-    while b != 0 {
-        (a, b) = (b, a % b);
-    }
-    a
 }

@@ -952,14 +952,23 @@ impl<M: FlowModel> Human2Nav<M> {
         // a plan that would run through a pedestrian is no better than one that stops in them,
         // and a later contact is better than an earlier one.
         let mut clearance = 0.0;
+        let footprint = &self.robot.footprint;
+        // Broad phase: an agent whose centre is farther than the footprint's reach, its radius
+        // and the margin cannot touch the footprint nor come within the margin.
+        let reach = footprint
+            .iter()
+            .map(FootprintShape::reach)
+            .fold(0.0, f64::max);
         for (j, p) in traj.iter().enumerate() {
             let t = (j + 1) as f64 * dt;
             let mut hit = false;
-            let footprint = &self.robot.footprint;
-            let agent_gaps = agents.iter().map(|a| {
+            let agent_gaps = agents.iter().filter_map(|a| {
                 let ax = a.position[0] + a.velocity[0] * t;
                 let ay = a.position[1] + a.velocity[1] * t;
-                footprint::clearance_at(footprint, *p, [ax, ay], a.radius)
+                let far = reach + a.radius + w.margin;
+                let (dx, dy) = (ax - p.x, ay - p.y);
+                (dx * dx + dy * dy < far * far)
+                    .then(|| footprint::clearance_at(footprint, *p, [ax, ay], a.radius))
             });
             let obstacle_gaps = self
                 .obstacles

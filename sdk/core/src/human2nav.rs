@@ -26,9 +26,11 @@
 //! skipped and all `K` samples are scored as they come from the model.
 //!
 //! # Selection rule
-//! `score = w_feas·(1 − TFS) + w_goal·d_end/d_0 + w_clear·C + w_cons·D`, where TFS is the
-//! trajectory feasibility score of the candidate ([`crate::tfs`]), `d_end/d_0` the remaining
-//! distance to the (clipped) goal relative to the current one, `C` the mean over waypoints of
+//! `score = w_feas·(1 − TFS) + w_goal·d/d_0 + w_clear·C + w_cons·D`, where TFS is the
+//! trajectory feasibility score of the candidate ([`crate::tfs`]), `d/d_0` the candidate's
+//! closest approach to the (clipped) goal relative to the current distance (0 once within
+//! [`SelectionWeights::arrival`], and then its waypoints after the arrival are not checked for
+//! contact; [`Progress`] also offers the distance at its end), `C` the mean over waypoints of
 //! `max(0, margin − gap)²/margin²` with `gap` the distance between the robot's footprint (its
 //! shapes at the waypoint's pose, [`RobotModel::footprint`]) and each agent's disc, agents
 //! predicted at constant velocity, and each static obstacle of the observation
@@ -98,6 +100,21 @@ use serde::{Deserialize, Serialize};
 /// Score added for each predicted overlap between the footprint and an agent's disc.
 pub const COLLISION_PENALTY: f64 = 10.0;
 
+/// How the selection's goal term measures a candidate's progress ([`SelectionWeights::progress`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Progress {
+    /// The distance left to the goal at the candidate's last waypoint. A candidate that
+    /// passes the goal scores worse than one that stops short of it.
+    End,
+    /// The closest approach to the goal along the candidate (from the robot's current
+    /// position on); a candidate that comes within [`SelectionWeights::arrival`] of the goal
+    /// has arrived there: its goal term is 0 and the waypoints after its arrival are not
+    /// checked for contact, since the run ends on arrival.
+    #[default]
+    Closest,
+}
+
 /// Weights of the selection rule (see the module docs). All finite and ≥ 0.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -112,6 +129,11 @@ pub struct SelectionWeights {
     pub consistency: f64,
     /// Gap (m) between footprint and agent disc below which clearance is penalised. Default 0.5.
     pub margin: f64,
+    /// How the goal term measures progress. Default [`Progress::Closest`].
+    pub progress: Progress,
+    /// Distance to the goal (m) within which a waypoint counts as arrived with
+    /// [`Progress::Closest`]. Default 0.3.
+    pub arrival: f64,
 }
 
 impl Default for SelectionWeights {
@@ -122,6 +144,8 @@ impl Default for SelectionWeights {
             clearance: 2.0,
             consistency: 0.1,
             margin: 0.5,
+            progress: Progress::Closest,
+            arrival: 0.3,
         }
     }
 }
@@ -277,6 +301,7 @@ impl Human2NavSettings {
             ("selection.goal", s.goal),
             ("selection.clearance", s.clearance),
             ("selection.consistency", s.consistency),
+            ("selection.arrival", s.arrival),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(name, "must be finite and ≥ 0");
@@ -935,7 +960,9 @@ impl<M: FlowModel> Human2Nav<M> {
     ) -> f64 {
         let w = &self.settings.selection;
         let dt = self.settings.dt;
-        let feas = if with_feasibility {
+        // TFS costs a pass over the plan; with a zero weight (the shipped selection) it is
+        // not computed.
+        let feas = if with_feasibility && w.feasibility > 0.0 {
             let mut with_start = Vec::with_capacity(traj.len() + 1);
             with_start.push(Pose2::IDENTITY);
             with_start.extend_from_slice(traj);
@@ -944,9 +971,7 @@ impl<M: FlowModel> Human2Nav<M> {
             1.0
         };
 
-        let d0 = goal[0].hypot(goal[1]).max(1e-3);
-        let end = traj.last().map_or([0.0, 0.0], |p| [p.x, p.y]);
-        let progress = (end[0] - goal[0]).hypot(end[1] - goal[1]) / d0;
+        let (progress, checked) = goal_term(traj, goal, w);
 
         // A predicted overlap ends the plan: it and every later waypoint cost the penalty, so
         // a plan that would run through a pedestrian is no better than one that stops in them,
@@ -959,7 +984,7 @@ impl<M: FlowModel> Human2Nav<M> {
             .iter()
             .map(FootprintShape::reach)
             .fold(0.0, f64::max);
-        for (j, p) in traj.iter().enumerate() {
+        for (j, p) in traj[..checked].iter().enumerate() {
             let t = (j + 1) as f64 * dt;
             let mut hit = false;
             let agent_gaps = agents.iter().filter_map(|a| {
@@ -1002,6 +1027,24 @@ impl<M: FlowModel> Human2Nav<M> {
             + w.goal * progress
             + w.clearance * clearance
             + w.consistency * consistency
+    }
+}
+
+/// The selection's goal term of an ego-frame candidate (`d/d_0`, module docs) and how many of
+/// its waypoints are checked for contact: all, or with [`Progress::Closest`] those up to its
+/// arrival.
+fn goal_term(traj: &[Pose2], goal: [f64; 2], w: &SelectionWeights) -> (f64, usize) {
+    let d0 = goal[0].hypot(goal[1]).max(1e-3);
+    let distance = |p: &Pose2| (p.x - goal[0]).hypot(p.y - goal[1]);
+    match w.progress {
+        Progress::End => (traj.last().map_or(d0, distance) / d0, traj.len()),
+        Progress::Closest => match traj.iter().position(|p| distance(p) <= w.arrival) {
+            Some(k) => (0.0, k + 1),
+            None => (
+                traj.iter().map(distance).fold(d0, f64::min) / d0,
+                traj.len(),
+            ),
+        },
     }
 }
 
@@ -1204,6 +1247,48 @@ mod tests {
             select_best(&candidates, &[false, false, false], score),
             Some(0)
         );
+    }
+
+    #[test]
+    fn the_goal_term_measures_the_end_or_the_closest_approach() {
+        // 0.1 m apart along x, from 0.4 m to 4.0 m: the goal at (2, 0.5) is passed.
+        let traj: Vec<Pose2> = (4..=40)
+            .map(|k| Pose2::new(0.1 * k as f64, 0.0, 0.0))
+            .collect();
+        let goal = [2.0, 0.5];
+        let d0 = 2.0f64.hypot(0.5);
+        let end = SelectionWeights {
+            progress: Progress::End,
+            ..SelectionWeights::default()
+        };
+        // The end at (4, 0) is as far from the goal as the start.
+        let (p, checked) = goal_term(&traj, goal, &end);
+        assert!((p - 1.0).abs() < 1e-12, "{p}");
+        assert_eq!(checked, traj.len());
+        // The closest approach is 0.5 m, at (2, 0): not within 0.3 m, so not arrived.
+        let closest = SelectionWeights {
+            progress: Progress::Closest,
+            ..end
+        };
+        let (p, checked) = goal_term(&traj, goal, &closest);
+        assert!((p - 0.5 / d0).abs() < 1e-12, "{p}");
+        assert_eq!(checked, traj.len());
+        // Within 0.6 m it arrives at (1.7, 0), the 14th waypoint, and is checked up to there.
+        let (p, checked) = goal_term(
+            &traj,
+            goal,
+            &SelectionWeights {
+                arrival: 0.6,
+                ..closest
+            },
+        );
+        assert_eq!(p, 0.0);
+        assert_eq!(checked, 14);
+        assert!((traj[13].x - 1.7).abs() < 1e-12);
+        // A candidate leading away: its closest approach is where the robot stands.
+        let away: Vec<Pose2> = traj.iter().map(|p| Pose2::new(-p.x, 0.0, 0.0)).collect();
+        assert_eq!(goal_term(&away, goal, &closest).0, 1.0);
+        assert_eq!(goal_term(&[], goal, &closest), (1.0, 0));
     }
 
     #[test]

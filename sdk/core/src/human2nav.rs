@@ -728,11 +728,11 @@ impl<M: FlowModel> Human2Nav<M> {
     ) {
         let dt = self.settings.dt;
         let switch = ((MOTION_SWITCH_S / dt).round() as usize).max(1);
-        let mut poses = Vec::with_capacity(horizon);
         for pair in self.motion_grid.spread(self.settings.motions) {
+            let mut poses = Vec::with_capacity(horizon);
             self.motion_grid
                 .rollout(Pose2::IDENTITY, v0, pair, switch, dt, horizon, &mut poses);
-            candidates.push(poses.clone());
+            candidates.push(poses);
             origin.push(Source::Motion);
         }
     }

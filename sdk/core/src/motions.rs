@@ -178,7 +178,7 @@ impl MotionGrid {
 
     /// Rolls out the motion toward `first` for `switch` steps, then toward `second`, from
     /// `start` with body velocity `v0`: `steps` poses at `dt, 2·dt, …` (the start itself not
-    /// included) into `out` (cleared first).
+    /// included) appended to `out`.
     #[allow(clippy::too_many_arguments)]
     pub fn rollout(
         &self,
@@ -190,7 +190,7 @@ impl MotionGrid {
         steps: usize,
         out: &mut Vec<Pose2>,
     ) {
-        out.clear();
+        out.reserve(steps);
         let mut twist = v0;
         let mut pose = start;
         for k in 1..=steps {
@@ -244,11 +244,10 @@ mod tests {
                 Twist2::new(1.2, 0.0, 0.3),
                 Twist2::new(-0.3, 0.0, 0.0),
             ] {
-                let mut out = Vec::new();
                 for pair in grid.spread(500) {
-                    grid.rollout(Pose2::IDENTITY, v0, pair, 10, 0.1, 32, &mut out);
                     let mut plan = vec![Pose2::IDENTITY];
-                    plan.extend_from_slice(&out);
+                    grid.rollout(Pose2::IDENTITY, v0, pair, 10, 0.1, 32, &mut plan);
+                    assert_eq!(plan.len(), 33);
                     let tfs = tfs_plan(&plan, 0.1, &limits, v0);
                     assert!(tfs >= 0.999, "{pair:?} from {v0:?}: TFS {tfs}");
                 }

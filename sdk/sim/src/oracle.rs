@@ -220,6 +220,8 @@ impl OraclePlanner {
     fn rollout(&self, obs: &Observation, pair: (Target, Target), poses: &mut Vec<Pose2>) {
         let switch = (self.cfg.switch_time / self.cfg.plan_dt).round().max(1.0) as usize;
         let steps = self.cfg.poses() - 1;
+        poses.clear();
+        poses.push(obs.ego);
         self.grid.rollout(
             obs.ego,
             obs.ego_velocity,
@@ -229,7 +231,6 @@ impl OraclePlanner {
             steps,
             poses,
         );
-        poses.insert(0, obs.ego);
     }
 
     /// Index of the first pose of `poses` up to `last` that touches a pedestrian or an

@@ -351,6 +351,8 @@ pub struct Human2Nav<M> {
     obstacles: Vec<Obstacle>,
     /// The robot's own motions offered to the selection ([`Human2NavSettings::motions`]).
     motion_grid: MotionGrid,
+    /// [`footprint::reach`] of the robot's footprint.
+    reach: f64,
 }
 
 impl<M> std::fmt::Debug for Human2Nav<M> {
@@ -394,6 +396,7 @@ impl<M: FlowModel> Human2Nav<M> {
             obstacles: Vec::new(),
             rng: ChaCha8Rng::seed_from_u64(settings.seed),
             motion_grid: MotionGrid::new(robot.limits, GridLevels::default()),
+            reach: footprint::reach(&robot.footprint),
             model,
             robot,
             bev,
@@ -818,14 +821,8 @@ impl<M: FlowModel> Human2Nav<M> {
     /// the distance covered at `v_max`, plus the footprint's reach and the selection margin),
     /// with the occupied cells of its grid there, in the ego frame.
     fn nearby_obstacles(&self, obs: &Observation, horizon: usize) -> Vec<Obstacle> {
-        let reach = self
-            .robot
-            .footprint
-            .iter()
-            .map(FootprintShape::reach)
-            .fold(0.0, f64::max);
         let range = self.robot.limits.v_max * horizon as f64 * self.settings.dt
-            + reach
+            + self.reach
             + self.settings.selection.margin;
         let here = [obs.ego.x, obs.ego.y];
         let grid = obs
@@ -980,17 +977,13 @@ impl<M: FlowModel> Human2Nav<M> {
         let footprint = &self.robot.footprint;
         // Broad phase: an agent whose centre is farther than the footprint's reach, its radius
         // and the margin cannot touch the footprint nor come within the margin.
-        let reach = footprint
-            .iter()
-            .map(FootprintShape::reach)
-            .fold(0.0, f64::max);
         for (j, p) in traj[..checked].iter().enumerate() {
             let t = (j + 1) as f64 * dt;
             let mut hit = false;
             let agent_gaps = agents.iter().filter_map(|a| {
                 let ax = a.position[0] + a.velocity[0] * t;
                 let ay = a.position[1] + a.velocity[1] * t;
-                let far = reach + a.radius + w.margin;
+                let far = self.reach + a.radius + w.margin;
                 let (dx, dy) = (ax - p.x, ay - p.y);
                 (dx * dx + dy * dy < far * far)
                     .then(|| footprint::clearance_at(footprint, *p, [ax, ay], a.radius))
@@ -1038,13 +1031,17 @@ fn goal_term(traj: &[Pose2], goal: [f64; 2], w: &SelectionWeights) -> (f64, usiz
     let distance = |p: &Pose2| (p.x - goal[0]).hypot(p.y - goal[1]);
     match w.progress {
         Progress::End => (traj.last().map_or(d0, distance) / d0, traj.len()),
-        Progress::Closest => match traj.iter().position(|p| distance(p) <= w.arrival) {
-            Some(k) => (0.0, k + 1),
-            None => (
-                traj.iter().map(distance).fold(d0, f64::min) / d0,
-                traj.len(),
-            ),
-        },
+        Progress::Closest => {
+            let mut closest = d0;
+            for (k, p) in traj.iter().enumerate() {
+                let d = distance(p);
+                if d <= w.arrival {
+                    return (0.0, k + 1);
+                }
+                closest = closest.min(d);
+            }
+            (closest / d0, traj.len())
+        }
     }
 }
 

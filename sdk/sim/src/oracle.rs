@@ -33,7 +33,7 @@ use crate::error::SimError;
 use crate::replay::CrowdReplay;
 use human2nav_core::motions::{GridLevels, MotionGrid, Target};
 use human2nav_core::obstacle::footprint_clearance;
-use human2nav_core::robot::footprint::{FootprintShape, clearance_at};
+use human2nav_core::robot::footprint::{FootprintShape, clearance_at, reach};
 use human2nav_core::{Limits, Observation, Plan, PlanError, PlanInfo, Planner, Pose2};
 use serde::{Deserialize, Serialize};
 
@@ -195,10 +195,7 @@ impl OraclePlanner {
                 "the robot has no footprint",
             ));
         }
-        let cover = footprint
-            .iter()
-            .map(FootprintShape::reach)
-            .fold(0.0, f64::max);
+        let cover = reach(&footprint);
         let grid = MotionGrid::new(
             limits,
             GridLevels {

@@ -110,6 +110,12 @@ impl std::fmt::Display for FootprintShape {
     }
 }
 
+/// The farthest any of `shapes` reaches from the base-link origin (0 for an empty footprint):
+/// no point of the footprint is farther from the robot's pose than this.
+pub fn reach(shapes: &[FootprintShape]) -> f64 {
+    shapes.iter().map(FootprintShape::reach).fold(0.0, f64::max)
+}
+
 /// The clearance between a footprint at the origin of its frame and a disc of `radius` at `p`
 /// (base-link frame): the smallest signed distance to any shape minus the radius, `+∞` for an
 /// empty footprint.

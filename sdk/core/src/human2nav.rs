@@ -77,7 +77,6 @@
 
 use crate::bev::{self, BevSpec};
 use crate::constraint::{ConstraintContext, Phi};
-use crate::dubins;
 use crate::flow::{FlowCondition, FlowModel};
 use crate::guidance::{
     self, GuidanceError, GuidanceResult, GuidanceSettings, GuidanceVariant, GuidanceWorkspace,
@@ -116,20 +115,6 @@ pub enum Progress {
     Closest,
 }
 
-/// What the selection's goal term measures distances to the goal with
-/// ([`SelectionWeights::distance`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum GoalDistance {
-    /// The straight-line distance.
-    #[default]
-    Straight,
-    /// How far the robot has to drive forward from a waypoint's pose to reach the goal, with
-    /// its minimum turning radius ([`crate::dubins`]): the straight-line distance for a robot
-    /// that turns in place, longer for a car wherever the goal is not ahead of it.
-    Drive,
-}
-
 /// Weights of the selection rule (see the module docs). All finite and ≥ 0.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -149,9 +134,6 @@ pub struct SelectionWeights {
     /// Distance to the goal (m) within which a waypoint counts as arrived with
     /// [`Progress::Closest`]. Default 0.3.
     pub arrival: f64,
-    /// How the goal term measures the distance from a waypoint to the goal (the arrival is
-    /// always the straight-line distance). Default [`GoalDistance::Straight`].
-    pub distance: GoalDistance,
 }
 
 impl Default for SelectionWeights {
@@ -164,7 +146,6 @@ impl Default for SelectionWeights {
             margin: 0.5,
             progress: Progress::Closest,
             arrival: 0.3,
-            distance: GoalDistance::Straight,
         }
     }
 }
@@ -987,11 +968,7 @@ impl<M: FlowModel> Human2Nav<M> {
             1.0
         };
 
-        let radius = match (w.distance, self.robot.limits.kappa_max) {
-            (GoalDistance::Drive, Some(k)) if k > 0.0 => 1.0 / k,
-            _ => 0.0,
-        };
-        let (progress, checked) = goal_term(traj, goal, w, radius);
+        let (progress, checked) = goal_term(traj, goal, w);
 
         // A predicted overlap ends the plan: it and every later waypoint cost the penalty, so
         // a plan that would run through a pedestrian is no better than one that stops in them,
@@ -1048,25 +1025,20 @@ impl<M: FlowModel> Human2Nav<M> {
 
 /// The selection's goal term of an ego-frame candidate (`d/d_0`, module docs) and how many of
 /// its waypoints are checked for contact: all, or with [`Progress::Closest`] those up to its
-/// arrival. Distances are driven ones for a turning radius `radius` > 0
-/// ([`GoalDistance::Drive`]), straight ones otherwise.
-fn goal_term(traj: &[Pose2], goal: [f64; 2], w: &SelectionWeights, radius: f64) -> (f64, usize) {
-    let drive = |p: &Pose2| dubins::distance_to_point(p, goal, radius);
-    let d0 = drive(&Pose2::IDENTITY).max(1e-3);
+/// arrival.
+fn goal_term(traj: &[Pose2], goal: [f64; 2], w: &SelectionWeights) -> (f64, usize) {
+    let d0 = goal[0].hypot(goal[1]).max(1e-3);
+    let distance = |p: &Pose2| (p.x - goal[0]).hypot(p.y - goal[1]);
     match w.progress {
-        Progress::End => (traj.last().map_or(d0, drive) / d0, traj.len()),
+        Progress::End => (traj.last().map_or(d0, distance) / d0, traj.len()),
         Progress::Closest => {
             let mut closest = d0;
             for (k, p) in traj.iter().enumerate() {
-                let straight = (p.x - goal[0]).hypot(p.y - goal[1]);
-                if straight <= w.arrival {
+                let d = distance(p);
+                if d <= w.arrival {
                     return (0.0, k + 1);
                 }
-                // A drive is never shorter than the straight line: only a waypoint that is
-                // closer by air can be closer by road.
-                if straight < closest {
-                    closest = closest.min(if radius > 0.0 { drive(p) } else { straight });
-                }
+                closest = closest.min(d);
             }
             (closest / d0, traj.len())
         }
@@ -1250,7 +1222,6 @@ fn phi_context<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::f64::consts::FRAC_PI_4;
 
     fn line(speed: f64) -> Vec<Pose2> {
         (1..=4)
@@ -1288,7 +1259,7 @@ mod tests {
             ..SelectionWeights::default()
         };
         // The end at (4, 0) is as far from the goal as the start.
-        let (p, checked) = goal_term(&traj, goal, &end, 0.0);
+        let (p, checked) = goal_term(&traj, goal, &end);
         assert!((p - 1.0).abs() < 1e-12, "{p}");
         assert_eq!(checked, traj.len());
         // The closest approach is 0.5 m, at (2, 0): not within 0.3 m, so not arrived.
@@ -1296,7 +1267,7 @@ mod tests {
             progress: Progress::Closest,
             ..end
         };
-        let (p, checked) = goal_term(&traj, goal, &closest, 0.0);
+        let (p, checked) = goal_term(&traj, goal, &closest);
         assert!((p - 0.5 / d0).abs() < 1e-12, "{p}");
         assert_eq!(checked, traj.len());
         // Within 0.6 m it arrives at (1.7, 0), the 14th waypoint, and is checked up to there.
@@ -1307,42 +1278,14 @@ mod tests {
                 arrival: 0.6,
                 ..closest
             },
-            0.0,
         );
         assert_eq!(p, 0.0);
         assert_eq!(checked, 14);
         assert!((traj[13].x - 1.7).abs() < 1e-12);
         // A candidate leading away: its closest approach is where the robot stands.
         let away: Vec<Pose2> = traj.iter().map(|p| Pose2::new(-p.x, 0.0, 0.0)).collect();
-        assert_eq!(goal_term(&away, goal, &closest, 0.0).0, 1.0);
-        assert_eq!(goal_term(&[], goal, &closest, 0.0), (1.0, 0));
-    }
-
-    #[test]
-    fn the_driven_goal_term_prefers_facing_the_goal_over_standing_beside_it() {
-        let r = 1.6;
-        let goal = [2.0, 2.0];
-        let closest = SelectionWeights::default();
-        // Beside the goal, heading past it: 0.8 m by air, inside the left turning circle.
-        let beside = [Pose2::new(2.0, 1.2, 0.0)];
-        // A quarter of the way round a left turn, the goal ahead: 1.76 m by air.
-        let facing = [Pose2::new(
-            r * FRAC_PI_4.sin(),
-            r * (1.0 - FRAC_PI_4.cos()),
-            FRAC_PI_4,
-        )];
-        let straight = |t: &[Pose2]| goal_term(t, goal, &closest, 0.0).0;
-        let driven = |t: &[Pose2]| goal_term(t, goal, &closest, r).0;
-        assert!(straight(&beside) < straight(&facing));
-        assert!(driven(&facing) < driven(&beside));
-        // Facing the goal, the drive is about as long as the straight line.
-        let d0 = dubins::distance_to_point(&Pose2::IDENTITY, goal, r);
-        assert!((driven(&facing) * d0 - 0.869f64.hypot(1.531)).abs() < 0.02);
-        // Arrival is by air whatever the measure.
-        assert_eq!(
-            goal_term(&[Pose2::new(2.0, 1.8, 0.0)], goal, &closest, r),
-            (0.0, 1)
-        );
+        assert_eq!(goal_term(&away, goal, &closest).0, 1.0);
+        assert_eq!(goal_term(&[], goal, &closest), (1.0, 0));
     }
 
     #[test]

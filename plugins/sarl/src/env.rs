@@ -103,6 +103,20 @@ impl EnvConfig {
         if self.human_num == 0 {
             return Err(SarlError::config("env.human_num", "must be ≥ 1"));
         }
+        // Each human starts near the circle at least 2·human_radius + discomfort_dist from
+        // every start and goal placed before (goals are the opposite points): past what fits
+        // on half the circle, the placement could search forever.
+        let spacing = 2.0 * self.human_radius + self.discomfort_dist.max(0.0);
+        let fit = (std::f64::consts::PI * self.circle_radius / spacing).floor();
+        if self.human_num as f64 > fit {
+            return Err(SarlError::config(
+                "env.human_num",
+                format!(
+                    "{} humans do not fit on a circle of radius {} m at {spacing} m spacing (at most {fit})",
+                    self.human_num, self.circle_radius
+                ),
+            ));
+        }
         for (field, v) in [
             ("env.success_reward", self.success_reward),
             ("env.collision_penalty", self.collision_penalty),

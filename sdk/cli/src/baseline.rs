@@ -2,12 +2,19 @@
 //! circle-crossing environment of its own crate (`human2nav-sarl`): imitation on ORCA
 //! demonstrations, then TD learning; checkpoints every `run.checkpoint_every` episodes,
 //! `--resume` continues exactly; the trained network is evaluated on held-out seeds and
-//! exported with its model card and training curve.
+//! exported with its model card and training curve. `eval-sarl` runs a trained model in that
+//! environment with the robot, the crowd size and the crowd's reaction changed one at a time,
+//! to see which departure from its training regime costs it how much.
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
 use human2nav_core::lock::DirLock;
-use human2nav_sarl::train::{Observer, TrainConfig, Trainer};
+use human2nav_flow::planner::load_profile;
+use human2nav_sarl::SarlModel;
+use human2nav_sarl::action::ActionSpace;
+use human2nav_sarl::env::EnvConfig;
+use human2nav_sarl::eval::{Policy, SeedStream, evaluate};
+use human2nav_sarl::train::{IlConfig, Observer, TrainConfig, Trainer};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -18,6 +25,36 @@ pub enum BaselineCommand {
     /// Train SARL (imitation on ORCA demonstrations, then TD learning) and export
     /// `models/sarl` (weights, model card, training curve).
     TrainSarl(TrainSarlArgs),
+    /// Evaluate a trained SARL model in circle crossing, in its training regime and with the
+    /// benchmark robots' radius and speed, more humans, or humans that see the robot: which
+    /// departure from the regime it was trained in costs it how much.
+    EvalSarl(EvalSarlArgs),
+}
+
+/// Arguments of `human2nav baseline eval-sarl`.
+#[derive(Debug, Args)]
+pub struct EvalSarlArgs {
+    /// The model folder (`model.toml` + `model.safetensors`).
+    #[arg(long, default_value = "models/sarl")]
+    model: PathBuf,
+    /// Robot profiles whose footprint radius and `v_max` replace the trained robot's radius
+    /// and preferred speed (as the benchmark passes them to SARL); the trained robot is always
+    /// evaluated too.
+    #[arg(long = "robot")]
+    robots: Vec<PathBuf>,
+    /// Numbers of humans (comma-separated; default: the trained number).
+    #[arg(long, value_delimiter = ',')]
+    humans: Vec<usize>,
+    /// Also run each setting with humans whose ORCA sees the robot (trained: it does not).
+    #[arg(long)]
+    visible: bool,
+    /// Episodes per setting, from the held-out test stream of the training seed (the card's
+    /// evaluation uses the first 500).
+    #[arg(long, default_value_t = 500)]
+    episodes: usize,
+    /// Also write the table to this Markdown file.
+    #[arg(long)]
+    out: Option<PathBuf>,
 }
 
 /// Arguments of `human2nav baseline train-sarl`.
@@ -41,6 +78,7 @@ pub struct TrainSarlArgs {
 pub fn run(cmd: BaselineCommand) -> anyhow::Result<ExitCode> {
     match cmd {
         BaselineCommand::TrainSarl(args) => train_sarl(args),
+        BaselineCommand::EvalSarl(args) => eval_sarl(args),
     }
 }
 
@@ -177,5 +215,139 @@ fn train_sarl(args: TrainSarlArgs) -> anyhow::Result<ExitCode> {
         model_dir.display(),
         card.training.wall_seconds
     );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// One environment of `eval-sarl`: what differs from the trained regime, and the settings.
+struct Setting {
+    robot: String,
+    env: EnvConfig,
+}
+
+fn eval_sarl(args: EvalSarlArgs) -> anyhow::Result<ExitCode> {
+    let root = workspace_root();
+    let dir = resolve(&root, &args.model);
+    let model = SarlModel::load_dir(&dir)
+        .with_context(|| format!("loading the SARL model {}", dir.display()))?;
+    if args.episodes == 0 {
+        anyhow::bail!("--episodes must be at least 1");
+    }
+    let trained = model.card.env.clone();
+    let mut robots = vec![(
+        "trained".to_string(),
+        trained.robot_radius,
+        trained.robot_v_pref,
+    )];
+    for path in &args.robots {
+        let profile = load_profile(&resolve(&root, path))?;
+        robots.push((
+            profile.name.clone(),
+            profile.footprint_radius,
+            profile.limits.v_max,
+        ));
+    }
+    let humans = if args.humans.is_empty() {
+        vec![trained.human_num]
+    } else {
+        args.humans.clone()
+    };
+    let visibility: &[bool] = if args.visible {
+        &[trained.robot_visible, !trained.robot_visible]
+    } else {
+        &[trained.robot_visible]
+    };
+    let mut settings = Vec::new();
+    for (name, radius, v_pref) in &robots {
+        for &n in &humans {
+            for &visible in visibility {
+                let env = EnvConfig {
+                    robot_radius: *radius,
+                    robot_v_pref: *v_pref,
+                    human_num: n,
+                    robot_visible: visible,
+                    ..trained.clone()
+                };
+                env.validate().with_context(|| {
+                    format!("the circle-crossing setting for {name} with {n} humans")
+                })?;
+                settings.push(Setting {
+                    robot: name.clone(),
+                    env,
+                });
+            }
+        }
+    }
+
+    // One libtorch thread, as in training and in the benchmark's planner.
+    human2nav_flow::tch::set_num_threads(1);
+    let seed = model.card.training.seed;
+    let la = &model.card.lookahead;
+    let orca = Policy::Orca {
+        safety_space: IlConfig::default().safety_space,
+    };
+    let n = args.episodes;
+    let bar = ProgressBar::new((2 * n * settings.len()) as u64).with_style(
+        ProgressStyle::with_template(
+            "{prefix:>10} [{bar:32}] {pos}/{len} {elapsed_precise} ETA {eta_precise}  {msg}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar.set_prefix("episodes");
+    let mut table = String::from(
+        "| robot | radius (m) | v_pref (m/s) | humans | humans see the robot | SARL success | collision | timeout | ORCA success |\n\
+         |---|---|---|---|---|---|---|---|---|\n",
+    );
+    for (k, st) in settings.iter().enumerate() {
+        let env = &st.env;
+        let actions =
+            ActionSpace::holonomic(env.robot_v_pref, la.speed_samples, la.rotation_samples);
+        let sarl = Policy::Sarl {
+            net: &model.net,
+            actions: &actions,
+            lookahead: model.lookahead(),
+            epsilon: 0.0,
+        };
+        bar.set_message(format!(
+            "{}, {} humans{}",
+            st.robot,
+            env.human_num,
+            if env.robot_visible { ", visible" } else { "" }
+        ));
+        let base = (2 * n * k) as u64;
+        let s = evaluate(env, &sarl, seed, SeedStream::Test, n, &mut |i| {
+            bar.set_position(base + i as u64)
+        })?;
+        let o = evaluate(env, &orca, seed, SeedStream::Test, n, &mut |i| {
+            bar.set_position(base + (n + i) as u64)
+        })?;
+        let pct = |x: f64| format!("{:.1} %", 100.0 * x);
+        table.push_str(&format!(
+            "| {} | {:.2} | {:.2} | {} | {} | {} | {} | {} | {} |\n",
+            st.robot,
+            env.robot_radius,
+            env.robot_v_pref,
+            env.human_num,
+            if env.robot_visible { "yes" } else { "no" },
+            pct(s.success_rate),
+            pct(s.collision_rate),
+            pct(s.timeout_rate),
+            pct(o.success_rate),
+        ));
+    }
+    bar.finish_and_clear();
+    println!(
+        "SARL ({}) in circle crossing, {n} held-out episodes per row (test stream of seed {seed}); ORCA: the imitation demonstrator on the same episodes\n",
+        dir.display()
+    );
+    print!("{table}");
+    if let Some(out) = &args.out {
+        let path = resolve(&root, out);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("creating {}", parent.display()))?;
+        }
+        std::fs::write(&path, &table).with_context(|| format!("writing {}", path.display()))?;
+        println!("\ntable: {}", path.display());
+    }
     Ok(ExitCode::SUCCESS)
 }

@@ -768,6 +768,36 @@ fn config_cases() -> Vec<Case> {
             &["sarl.toml", "episodez"],
             sarl_edit("[rl]", "[rl]\nepisodez = 3"),
         ),
+        err(
+            a,
+            "sarl.toml `human_num = 40` (more than fit on the circle)",
+            "accepted; placing the humans could search forever",
+            &["env.human_num", "40 humans do not fit"],
+            sarl_edit("human_num = 5", "human_num = 40"),
+        ),
+        err(
+            a,
+            "`baseline eval-sarl --humans 40`",
+            NR,
+            &["40 humans", "env.human_num", "do not fit"],
+            |_| cli(&["baseline", "eval-sarl", "--humans", "40", "--episodes", "1"]),
+        ),
+        err(
+            a,
+            "`baseline eval-sarl --model` a folder without a card",
+            NR,
+            &["loading the SARL model", "model.toml"],
+            |d| {
+                cli(&[
+                    "baseline",
+                    "eval-sarl",
+                    "--model",
+                    &d.to_string_lossy(),
+                    "--episodes",
+                    "1",
+                ])
+            },
+        ),
     ]
 }
 

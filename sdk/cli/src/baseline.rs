@@ -218,7 +218,7 @@ fn train_sarl(args: TrainSarlArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// One environment of `eval-sarl`: what differs from the trained regime, and the settings.
+/// One row of `eval-sarl`: whose radius and speed the robot has, and the whole environment.
 struct Setting {
     robot: String,
     env: EnvConfig,

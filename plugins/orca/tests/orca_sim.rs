@@ -269,3 +269,45 @@ proptest! {
         prop_assert_eq!(list.indices().collect::<Vec<_>>(), expected);
     }
 }
+
+/// FNV-1a over the bits of every position and velocity of a run.
+fn fingerprint(run: &[(Vec<Vec2>, Vec<Vec2>)]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for (p, v) in run {
+        for (x, y) in bits(p).into_iter().chain(bits(v)) {
+            for b in x.to_le_bytes().into_iter().chain(y.to_le_bytes()) {
+                h = (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3);
+            }
+        }
+    }
+    h
+}
+
+/// The crowd's trajectories are pinned bit for bit: a change that makes ORCA faster must not
+/// change a single result (the lattice's start is exact arithmetic, and the update uses only
+/// `+ − × ÷` and `sqrt`, which IEEE 754 rounds the same on every platform). The fingerprints
+/// were recorded with the per-agent code; the test also runs that code, so a change to the
+/// half-planes or the linear programs shows here even though the other tests compare the
+/// simulation against it.
+#[test]
+fn trajectories_match_their_recorded_fingerprints() {
+    let expected: [(usize, u64); 3] = [
+        (5, 0x27ba_78fb_ef48_f6ac),
+        (37, 0x8895_972a_491f_39ec),
+        (200, 0xee08_0afe_ef5d_fc68),
+    ];
+    for (n, want) in expected {
+        let specs = lattice(n);
+        let sim = fingerprint(&run_sim(&specs, NeighborSearch::Auto, 80, None));
+        let reference = fingerprint(&run_per_agent(&specs, 80, None));
+        eprintln!("lattice n = {n}: {sim:#018x} (per-agent code {reference:#018x})");
+        assert_eq!(
+            sim, want,
+            "lattice n = {n}: the simulation's trajectories changed"
+        );
+        assert_eq!(
+            reference, want,
+            "lattice n = {n}: the per-agent code's trajectories changed"
+        );
+    }
+}

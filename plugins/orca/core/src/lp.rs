@@ -113,6 +113,7 @@ impl Line {
 /// With `direction_opt` the result is the extreme point furthest along `opt` (a unit vector);
 /// otherwise it is the point of the line closest to `opt`. Returns `None` when the line has no
 /// feasible point (RVO2 `linearProgram1` returning `false`).
+#[inline]
 pub fn linear_program1(
     lines: &[Line],
     line_no: usize,

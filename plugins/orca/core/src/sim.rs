@@ -40,6 +40,9 @@ pub struct OrcaSim {
     velocities: Vec<Vec2>,
     pref_velocities: Vec<Vec2>,
     params: Vec<OrcaParams>,
+    /// Each agent's `1 / time_horizon` and `1 / time_step` (the divisions [`orca_line_inv`]
+    /// takes done once, at [`OrcaSim::add_agent`]).
+    inverses: Vec<(f64, f64)>,
     // Buffers reused from step to step.
     new_velocities: Vec<Vec2>,
     /// Each agent's neighbours at the last step: agent `i`'s are
@@ -73,6 +76,7 @@ impl OrcaSim {
             velocities: Vec::new(),
             pref_velocities: Vec::new(),
             params: Vec::new(),
+            inverses: Vec::new(),
             new_velocities: Vec::new(),
             last_neighbors: Vec::new(),
             last_start: Vec::new(),
@@ -109,6 +113,8 @@ impl OrcaSim {
             time_step: self.time_step,
             ..params
         });
+        self.inverses
+            .push((1.0 / params.time_horizon, 1.0 / self.time_step));
         self.positions.len() - 1
     }
 
@@ -206,7 +212,7 @@ impl OrcaSim {
             self.next_neighbors.extend(self.neighbors.indices());
             self.next_start.push(self.next_neighbors.len());
             self.lines.clear();
-            let (inv_tau, inv_dt) = (1.0 / p.time_horizon, 1.0 / p.time_step);
+            let (inv_tau, inv_dt) = self.inverses[i];
             for j in self.neighbors.indices() {
                 let other = Neighbor {
                     position: self.positions[j],

@@ -1,13 +1,16 @@
 //! `human2nav train --config <toml>`: train the conditional flow-matching model on the tuple
 //! cache, checkpoint and resume, export the EMA weights with a model card and a loss curve,
-//! evaluate on the held-out test scenes, and measure latencies.
+//! evaluate on the held-out test scenes, and measure latencies; `--bench-steps N` times
+//! training steps on the cache instead and writes nothing.
 //!
 //! The training itself lives in [`human2nav_experiments::train`]; this is its command line.
 
 use anyhow::Context;
 use clap::Args;
 use human2nav_core::lock::DirLock;
-use human2nav_experiments::train::{TrainConfig, device_of, open_cache, run_evaluation, train};
+use human2nav_experiments::train::{
+    TrainConfig, bench_train_steps, device_of, open_cache, run_evaluation, train,
+};
 use human2nav_flow::CfmModel;
 use human2nav_flow::model::CARD_FILE;
 use human2nav_flow::tch;
@@ -36,6 +39,48 @@ pub struct TrainArgs {
     /// Override `train.steps`.
     #[arg(long)]
     steps: Option<u64>,
+    /// Throughput only: time this many training steps (after 5 untimed warm-up steps) of a
+    /// fresh run on the tuple cache at `train.batch_size`, batch building included, and print
+    /// milliseconds per step (median and mean, and per phase). Writes nothing: no checkpoint,
+    /// model or card (compare with sdk/flow/reference/torch_train_step.py --bench).
+    #[arg(long, value_name = "N", conflicts_with_all = ["fresh", "eval_only", "bench"])]
+    bench_steps: Option<usize>,
+}
+
+/// Untimed steps before `--bench-steps` starts timing.
+const BENCH_WARMUP_STEPS: usize = 5;
+
+/// `--bench-steps`: times training steps and prints milliseconds per step.
+fn bench_steps(
+    cfg: &TrainConfig,
+    cache: &human2nav_data::TupleCache,
+    device: tch::Device,
+    steps: usize,
+) -> anyhow::Result<ExitCode> {
+    anyhow::ensure!(steps > 0, "--bench-steps must be positive");
+    let b = bench_train_steps(cfg, cache, device, steps, BENCH_WARMUP_STEPS)?;
+    let stat = |v: &[f64]| {
+        let median = human2nav_sim::stats::median(v).unwrap_or(f64::NAN);
+        (median, v.iter().sum::<f64>() / v.len() as f64)
+    };
+    let (median, mean) = stat(&b.step_ms);
+    println!(
+        "train step: batch {}, {} torch threads, {steps} steps after {BENCH_WARMUP_STEPS} warm-up: \
+         median {median:.2} ms, mean {mean:.2} ms per step ({:.0} samples/s at the median)",
+        cfg.train.batch_size,
+        cfg.run.threads,
+        cfg.train.batch_size as f64 * 1e3 / median
+    );
+    for (name, v) in [
+        ("batch building", &b.batch_ms),
+        ("forward + loss", &b.forward_ms),
+        ("backward", &b.backward_ms),
+        ("clip + AdamW + EMA", &b.update_ms),
+    ] {
+        let (median, mean) = stat(v);
+        println!("  {name:<20} median {median:7.2} ms  mean {mean:7.2} ms");
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 /// The workspace root: the nearest ancestor of the current directory whose Cargo.toml has a
@@ -93,6 +138,9 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
     eprintln!("device {device:?}, {} torch threads", cfg.run.threads);
 
     let cache = open_cache(&cache_dir, &cfg, &args.config)?;
+    if let Some(steps) = args.bench_steps {
+        return bench_steps(&cfg, &cache, device, steps);
+    }
 
     if !args.eval_only {
         let _lock = DirLock::acquire(&out_dir, "human2nav train")

@@ -249,6 +249,64 @@ pub fn train(
     Ok(())
 }
 
+/// Per-step wall times of `human2nav train --bench-steps`, milliseconds, one entry per timed
+/// step.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StepBench {
+    /// Whole steps (batch building included).
+    pub step_ms: Vec<f64>,
+    /// Batch indices and batch building.
+    pub batch_ms: Vec<f64>,
+    /// Forward pass and loss.
+    pub forward_ms: Vec<f64>,
+    /// Backward pass.
+    pub backward_ms: Vec<f64>,
+    /// Gradient clipping, AdamW and the EMA.
+    pub update_ms: Vec<f64>,
+}
+
+/// Times `steps` training steps of a fresh run of `cfg` on the cache's training split (the
+/// tuples `human2nav train` trains on, normalisation estimated the same way), after `warmup`
+/// untimed steps: [`Trainer::train_step_timed`] at `train.batch_size` with the torch threads
+/// already set by the caller, batch building included. Nothing is written (no checkpoint, no
+/// model); a throughput measurement, comparable with `sdk/flow/reference/torch_train_step.py
+/// --bench`.
+pub fn bench_train_steps(
+    cfg: &TrainConfig,
+    cache: &TupleCache,
+    device: tch::Device,
+    steps: usize,
+    warmup: usize,
+) -> anyhow::Result<StepBench> {
+    let load_start = Instant::now();
+    let train_set = cache.load_scenes(Split::Train, cfg.data.train_fraction, cfg.train.seed)?;
+    eprintln!(
+        "loaded {} training tuples in {:.1} s",
+        train_set.len(),
+        load_start.elapsed().as_secs_f64()
+    );
+    if train_set.is_empty() {
+        bail!("the training split of {} is empty", cache.dir().display());
+    }
+    let norm = Normalisation::estimate(&train_set, cfg.train.seed)?;
+    let no_val: &[human2nav_data::tuples::TrainingTuple] = &[];
+    let mut trainer = Trainer::new(&cfg.net, &norm, &cfg.train, &train_set, no_val, device)?;
+    for _ in 0..warmup {
+        trainer.train_step()?;
+    }
+    let mut bench = StepBench::default();
+    let ms = |s: f64| s * 1e3;
+    for _ in 0..steps {
+        let t = trainer.train_step_timed()?;
+        bench.step_ms.push(ms(t.total_s()));
+        bench.batch_ms.push(ms(t.batch_s));
+        bench.forward_ms.push(ms(t.forward_s));
+        bench.backward_ms.push(ms(t.backward_s));
+        bench.update_ms.push(ms(t.update_s));
+    }
+    Ok(bench)
+}
+
 /// Steps `trainer` to its total under a progress bar, validating, checkpointing into `ckpt` and
 /// redrawing `out_dir/loss_curve.png` at the configured intervals; returns whether
 /// `run.max_minutes` stopped it early.

@@ -21,6 +21,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+use std::time::Instant;
 use tch::{Device, Kind, Tensor};
 
 /// One training example as the trainer needs it. Implemented for the data crate's tuples and
@@ -330,6 +331,30 @@ pub struct LossRecord {
     pub lr: f64,
     /// Training seconds so far (across resumes).
     pub elapsed_s: f64,
+}
+
+/// One training step and where its wall time went ([`Trainer::train_step_timed`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepTimes {
+    /// The batch loss (before the update).
+    pub loss: f64,
+    /// Seconds to draw the batch indices and build the batch: flow times, source noise,
+    /// geodesic points and targets, trajectory features, the BEV stack and the normalised
+    /// conditions, as tensors.
+    pub batch_s: f64,
+    /// Seconds of the forward pass and the loss (condition encoding, FiLM, U-Net, MSE).
+    pub forward_s: f64,
+    /// Seconds of the backward pass.
+    pub backward_s: f64,
+    /// Seconds of the update: gradient-norm clipping, AdamW and the EMA.
+    pub update_s: f64,
+}
+
+impl StepTimes {
+    /// Seconds of the whole step.
+    pub fn total_s(&self) -> f64 {
+        self.batch_s + self.forward_s + self.backward_s + self.update_s
+    }
 }
 
 /// A batch in tensor form.
@@ -727,6 +752,13 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
 
     /// One optimiser step; returns the batch loss (before the update).
     pub fn train_step(&mut self) -> Result<f64, CfmError> {
+        self.train_step_timed().map(|t| t.loss)
+    }
+
+    /// [`Self::train_step`], also returning the wall time of its phases (for throughput
+    /// measurements such as `human2nav train --bench-steps`).
+    pub fn train_step_timed(&mut self) -> Result<StepTimes, CfmError> {
+        let start = Instant::now();
         let step = self.step;
         let idx = self.batch_indices(step);
         let mut rng = ChaCha8Rng::seed_from_u64(self.opts.seed);
@@ -743,6 +775,7 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
             &mut rng,
             self.model.device(),
         );
+        let built = Instant::now();
         for p in &mut self.params {
             p.zero_grad();
         }
@@ -751,14 +784,23 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
         if !loss_value.is_finite() {
             return Err(CfmError::Diverged { step });
         }
+        let forward = Instant::now();
         loss.backward();
+        let backward = Instant::now();
         self.apply_adamw(step);
         self.step += 1;
         self.loss_sum += loss_value;
         self.loss_count += 1;
         self.model.invalidate_cache();
         self.ema.invalidate_cache();
-        Ok(loss_value)
+        let end = Instant::now();
+        Ok(StepTimes {
+            loss: loss_value,
+            batch_s: built.duration_since(start).as_secs_f64(),
+            forward_s: forward.duration_since(built).as_secs_f64(),
+            backward_s: backward.duration_since(forward).as_secs_f64(),
+            update_s: end.duration_since(backward).as_secs_f64(),
+        })
     }
 
     fn apply_adamw(&mut self, step: u64) {

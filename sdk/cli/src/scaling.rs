@@ -27,6 +27,14 @@ pub struct ScalingArgs {
     /// run on one worker per core (`RAYON_NUM_THREADS` overrides).
     #[arg(long)]
     threads: Option<usize>,
+    /// Measure this suite of the bench config instead of the scaling config's `suite`.
+    #[arg(long)]
+    suite: Option<String>,
+    /// Folder of the fraction models and their training runs (`models/`, `train/`)
+    /// [default: the output directory]. Give an earlier run's --out to measure its models on
+    /// another suite without training them again.
+    #[arg(long)]
+    models: Option<PathBuf>,
 }
 
 /// Runs `human2nav scaling`.
@@ -36,6 +44,8 @@ pub fn run(args: ScalingArgs) -> anyhow::Result<ExitCode> {
         out: args.out,
         quick: args.quick,
         threads: args.threads,
+        suite: args.suite,
+        models: args.models,
     };
     let outcome = scaling::run(&request, &MultiProgress::new())?;
     println!(

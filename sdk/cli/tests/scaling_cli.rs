@@ -68,8 +68,11 @@ fn write_configs(dir: &Path) -> PathBuf {
             "seed = 5\nrobots = [{}]\n\
              [[methods]]\nname = \"straight\"\nkind = \"straight\"\n\
              [[suites]]\nname = \"real\"\nkind = \"real\"\nepisodes = {}\nper_class = 50\n\
+             quick_per_class = 3\n\
+             [[suites]]\nname = \"again\"\nkind = \"real\"\nepisodes = {}\nper_class = 50\n\
              quick_per_class = 3\n",
             lit(&root.join("robots/diablo/robot.toml")),
+            lit(&dir.join("episodes.json")),
             lit(&dir.join("episodes.json")),
         ),
     )
@@ -233,5 +236,49 @@ fn two_fractions_end_to_end_then_resumed() {
         assert_eq!(c[closed_loop], "measured");
         assert_eq!(a[sr], c[sr], "deterministic given the seeds");
     }
+
+    // Another suite on the same models: `--suite` measures it, `--models` reuses the models
+    // of the run above instead of training them again (the suite `again` has the same
+    // episodes, so the success rates are the same).
+    let again_dir = dir.join("out-again");
+    let out = human2nav(&[
+        "scaling",
+        "--config",
+        scaling.to_str().unwrap(),
+        "--out",
+        again_dir.to_str().unwrap(),
+        "--models",
+        out_dir.to_str().unwrap(),
+        "--suite",
+        "again",
+        "--threads",
+        "1",
+    ]);
+    let stderr = text(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("suite `again`"), "{stderr}");
+    assert!(!stderr.contains("training 4 steps"), "{stderr}");
+    assert!(!again_dir.join("models").exists());
+    let (_, other_suite) = csv_rows(&again_dir.join("scaling.csv"));
+    for (a, d) in rows.iter().zip(&other_suite) {
+        assert_eq!(d[model], "reused");
+        assert_eq!(d[closed_loop], "measured");
+        assert_eq!(a[sr], d[sr]);
+    }
+    let out = human2nav(&[
+        "scaling",
+        "--config",
+        scaling.to_str().unwrap(),
+        "--out",
+        again_dir.to_str().unwrap(),
+        "--suite",
+        "nope",
+    ]);
+    let stderr = text(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("`nope` is not a suite of") && stderr.contains("real, again"),
+        "{stderr}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -18,6 +18,8 @@
 //!   is not retrained (the command is resumable);
 //! * `train/frac-<pct>/checkpoint/`: the training checkpoints (an interrupted training resumes
 //!   from there);
+//!   (these two folders go under `--models` instead when it is given: a run on another suite
+//!   pointed at an earlier run's folder reuses its models; `--suite` picks that suite);
 //! * `frac-<pct>/planner.toml` and `frac-<pct>/results.csv`: the planner used and one row per
 //!   episode × robot; `frac-<pct>/closed_loop.toml`: the same rows with what they were measured
 //!   with (model, planner, episodes, robots, simulation settings, seed), reused by a later run
@@ -72,13 +74,19 @@ pub struct ScalingRequest {
     /// Torch threads for training; `None` is the train config's `run.threads`. The episodes
     /// run on one worker per core (`RAYON_NUM_THREADS` overrides).
     pub threads: Option<usize>,
+    /// Measure this suite of the bench config instead of the scaling config's `suite`.
+    pub suite: Option<String>,
+    /// Folder that holds (or will hold) the fraction models and their training runs
+    /// (`models/`, `train/`); `None` is the output directory. Pointing a run on another suite
+    /// at an earlier run's output reuses its models instead of training them again.
+    pub models: Option<PathBuf>,
 }
 
 impl ScalingRequest {
     /// The command line written into the report.
     pub fn command(&self) -> String {
         format!(
-            "human2nav scaling --config {}{}{}{}",
+            "human2nav scaling --config {}{}{}{}{}{}",
             self.config.display(),
             self.out
                 .as_ref()
@@ -87,6 +95,14 @@ impl ScalingRequest {
             if self.quick { " --quick" } else { "" },
             self.threads
                 .map(|t| format!(" --threads {t}"))
+                .unwrap_or_default(),
+            self.suite
+                .as_ref()
+                .map(|s| format!(" --suite {s}"))
+                .unwrap_or_default(),
+            self.models
+                .as_ref()
+                .map(|p| format!(" --models {}", p.display()))
                 .unwrap_or_default()
         )
     }
@@ -347,6 +363,8 @@ fn stage_style() -> ProgressStyle {
 struct Setup {
     cfg: ScalingConfig,
     out: PathBuf,
+    /// Where the fraction models and their training runs are (`models/`, `train/`).
+    models: PathBuf,
     train: TrainSettings,
     bench_path: PathBuf,
     bcfg: BenchConfig,
@@ -386,10 +404,18 @@ struct TrainedModel {
 pub fn run(request: &ScalingRequest, multi: &MultiProgress) -> anyhow::Result<ScalingOutcome> {
     let started = Instant::now();
     let cfg = load_config(request)?;
-    let (root, out) = locations(request);
+    let (root, out, models) = locations(request);
     let _lock = DirLock::acquire(&out, "human2nav scaling")
         .with_context(|| format!("locking the output folder {}", out.display()))?;
-    let setup = Setup::load(cfg, request, &root, out)?;
+    let _models_lock = if models != out {
+        Some(
+            DirLock::acquire(&models, "human2nav scaling")
+                .with_context(|| format!("locking the models folder {}", models.display()))?,
+        )
+    } else {
+        None
+    };
+    let setup = Setup::load(cfg, request, &root, out, models)?;
 
     let stages = multi.add(ProgressBar::new(2 * setup.cfg.fractions.len() as u64));
     stages.set_style(stage_style());
@@ -406,16 +432,22 @@ pub fn run(request: &ScalingRequest, multi: &MultiProgress) -> anyhow::Result<Sc
 
 /// Reads, parses and checks the scaling configuration and the request's options.
 fn load_config(request: &ScalingRequest) -> anyhow::Result<ScalingConfig> {
-    let cfg = ScalingConfig::load(&request.config)?;
+    let mut cfg = ScalingConfig::load(&request.config)?;
     if request.threads == Some(0) {
         bail!("--threads must be at least 1");
+    }
+    if let Some(suite) = &request.suite {
+        if suite.is_empty() {
+            bail!("--suite must name a suite of the bench config");
+        }
+        cfg.suite = suite.clone();
     }
     Ok(cfg)
 }
 
-/// The workspace root (found from the configuration's folder, else the current directory)
-/// and the absolute output folder.
-fn locations(request: &ScalingRequest) -> (PathBuf, PathBuf) {
+/// The workspace root (found from the configuration's folder, else the current directory),
+/// the absolute output folder and the absolute folder of the fraction models.
+fn locations(request: &ScalingRequest) -> (PathBuf, PathBuf, PathBuf) {
     let cwd = std::env::current_dir().unwrap_or_else(|_| PathBuf::from("."));
     let config_dir = request
         .config
@@ -435,7 +467,11 @@ fn locations(request: &ScalingRequest) -> (PathBuf, PathBuf) {
             "out/scaling"
         }),
     };
-    (root, out)
+    let models = request
+        .models
+        .as_ref()
+        .map_or_else(|| out.clone(), |p| cwd.join(p));
+    (root, out, models)
 }
 
 /// The train config with the scaling overrides (steps, seed, threads, no time cap), its
@@ -584,6 +620,7 @@ impl Setup {
         request: &ScalingRequest,
         root: &Path,
         out: PathBuf,
+        models: PathBuf,
     ) -> anyhow::Result<Setup> {
         let train = train_settings(&cfg, request, root)?;
         let (bench_path, bcfg, suite, per_class) = bench_suite(&cfg, request, root)?;
@@ -604,6 +641,7 @@ impl Setup {
         Ok(Setup {
             cfg,
             out,
+            models,
             train,
             bench_path,
             bcfg,
@@ -626,8 +664,8 @@ impl Setup {
         let tr = &self.train;
         let manifest = tr.cache.manifest();
         let name = fraction_name(fraction);
-        let model_dir = self.out.join("models").join(&name);
-        let run_dir = self.out.join("train").join(&name);
+        let model_dir = self.models.join("models").join(&name);
+        let run_dir = self.models.join("train").join(&name);
         let picked = tr
             .cache
             .pick_scenes(Split::Train, fraction, tr.cfg.train.seed)?;

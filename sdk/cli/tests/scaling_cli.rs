@@ -115,6 +115,21 @@ fn csv_rows(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
     (header, rows)
 }
 
+/// `human2nav scaling --config <scaling> --out <out> --threads 1` with `extra` arguments.
+fn run_scaling(scaling: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "scaling",
+        "--config",
+        scaling.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--threads",
+        "1",
+    ];
+    args.extend_from_slice(extra);
+    human2nav(&args)
+}
+
 fn column(header: &[String], name: &str) -> usize {
     header.iter().position(|h| h == name).unwrap()
 }
@@ -135,17 +150,7 @@ fn two_fractions_end_to_end_then_resumed() {
     assert!(out.status.success(), "{}", text(&out.stderr));
 
     let out_dir = dir.join("out");
-    let run = || {
-        human2nav(&[
-            "scaling",
-            "--config",
-            scaling.to_str().unwrap(),
-            "--out",
-            out_dir.to_str().unwrap(),
-            "--threads",
-            "1",
-        ])
-    };
+    let run = || run_scaling(&scaling, &out_dir, &[]);
     let out = run();
     let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
     assert!(out.status.success(), "{stderr}");
@@ -241,19 +246,11 @@ fn two_fractions_end_to_end_then_resumed() {
     // of the run above instead of training them again (the suite `again` has the same
     // episodes, so the success rates are the same).
     let again_dir = dir.join("out-again");
-    let out = human2nav(&[
-        "scaling",
-        "--config",
-        scaling.to_str().unwrap(),
-        "--out",
-        again_dir.to_str().unwrap(),
-        "--models",
-        out_dir.to_str().unwrap(),
-        "--suite",
-        "again",
-        "--threads",
-        "1",
-    ]);
+    let out = run_scaling(
+        &scaling,
+        &again_dir,
+        &["--models", out_dir.to_str().unwrap(), "--suite", "again"],
+    );
     let stderr = text(&out.stderr);
     assert!(out.status.success(), "{stderr}");
     assert!(stderr.contains("suite `again`"), "{stderr}");
@@ -265,15 +262,7 @@ fn two_fractions_end_to_end_then_resumed() {
         assert_eq!(d[closed_loop], "measured");
         assert_eq!(a[sr], d[sr]);
     }
-    let out = human2nav(&[
-        "scaling",
-        "--config",
-        scaling.to_str().unwrap(),
-        "--out",
-        again_dir.to_str().unwrap(),
-        "--suite",
-        "nope",
-    ]);
+    let out = run_scaling(&scaling, &again_dir, &["--suite", "nope"]);
     let stderr = text(&out.stderr);
     assert!(!out.status.success());
     assert!(

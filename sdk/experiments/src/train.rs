@@ -189,6 +189,19 @@ fn scene_names(cache: &TupleCache, split: Split) -> String {
     names.join(", ")
 }
 
+/// The tuples a run of `cfg` trains on (its share of the training scenes); an empty split is
+/// an error naming the cache.
+fn training_tuples(
+    cfg: &TrainConfig,
+    cache: &TupleCache,
+) -> anyhow::Result<Vec<human2nav_data::tuples::TrainingTuple>> {
+    let train_set = cache.load_scenes(Split::Train, cfg.data.train_fraction, cfg.train.seed)?;
+    if train_set.is_empty() {
+        bail!("the training split of {} is empty", cache.dir().display());
+    }
+    Ok(train_set)
+}
+
 /// Trains (or resumes from `out_dir/checkpoint`) and exports the EMA model with its card.
 pub fn train(
     cfg: &TrainConfig,
@@ -199,7 +212,7 @@ pub fn train(
     fresh: bool,
 ) -> anyhow::Result<()> {
     let load_start = Instant::now();
-    let train_set = cache.load_scenes(Split::Train, cfg.data.train_fraction, cfg.train.seed)?;
+    let train_set = training_tuples(cfg, cache)?;
     let val_set = cache.load(Split::Val)?;
     eprintln!(
         "loaded {} training and {} validation tuples in {:.1} s",
@@ -207,9 +220,6 @@ pub fn train(
         val_set.len(),
         load_start.elapsed().as_secs_f64()
     );
-    if train_set.is_empty() {
-        bail!("the training split of {} is empty", cache.dir().display());
-    }
 
     let ckpt = out_dir.join("checkpoint");
     let resume_from = if fresh {
@@ -279,15 +289,12 @@ pub fn bench_train_steps(
     warmup: usize,
 ) -> anyhow::Result<StepBench> {
     let load_start = Instant::now();
-    let train_set = cache.load_scenes(Split::Train, cfg.data.train_fraction, cfg.train.seed)?;
+    let train_set = training_tuples(cfg, cache)?;
     eprintln!(
         "loaded {} training tuples in {:.1} s",
         train_set.len(),
         load_start.elapsed().as_secs_f64()
     );
-    if train_set.is_empty() {
-        bail!("the training split of {} is empty", cache.dir().display());
-    }
     let norm = Normalisation::estimate(&train_set, cfg.train.seed)?;
     let no_val: &[human2nav_data::tuples::TrainingTuple] = &[];
     let mut trainer = Trainer::new(&cfg.net, &norm, &cfg.train, &train_set, no_val, device)?;

@@ -2,24 +2,22 @@
 //! training tuples, for the agreement check of the PyTorch reference
 //! (`sdk/flow/reference/torch_train_step.py --check`).
 //!
-//! The batch is built as the trainer builds one (mirror and path noise off, as shipped): tuples
-//! of the cache's training split at fixed indices, flow times from the default time
-//! distribution and unit-normal source twists from a seeded generator, the geodesic point and
-//! target velocity of Eq. 3, trajectory features and normalised conditions through the crate's
-//! own functions, with the model card's normalisation. Everything goes into one safetensors
+//! The batch is built by the trainer's own recipe (`train::batch_from_draws`; mirror and path
+//! noise off, as shipped) with the model card's normalisation: tuples of the cache's training
+//! split at fixed indices, flow times from the default time distribution and unit-normal
+//! source twists from a seeded generator. Everything goes into one safetensors
 //! file: the indices, twists and times (so the reference rebuilds the batch itself), the
 //! network inputs, its output, the MSE loss and the gradient of every weight.
 //!
 //! `cargo run --release -p human2nav-flow --example torch_reference -- <model dir> <cache dir> <out.safetensors> [rows]`
 
 use anyhow::Context;
-use human2nav_core::se2::{Pose2, Twist2};
+use human2nav_core::se2::Twist2;
 use human2nav_data::cache::TupleCache;
 use human2nav_data::tuples::Split;
 use human2nav_flow::CfmModel;
-use human2nav_flow::cfm::{TimeDistribution, geodesic_point, target_velocity};
-use human2nav_flow::model::{normalise_condition, trajectory_features};
-use human2nav_flow::train::TrainingSample;
+use human2nav_flow::cfm::TimeDistribution;
+use human2nav_flow::train::{Batch, BatchDraws, batch_from_draws};
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use tch::{Kind, Tensor};
@@ -35,10 +33,15 @@ fn main() -> anyhow::Result<()> {
     let model = CfmModel::load(model_dir.as_ref(), tch::Device::Cpu)?;
     let cache = TupleCache::open(cache_dir.as_ref()).context("opening the cache")?;
     let compact = cache.load_compact(Split::Train)?;
+    anyhow::ensure!(
+        rows > 0 && !compact.is_empty(),
+        "need at least one row and a non-empty training split (rows = {rows}, {} tuples)",
+        compact.len()
+    );
     let spec = cache.manifest().bev;
     let net = &model.card().net;
     let norm = &model.card().normalisation;
-    let (t_len, cells, bev_len) = (net.horizon, net.bev_cells, net.bev_len());
+    let t_len = net.horizon;
 
     // Rows spread over the split; seeded flow times and source twists, the first two times at
     // the ends of the distribution's range.
@@ -56,45 +59,26 @@ fn main() -> anyhow::Result<()> {
         .map(|_| StandardNormal.sample(&mut rng))
         .collect();
 
-    let s = norm.position_scale;
-    let mut x = vec![0f32; rows * 5 * t_len];
-    let mut target = vec![0f32; rows * 3 * t_len];
-    let mut bev = vec![0f32; rows * bev_len];
-    let mut gv = vec![0f32; rows * 4];
-    let mut poses = vec![0f64; t_len * 3];
-    for (row, &i) in idx.iter().enumerate() {
-        let ex = compact[i].to_tuple(&spec);
-        let tgt = &mut target[row * 3 * t_len..(row + 1) * 3 * t_len];
-        for j in 0..t_len {
-            let p = ex.future_pose(j);
-            let p1 = Pose2::new(p.x / s, p.y / s, p.theta);
-            let k = (row * t_len + j) * 3;
-            let x0 = Pose2::exp(Twist2::new(xi0[k], xi0[k + 1], xi0[k + 2]));
-            let xi = target_velocity(x0, p1);
-            let xt = geodesic_point(x0, xi, ts[row]);
-            poses[3 * j..3 * j + 3].copy_from_slice(&xt.to_array());
-            let xi = xi.to_array();
-            for c in 0..3 {
-                tgt[c * t_len + j] = (xi[c] / norm.velocity_std[c]) as f32;
-            }
-        }
-        trajectory_features(&poses, &mut x[row * 5 * t_len..(row + 1) * 5 * t_len]);
-        normalise_condition(
-            norm,
-            ex.bev(),
-            ex.goal(),
-            ex.velocity(),
-            &mut bev[row * bev_len..(row + 1) * bev_len],
-            &mut gv[row * 4..row * 4 + 4],
-        );
-    }
-    let (b, t, c) = (rows as i64, t_len as i64, cells as i64);
-    let x = Tensor::from_slice(&x).view([b, 5, t]);
-    let t32: Vec<f32> = ts.iter().map(|&v| v as f32).collect();
-    let tt = Tensor::from_slice(&t32);
-    let bev = Tensor::from_slice(&bev).view([b, 3, c, c]);
-    let gv = Tensor::from_slice(&gv).view([b, 4]);
-    let target = Tensor::from_slice(&target).view([b, 3, t]);
+    // The trainer's own batch recipe on these draws (no mirroring, no path noise, as shipped).
+    let tuples: Vec<_> = idx.iter().map(|&i| compact[i].to_tuple(&spec)).collect();
+    let rows_idx: Vec<usize> = (0..rows).collect();
+    let draws = BatchDraws {
+        flip: vec![false; rows],
+        t: ts.clone(),
+        source: xi0
+            .chunks_exact(3)
+            .map(|c| Twist2::new(c[0], c[1], c[2]))
+            .collect(),
+        path: Vec::new(),
+    };
+    let Batch {
+        x,
+        t: tt,
+        bev,
+        goal_vel: gv,
+        target,
+    } = batch_from_draws(&tuples, &rows_idx, net, norm, &draws, tch::Device::Cpu);
+    let (b, t) = (rows as i64, t_len as i64);
 
     // The trainer's loss: condition encoding, FiLM, U-Net, MSE; then its gradients.
     let cond = model.net().encode_condition(&bev, &gv);

@@ -357,13 +357,19 @@ impl StepTimes {
     }
 }
 
-/// A batch in tensor form.
-struct Batch {
-    x: Tensor,
-    t: Tensor,
-    bev: Tensor,
-    goal_vel: Tensor,
-    target: Tensor,
+/// A training batch in tensor form: the network's inputs and the regression target of Eq. 3.
+#[derive(Debug)]
+pub struct Batch {
+    /// `[B, 5, T]` features of the path point `x_t` ([`trajectory_features`]).
+    pub x: Tensor,
+    /// `[B]` flow times.
+    pub t: Tensor,
+    /// `[B, 3, H, W]` normalised BEV rasters.
+    pub bev: Tensor,
+    /// `[B, 4]` normalised goal and ego velocity.
+    pub goal_vel: Tensor,
+    /// `[B, 3, T]` standardised target velocities `ξ/σ`.
+    pub target: Tensor,
 }
 
 /// Eq. 3's path noise: `σ` and its own generator, so that the source draws, flow times and
@@ -385,6 +391,45 @@ impl PathNoise {
     }
 }
 
+/// The random part of a batch (per-waypoint entries row-major; `x_0 = exp(ξ_0)`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BatchDraws {
+    /// Per row: mirrored (y ↦ −y) or not.
+    pub flip: Vec<bool>,
+    /// Per row: the flow time.
+    pub t: Vec<f64>,
+    /// Per row and waypoint: the source twist `ξ_0`.
+    pub source: Vec<Twist2>,
+    /// Per row and waypoint: the path noise twist, scaled by `σ`; empty without path noise.
+    pub path: Vec<Twist2>,
+}
+
+/// The draws of a batch of `rows` rows from `rng` (and the path noise's own generator), in
+/// the order the trainer has always taken them: per row the mirror flag (only when `mirror`),
+/// the flow time, then the waypoints' source twists.
+fn draw_batch<R: Rng + ?Sized>(
+    rows: usize,
+    t_len: usize,
+    time: &TimeSampler,
+    mirror: bool,
+    path: Option<&mut PathNoise>,
+    rng: &mut R,
+) -> BatchDraws {
+    let mut path = path.filter(|p| p.sigma > 0.0);
+    let mut d = BatchDraws::default();
+    for _ in 0..rows {
+        d.flip.push(mirror && rng.random_bool(0.5));
+        d.t.push(time.sample(rng));
+        for _ in 0..t_len {
+            d.source.push(unit_normal_twist(rng));
+            if let Some(p) = path.as_deref_mut() {
+                d.path.push(unit_normal_twist(&mut p.rng).scale(p.sigma));
+            }
+        }
+    }
+    d
+}
+
 /// Builds the batch of examples `idx` with noise from `rng`: features of `x_t`, flow times,
 /// normalised conditions and standardised targets `ξ/σ`.
 fn build_batch<S: TrainingSample, R: Rng + ?Sized>(
@@ -398,7 +443,22 @@ fn build_batch<S: TrainingSample, R: Rng + ?Sized>(
     rng: &mut R,
     device: Device,
 ) -> Batch {
-    let mut path = path.filter(|p| p.sigma > 0.0);
+    let draws = draw_batch(idx.len(), net.horizon, time, mirror, path, rng);
+    batch_from_draws(data, idx, net, norm, &draws, device)
+}
+
+/// The batch of examples `idx` given its random part: the recipe of the trainer's batches
+/// (the SE(2) geodesic point and target of Eq. 3, trajectory features, mirrored and
+/// normalised conditions), public so that a reference implementation can be checked against
+/// it on the same draws.
+pub fn batch_from_draws<S: TrainingSample>(
+    data: &[S],
+    idx: &[usize],
+    net: &NetConfig,
+    norm: &Normalisation,
+    draws: &BatchDraws,
+    device: Device,
+) -> Batch {
     let b = idx.len();
     let t_len = net.horizon;
     let bev_len = net.bev_len();
@@ -413,8 +473,8 @@ fn build_batch<S: TrainingSample, R: Rng + ?Sized>(
     let s = norm.position_scale;
     for (row, &i) in idx.iter().enumerate() {
         let ex = &data[i];
-        let flip = mirror && rng.random_bool(0.5);
-        let t = time.sample(rng);
+        let flip = draws.flip[row];
+        let t = draws.t[row];
         ts[row] = t as f32;
         let tgt = &mut target[row * 3 * t_len..(row + 1) * 3 * t_len];
         for j in 0..t_len {
@@ -422,11 +482,12 @@ fn build_batch<S: TrainingSample, R: Rng + ?Sized>(
             if flip {
                 p1 = Pose2::new(p1.x, -p1.y, -p1.theta);
             }
-            let x0 = Pose2::exp(unit_normal_twist(rng));
+            let k = row * t_len + j;
+            let x0 = Pose2::exp(draws.source[k]);
             let xi = target_velocity(x0, p1);
             let mut xt = geodesic_point(x0, xi, t);
-            if let Some(p) = path.as_deref_mut() {
-                xt = xt.compose(Pose2::exp(unit_normal_twist(&mut p.rng).scale(p.sigma)));
+            if let Some(&noise) = draws.path.get(k) {
+                xt = xt.compose(Pose2::exp(noise));
             }
             poses[3 * j..3 * j + 3].copy_from_slice(&xt.to_array());
             let xi = xi.to_array();

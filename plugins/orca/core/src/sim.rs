@@ -40,9 +40,10 @@ pub struct OrcaSim {
     velocities: Vec<Vec2>,
     pref_velocities: Vec<Vec2>,
     params: Vec<OrcaParams>,
-    /// Each agent's `1 / time_horizon` and `1 / time_step` (the divisions [`orca_line_inv`]
-    /// takes done once, at [`OrcaSim::add_agent`]).
-    inverses: Vec<(f64, f64)>,
+    /// Each agent's `1 / time_horizon` and the simulation's `1 / time_step`: the divisions
+    /// [`orca_line_inv`] takes, done once instead of once per agent and step.
+    inv_time_horizons: Vec<f64>,
+    inv_time_step: f64,
     // Buffers reused from step to step.
     new_velocities: Vec<Vec2>,
     /// Each agent's neighbours at the last step: agent `i`'s are
@@ -76,7 +77,8 @@ impl OrcaSim {
             velocities: Vec::new(),
             pref_velocities: Vec::new(),
             params: Vec::new(),
-            inverses: Vec::new(),
+            inv_time_horizons: Vec::new(),
+            inv_time_step: 1.0 / time_step,
             new_velocities: Vec::new(),
             last_neighbors: Vec::new(),
             last_start: Vec::new(),
@@ -113,8 +115,7 @@ impl OrcaSim {
             time_step: self.time_step,
             ..params
         });
-        self.inverses
-            .push((1.0 / params.time_horizon, 1.0 / self.time_step));
+        self.inv_time_horizons.push(1.0 / params.time_horizon);
         self.positions.len() - 1
     }
 
@@ -212,7 +213,7 @@ impl OrcaSim {
             self.next_neighbors.extend(self.neighbors.indices());
             self.next_start.push(self.next_neighbors.len());
             self.lines.clear();
-            let (inv_tau, inv_dt) = self.inverses[i];
+            let (inv_tau, inv_dt) = (self.inv_time_horizons[i], self.inv_time_step);
             for j in self.neighbors.indices() {
                 let other = Neighbor {
                     position: self.positions[j],

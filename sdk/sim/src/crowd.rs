@@ -36,7 +36,8 @@
 //! 2 m from the robot's footprint) and who is back on its recording (within 1 cm and
 //! 5 cm/s) is replayed exactly, so a reactive run differs from the replay only near the robot.
 //! Pedestrians appear and disappear when their recorded tracks do. What a planner observes
-//! (positions, velocities and the 0.1 s history) is the simulated crowd.
+//! (positions, velocities and the 0.1 s history) is the simulated crowd; the velocity, as in a
+//! replay, is the last step's, never the recording's next segment.
 
 use crate::episode::{AgentTrack, Episode};
 use crate::replay::{CrowdReplay, PedestrianSample};
@@ -267,7 +268,9 @@ impl<'a> Crowd<'a> {
     }
 
     /// The pedestrians present within `range` of `centre` as a planner observes them, with up
-    /// to `history_len` positions at the episode's step (see [`CrowdReplay::observe`]).
+    /// to `history_len` positions at the episode's step (see [`CrowdReplay::observe`]). The
+    /// velocity is causal: a walker on its recording is seen with the recording's
+    /// [`CrowdReplay::observed_velocity`], a displaced one with the velocity of its last step.
     pub fn observe(&self, centre: [f64; 2], range: f64, history_len: usize) -> Vec<AgentState> {
         if self.force.is_none() {
             return self.replay.observe(self.time, centre, range, history_len);
@@ -280,10 +283,17 @@ impl<'a> Crowd<'a> {
                 continue;
             }
             let from = w.history.len().saturating_sub(history_len);
+            let velocity = if w.displaced {
+                w.velocity
+            } else {
+                self.replay
+                    .observed_velocity(track, self.time)
+                    .unwrap_or_default()
+            };
             out.push(AgentState {
                 id: track.id,
                 position: w.position,
-                velocity: w.velocity,
+                velocity,
                 radius: track.radius,
                 history: w.history[from..].to_vec(),
             });

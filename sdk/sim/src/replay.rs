@@ -2,9 +2,15 @@
 //!
 //! A track with samples `q_0 … q_{n−1}` at times `t_k = (start_step + k)·dt` is *present* for
 //! `t ∈ [t_0, t_{n−1}]` (a single-sample track only at `t_0`, within half a simulation step).
-//! Between samples the position is interpolated linearly; the velocity is the finite difference
-//! of the segment containing `t` (`(q_{k+1} − q_k)/dt`; the last segment at the final sample;
-//! zero for a single sample). Pedestrians never react to the robot.
+//! Between samples the position is interpolated linearly; the velocity of [`CrowdReplay::sample`]
+//! is the finite difference of the segment containing `t` (`(q_{k+1} − q_k)/dt`; the last
+//! segment at the final sample; zero for a single sample). Pedestrians never react to the robot.
+//!
+//! What a planner observes ([`CrowdReplay::observe`]) is causal: the position at `t`, the
+//! history up to the last sample not after `t`, and the velocity over the last step
+//! ([`CrowdReplay::observed_velocity`]), as a tracker would estimate it. The segment velocity of
+//! `sample` is the one the pedestrian moves with next, 0.1 s of the future at the planners'
+//! instants; it serves the collision bookkeeping, never an observation.
 
 use crate::episode::{AgentTrack, Episode};
 use human2nav_core::AgentState;
@@ -74,6 +80,25 @@ impl<'a> CrowdReplay<'a> {
         })
     }
 
+    /// The velocity of `track` at `t` as a tracker estimates it from what it has seen: the
+    /// displacement over the last step, `(p(t) − p(t − dt))/dt` (from the track's first sample
+    /// while it is younger than a step), zero at the first sample, `None` when the track is
+    /// not present at `t`. It reads no position after `t`.
+    pub fn observed_velocity(&self, track: &AgentTrack, t: f64) -> Option<[f64; 2]> {
+        let now = self.sample(track, t)?;
+        let dt = self.episode.dt;
+        let back = (t - dt).max(track.start_step as f64 * dt);
+        let span = t - back;
+        if span <= PRESENCE_EPS * dt {
+            return Some([0.0, 0.0]);
+        }
+        let before = self.sample(track, back)?;
+        Some([
+            (now.position[0] - before.position[0]) / span,
+            (now.position[1] - before.position[1]) / span,
+        ])
+    }
+
     /// Every pedestrian present at `t`, in track order.
     pub fn at(&self, t: f64) -> Vec<PedestrianSample> {
         self.episode
@@ -84,8 +109,9 @@ impl<'a> CrowdReplay<'a> {
     }
 
     /// The pedestrians present at `t` within `range` of `centre` (centre distance), as the
-    /// planner observes them, with up to `history_len` recorded positions (at the episode's
-    /// step, oldest first, ending at the last sample not after `t`).
+    /// planner observes them: the position at `t`, the [`Self::observed_velocity`] and up to
+    /// `history_len` recorded positions (at the episode's step, oldest first, ending at the last
+    /// sample not after `t`). Nothing in it depends on the recording after `t`.
     pub fn observe(
         &self,
         t: f64,
@@ -116,7 +142,7 @@ impl<'a> CrowdReplay<'a> {
             out.push(AgentState {
                 id: s.id,
                 position: s.position,
-                velocity: s.velocity,
+                velocity: self.observed_velocity(tr, t).unwrap_or_default(),
                 radius: s.radius,
                 history,
             });

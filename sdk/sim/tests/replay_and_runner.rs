@@ -55,7 +55,51 @@ fn replay_interpolates_linearly_and_respects_presence() {
     assert_eq!(seen[0].history.len(), 3);
     // Out of sensor range.
     assert!(replay.observe(0.4, [100.0, 0.0], 10.0, 2).is_empty());
+    // The observed velocity is the last step's displacement, not the segment ahead: zero at the
+    // first sample, (1, 0) m over 0.1 s at the second, half a step into the last segment the
+    // move from 0.25 s to 0.35 s, at the final sample the last segment.
+    let v = |t: f64| replay.observe(t, [0.0, 0.0], 10.0, 2)[0].velocity;
+    assert_eq!(v(0.2), [0.0, 0.0]);
+    assert_relative_eq!(v(0.3)[0], 10.0, epsilon = 1e-9);
+    assert_relative_eq!(v(0.3)[1], 0.0, epsilon = 1e-9);
+    assert_relative_eq!(v(0.25)[0], 10.0, epsilon = 1e-9);
+    assert_relative_eq!(v(0.35)[0], 15.0, epsilon = 1e-9);
+    assert_relative_eq!(v(0.35)[1], 5.0, epsilon = 1e-9);
+    assert_relative_eq!(v(0.4)[0], 20.0, epsilon = 1e-9);
+    assert_relative_eq!(v(0.4)[1], 10.0, epsilon = 1e-9);
     assert_relative_eq!(replay.end_time(), 0.4, epsilon = 1e-12);
+}
+
+#[test]
+fn observation_reads_nothing_after_its_time() {
+    // Two recordings equal up to 0.5 s and apart after it: whatever the planners see at or
+    // before 0.5 s must be the same.
+    let past: Vec<[f64; 2]> = (0..6).map(|k| [0.1 * k as f64, 0.05 * k as f64]).collect();
+    let mut a = past.clone();
+    a.extend([[0.6, 0.3], [0.7, 0.35]]);
+    let mut b = past;
+    b.extend([[0.4, 0.9], [-1.0, 2.0]]);
+    let track = |positions| AgentTrack {
+        id: 7,
+        start_step: 0,
+        positions,
+        radius: 0.3,
+    };
+    let ep_a = episode("a", ScenarioClass::CoFlow, 0.0, vec![track(a)]);
+    let ep_b = episode("b", ScenarioClass::CoFlow, 0.0, vec![track(b)]);
+    let (ra, rb) = (CrowdReplay::new(&ep_a), CrowdReplay::new(&ep_b));
+    for k in 0..=10 {
+        let t = 0.05 * k as f64;
+        assert_eq!(
+            ra.observe(t, [0.0, 0.0], 10.0, 8),
+            rb.observe(t, [0.0, 0.0], 10.0, 8),
+            "t = {t}"
+        );
+    }
+    assert_ne!(
+        ra.observe(0.55, [0.0, 0.0], 10.0, 8),
+        rb.observe(0.55, [0.0, 0.0], 10.0, 8)
+    );
 }
 
 #[test]

@@ -83,7 +83,7 @@ impl<'a> CrowdReplay<'a> {
     /// The velocity of `track` at `t` as a tracker estimates it from what it has seen: the
     /// displacement over the last step, `(p(t) − p(t − dt))/dt` (from the track's first sample
     /// while it is younger than a step), zero at the first sample, `None` when the track is
-    /// not present at `t`. It reads no position after `t`.
+    /// not present at `t`. It uses positions at `t` and before only.
     pub fn observed_velocity(&self, track: &AgentTrack, t: f64) -> Option<[f64; 2]> {
         let now = self.sample(track, t)?;
         let dt = self.episode.dt;
@@ -111,7 +111,10 @@ impl<'a> CrowdReplay<'a> {
     /// The pedestrians present at `t` within `range` of `centre` (centre distance), as the
     /// planner observes them: the position at `t`, the [`Self::observed_velocity`] and up to
     /// `history_len` recorded positions (at the episode's step, oldest first, ending at the last
-    /// sample not after `t`). Nothing in it depends on the recording after `t`.
+    /// sample not after `t`). At a sample time (the planners' instants at 10 Hz) nothing in it
+    /// depends on the recording after `t`; between samples the position is the pedestrian's
+    /// interpolated position at `t`, which the next sample shapes as it shapes the simulated
+    /// world.
     pub fn observe(
         &self,
         t: f64,

@@ -286,9 +286,8 @@ impl<'a> Crowd<'a> {
             let velocity = if w.displaced {
                 w.velocity
             } else {
-                self.replay
-                    .observed_velocity(track, self.time)
-                    .unwrap_or_default()
+                // On its recording: `w.position` is the recorded position at this time.
+                self.replay.velocity_into(track, self.time, w.position)
             };
             out.push(AgentState {
                 id: track.id,

@@ -86,17 +86,21 @@ impl<'a> CrowdReplay<'a> {
     /// not present at `t`. It uses positions at `t` and before only.
     pub fn observed_velocity(&self, track: &AgentTrack, t: f64) -> Option<[f64; 2]> {
         let now = self.sample(track, t)?;
+        Some(self.velocity_into(track, t, now.position))
+    }
+
+    /// [`Self::observed_velocity`] of a present track whose position at `t` is `now`.
+    pub(crate) fn velocity_into(&self, track: &AgentTrack, t: f64, now: [f64; 2]) -> [f64; 2] {
         let dt = self.episode.dt;
         let back = (t - dt).max(track.start_step as f64 * dt);
         let span = t - back;
-        if span <= PRESENCE_EPS * dt {
-            return Some([0.0, 0.0]);
+        match self.sample(track, back) {
+            Some(before) if span > PRESENCE_EPS * dt => [
+                (now[0] - before.position[0]) / span,
+                (now[1] - before.position[1]) / span,
+            ],
+            _ => [0.0, 0.0],
         }
-        let before = self.sample(track, back)?;
-        Some([
-            (now.position[0] - before.position[0]) / span,
-            (now.position[1] - before.position[1]) / span,
-        ])
     }
 
     /// Every pedestrian present at `t`, in track order.
@@ -145,7 +149,7 @@ impl<'a> CrowdReplay<'a> {
             out.push(AgentState {
                 id: s.id,
                 position: s.position,
-                velocity: self.observed_velocity(tr, t).unwrap_or_default(),
+                velocity: self.velocity_into(tr, t, s.position),
                 radius: s.radius,
                 history,
             });

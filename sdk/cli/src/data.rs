@@ -6,8 +6,9 @@ use clap::Subcommand;
 use human2nav_data::cache::Manifest;
 use human2nav_data::config::DataConfig;
 use human2nav_data::pipeline::{self, Locations, Progress};
+use human2nav_data::prediction::{self, PredictionOptions};
 use human2nav_data::resample::median;
-use human2nav_data::{ScenarioClass, Split, TupleCache};
+use human2nav_data::{EpisodeSuite, ScenarioClass, Split, TupleCache};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -47,6 +48,27 @@ pub enum DataCommand {
         /// Data config (e.g. sdk/configs/data.toml).
         #[arg(long)]
         config: PathBuf,
+    },
+    /// Score simple pedestrian predictors on the recorded crowds of an episode file: the
+    /// last step's velocity held (what the benchmark's planners see), mean velocities, standing
+    /// still, and a ridge model on the history fitted leave-one-scene-out (ADE / FDE over the
+    /// horizon, ADE over the first second; overall and per scene, as Markdown).
+    Predict {
+        /// Episode file (e.g. out/data/episodes-interaction-val.json).
+        #[arg(long)]
+        episodes: PathBuf,
+        /// Steps of history a prediction sees (1 to 1000).
+        #[arg(long, default_value_t = 8)]
+        history: usize,
+        /// Steps predicted (1 to 1000; 32 = the planner's 3.2 s).
+        #[arg(long, default_value_t = 32)]
+        horizon: usize,
+        /// Steps between two windows of a track (1 to 100000).
+        #[arg(long, default_value_t = 5)]
+        stride: usize,
+        /// Ridge regularisation of the learned model (>= 0).
+        #[arg(long, default_value_t = 1.0)]
+        lambda: f64,
     },
 }
 
@@ -118,7 +140,31 @@ pub fn run(cmd: DataCommand) -> anyhow::Result<ExitCode> {
         DataCommand::Stats { cache } => stats(&cache),
         DataCommand::Episodes { config, out } => episodes(&config, out),
         DataCommand::Associate { config } => associate(&config),
+        DataCommand::Predict {
+            episodes,
+            history,
+            horizon,
+            stride,
+            lambda,
+        } => predict(
+            &episodes,
+            PredictionOptions {
+                history,
+                horizon,
+                stride,
+                ridge_lambda: lambda,
+            },
+        ),
     }
+}
+
+fn predict(path: &Path, options: PredictionOptions) -> anyhow::Result<ExitCode> {
+    let suite = EpisodeSuite::load(path).with_context(|| format!("loading {}", path.display()))?;
+    let report = prediction::study(&suite, options)
+        .with_context(|| format!("predicting the crowds of {}", path.display()))?;
+    println!("{}: {}\n", path.display(), suite.source);
+    print!("{}", report.markdown());
+    Ok(ExitCode::SUCCESS)
 }
 
 fn build(config: &Path) -> anyhow::Result<ExitCode> {

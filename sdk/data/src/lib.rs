@@ -11,6 +11,8 @@
 //! classes. [`config`] is the `data.toml` schema, [`pipeline`] the parallel,
 //! thread-count-independent jobs behind `human2nav data build | episodes | associate`, and
 //! [`paths`] locates datasets and outputs. [`limits`] lists the bounds on what is read.
+//! [`prediction`] scores simple pedestrian predictors on the recorded crowds of an episode
+//! file (`human2nav data predict`).
 
 #![warn(missing_docs)]
 
@@ -25,6 +27,7 @@ pub mod limits;
 pub mod loaders;
 pub mod paths;
 pub mod pipeline;
+pub mod prediction;
 pub mod resample;
 pub mod scenario;
 pub mod synthetic;

@@ -1,0 +1,629 @@
+//! How well simple pedestrian predictors foresee the recorded crowds of an episode file: the
+//! offline study behind `human2nav data predict`.
+//!
+//! Every planner of the benchmark sees a pedestrian as its present position and the velocity of
+//! its last 0.1 s step (the simulator's causal observation), and Human2Nav's selection extends
+//! that velocity over its 3.2 s plan. This module asks whether anything a planner could compute
+//! from the same history predicts better. It cuts every recorded track of an episode file into
+//! windows (a history of `history` steps, a future of `horizon` steps, one window every
+//! `stride` steps) and scores, by average and final displacement error (ADE, FDE) and by ADE
+//! over the first second:
+//!
+//! * [`Predictor::LastStep`]: the last step's velocity held (what the planners use);
+//! * [`Predictor::MeanVelocity`]: the mean velocity over the last `n` steps, held;
+//! * [`Predictor::Static`]: the present position held;
+//! * [`Predictor::Ridge`]: a linear model learned from data. In the frame of the pedestrian's
+//!   heading, it maps the `history` step velocities (and a constant) to the future's departure
+//!   from the last-step prediction, fitted by ridge regression. It is scored leave-one-scene-out:
+//!   the windows of each scene are predicted by a model fitted on the other scenes' windows, so
+//!   that no scene is scored by a model that has seen it.
+//!
+//! The same pedestrian appears in many episodes of a file (the crowds of nearby episodes
+//! overlap), so tracks are taken once per scene, identity and first position.
+
+use crate::error::DataError;
+use crate::scenario::EpisodeSuite;
+use std::collections::{BTreeMap, BTreeSet};
+
+/// Options of the study.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PredictionOptions {
+    /// Steps of history a window shows (at least 1; the ridge model's features are their
+    /// velocities).
+    pub history: usize,
+    /// Steps predicted (32 at 0.1 s: the planner's 3.2 s).
+    pub horizon: usize,
+    /// Steps between the starts of two windows of a track (at least 1).
+    pub stride: usize,
+    /// Ridge regularisation `λ` of the learned model (added to `XᵀX`; `≥ 0`).
+    pub ridge_lambda: f64,
+}
+
+impl Default for PredictionOptions {
+    fn default() -> Self {
+        Self {
+            history: 8,
+            horizon: 32,
+            stride: 5,
+            ridge_lambda: 1.0,
+        }
+    }
+}
+
+impl PredictionOptions {
+    fn validate(&self) -> Result<(), DataError> {
+        let bad = |field: &str, message: &str| {
+            Err(DataError::Option {
+                field: field.into(),
+                message: message.into(),
+            })
+        };
+        if !(1..=1000).contains(&self.history) {
+            return bad("history", "must be 1 to 1000 steps");
+        }
+        if !(1..=1000).contains(&self.horizon) {
+            return bad("horizon", "must be 1 to 1000 steps");
+        }
+        if !(1..=100_000).contains(&self.stride) {
+            return bad("stride", "must be 1 to 100000 steps");
+        }
+        if !(self.ridge_lambda.is_finite() && self.ridge_lambda >= 0.0) {
+            return bad("ridge_lambda", "must be a finite number >= 0");
+        }
+        Ok(())
+    }
+}
+
+/// A predictor of the study (module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Predictor {
+    /// The last step's velocity, held.
+    LastStep,
+    /// The mean velocity over the last `n` steps, held.
+    MeanVelocity(usize),
+    /// The present position, held.
+    Static,
+    /// The ridge model on the history's velocities, leave-one-scene-out.
+    Ridge,
+}
+
+impl std::fmt::Display for Predictor {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::LastStep => write!(f, "last-step velocity (the planners')"),
+            Self::MeanVelocity(n) => write!(f, "mean velocity over {n} steps"),
+            Self::Static => write!(f, "standing still"),
+            Self::Ridge => write!(f, "ridge on the history, leave-one-scene-out"),
+        }
+    }
+}
+
+/// Errors of one predictor over a set of windows (metres).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Errors {
+    /// Mean over windows of the mean displacement error over the horizon.
+    pub ade: f64,
+    /// Mean over windows of the displacement error at the horizon's end.
+    pub fde: f64,
+    /// Mean over windows of the mean displacement error over the first second.
+    pub ade_1s: f64,
+    /// Windows scored.
+    pub windows: usize,
+}
+
+/// The study's result: errors per predictor, overall and per scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PredictionReport {
+    /// Options the study ran with.
+    pub options: PredictionOptions,
+    /// Distinct tracks found in the file.
+    pub tracks: usize,
+    /// Every predictor over all windows.
+    pub overall: BTreeMap<Predictor, Errors>,
+    /// Per scene (`dataset/scene`), every predictor over that scene's windows.
+    pub per_scene: BTreeMap<String, BTreeMap<Predictor, Errors>>,
+}
+
+/// One window: the history (`history + 1` positions, the last the present) and the future.
+struct Window {
+    scene: usize,
+    past: Vec<[f64; 2]>,
+    future: Vec<[f64; 2]>,
+}
+
+/// The windows of every distinct track of `suite`, and the scene names they index.
+fn windows(suite: &EpisodeSuite, o: &PredictionOptions) -> (Vec<Window>, Vec<String>, usize) {
+    let mut scenes: Vec<String> = Vec::new();
+    let mut seen = BTreeSet::new();
+    let mut out = Vec::new();
+    for e in &suite.episodes {
+        let scene = match scenes.iter().position(|s| *s == e.scene) {
+            Some(i) => i,
+            None => {
+                scenes.push(e.scene.clone());
+                scenes.len() - 1
+            }
+        };
+        for a in &e.agents {
+            let Some(first) = a.positions.first() else {
+                continue;
+            };
+            if !seen.insert((scene, a.id, first[0].to_bits(), first[1].to_bits())) {
+                continue;
+            }
+            let p = &a.positions;
+            let mut k = o.history;
+            while k + o.horizon < p.len() {
+                out.push(Window {
+                    scene,
+                    past: p[k - o.history..=k].to_vec(),
+                    future: p[k + 1..=k + o.horizon].to_vec(),
+                });
+                k += o.stride;
+            }
+        }
+    }
+    (out, scenes, seen.len())
+}
+
+fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
+    [a[0] - b[0], a[1] - b[1]]
+}
+
+/// Position after `i + 1` steps of velocity `v` (per step) from `p`.
+fn held(p: [f64; 2], v: [f64; 2], i: usize) -> [f64; 2] {
+    let s = (i + 1) as f64;
+    [p[0] + v[0] * s, p[1] + v[1] * s]
+}
+
+/// The rotation into the pedestrian's heading frame: `(cos, sin)` of the last step's direction,
+/// or of the history's displacement when the last step is (nearly) zero, or the identity.
+fn heading(w: &Window) -> (f64, f64) {
+    let n = w.past.len();
+    for d in [
+        sub(w.past[n - 1], w.past[n - 2]),
+        sub(w.past[n - 1], w.past[0]),
+    ] {
+        let l = d[0].hypot(d[1]);
+        if l > 1e-4 {
+            return (d[0] / l, d[1] / l);
+        }
+    }
+    (1.0, 0.0)
+}
+
+fn to_local((c, s): (f64, f64), v: [f64; 2]) -> [f64; 2] {
+    [c * v[0] + s * v[1], -s * v[0] + c * v[1]]
+}
+
+fn to_world((c, s): (f64, f64), v: [f64; 2]) -> [f64; 2] {
+    [c * v[0] - s * v[1], s * v[0] + c * v[1]]
+}
+
+/// The ridge model's features of a window: the history's step displacements in the heading
+/// frame, then 1.
+fn features(w: &Window) -> Vec<f64> {
+    let r = heading(w);
+    let mut f: Vec<f64> = w
+        .past
+        .windows(2)
+        .flat_map(|p| to_local(r, sub(p[1], p[0])))
+        .collect();
+    f.push(1.0);
+    f
+}
+
+/// The last-step prediction of a window.
+fn last_step(w: &Window, horizon: usize) -> Vec<[f64; 2]> {
+    let n = w.past.len();
+    let v = sub(w.past[n - 1], w.past[n - 2]);
+    (0..horizon).map(|i| held(w.past[n - 1], v, i)).collect()
+}
+
+/// The ridge model's targets of a window: the future's departure from the last-step
+/// prediction, in the heading frame.
+fn targets(w: &Window) -> Vec<f64> {
+    let r = heading(w);
+    last_step(w, w.future.len())
+        .iter()
+        .zip(&w.future)
+        .flat_map(|(p, f)| to_local(r, sub(*f, *p)))
+        .collect()
+}
+
+/// Solves `A·x = b` for each column of `b` (`A` symmetric positive definite, `n × n` row-major,
+/// `b` `n × m`) by Cholesky, in place in `b`. `None` when `A` is not positive definite.
+fn cholesky_solve(mut a: Vec<f64>, n: usize, b: &mut [f64], m: usize) -> Option<()> {
+    for j in 0..n {
+        let mut d = a[j * n + j];
+        for k in 0..j {
+            d -= a[j * n + k] * a[j * n + k];
+        }
+        if d.is_nan() || d <= 0.0 {
+            return None;
+        }
+        let d = d.sqrt();
+        a[j * n + j] = d;
+        for i in j + 1..n {
+            let mut v = a[i * n + j];
+            for k in 0..j {
+                v -= a[i * n + k] * a[j * n + k];
+            }
+            a[i * n + j] = v / d;
+        }
+    }
+    for c in 0..m {
+        for i in 0..n {
+            let mut v = b[i * m + c];
+            for k in 0..i {
+                v -= a[i * n + k] * b[k * m + c];
+            }
+            b[i * m + c] = v / a[i * n + i];
+        }
+        for i in (0..n).rev() {
+            let mut v = b[i * m + c];
+            for k in i + 1..n {
+                v -= a[k * n + i] * b[k * m + c];
+            }
+            b[i * m + c] = v / a[i * n + i];
+        }
+    }
+    Some(())
+}
+
+/// Sums `XᵀX` and `XᵀY` of a set of windows.
+struct Normal {
+    xtx: Vec<f64>,
+    xty: Vec<f64>,
+    n: usize,
+    m: usize,
+}
+
+impl Normal {
+    fn new(n: usize, m: usize) -> Self {
+        Self {
+            xtx: vec![0.0; n * n],
+            xty: vec![0.0; n * m],
+            n,
+            m,
+        }
+    }
+
+    fn add(&mut self, x: &[f64], y: &[f64], sign: f64) {
+        for i in 0..self.n {
+            let xi = sign * x[i];
+            for j in 0..self.n {
+                self.xtx[i * self.n + j] += xi * x[j];
+            }
+            for j in 0..self.m {
+                self.xty[i * self.m + j] += xi * y[j];
+            }
+        }
+    }
+
+    /// The ridge solution `(XᵀX + λ·I)⁻¹·XᵀY`, `n × m` row-major.
+    fn solve(&self, lambda: f64) -> Option<Vec<f64>> {
+        let mut a = self.xtx.clone();
+        for i in 0..self.n {
+            a[i * self.n + i] += lambda;
+        }
+        let mut b = self.xty.clone();
+        cholesky_solve(a, self.n, &mut b, self.m)?;
+        Some(b)
+    }
+}
+
+/// The ridge prediction of a window with weights `w` (`features × 2·horizon`).
+fn ridge(w: &Window, weights: &[f64], horizon: usize) -> Vec<[f64; 2]> {
+    let x = features(w);
+    let m = 2 * horizon;
+    let r = heading(w);
+    last_step(w, horizon)
+        .into_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let mut d = [0.0; 2];
+            for (k, xk) in x.iter().enumerate() {
+                d[0] += xk * weights[k * m + 2 * i];
+                d[1] += xk * weights[k * m + 2 * i + 1];
+            }
+            let d = to_world(r, d);
+            [p[0] + d[0], p[1] + d[1]]
+        })
+        .collect()
+}
+
+/// Adds one window's errors (ADE, FDE, ADE over the first `first` steps) to a running sum.
+fn score(sum: &mut Errors, prediction: &[[f64; 2]], future: &[[f64; 2]], first: usize) {
+    let e: Vec<f64> = prediction
+        .iter()
+        .zip(future)
+        .map(|(p, f)| (p[0] - f[0]).hypot(p[1] - f[1]))
+        .collect();
+    let first = first.clamp(1, e.len());
+    sum.ade += e.iter().sum::<f64>() / e.len() as f64;
+    sum.fde += e[e.len() - 1];
+    sum.ade_1s += e[..first].iter().sum::<f64>() / first as f64;
+    sum.windows += 1;
+}
+
+/// Runs the study on `suite` (tracks at `dt`, from its episodes).
+///
+/// # Errors
+/// [`DataError::Option`] for options out of range, and when the file yields no window (tracks
+/// shorter than `history + horizon + 1` steps) or the ridge model cannot be fitted (fewer than
+/// two scenes, or a scene whose complement has too few windows to determine it).
+pub fn study(suite: &EpisodeSuite, o: PredictionOptions) -> Result<PredictionReport, DataError> {
+    o.validate()?;
+    let (windows, scenes, tracks) = windows(suite, &o);
+    let fail = |message: String| DataError::Option {
+        field: "episodes".into(),
+        message,
+    };
+    if windows.is_empty() {
+        return Err(fail(format!(
+            "no track is {} steps long (history {} + horizon {} + 1)",
+            o.history + o.horizon + 1,
+            o.history,
+            o.horizon
+        )));
+    }
+    if scenes.len() < 2 {
+        return Err(fail(format!(
+            "the ridge model is scored leave-one-scene-out and the file has {} scene",
+            scenes.len()
+        )));
+    }
+    let dt = suite.episodes.first().map_or(0.1, |e| e.dt);
+    let first = ((1.0 / dt).round() as usize).max(1);
+    let (nf, m) = (o.history * 2 + 1, o.horizon * 2);
+    // Leave-one-scene-out: the sums over all windows minus those of the held-out scene.
+    let mut all = Normal::new(nf, m);
+    let mut own: Vec<Normal> = (0..scenes.len()).map(|_| Normal::new(nf, m)).collect();
+    for w in &windows {
+        let (x, y) = (features(w), targets(w));
+        all.add(&x, &y, 1.0);
+        own[w.scene].add(&x, &y, 1.0);
+    }
+    let mut weights = Vec::with_capacity(scenes.len());
+    for (s, name) in own.iter().zip(&scenes) {
+        let mut rest = Normal::new(nf, m);
+        rest.xtx = all.xtx.iter().zip(&s.xtx).map(|(a, b)| a - b).collect();
+        rest.xty = all.xty.iter().zip(&s.xty).map(|(a, b)| a - b).collect();
+        weights.push(rest.solve(o.ridge_lambda).ok_or_else(|| {
+            fail(format!(
+                "the ridge model without scene `{name}` is undetermined (raise ridge_lambda)"
+            ))
+        })?);
+    }
+    let mut predictors = vec![
+        Predictor::LastStep,
+        Predictor::MeanVelocity(4.min(o.history)),
+        Predictor::MeanVelocity(o.history),
+        Predictor::Static,
+        Predictor::Ridge,
+    ];
+    predictors.dedup();
+    let mut overall: BTreeMap<Predictor, Errors> = BTreeMap::new();
+    let mut per_scene: BTreeMap<String, BTreeMap<Predictor, Errors>> = BTreeMap::new();
+    for w in &windows {
+        let n = w.past.len();
+        let now = w.past[n - 1];
+        for &p in &predictors {
+            let prediction = match p {
+                Predictor::LastStep => last_step(w, o.horizon),
+                Predictor::MeanVelocity(k) => {
+                    let d = sub(now, w.past[n - 1 - k]);
+                    let v = [d[0] / k as f64, d[1] / k as f64];
+                    (0..o.horizon).map(|i| held(now, v, i)).collect()
+                }
+                Predictor::Static => vec![now; o.horizon],
+                Predictor::Ridge => ridge(w, &weights[w.scene], o.horizon),
+            };
+            score(overall.entry(p).or_default(), &prediction, &w.future, first);
+            let scene = per_scene.entry(scenes[w.scene].clone()).or_default();
+            score(scene.entry(p).or_default(), &prediction, &w.future, first);
+        }
+    }
+    for e in overall
+        .values_mut()
+        .chain(per_scene.values_mut().flat_map(|m| m.values_mut()))
+    {
+        let n = e.windows.max(1) as f64;
+        e.ade /= n;
+        e.fde /= n;
+        e.ade_1s /= n;
+    }
+    Ok(PredictionReport {
+        options: o,
+        tracks,
+        overall,
+        per_scene,
+    })
+}
+
+impl PredictionReport {
+    /// The report as Markdown: one table overall, one per scene.
+    pub fn markdown(&self) -> String {
+        let o = &self.options;
+        let windows = self.overall.values().next().map_or(0, |e| e.windows);
+        let mut s = format!(
+            "{} distinct tracks, {windows} windows ({} steps of history, {} predicted, one \
+             window every {} steps; ridge λ = {}).\n\n",
+            self.tracks, o.history, o.horizon, o.stride, o.ridge_lambda
+        );
+        let table = |s: &mut String, rows: &BTreeMap<Predictor, Errors>| {
+            s.push_str("| predictor | ADE (m) | FDE (m) | ADE first 1 s (m) | windows |\n");
+            s.push_str("|---|---|---|---|---|\n");
+            for (p, e) in rows {
+                s.push_str(&format!(
+                    "| {p} | {:.3} | {:.3} | {:.3} | {} |\n",
+                    e.ade, e.fde, e.ade_1s, e.windows
+                ));
+            }
+        };
+        s.push_str("All scenes:\n\n");
+        table(&mut s, &self.overall);
+        for (scene, rows) in &self.per_scene {
+            s.push_str(&format!("\n`{scene}`:\n\n"));
+            table(&mut s, rows);
+        }
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::{AgentTrack, Episode, ScenarioClass};
+    use human2nav_core::se2::Pose2;
+
+    fn episode(scene: &str, tracks: Vec<Vec<[f64; 2]>>) -> Episode {
+        Episode {
+            id: format!("{scene}/e"),
+            scene: scene.into(),
+            source: "synthetic".into(),
+            scenario: ScenarioClass::CoFlow,
+            dt: 0.1,
+            start: Pose2::new(0.0, 0.0, 0.0),
+            goal: [5.0, 0.0],
+            time_budget: 10.0,
+            agents: tracks
+                .into_iter()
+                .enumerate()
+                .map(|(i, positions)| AgentTrack {
+                    id: i as u64,
+                    start_step: 0,
+                    positions,
+                    radius: 0.3,
+                })
+                .collect(),
+            density: 1,
+            obstacles: Vec::new(),
+        }
+    }
+
+    fn suite(episodes: Vec<Episode>) -> EpisodeSuite {
+        EpisodeSuite::new("test", episodes)
+    }
+
+    /// A track along heading `theta` from `p0`, at speed `v0` per step changing by `a` per
+    /// step.
+    fn track(p0: [f64; 2], theta: f64, v0: f64, a: f64, n: usize) -> Vec<[f64; 2]> {
+        let (c, s) = (theta.cos(), theta.sin());
+        (0..n)
+            .map(|k| {
+                let k = k as f64;
+                let d = v0 * k + 0.5 * a * k * k;
+                [p0[0] + c * d, p0[1] + s * d]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn constant_velocity_tracks_are_predicted_exactly_by_the_held_velocities() {
+        let s = suite(vec![
+            episode("a", vec![track([0.0, 0.0], 0.3, 0.12, 0.0, 60)]),
+            episode("b", vec![track([5.0, 1.0], -2.0, 0.08, 0.0, 60)]),
+        ]);
+        let r = study(&s, PredictionOptions::default()).expect("study");
+        for p in [
+            Predictor::LastStep,
+            Predictor::MeanVelocity(4),
+            Predictor::MeanVelocity(8),
+        ] {
+            assert!(r.overall[&p].ade < 1e-9, "{p}: {:?}", r.overall[&p]);
+        }
+        // Standing still is off by the distance walked: 0.12 m/step at the horizon's end.
+        let st = r.per_scene["a"][&Predictor::Static];
+        assert!((st.fde - 0.12 * 32.0).abs() < 1e-9, "{st:?}");
+        // 60 positions, windows at 8, 13, 18, 23 (23 + 32 < 60 and 28 + 32 >= 60).
+        assert_eq!(r.per_scene["a"][&Predictor::LastStep].windows, 4);
+        assert_eq!(r.tracks, 2);
+    }
+
+    #[test]
+    fn the_ridge_model_learns_a_deceleration_the_held_velocity_misses() {
+        // Every pedestrian slows by the same amount per step, in every scene and direction:
+        // the departure from the last step's velocity is a linear function of the history (its
+        // velocities fall linearly), which the ridge model fits from the other scenes.
+        let mut episodes = Vec::new();
+        for (i, scene) in ["a", "b", "c"].into_iter().enumerate() {
+            let tracks = (0..6)
+                .map(|j| {
+                    let theta = 0.7 * (i * 6 + j) as f64;
+                    track(
+                        [i as f64, j as f64],
+                        theta,
+                        0.15 + 0.01 * j as f64,
+                        -0.002,
+                        60,
+                    )
+                })
+                .collect();
+            episodes.push(episode(scene, tracks));
+        }
+        let r = study(
+            &suite(episodes),
+            PredictionOptions {
+                ridge_lambda: 1e-9,
+                ..PredictionOptions::default()
+            },
+        )
+        .expect("study");
+        let (cv, ridge) = (
+            r.overall[&Predictor::LastStep],
+            r.overall[&Predictor::Ridge],
+        );
+        assert!(cv.fde > 0.5, "the held velocity overshoots: {cv:?}");
+        assert!(ridge.fde < 1e-3 * cv.fde, "ridge {ridge:?} against {cv:?}");
+    }
+
+    #[test]
+    fn the_same_track_in_two_episodes_counts_once() {
+        let t = track([0.0, 0.0], 0.0, 0.1, 0.0, 50);
+        let s = suite(vec![
+            episode("a", vec![t.clone()]),
+            episode("a", vec![t]),
+            episode("b", vec![track([1.0, 0.0], 1.0, 0.1, 0.0, 50)]),
+        ]);
+        let r = study(&s, PredictionOptions::default()).expect("study");
+        assert_eq!(r.tracks, 2);
+        assert_eq!(r.per_scene["a"][&Predictor::LastStep].windows, 2);
+    }
+
+    #[test]
+    fn unusable_files_and_options_are_refused_by_name() {
+        let short = suite(vec![
+            episode("a", vec![track([0.0, 0.0], 0.0, 0.1, 0.0, 20)]),
+            episode("b", vec![track([0.0, 0.0], 0.0, 0.1, 0.0, 20)]),
+        ]);
+        let e = study(&short, PredictionOptions::default()).expect_err("too short");
+        assert!(e.to_string().contains("41 steps"), "{e}");
+        let one = suite(vec![episode(
+            "a",
+            vec![track([0.0, 0.0], 0.0, 0.1, 0.0, 60)],
+        )]);
+        let e = study(&one, PredictionOptions::default()).expect_err("one scene");
+        assert!(e.to_string().contains("leave-one-scene-out"), "{e}");
+        for (o, field) in [
+            (
+                PredictionOptions {
+                    history: 0,
+                    ..PredictionOptions::default()
+                },
+                "history",
+            ),
+            (
+                PredictionOptions {
+                    ridge_lambda: f64::NAN,
+                    ..PredictionOptions::default()
+                },
+                "ridge_lambda",
+            ),
+        ] {
+            let e = study(&short, o).expect_err(field);
+            assert!(e.to_string().contains(field), "{e}");
+        }
+    }
+}

@@ -522,14 +522,14 @@ fn config_cases() -> Vec<Case> {
             "planner.toml `samples = 100000`",
             "ran without an upper bound",
             &["samples", "1024"],
-            planner_edit("samples = 16 ", "samples = 100000 "),
+            planner_edit("\nsamples = 4 ", "\nsamples = 100000 "),
         ),
         err(
             a,
             "planner.toml `samples = 0`",
             NR,
             &["samples"],
-            planner_edit("samples = 16 ", "samples = 0 "),
+            planner_edit("\nsamples = 4 ", "\nsamples = 0 "),
         ),
         err(
             a,
@@ -592,7 +592,7 @@ fn config_cases() -> Vec<Case> {
             "planner.toml unknown key",
             NR,
             &["planner.toml", "sampels"],
-            planner_edit("samples = 16 ", "sampels = 16 "),
+            planner_edit("\nsamples = 4 ", "\nsampels = 4 "),
         ),
         err(
             a,

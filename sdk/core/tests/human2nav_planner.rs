@@ -135,7 +135,10 @@ fn plan_starts_at_the_robot_and_is_in_the_world_frame() {
     assert_relative_eq!(last.x, 0.16 * 32.0, epsilon = 1e-3);
     assert_relative_eq!(last.y, 0.0, epsilon = 1e-3);
     assert!(!plan.info.fallback);
-    assert_eq!(plan.info.candidates.len(), 16);
+    assert_eq!(
+        plan.info.candidates.len(),
+        Human2NavSettings::default().samples
+    );
     assert!(plan.info.guided.is_empty());
 }
 
@@ -157,6 +160,7 @@ fn tfs_pair(guided: &mut Human2Nav<HumanFuture>) -> (f64, f64, f64, f64, usize) 
 #[test]
 fn algorithm_1_alone_makes_an_infeasible_human_trajectory_feasible() {
     let mut settings = Human2NavSettings {
+        samples: 16,
         guided_samples: 0,
         motions: 0,
         ..Default::default()
@@ -182,7 +186,13 @@ fn algorithm_1_alone_makes_an_infeasible_human_trajectory_feasible() {
 
 #[test]
 fn the_default_pipeline_guides_a_shortlist_and_ends_feasible() {
-    let (tfs_u, tfs_g, before, after, guided) = tfs_pair(&mut planner(true));
+    // 16 samples (the default is 4, all of them shortlisted), so that the shortlist is one.
+    let settings = Human2NavSettings {
+        samples: 16,
+        ..Default::default()
+    };
+    let mut p = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings).unwrap();
+    let (tfs_u, tfs_g, before, after, guided) = tfs_pair(&mut p);
     assert!(tfs_u < 0.1, "unguided TFS {tfs_u}");
     assert_eq!(tfs_g, 1.0, "Algorithm 1 + last-step correction");
     // The adaptive step never lets Φ rise (on a uniform over-speed the plain gradient barely
@@ -195,6 +205,7 @@ fn the_default_pipeline_guides_a_shortlist_and_ends_feasible() {
 fn the_paper_variant_guides_every_sample() {
     let mut settings = Arm::Both.settings(&Human2NavSettings::default());
     settings.guidance.variant = GuidanceVariant::Paper;
+    settings.samples = 16;
     assert_eq!(settings.guided_samples, 4);
     let mut p = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings).unwrap();
     let (_, tfs_g, before, after, guided) = tfs_pair(&mut p);

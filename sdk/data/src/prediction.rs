@@ -289,9 +289,9 @@ impl Normal {
         }
     }
 
-    fn add(&mut self, x: &[f64], y: &[f64], sign: f64) {
+    fn add(&mut self, x: &[f64], y: &[f64]) {
         for i in 0..self.n {
-            let xi = sign * x[i];
+            let xi = x[i];
             for j in 0..self.n {
                 self.xtx[i * self.n + j] += xi * x[j];
             }
@@ -302,6 +302,16 @@ impl Normal {
     }
 
     /// The ridge solution `(XᵀX + λ·I)⁻¹·XᵀY`, `n × m` row-major.
+    /// Adds another set's sums.
+    fn absorb(&mut self, other: &Normal) {
+        for (a, b) in self.xtx.iter_mut().zip(&other.xtx) {
+            *a += b;
+        }
+        for (a, b) in self.xty.iter_mut().zip(&other.xty) {
+            *a += b;
+        }
+    }
+
     fn solve(&self, lambda: f64) -> Option<Vec<f64>> {
         let mut a = self.xtx.clone();
         for i in 0..self.n {
@@ -377,19 +387,17 @@ pub fn study(suite: &EpisodeSuite, o: PredictionOptions) -> Result<PredictionRep
     let dt = suite.episodes.first().map_or(0.1, |e| e.dt);
     let first = ((1.0 / dt).round() as usize).max(1);
     let (nf, m) = (o.history * 2 + 1, o.horizon * 2);
-    // Leave-one-scene-out: the sums over all windows minus those of the held-out scene.
-    let mut all = Normal::new(nf, m);
+    // Leave-one-scene-out: each scene's model is fitted on the sums of the other scenes.
     let mut own: Vec<Normal> = (0..scenes.len()).map(|_| Normal::new(nf, m)).collect();
     for w in &windows {
-        let (x, y) = (features(w), targets(w));
-        all.add(&x, &y, 1.0);
-        own[w.scene].add(&x, &y, 1.0);
+        own[w.scene].add(&features(w), &targets(w));
     }
     let mut weights = Vec::with_capacity(scenes.len());
-    for (s, name) in own.iter().zip(&scenes) {
+    for (s, name) in scenes.iter().enumerate() {
         let mut rest = Normal::new(nf, m);
-        rest.xtx = all.xtx.iter().zip(&s.xtx).map(|(a, b)| a - b).collect();
-        rest.xty = all.xty.iter().zip(&s.xty).map(|(a, b)| a - b).collect();
+        for (_, other) in own.iter().enumerate().filter(|&(t, _)| t != s) {
+            rest.absorb(other);
+        }
         weights.push(rest.solve(o.ridge_lambda).ok_or_else(|| {
             fail(format!(
                 "the ridge model without scene `{name}` is undetermined (raise ridge_lambda)"

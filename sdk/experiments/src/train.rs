@@ -466,6 +466,7 @@ fn export<S: human2nav_flow::train::TrainingSample>(
             cfg.train.time.alpha, cfg.train.time.beta, cfg.train.time.s
         ),
         path_sigma: cfg.train.path_sigma,
+        mirror: cfg.train.mirror,
         optimiser: cfg.train.describe_optimiser(),
         wall_time_s: wall,
         threads: cfg.run.threads,

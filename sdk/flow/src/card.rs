@@ -102,6 +102,10 @@ pub struct TrainingInfo {
     /// written before the option existed are 0).
     #[serde(default)]
     pub path_sigma: f64,
+    /// Whether each training example was also used as its left-right mirror image (with
+    /// probability 1/2; cards written before the field existed were trained without).
+    #[serde(default)]
+    pub mirror: bool,
     /// Optimiser and schedule, in words.
     pub optimiser: String,
     /// Wall time of training in seconds.

@@ -2,6 +2,7 @@
 bad input, and living in one process with torch."""
 
 import math
+import re
 import subprocess
 import sys
 import textwrap
@@ -17,6 +18,13 @@ DIABLO = ROOT / "robots" / "diablo" / "robot.toml"
 MODEL = ROOT / "models" / "human2nav-cfm"
 CONFIG = ROOT / "sdk" / "configs" / "planner.toml"
 PEOPLE = np.array([[2.5, 0.4, -1.0, 0.0, 0.3], [3.5, -0.8, -0.8, 0.3, 0.3]])
+
+
+def shipped_setting(key):
+    """An integer setting of the shipped planner.toml (`key = N` at the start of a line)."""
+    match = re.search(rf"^{key} = (\d+)", CONFIG.read_text(), re.MULTILINE)
+    assert match, f"{CONFIG} has no `{key}`"
+    return int(match.group(1))
 
 
 @pytest.fixture(scope="module")
@@ -56,8 +64,8 @@ def test_human2nav_plans_from_numpy_arrays(planner):
     np.testing.assert_allclose(plan.poses[0], [1.0, 2.0, 0.3])
     assert plan.dt == pytest.approx(0.1)
     assert plan.times[-1] == pytest.approx(3.2)
-    assert plan.candidates.shape == (16, 33, 3)
-    assert plan.guided.shape[0] == 4
+    assert plan.candidates.shape == (shipped_setting("samples"), 33, 3)
+    assert plan.guided.shape[0] == min(shipped_setting("guided_samples"), shipped_setting("samples"))
     assert not plan.info["fallback"]
     stages = plan.info["stages"]
     assert stages["sampling"] == (5, 5) and stages["cut_short"] is None

@@ -23,6 +23,8 @@
 
 use crate::error::DataError;
 use crate::scenario::EpisodeSuite;
+use human2nav_core::se2::Pose2;
+use nalgebra::{DMatrix, DVector};
 use std::collections::{BTreeMap, BTreeSet};
 
 /// Options of the study.
@@ -124,11 +126,13 @@ pub struct PredictionReport {
     pub per_scene: BTreeMap<String, BTreeMap<Predictor, Errors>>,
 }
 
-/// One window: the history (`history + 1` positions, the last the present) and the future.
+/// One window: the history (`history + 1` positions, the last the present), the future, and
+/// the pedestrian's heading frame ([`heading`]).
 struct Window {
     scene: usize,
     past: Vec<[f64; 2]>,
     future: Vec<[f64; 2]>,
+    frame: Pose2,
 }
 
 /// The windows of every distinct track of `suite`, and the scene names they index.
@@ -154,10 +158,12 @@ fn windows(suite: &EpisodeSuite, o: &PredictionOptions) -> (Vec<Window>, Vec<Str
             let p = &a.positions;
             let mut k = o.history;
             while k + o.horizon < p.len() {
+                let past = &p[k - o.history..=k];
                 out.push(Window {
                     scene,
-                    past: p[k - o.history..=k].to_vec(),
+                    past: past.to_vec(),
                     future: p[k + 1..=k + o.horizon].to_vec(),
+                    frame: heading(past),
                 });
                 k += o.stride;
             }
@@ -176,41 +182,29 @@ fn held(p: [f64; 2], v: [f64; 2], i: usize) -> [f64; 2] {
     [p[0] + v[0] * s, p[1] + v[1] * s]
 }
 
-/// The rotation into the pedestrian's heading frame: `(cos, sin)` of the last step's direction,
-/// or of the history's displacement when the last step is (nearly) zero, or the identity.
-fn heading(w: &Window) -> (f64, f64) {
-    let n = w.past.len();
-    for d in [
-        sub(w.past[n - 1], w.past[n - 2]),
-        sub(w.past[n - 1], w.past[0]),
-    ] {
-        let l = d[0].hypot(d[1]);
-        if l > 1e-4 {
-            return (d[0] / l, d[1] / l);
+/// The pedestrian's heading frame (a rotation): the last step's direction, or the history's
+/// displacement when the last step is (nearly) zero, or the world's axes.
+fn heading(past: &[[f64; 2]]) -> Pose2 {
+    let n = past.len();
+    for d in [sub(past[n - 1], past[n - 2]), sub(past[n - 1], past[0])] {
+        if d[0].hypot(d[1]) > 1e-4 {
+            return Pose2::new(0.0, 0.0, d[1].atan2(d[0]));
         }
     }
-    (1.0, 0.0)
-}
-
-fn to_local((c, s): (f64, f64), v: [f64; 2]) -> [f64; 2] {
-    [c * v[0] + s * v[1], -s * v[0] + c * v[1]]
-}
-
-fn to_world((c, s): (f64, f64), v: [f64; 2]) -> [f64; 2] {
-    [c * v[0] - s * v[1], s * v[0] + c * v[1]]
+    Pose2::new(0.0, 0.0, 0.0)
 }
 
 /// The ridge model's features of a window: the history's step displacements in the heading
 /// frame, then 1.
-fn features(w: &Window) -> Vec<f64> {
-    let r = heading(w);
-    let mut f: Vec<f64> = w
+fn features(w: &Window) -> DVector<f64> {
+    let steps = w
         .past
         .windows(2)
-        .flat_map(|p| to_local(r, sub(p[1], p[0])))
-        .collect();
-    f.push(1.0);
-    f
+        .map(|p| w.frame.inverse_rotate(sub(p[1], p[0])));
+    DVector::from_iterator(
+        2 * (w.past.len() - 1) + 1,
+        steps.flatten().chain(std::iter::once(1.0)),
+    )
 }
 
 /// The last-step prediction of a window.
@@ -221,123 +215,51 @@ fn last_step(w: &Window, horizon: usize) -> Vec<[f64; 2]> {
 }
 
 /// The ridge model's targets of a window: the future's departure from the last-step
-/// prediction, in the heading frame.
-fn targets(w: &Window) -> Vec<f64> {
-    let r = heading(w);
-    last_step(w, w.future.len())
+/// prediction `cv`, in the heading frame.
+fn targets(w: &Window, cv: &[[f64; 2]]) -> DVector<f64> {
+    let d = cv
         .iter()
         .zip(&w.future)
-        .flat_map(|(p, f)| to_local(r, sub(*f, *p)))
-        .collect()
+        .map(|(p, f)| w.frame.inverse_rotate(sub(*f, *p)));
+    DVector::from_iterator(2 * cv.len(), d.flatten())
 }
 
-/// Solves `A·x = b` for each column of `b` (`A` symmetric positive definite, `n × n` row-major,
-/// `b` `n × m`) by Cholesky, in place in `b`. `None` when `A` is not positive definite.
-fn cholesky_solve(mut a: Vec<f64>, n: usize, b: &mut [f64], m: usize) -> Option<()> {
-    for j in 0..n {
-        let mut d = a[j * n + j];
-        for k in 0..j {
-            d -= a[j * n + k] * a[j * n + k];
-        }
-        if d.is_nan() || d <= 0.0 {
-            return None;
-        }
-        let d = d.sqrt();
-        a[j * n + j] = d;
-        for i in j + 1..n {
-            let mut v = a[i * n + j];
-            for k in 0..j {
-                v -= a[i * n + k] * a[j * n + k];
-            }
-            a[i * n + j] = v / d;
-        }
-    }
-    for c in 0..m {
-        for i in 0..n {
-            let mut v = b[i * m + c];
-            for k in 0..i {
-                v -= a[i * n + k] * b[k * m + c];
-            }
-            b[i * m + c] = v / a[i * n + i];
-        }
-        for i in (0..n).rev() {
-            let mut v = b[i * m + c];
-            for k in i + 1..n {
-                v -= a[k * n + i] * b[k * m + c];
-            }
-            b[i * m + c] = v / a[i * n + i];
-        }
-    }
-    Some(())
-}
-
-/// Sums `XᵀX` and `XᵀY` of a set of windows.
+/// The sums `XᵀX` and `XᵀY` of the ridge model over a set of windows.
 struct Normal {
-    xtx: Vec<f64>,
-    xty: Vec<f64>,
-    n: usize,
-    m: usize,
+    xtx: DMatrix<f64>,
+    xty: DMatrix<f64>,
 }
 
 impl Normal {
     fn new(n: usize, m: usize) -> Self {
         Self {
-            xtx: vec![0.0; n * n],
-            xty: vec![0.0; n * m],
-            n,
-            m,
+            xtx: DMatrix::zeros(n, n),
+            xty: DMatrix::zeros(n, m),
         }
     }
 
-    fn add(&mut self, x: &[f64], y: &[f64]) {
-        for i in 0..self.n {
-            let xi = x[i];
-            for j in 0..self.n {
-                self.xtx[i * self.n + j] += xi * x[j];
-            }
-            for j in 0..self.m {
-                self.xty[i * self.m + j] += xi * y[j];
-            }
-        }
+    fn add(&mut self, x: &DVector<f64>, y: &DVector<f64>) {
+        self.xtx.ger(1.0, x, x, 1.0);
+        self.xty.ger(1.0, x, y, 1.0);
     }
 
-    /// The ridge solution `(XᵀX + λ·I)⁻¹·XᵀY`, `n × m` row-major.
-    /// Adds another set's sums.
-    fn absorb(&mut self, other: &Normal) {
-        for (a, b) in self.xtx.iter_mut().zip(&other.xtx) {
-            *a += b;
-        }
-        for (a, b) in self.xty.iter_mut().zip(&other.xty) {
-            *a += b;
-        }
-    }
-
-    fn solve(&self, lambda: f64) -> Option<Vec<f64>> {
-        let mut a = self.xtx.clone();
-        for i in 0..self.n {
-            a[i * self.n + i] += lambda;
-        }
-        let mut b = self.xty.clone();
-        cholesky_solve(a, self.n, &mut b, self.m)?;
-        Some(b)
+    /// The ridge solution `(XᵀX + λ·I)⁻¹·XᵀY` (features × targets), `None` when the system
+    /// is not positive definite.
+    fn solve(&self, lambda: f64) -> Option<DMatrix<f64>> {
+        let n = self.xtx.nrows();
+        let a = &self.xtx + DMatrix::identity(n, n) * lambda;
+        Some(a.cholesky()?.solve(&self.xty))
     }
 }
 
-/// The ridge prediction of a window with weights `w` (`features × 2·horizon`).
-fn ridge(w: &Window, weights: &[f64], horizon: usize) -> Vec<[f64; 2]> {
-    let x = features(w);
-    let m = 2 * horizon;
-    let r = heading(w);
-    last_step(w, horizon)
-        .into_iter()
+/// The ridge prediction of a window from its last-step prediction `cv`, with `weights`
+/// (features × 2·horizon).
+fn ridge(w: &Window, weights: &DMatrix<f64>, cv: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    let d = weights.tr_mul(&features(w));
+    cv.iter()
         .enumerate()
         .map(|(i, p)| {
-            let mut d = [0.0; 2];
-            for (k, xk) in x.iter().enumerate() {
-                d[0] += xk * weights[k * m + 2 * i];
-                d[1] += xk * weights[k * m + 2 * i + 1];
-            }
-            let d = to_world(r, d);
+            let d = w.frame.rotate([d[2 * i], d[2 * i + 1]]);
             [p[0] + d[0], p[1] + d[1]]
         })
         .collect()
@@ -390,13 +312,14 @@ pub fn study(suite: &EpisodeSuite, o: PredictionOptions) -> Result<PredictionRep
     // Leave-one-scene-out: each scene's model is fitted on the sums of the other scenes.
     let mut own: Vec<Normal> = (0..scenes.len()).map(|_| Normal::new(nf, m)).collect();
     for w in &windows {
-        own[w.scene].add(&features(w), &targets(w));
+        own[w.scene].add(&features(w), &targets(w, &last_step(w, o.horizon)));
     }
     let mut weights = Vec::with_capacity(scenes.len());
     for (s, name) in scenes.iter().enumerate() {
         let mut rest = Normal::new(nf, m);
         for (_, other) in own.iter().enumerate().filter(|&(t, _)| t != s) {
-            rest.absorb(other);
+            rest.xtx += &other.xtx;
+            rest.xty += &other.xty;
         }
         weights.push(rest.solve(o.ridge_lambda).ok_or_else(|| {
             fail(format!(
@@ -417,16 +340,17 @@ pub fn study(suite: &EpisodeSuite, o: PredictionOptions) -> Result<PredictionRep
     for w in &windows {
         let n = w.past.len();
         let now = w.past[n - 1];
+        let cv = last_step(w, o.horizon);
         for &p in &predictors {
             let prediction = match p {
-                Predictor::LastStep => last_step(w, o.horizon),
+                Predictor::LastStep => cv.clone(),
                 Predictor::MeanVelocity(k) => {
                     let d = sub(now, w.past[n - 1 - k]);
                     let v = [d[0] / k as f64, d[1] / k as f64];
                     (0..o.horizon).map(|i| held(now, v, i)).collect()
                 }
                 Predictor::Static => vec![now; o.horizon],
-                Predictor::Ridge => ridge(w, &weights[w.scene], o.horizon),
+                Predictor::Ridge => ridge(w, &weights[w.scene], &cv),
             };
             score(overall.entry(p).or_default(), &prediction, &w.future, first);
             let scene = per_scene.entry(scenes[w.scene].clone()).or_default();
@@ -484,7 +408,6 @@ impl PredictionReport {
 mod tests {
     use super::*;
     use crate::scenario::{AgentTrack, Episode, ScenarioClass};
-    use human2nav_core::se2::Pose2;
 
     fn episode(scene: &str, tracks: Vec<Vec<[f64; 2]>>) -> Episode {
         Episode {

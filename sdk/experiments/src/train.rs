@@ -232,8 +232,10 @@ pub fn train(
         Trainer::resume(&set, &cfg.train, &train_set, &val_set, device)?
     } else {
         let norm = Normalisation::estimate(&train_set, cfg.train.seed)?;
-        eprintln!("normalisation: {norm:?}");
-        Trainer::new(&cfg.net, &norm, &cfg.train, &train_set, &val_set, device)?
+        let trainer = Trainer::new(&cfg.net, &norm, &cfg.train, &train_set, &val_set, device)?;
+        // The trainer's copy: `train.goal` decides whether the goal is seen.
+        eprintln!("normalisation: {:?}", trainer.model().card().normalisation);
+        trainer
     };
 
     let capped = train_steps(cfg, &mut trainer, out_dir, &ckpt)?;

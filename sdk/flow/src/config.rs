@@ -178,6 +178,16 @@ pub struct Normalisation {
     pub goal_scale: f64,
     /// Speed scale, m/s (root-mean-square ego speed over the training set).
     pub speed_scale: f64,
+    /// Whether the network sees the goal. `false`: the goal input is always zero, in training
+    /// and at inference, so the model generates where a walker goes from its velocity and the
+    /// scene alone: a goal-free, multimodal predictor of people (`train.goal = false`).
+    /// Default true.
+    #[serde(default = "goal_conditioned_default")]
+    pub goal_conditioned: bool,
+}
+
+fn goal_conditioned_default() -> bool {
+    true
 }
 
 impl Default for Normalisation {
@@ -187,6 +197,7 @@ impl Default for Normalisation {
             velocity_std: [1.0; 3],
             goal_scale: 1.0,
             speed_scale: 1.0,
+            goal_conditioned: true,
         }
     }
 }

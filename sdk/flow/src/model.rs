@@ -26,7 +26,8 @@ pub const WEIGHTS_FILE: &str = "model.safetensors";
 
 /// Writes the normalised condition of one example: the raster with its velocity channels
 /// divided by the speed scale into `bev_out` (`3·H·W`), and
-/// `[g_x/goal_scale, g_y/goal_scale, v_x/speed_scale, v_y/speed_scale]` into `goal_out`.
+/// `[g_x/goal_scale, g_y/goal_scale, v_x/speed_scale, v_y/speed_scale]` into `goal_out` (the
+/// goal zero for a model that is not [`Normalisation::goal_conditioned`]).
 ///
 /// Training and inference both go through this function, so the network sees the same inputs.
 pub fn normalise_condition(
@@ -43,6 +44,11 @@ pub fn normalise_condition(
     for (o, &b) in bev_out[plane..].iter_mut().zip(&bev[plane..]) {
         *o = b * inv_speed;
     }
+    let goal = if norm.goal_conditioned {
+        goal
+    } else {
+        [0.0; 2]
+    };
     goal_out[0] = (goal[0] / norm.goal_scale) as f32;
     goal_out[1] = (goal[1] / norm.goal_scale) as f32;
     goal_out[2] = (velocity[0] / norm.speed_scale) as f32;
@@ -584,6 +590,7 @@ mod tests {
             velocity_std: [0.9, 0.6, 1.3],
             goal_scale: 5.0,
             speed_scale: 1.2,
+            goal_conditioned: true,
         }
     }
 

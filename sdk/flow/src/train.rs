@@ -169,6 +169,7 @@ impl Normalisation {
             velocity_std,
             goal_scale,
             speed_scale,
+            goal_conditioned: true,
         };
         norm.validate()?;
         Ok(norm)
@@ -224,6 +225,10 @@ pub struct TrainOptions {
     /// 0, the deterministic geodesic: no noise is drawn, so batches are exactly those of
     /// earlier versions.
     pub path_sigma: f64,
+    /// Condition the model on the goal (the paper's planner). `false` trains a goal-free model
+    /// ([`Normalisation::goal_conditioned`]): from a walker's velocity and the scene alone it
+    /// generates where the walker goes, a multimodal predictor of people. Default true.
+    pub goal: bool,
 }
 
 impl Default for TrainOptions {
@@ -244,6 +249,7 @@ impl Default for TrainOptions {
             time: TimeDistribution::default(),
             mirror: false,
             path_sigma: 0.0,
+            goal: true,
         }
     }
 }
@@ -610,6 +616,10 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
         check_examples(net, train)?;
         check_examples(net, val)?;
         tch::manual_seed(opts.seed as i64);
+        let norm = &Normalisation {
+            goal_conditioned: opts.goal,
+            ..norm.clone()
+        };
         let model = CfmModel::new(net, norm, device)?;
         let ema = CfmModel::new(net, norm, device)?;
         let mut names: Vec<String> = model.var_store().variables().into_keys().collect();

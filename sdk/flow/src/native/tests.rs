@@ -12,6 +12,7 @@ fn norm() -> Normalisation {
         velocity_std: [0.9, 0.6, 1.3],
         goal_scale: 5.0,
         speed_scale: 1.2,
+        goal_conditioned: true,
     }
 }
 

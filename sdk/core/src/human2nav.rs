@@ -33,7 +33,9 @@
 //! contact; [`Progress`] also offers the distance at its end), `C` the mean over waypoints of
 //! `max(0, margin − gap)²/margin²` with `gap` the distance between the robot's footprint (its
 //! shapes at the waypoint's pose, [`RobotModel::footprint`]) and each agent's disc, agents
-//! predicted at constant velocity, and each static obstacle of the observation
+//! predicted at constant velocity (or by the planner's [`CrowdPredictor`], when it has one:
+//! `C` is then the mean over the scenes of its [`Forecast`]), and each static obstacle of the
+//! observation
 //! ([`crate::obstacle`]: circles, polygons, segments and the occupied cells of its grid), where
 //! the first waypoint with a predicted overlap and every one after it count
 //! [`COLLISION_PENALTY`] instead (a collision ends
@@ -78,6 +80,7 @@
 use crate::bev::{self, BevSpec};
 use crate::constraint::{ConstraintContext, Phi};
 use crate::flow::{FlowCondition, FlowModel};
+use crate::forecast::{CrowdPredictor, Forecast};
 use crate::guidance::{
     self, GuidanceError, GuidanceResult, GuidanceSettings, GuidanceVariant, GuidanceWorkspace,
 };
@@ -356,6 +359,8 @@ pub struct Human2Nav<M> {
     motion_grid: MotionGrid,
     /// [`footprint::reach`] of the robot's footprint.
     reach: f64,
+    /// Where the selection expects people to go; `None`: constant velocity.
+    predictor: Option<Box<dyn CrowdPredictor>>,
 }
 
 impl<M> std::fmt::Debug for Human2Nav<M> {
@@ -407,7 +412,56 @@ impl<M: FlowModel> Human2Nav<M> {
             workspace: GuidanceWorkspace::new(),
             projection: projection::ProjectionSolver::default(),
             previous: None,
+            predictor: None,
         })
+    }
+
+    /// The same planner with its selection scoring candidates against `predictor`'s forecasts
+    /// instead of constant velocity ([`crate::forecast`]; a forecast of several scenes is
+    /// scored as the mean over them). A call whose forecast fails falls back to constant
+    /// velocity and says so in its plan's notes. The forecast is made first in a call and is
+    /// not cut short by a deadline: its cost comes on top of the stages a budget governs.
+    pub fn with_predictor(mut self, predictor: Box<dyn CrowdPredictor>) -> Self {
+        self.predictor = Some(predictor);
+        self
+    }
+
+    /// The predictor in use, if any ([`Self::with_predictor`]).
+    pub fn predictor(&self) -> Option<&dyn CrowdPredictor> {
+        self.predictor.as_deref()
+    }
+
+    /// The forecast the selection scores against, in the ego frame: the predictor's, or
+    /// constant velocity without one or when it fails (noted in `notes`).
+    fn forecast(
+        &mut self,
+        obs: &Observation,
+        agents: &[AgentState],
+        horizon: usize,
+        notes: &mut Vec<String>,
+    ) -> Forecast {
+        let dt = self.settings.dt;
+        if let Some(p) = self.predictor.as_mut() {
+            match p.forecast(obs, horizon, dt) {
+                Ok(f) if f.horizon() == horizon && f.agents().len() == obs.agents.len() => {
+                    return f.in_frame(obs.ego);
+                }
+                Ok(f) => notes.push(format!(
+                    "predictor {} forecast {} agents over {} waypoints for {} agents over {}; \
+                     constant velocity used",
+                    p.name(),
+                    f.agents().len(),
+                    f.horizon(),
+                    obs.agents.len(),
+                    horizon
+                )),
+                Err(e) => notes.push(format!(
+                    "predictor {} failed ({e}); constant velocity used",
+                    p.name()
+                )),
+            }
+        }
+        Forecast::constant_velocity(agents, horizon, dt)
     }
 
     /// The settings in force.
@@ -471,6 +525,8 @@ impl<M: FlowModel> Human2Nav<M> {
         let horizon = self.model.horizon();
         let k = self.settings.samples;
         let (cond, agents) = self.condition(obs);
+        let mut notes = Vec::new();
+        let forecast = self.forecast(obs, &agents, horizon, &mut notes);
         self.obstacles = self.nearby_obstacles(obs, horizon);
         let x0 = self.draw_source(k, horizon);
         let goal = cond.goal;
@@ -488,7 +544,6 @@ impl<M: FlowModel> Human2Nav<M> {
             },
             ..Stages::default()
         };
-        let mut notes = Vec::new();
 
         // Stage 1: the K samples of the flow model, without guidance (Φ for diagnostics).
         let first =
@@ -514,7 +569,7 @@ impl<M: FlowModel> Human2Nav<M> {
             let shortlist = if unguided.is_empty() {
                 Vec::new()
             } else {
-                self.shortlist(&unguided, goal, &agents, obs.ego_velocity, previous_ego)
+                self.shortlist(&unguided, goal, &forecast, obs.ego_velocity, previous_ego)
             };
             if shortlist.is_empty() || stages.cut_short.is_some() {
                 // No time left for Algorithm 1: the shortlist goes on unguided.
@@ -579,7 +634,7 @@ impl<M: FlowModel> Human2Nav<M> {
 
         // Stage 3: selection.
         let best = select_best(&candidates, &corrected, |c| {
-            self.score(c, goal, &agents, obs.ego_velocity, previous_ego, true)
+            self.score(c, goal, &forecast, obs.ego_velocity, previous_ego, true)
         });
         let Some(chosen) = best else {
             return Err(if candidates.is_empty() {
@@ -910,7 +965,7 @@ impl<M: FlowModel> Human2Nav<M> {
         &self,
         samples: &[Vec<Pose2>],
         goal: [f64; 2],
-        agents: &[AgentState],
+        forecast: &Forecast,
         v0: Twist2,
         previous: Option<&[Pose2]>,
     ) -> Vec<usize> {
@@ -923,7 +978,7 @@ impl<M: FlowModel> Human2Nav<M> {
             .iter()
             .enumerate()
             .map(|(i, c)| {
-                let s = self.score(c, goal, agents, v0, previous, false);
+                let s = self.score(c, goal, forecast, v0, previous, false);
                 (if s.is_finite() { s } else { f64::INFINITY }, i)
             })
             .collect();
@@ -947,68 +1002,36 @@ impl<M: FlowModel> Human2Nav<M> {
         out.iter().all(|p| p.is_finite()).then_some(out)
     }
 
-    /// The selection score of one ego-frame candidate (lower is better); without
-    /// `with_feasibility` the TFS term is left out.
+    /// The selection score of one ego-frame candidate (lower is better) against an ego-frame
+    /// `forecast`; without `with_feasibility` the TFS term is left out.
     fn score(
         &self,
         traj: &[Pose2],
         goal: [f64; 2],
-        agents: &[AgentState],
+        forecast: &Forecast,
         v0: Twist2,
         previous: Option<&[Pose2]>,
         with_feasibility: bool,
     ) -> f64 {
         let w = &self.settings.selection;
-        let dt = self.settings.dt;
         // TFS costs a pass over the plan; with a zero weight (the shipped selection) it is
         // not computed.
         let feas = if with_feasibility && w.feasibility > 0.0 {
             let mut with_start = Vec::with_capacity(traj.len() + 1);
             with_start.push(Pose2::IDENTITY);
             with_start.extend_from_slice(traj);
-            tfs::tfs_plan(&with_start, dt, &self.robot.limits, v0)
+            tfs::tfs_plan(&with_start, self.settings.dt, &self.robot.limits, v0)
         } else {
             1.0
         };
 
         let (progress, checked) = goal_term(traj, goal, w);
 
-        // A predicted overlap ends the plan: it and every later waypoint cost the penalty, so
-        // a plan that would run through a pedestrian is no better than one that stops in them,
-        // and a later contact is better than an earlier one.
-        let mut clearance = 0.0;
-        let footprint = &self.robot.footprint;
-        // Broad phase: an agent whose centre is farther than the footprint's reach, its radius
-        // and the margin cannot touch the footprint nor come within the margin.
-        for (j, p) in traj[..checked].iter().enumerate() {
-            let t = (j + 1) as f64 * dt;
-            let mut hit = false;
-            let agent_gaps = agents.iter().filter_map(|a| {
-                let ax = a.position[0] + a.velocity[0] * t;
-                let ay = a.position[1] + a.velocity[1] * t;
-                let far = self.reach + a.radius + w.margin;
-                let (dx, dy) = (ax - p.x, ay - p.y);
-                (dx * dx + dy * dy < far * far)
-                    .then(|| footprint::clearance_at(footprint, *p, [ax, ay], a.radius))
-            });
-            let obstacle_gaps = self
-                .obstacles
-                .iter()
-                .map(|o| obstacle::footprint_clearance(footprint, *p, o));
-            for gap in agent_gaps.chain(obstacle_gaps) {
-                if gap < 0.0 {
-                    hit = true;
-                    break;
-                } else if gap < w.margin {
-                    clearance += ((w.margin - gap) / w.margin).powi(2);
-                }
-            }
-            if hit {
-                clearance += COLLISION_PENALTY * (traj.len() - j) as f64;
-                break;
-            }
-        }
-        clearance /= traj.len().max(1) as f64;
+        let scenes = forecast.scenes();
+        let clearance = (0..scenes)
+            .map(|s| self.clearance(&traj[..checked], traj.len(), forecast, s))
+            .sum::<f64>()
+            / scenes as f64;
 
         let consistency = previous.map_or(0.0, |prev| {
             let n = prev.len().min(traj.len()).max(1);
@@ -1023,6 +1046,49 @@ impl<M: FlowModel> Human2Nav<M> {
             + w.goal * progress
             + w.clearance * clearance
             + w.consistency * consistency
+    }
+}
+
+impl<M> Human2Nav<M> {
+    /// The clearance term `C` of a candidate against scene `scene` of `forecast` and the
+    /// static obstacles: `checked` are its waypoints checked for contact, `len` its length.
+    ///
+    /// A predicted overlap ends the plan: it and every later waypoint cost the penalty, so a
+    /// plan that would run through a pedestrian is no better than one that stops in them, and
+    /// a later contact is better than an earlier one.
+    fn clearance(&self, checked: &[Pose2], len: usize, forecast: &Forecast, scene: usize) -> f64 {
+        let margin = self.settings.selection.margin;
+        let footprint = &self.robot.footprint;
+        let mut clearance = 0.0;
+        for (j, p) in checked.iter().enumerate() {
+            let mut hit = false;
+            // Broad phase: an agent whose centre is farther than the footprint's reach, its
+            // radius and the margin cannot touch the footprint nor come within the margin.
+            let agent_gaps = forecast.agents().iter().enumerate().filter_map(|(i, a)| {
+                let q = forecast.position(i, scene, j);
+                let far = self.reach + a.radius + margin;
+                let (dx, dy) = (q[0] - p.x, q[1] - p.y);
+                (dx * dx + dy * dy < far * far)
+                    .then(|| footprint::clearance_at(footprint, *p, q, a.radius))
+            });
+            let obstacle_gaps = self
+                .obstacles
+                .iter()
+                .map(|o| obstacle::footprint_clearance(footprint, *p, o));
+            for gap in agent_gaps.chain(obstacle_gaps) {
+                if gap < 0.0 {
+                    hit = true;
+                    break;
+                } else if gap < margin {
+                    clearance += ((margin - gap) / margin).powi(2);
+                }
+            }
+            if hit {
+                clearance += COLLISION_PENALTY * (len - j) as f64;
+                break;
+            }
+        }
+        clearance / len.max(1) as f64
     }
 }
 

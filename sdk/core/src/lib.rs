@@ -12,6 +12,7 @@
 //! * [`tfs`]: the trajectory feasibility score.
 //! * [`bev`]: the ego-centred bird's-eye-view raster shared by training and inference.
 //! * [`flow`], [`guidance`]: the flow-model interface and feasibility guidance (Algorithm 1).
+//! * [`forecast`]: what the people around the robot may do, and the predictors that say so.
 //! * [`planner`]: the `Planner` trait, observations and plans.
 //! * [`obstacle`]: static obstacles and occupancy grids; [`frames`]: pedestrians from another
 //!   frame and time.
@@ -26,6 +27,7 @@ pub mod constraint;
 pub mod embodiment;
 pub mod fileset;
 pub mod flow;
+pub mod forecast;
 pub mod frames;
 pub mod guidance;
 pub mod human2nav;

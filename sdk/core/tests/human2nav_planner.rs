@@ -8,6 +8,7 @@ use human2nav_core::ablation::Arm;
 use human2nav_core::bev::BevSpec;
 use human2nav_core::constraint::Phi;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
+use human2nav_core::forecast::{CrowdPredictor, Forecast, ForecastAgent, constant_velocity_path};
 use human2nav_core::guidance::analytic::ConstantField;
 use human2nav_core::guidance::{GuidanceVariant, PaperSettings};
 use human2nav_core::human2nav::{Human2Nav, Human2NavSettings, RobotModel, pose_at};
@@ -876,4 +877,121 @@ fn the_robots_own_motions_steer_round_what_the_samples_run_into() {
     };
     let err = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings).unwrap_err();
     assert!(err.to_string().contains("motions"), "{err}");
+}
+
+/// A predictor with a fixed answer: agent `id` walks from its position to `to` in the first
+/// second and stays there; everyone else moves on at constant velocity. Or it fails.
+struct Scripted {
+    id: u64,
+    to: [f64; 2],
+    fail: bool,
+}
+
+impl CrowdPredictor for Scripted {
+    fn name(&self) -> &str {
+        "scripted"
+    }
+    fn forecast(&mut self, obs: &Observation, horizon: usize, dt: f64) -> Result<Forecast, String> {
+        if self.fail {
+            return Err("no forecast today".into());
+        }
+        let agents = obs
+            .agents
+            .iter()
+            .map(|a| {
+                let path = if a.id == self.id {
+                    (1..=horizon)
+                        .map(|j| {
+                            let s = (j as f64 * dt).min(1.0);
+                            let p = a.position;
+                            [
+                                p[0] + s * (self.to[0] - p[0]),
+                                p[1] + s * (self.to[1] - p[1]),
+                            ]
+                        })
+                        .collect()
+                } else {
+                    constant_velocity_path(a, horizon, dt)
+                };
+                ForecastAgent {
+                    id: a.id,
+                    radius: a.radius,
+                    paths: vec![path],
+                }
+            })
+            .collect();
+        Forecast::new(horizon, 1, agents)
+    }
+}
+
+/// Someone standing 1 m to the left of the robot's way to its goal, 2 m ahead, and the
+/// smallest gap between the robot's disc and them along a plan if they step into the way.
+fn bystander() -> (Observation, impl Fn(&[Pose2]) -> f64) {
+    let obs = Observation {
+        time: 0.0,
+        ego: Pose2::IDENTITY,
+        ego_velocity: Twist2::new(0.8, 0.0, 0.0),
+        goal: [6.0, 0.0],
+        agents: vec![AgentState {
+            id: 3,
+            position: [2.0, 1.0],
+            velocity: [0.0, 0.0],
+            radius: 0.3,
+            history: vec![],
+        }],
+        ..Default::default()
+    };
+    let gap = |plan: &[Pose2]| {
+        plan.iter()
+            .skip(1)
+            .enumerate()
+            .map(|(j, p)| {
+                let s = ((j + 1) as f64 * 0.1).min(1.0);
+                let q = [2.0, 1.0 - s];
+                (p.x - q[0]).hypot(p.y - q[1]) - ROBOT_RADIUS - 0.3
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    (obs, gap)
+}
+
+#[test]
+fn the_selection_avoids_where_its_predictor_says_people_go() {
+    let (obs, gap) = bystander();
+    // At constant velocity the bystander stays put, and the plan runs through the place they
+    // step into.
+    let plain = planner(true).plan(&obs).unwrap();
+    assert!(gap(&plain.poses) < 0.0, "gap {}", gap(&plain.poses));
+    let mut predicted = planner(true).with_predictor(Box::new(Scripted {
+        id: 3,
+        to: [2.0, 0.0],
+        fail: false,
+    }));
+    assert_eq!(predicted.predictor().map(|p| p.name()), Some("scripted"));
+    let plan = predicted.plan(&obs).unwrap();
+    assert!(gap(&plan.poses) >= 0.0, "gap {}", gap(&plan.poses));
+    assert!(!plan.info.fallback);
+}
+
+#[test]
+fn a_failing_predictor_leaves_constant_velocity_and_a_note() {
+    let (obs, _) = bystander();
+    let plain = planner(true).plan(&obs).unwrap();
+    let plan = planner(true)
+        .with_predictor(Box::new(Scripted {
+            id: 3,
+            to: [2.0, 0.0],
+            fail: true,
+        }))
+        .plan(&obs)
+        .unwrap();
+    assert_eq!(plan.poses, plain.poses);
+    assert!(
+        plan.info
+            .notes
+            .iter()
+            .any(|n| n.contains("predictor scripted failed (no forecast today)")),
+        "{:?}",
+        plan.info.notes
+    );
 }

@@ -1,0 +1,598 @@
+//! What a planner expects the people around the robot to do: [`Forecast`]s, and the
+//! [`CrowdPredictor`]s that make them.
+//!
+//! A forecast holds `scenes` possible futures of the crowd. In each, every agent has a
+//! position at each of the plan's `horizon` waypoints (`dt` apart, the first `dt` after the
+//! observation). An agent predicted one way only (at constant velocity, say) has one path,
+//! shared by every scene. Scenes are equally likely: a selection that scores a plan against
+//! each and averages ([`crate::human2nav`]) scores its expected cost.
+//!
+//! [`Forecast::constant_velocity`] is the one-scene forecast every planner of the SDK used
+//! before predictors existed. A learned, multimodal predictor (the flow crate's goal-free
+//! model of people) implements [`CrowdPredictor`] and is handed to the planner.
+
+use crate::bev::{self, BevSpec};
+use crate::flow::{FlowCondition, FlowModel};
+use crate::guidance::{self, GuidanceWorkspace};
+use crate::planner::{AgentState, Observation};
+use crate::se2::{Pose2, Twist2};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+
+/// Largest number of scenes of a forecast: each one is a pass of the selection over every
+/// candidate, so hundreds would be seconds a call.
+pub const MAX_SCENES: usize = 64;
+
+/// One agent's predicted paths.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ForecastAgent {
+    /// The agent's id, as observed.
+    pub id: u64,
+    /// Radius of its disc (m).
+    pub radius: f64,
+    /// One path (the same in every scene) or one per scene; each `horizon` positions `[x, y]`.
+    pub paths: Vec<Vec<[f64; 2]>>,
+}
+
+/// Possible futures of the observed agents (module docs). Build one with
+/// [`Forecast::constant_velocity`] or [`Forecast::new`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Forecast {
+    horizon: usize,
+    scenes: usize,
+    agents: Vec<ForecastAgent>,
+}
+
+impl Forecast {
+    /// A forecast of `scenes` scenes over `horizon` waypoints, checked: at least one scene (at
+    /// most [`MAX_SCENES`]), every agent with one path or `scenes` of them, each of `horizon`
+    /// finite positions, and a finite radius ≥ 0.
+    pub fn new(horizon: usize, scenes: usize, agents: Vec<ForecastAgent>) -> Result<Self, String> {
+        if !(1..=MAX_SCENES).contains(&scenes) {
+            return Err(format!(
+                "a forecast needs 1 to {MAX_SCENES} scenes, got {scenes}"
+            ));
+        }
+        for a in &agents {
+            if a.paths.len() != 1 && a.paths.len() != scenes {
+                return Err(format!(
+                    "agent {}: {} paths for {scenes} scenes (1 or {scenes} expected)",
+                    a.id,
+                    a.paths.len()
+                ));
+            }
+            if let Some(p) = a.paths.iter().find(|p| p.len() != horizon) {
+                return Err(format!(
+                    "agent {}: a path of {} positions for a horizon of {horizon}",
+                    a.id,
+                    p.len()
+                ));
+            }
+            let finite = a.paths.iter().flatten().flatten().all(|v| v.is_finite());
+            if !(finite && a.radius.is_finite() && a.radius >= 0.0) {
+                return Err(format!("agent {}: a non-finite position or radius", a.id));
+            }
+        }
+        Ok(Self {
+            horizon,
+            scenes,
+            agents,
+        })
+    }
+
+    /// Every agent moving on at its observed velocity: one scene, positions at `dt, 2dt, …`
+    /// after the observation, in the agents' frame.
+    pub fn constant_velocity(agents: &[AgentState], horizon: usize, dt: f64) -> Self {
+        let agents = agents
+            .iter()
+            .map(|a| ForecastAgent {
+                id: a.id,
+                radius: a.radius,
+                paths: vec![constant_velocity_path(a, horizon, dt)],
+            })
+            .collect();
+        Self {
+            horizon,
+            scenes: 1,
+            agents,
+        }
+    }
+
+    /// Waypoints per path.
+    pub fn horizon(&self) -> usize {
+        self.horizon
+    }
+
+    /// Number of scenes.
+    pub fn scenes(&self) -> usize {
+        self.scenes
+    }
+
+    /// The agents and their paths.
+    pub fn agents(&self) -> &[ForecastAgent] {
+        &self.agents
+    }
+
+    /// Agent `agent`'s position at waypoint `step` (0-based: `dt` after the observation) of
+    /// scene `scene`.
+    pub fn position(&self, agent: usize, scene: usize, step: usize) -> [f64; 2] {
+        let paths = &self.agents[agent].paths;
+        paths[if paths.len() == 1 { 0 } else { scene }][step]
+    }
+
+    /// The same forecast with every position `p` replaced by `frame.inverse_act(p)`: from the
+    /// world frame into the frame whose pose in the world is `frame` (the robot's, say).
+    pub fn in_frame(&self, frame: Pose2) -> Self {
+        let agents = self
+            .agents
+            .iter()
+            .map(|a| ForecastAgent {
+                paths: a
+                    .paths
+                    .iter()
+                    .map(|p| p.iter().map(|&q| frame.inverse_act(q)).collect())
+                    .collect(),
+                ..a.clone()
+            })
+            .collect();
+        Self { agents, ..*self }
+    }
+}
+
+/// `horizon` positions of `agent` moving on at its velocity, `dt` apart from `dt` on.
+pub fn constant_velocity_path(agent: &AgentState, horizon: usize, dt: f64) -> Vec<[f64; 2]> {
+    (1..=horizon)
+        .map(|j| {
+            let t = j as f64 * dt;
+            [
+                agent.position[0] + agent.velocity[0] * t,
+                agent.position[1] + agent.velocity[1] * t,
+            ]
+        })
+        .collect()
+}
+
+/// A source of [`Forecast`]s for a planner.
+pub trait CrowdPredictor: Send {
+    /// A short name for diagnostics (`constant-velocity`, `flow`, …).
+    fn name(&self) -> &str;
+
+    /// The forecast of `obs.agents` over `horizon` waypoints `dt` apart, in the world frame of
+    /// `obs`, with every agent of the observation in it. An error makes the planner fall back
+    /// to constant velocity for this call (and say so in its plan's notes).
+    fn forecast(&mut self, obs: &Observation, horizon: usize, dt: f64) -> Result<Forecast, String>;
+}
+
+/// The forecast the planner makes without a predictor ([`Forecast::constant_velocity`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ConstantVelocity;
+
+impl CrowdPredictor for ConstantVelocity {
+    fn name(&self) -> &str {
+        "constant-velocity"
+    }
+
+    fn forecast(&mut self, obs: &Observation, horizon: usize, dt: f64) -> Result<Forecast, String> {
+        Ok(Forecast::constant_velocity(&obs.agents, horizon, dt))
+    }
+}
+
+/// Settings of a [`FlowPredictor`] (the `[prediction]` table of a planner file).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FlowPredictorSettings {
+    /// Scenes of the forecast: futures sampled per predicted agent (1 to [`MAX_SCENES`]).
+    /// Default 4.
+    pub samples: usize,
+    /// Euler steps of each sample's integration (1 to 100). Default 5, as the planner's.
+    pub steps_n: usize,
+    /// Only agents within this distance (m) of the robot are predicted by the model; the
+    /// others move on at constant velocity. Default 6.
+    pub range: f64,
+    /// At most this many agents, the nearest, are predicted by the model per call (each is a
+    /// batch of `samples` through the network). Default 8.
+    pub max_agents: usize,
+    /// Agents slower than this (m/s) stay at constant velocity: the model was trained on
+    /// people who walk (windows in which the walker moves less than 0.5 m were left out), and
+    /// a standing person has no heading to predict from. Default 0.3.
+    pub min_speed: f64,
+    /// Add the constant-velocity forecast as one more scene. Default false.
+    pub constant_velocity_scene: bool,
+    /// Draw the robot into each walker's raster, as a disc of `robot_radius` moving at its
+    /// velocity: the walkers are predicted as people who see the robot and make way for it,
+    /// as they make way for each other in the training data. Off, the robot is not in the
+    /// raster, as in training, and the walkers are predicted as if it were not there (as a
+    /// replayed crowd behaves). Default false.
+    pub see_robot: bool,
+    /// Radius (m) of the robot's disc in the rasters with `see_robot`. Default 0.4.
+    pub robot_radius: f64,
+    /// Seed of the source noise (mixed with the call's time and the agent's id, so that a
+    /// forecast depends on its observation only). Default 0.
+    pub seed: u64,
+}
+
+impl Default for FlowPredictorSettings {
+    fn default() -> Self {
+        Self {
+            samples: 4,
+            steps_n: 5,
+            range: 6.0,
+            max_agents: 8,
+            min_speed: 0.3,
+            constant_velocity_scene: false,
+            see_robot: false,
+            robot_radius: 0.4,
+            seed: 0,
+        }
+    }
+}
+
+impl FlowPredictorSettings {
+    /// Checks every field; the error is `<key>: <why>` for the first offending one.
+    pub fn validate(&self) -> Result<(), String> {
+        let scenes = self.samples + usize::from(self.constant_velocity_scene);
+        if self.samples == 0 || scenes > MAX_SCENES {
+            return Err(format!(
+                "samples: must be 1 to {} (with the constant-velocity scene, {} \
+                 scenes in all), got {}",
+                MAX_SCENES - usize::from(self.constant_velocity_scene),
+                MAX_SCENES,
+                self.samples
+            ));
+        }
+        if !(1..=100).contains(&self.steps_n) {
+            return Err(format!("steps_n: must be 1 to 100, got {}", self.steps_n));
+        }
+        if !(self.range.is_finite() && self.range >= 0.0) {
+            return Err("range: must be finite and ≥ 0".into());
+        }
+        if self.max_agents > 1000 {
+            return Err(format!(
+                "max_agents: must be at most 1000, got {}",
+                self.max_agents
+            ));
+        }
+        if !(self.min_speed.is_finite() && self.min_speed >= 0.0) {
+            return Err("min_speed: must be finite and ≥ 0".into());
+        }
+        if !(self.robot_radius.is_finite() && self.robot_radius >= 0.0) {
+            return Err("robot_radius: must be finite and ≥ 0".into());
+        }
+        Ok(())
+    }
+}
+
+/// A learned, multimodal predictor of people: a flow model trained on people walking, without
+/// their goals (the flow crate's goal-free model), samples where each agent near the robot
+/// goes, from the agent's own pose and velocity and the other agents around it (its BEV
+/// raster, drawn as in training; the robot is in it only with
+/// [`FlowPredictorSettings::see_robot`]). Scene `s`
+/// of the forecast is every such agent's sample `s`; the other agents move on at constant
+/// velocity.
+pub struct FlowPredictor<M> {
+    model: M,
+    bev: BevSpec,
+    settings: FlowPredictorSettings,
+    raster: Vec<f32>,
+    workspace: GuidanceWorkspace,
+}
+
+impl<M> std::fmt::Debug for FlowPredictor<M> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FlowPredictor")
+            .field("bev", &self.bev)
+            .field("settings", &self.settings)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<M: FlowModel> FlowPredictor<M> {
+    /// A predictor sampling `model` (its rasters drawn with `bev`, the model's own spec).
+    pub fn new(model: M, bev: BevSpec, settings: FlowPredictorSettings) -> Result<Self, String> {
+        settings.validate()?;
+        bev.validate().map_err(|e| format!("bev: {e}"))?;
+        if model.horizon() == 0 {
+            return Err("the prediction model has a horizon of 0 poses".into());
+        }
+        Ok(Self {
+            raster: vec![0.0; bev.len()],
+            model,
+            bev,
+            settings,
+            workspace: GuidanceWorkspace::new(),
+        })
+    }
+
+    /// The settings in force.
+    pub fn settings(&self) -> &FlowPredictorSettings {
+        &self.settings
+    }
+
+    /// The indices of the agents the model predicts: moving, within range, the nearest first,
+    /// at most `max_agents`.
+    fn chosen(&self, obs: &Observation) -> Vec<usize> {
+        let s = &self.settings;
+        let mut near: Vec<(f64, usize)> = obs
+            .agents
+            .iter()
+            .enumerate()
+            .filter_map(|(i, a)| {
+                let d = (a.position[0] - obs.ego.x).hypot(a.position[1] - obs.ego.y);
+                let speed = a.velocity[0].hypot(a.velocity[1]);
+                (d <= s.range && speed >= s.min_speed && speed > 0.0).then_some((d, i))
+            })
+            .collect();
+        near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        near.truncate(s.max_agents);
+        near.into_iter().map(|(_, i)| i).collect()
+    }
+
+    /// `samples` paths of agent `i` of `obs` (world frame, `horizon` positions each).
+    fn sample_agent(
+        &mut self,
+        obs: &Observation,
+        i: usize,
+        horizon: usize,
+    ) -> Result<Vec<Vec<[f64; 2]>>, String> {
+        let a = &obs.agents[i];
+        let speed = a.velocity[0].hypot(a.velocity[1]);
+        let pose = Pose2::new(
+            a.position[0],
+            a.position[1],
+            a.velocity[1].atan2(a.velocity[0]),
+        );
+        let mut others: Vec<AgentState> = obs
+            .agents
+            .iter()
+            .enumerate()
+            .filter(|&(j, _)| j != i)
+            .map(|(_, b)| b.clone())
+            .collect();
+        if self.settings.see_robot {
+            let v = obs.ego_velocity;
+            others.push(AgentState {
+                id: u64::MAX,
+                position: [obs.ego.x, obs.ego.y],
+                velocity: obs.ego.rotate([v.vx, v.vy]),
+                radius: self.settings.robot_radius,
+                history: Vec::new(),
+            });
+        }
+        bev::rasterize(self.bev, pose, &others, &mut self.raster);
+        let cond = FlowCondition {
+            bev: self.raster.clone(),
+            goal: [0.0, 0.0],
+            velocity: [speed, 0.0],
+        };
+        let k = self.settings.samples;
+        let t = self.model.horizon();
+        // The source noise depends on the observation only: its time, the agent and the seed.
+        let mut rng = ChaCha8Rng::seed_from_u64(
+            self.settings.seed ^ obs.time.to_bits() ^ a.id.wrapping_mul(0x9e37_79b9_7f4a_7c15),
+        );
+        let std = self.model.source_std();
+        let mut x0 = vec![0.0; k * t * 3];
+        for p in x0.chunks_exact_mut(3) {
+            let mut xi = [0.0; 3];
+            for (d, s) in xi.iter_mut().zip(std) {
+                let z: f64 = StandardNormal.sample(&mut rng);
+                *d = z * s;
+            }
+            p.copy_from_slice(&Pose2::exp(Twist2::new(xi[0], xi[1], xi[2])).to_array());
+        }
+        let out = guidance::sample(
+            &self.model,
+            &cond,
+            &x0,
+            self.settings.steps_n,
+            &mut self.workspace,
+        )
+        .map_err(|e| format!("agent {}: {e}", a.id))?;
+        Ok(out
+            .chunks_exact(t * 3)
+            .map(|traj| {
+                (0..horizon)
+                    .map(|j| {
+                        // Past the model's horizon the last pose is held.
+                        let q = &traj[3 * j.min(t - 1)..];
+                        pose.act([q[0], q[1]])
+                    })
+                    .collect()
+            })
+            .collect())
+    }
+}
+
+impl<M: FlowModel + Send> CrowdPredictor for FlowPredictor<M> {
+    fn name(&self) -> &str {
+        "flow"
+    }
+
+    fn forecast(&mut self, obs: &Observation, horizon: usize, dt: f64) -> Result<Forecast, String> {
+        let chosen = self.chosen(obs);
+        let mut paths: Vec<Vec<Vec<[f64; 2]>>> = obs
+            .agents
+            .iter()
+            .map(|a| vec![constant_velocity_path(a, horizon, dt)])
+            .collect();
+        let k = self.settings.samples;
+        let cv_scene = self.settings.constant_velocity_scene;
+        for &i in &chosen {
+            let mut sampled = self.sample_agent(obs, i, horizon)?;
+            if cv_scene {
+                sampled.push(paths[i][0].clone());
+            }
+            paths[i] = sampled;
+        }
+        let agents = obs
+            .agents
+            .iter()
+            .zip(paths)
+            .map(|(a, paths)| ForecastAgent {
+                id: a.id,
+                radius: a.radius,
+                paths,
+            })
+            .collect();
+        let scenes = if chosen.is_empty() {
+            1
+        } else {
+            k + usize::from(cv_scene)
+        };
+        Forecast::new(horizon, scenes, agents)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn walker(id: u64, p: [f64; 2], v: [f64; 2]) -> AgentState {
+        AgentState {
+            id,
+            position: p,
+            velocity: v,
+            radius: 0.3,
+            history: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn constant_velocity_moves_each_agent_on_from_the_first_step() {
+        let f = Forecast::constant_velocity(&[walker(7, [1.0, 2.0], [0.5, -1.0])], 3, 0.1);
+        assert_eq!((f.horizon(), f.scenes()), (3, 1));
+        let p = f.position(0, 0, 2);
+        assert!((p[0] - 1.15).abs() < 1e-12 && (p[1] - 1.7).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_shared_path_serves_every_scene_and_frames_change_positions() {
+        let agents = vec![
+            ForecastAgent {
+                id: 1,
+                radius: 0.3,
+                paths: vec![vec![[1.0, 0.0]; 2]],
+            },
+            ForecastAgent {
+                id: 2,
+                radius: 0.3,
+                paths: vec![vec![[0.0, 1.0]; 2], vec![[0.0, 2.0]; 2]],
+            },
+        ];
+        let f = Forecast::new(2, 2, agents).expect("valid");
+        assert_eq!(f.position(0, 1, 1), [1.0, 0.0]);
+        assert_eq!(f.position(1, 1, 0), [0.0, 2.0]);
+        // In the frame of a robot at (1, 0) facing +y, (1, 0) is its origin and (0, 2) is 2 m
+        // ahead and 1 m to the left.
+        let g = f.in_frame(Pose2::new(1.0, 0.0, std::f64::consts::FRAC_PI_2));
+        let near = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]) < 1e-12;
+        assert!(near(g.position(0, 0, 0), [0.0, 0.0]));
+        assert!(near(g.position(1, 1, 0), [2.0, 1.0]));
+    }
+
+    /// A "model" whose every sample veers left: 0.1 m forward and 0.05 m left per step, in the
+    /// walker's frame.
+    fn veering_left(horizon: usize) -> crate::guidance::analytic::GeodesicTarget {
+        let target = (1..=horizon)
+            .flat_map(|k| [0.1 * k as f64, 0.05 * k as f64, 0.0])
+            .collect();
+        crate::guidance::analytic::GeodesicTarget { target }
+    }
+
+    #[test]
+    fn the_flow_predictor_samples_near_walkers_in_their_own_frame() {
+        let settings = FlowPredictorSettings {
+            samples: 3,
+            range: 5.0,
+            max_agents: 1,
+            ..FlowPredictorSettings::default()
+        };
+        let mut p = FlowPredictor::new(veering_left(8), BevSpec::default(), settings).unwrap();
+        let obs = Observation {
+            agents: vec![
+                // Walking along +y: its left is −x.
+                walker(1, [1.0, 0.0], [0.0, 1.0]),
+                // Nearer, but standing: constant velocity.
+                walker(2, [0.5, 0.0], [0.1, 0.0]),
+                // Moving but beyond max_agents (farther than agent 1).
+                walker(3, [2.0, 0.0], [1.0, 0.0]),
+                // Out of range.
+                walker(4, [9.0, 0.0], [1.0, 0.0]),
+            ],
+            ..Observation::default()
+        };
+        let f = p.forecast(&obs, 10, 0.1).unwrap();
+        assert_eq!((f.scenes(), f.horizon()), (3, 10));
+        let paths: Vec<usize> = f.agents().iter().map(|a| a.paths.len()).collect();
+        assert_eq!(paths, [3, 1, 1, 1]);
+        for s in 0..3 {
+            // Step 4 (0.5 s): 0.5 m ahead (+y) and 0.25 m to its left (−x); past the model's 8
+            // poses the last one is held.
+            let q = f.position(0, s, 4);
+            assert!(
+                (q[0] - 0.75).abs() < 1e-3 && (q[1] - 0.5).abs() < 1e-3,
+                "{q:?}"
+            );
+            let q = f.position(0, s, 9);
+            assert!(
+                (q[0] - 0.6).abs() < 1e-3 && (q[1] - 0.8).abs() < 1e-3,
+                "{q:?}"
+            );
+        }
+        assert_eq!(f.position(2, 1, 0), [2.1, 0.0]);
+        // The same observation gives the same forecast; with the constant-velocity scene there
+        // is one more scene, agent 1 on its straight line in it.
+        assert_eq!(p.forecast(&obs, 10, 0.1).unwrap(), f);
+        let settings = FlowPredictorSettings {
+            constant_velocity_scene: true,
+            ..settings
+        };
+        let mut p = FlowPredictor::new(veering_left(8), BevSpec::default(), settings).unwrap();
+        let g = p.forecast(&obs, 10, 0.1).unwrap();
+        assert_eq!(g.scenes(), 4);
+        let q = g.position(0, 3, 4);
+        assert!(
+            (q[0] - 1.0).abs() < 1e-12 && (q[1] - 0.5).abs() < 1e-12,
+            "{q:?}"
+        );
+    }
+
+    #[test]
+    fn flow_predictor_settings_name_the_bad_field() {
+        let bad = |s: FlowPredictorSettings| s.validate().unwrap_err();
+        let d = FlowPredictorSettings::default();
+        assert!(bad(FlowPredictorSettings { samples: 0, ..d }).starts_with("samples: "));
+        assert!(bad(FlowPredictorSettings { steps_n: 0, ..d }).starts_with("steps_n: "));
+        let e = bad(FlowPredictorSettings {
+            range: f64::NAN,
+            ..d
+        });
+        assert!(e.starts_with("range: "), "{e}");
+        let e = bad(FlowPredictorSettings {
+            min_speed: -1.0,
+            ..d
+        });
+        assert!(e.starts_with("min_speed: "), "{e}");
+        assert!(toml::from_str::<FlowPredictorSettings>("sample = 3").is_err());
+    }
+
+    #[test]
+    fn malformed_forecasts_are_refused_with_the_agent_named() {
+        let path = |n: usize| vec![[0.0, 0.0]; n];
+        let one = |id: u64, paths: Vec<Vec<[f64; 2]>>| ForecastAgent {
+            id,
+            radius: 0.3,
+            paths,
+        };
+        assert!(Forecast::new(2, 0, Vec::new()).is_err());
+        assert!(Forecast::new(2, MAX_SCENES + 1, Vec::new()).is_err());
+        let e = Forecast::new(2, 3, vec![one(4, vec![path(2), path(2)])]).unwrap_err();
+        assert!(e.contains("agent 4") && e.contains("2 paths"), "{e}");
+        let e = Forecast::new(2, 1, vec![one(5, vec![path(3)])]).unwrap_err();
+        assert!(e.contains("agent 5") && e.contains("3 positions"), "{e}");
+        let e = Forecast::new(2, 1, vec![one(6, vec![vec![[f64::NAN, 0.0]; 2]])]).unwrap_err();
+        assert!(e.contains("agent 6"), "{e}");
+    }
+}

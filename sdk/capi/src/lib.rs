@@ -435,7 +435,10 @@ fn build(
         human2nav_flow::tch::set_num_threads(i32::try_from(config.threads).unwrap_or(1));
     }
     let model = load_model(Path::new(model_dir), config.backend)?;
-    let robot = RobotPlanner::new(profile, model, config.human2nav)?;
+    // A predictor model the configuration names is loaded too, relative to the current
+    // directory (the API has no workspace root).
+    let robot = RobotPlanner::new(profile, model, config.human2nav)?
+        .with_prediction(&config, Path::new("."))?;
     Ok(Box::new(h2n_planner {
         robot,
         embodiment,
@@ -455,7 +458,8 @@ fn config_from(text: Option<&str>, path: &Path) -> Result<PlannerConfig, Failure
 /// Creates a planner from files: the robot profile `robot_toml` (its URDF is found relative to
 /// it), the planner configuration `planner_toml` (NULL: the built-in defaults, equal to the
 /// shipped `sdk/configs/planner.toml`) and the model folder `model_dir` (`model.toml` and its
-/// weights; the configuration's `model` key is not used). On success `*out` holds the planner.
+/// weights; the configuration's `model` key is not used; a `[prediction]` model it names is
+/// loaded, a relative path from the current directory). On success `*out` holds the planner.
 ///
 /// # Safety
 /// The strings are NULL or NUL-terminated; `out` is NULL or writable.

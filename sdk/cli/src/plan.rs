@@ -20,8 +20,9 @@ use human2nav_experiments::train::cache_windows;
 use human2nav_flow::eval::{EvalOptions, guided_windows};
 use human2nav_flow::net::Complexity;
 use human2nav_flow::planner::{
-    Backend, BevOrigin, FlowCallStats, LatencyStats, PlannerConfig, PlannerModel, RobotPlanner,
-    TimedModel, bev_spec, load_model, load_profile, measure_latency, robot_model, robot_phi,
+    Backend, BevOrigin, FlowCallStats, LatencyStats, PlannerConfig, PlannerModel, PredictionModel,
+    RobotPlanner, TimedModel, bev_spec, load_model, load_profile, measure_latency, robot_model,
+    robot_phi,
 };
 use human2nav_sim::episode::{Episode, ScenarioTitle};
 use human2nav_sim::plan_figure::{
@@ -183,22 +184,43 @@ pub fn run(args: PlanArgs) -> anyhow::Result<ExitCode> {
         }
         return eval(&args, &cfg, &model, &model_dir, &episodes, &step);
     }
+    let prediction = PredictionModel::load(&cfg, &workspace)?;
     if let Some(calls) = args.bench {
-        return bench(&args, &cfg, &model_dir, &episodes, &step, calls);
+        return bench(
+            &args,
+            &cfg,
+            &model_dir,
+            prediction.as_ref(),
+            &episodes,
+            &step,
+            calls,
+        );
     }
-    plan_one(&args, &cfg, &model_dir, &workspace, &episodes, &step)
+    plan_one(
+        &args,
+        &cfg,
+        &model_dir,
+        prediction.as_ref(),
+        &workspace,
+        &episodes,
+        &step,
+    )
 }
 
 fn plan_one(
     args: &PlanArgs,
     cfg: &PlannerConfig,
     model_dir: &Path,
+    prediction: Option<&PredictionModel>,
     workspace: &Path,
     episodes: &[Episode],
     step: &StepOptions,
 ) -> anyhow::Result<ExitCode> {
     let robot_path = &args.robot[0];
     let mut rp = RobotPlanner::load_with(robot_path, model_dir, cfg.backend, cfg.human2nav)?;
+    if let Some(p) = prediction {
+        rp = rp.with_predictor(p.predictor()?);
+    }
     let ep = select_episode(episodes, args.index, args.id.as_deref())?;
     let obs = observation_at(ep, step)?;
     let plan = rp.planner.plan(&obs)?;
@@ -575,6 +597,7 @@ fn bench(
     args: &PlanArgs,
     cfg: &PlannerConfig,
     model_dir: &Path,
+    prediction: Option<&PredictionModel>,
     episodes: &[Episode],
     step: &StepOptions,
     calls: usize,
@@ -623,6 +646,11 @@ fn bench(
     for (mode, settings) in modes {
         for &backend in &backends {
             let (mut planner, stats) = timed_planner(robot, model_dir, backend, settings)?;
+            // The configured planner predicts people as configured; the arms' rows time the
+            // planner's own stages, at constant velocity.
+            if let (Some(p), "configured") = (prediction, mode.as_str()) {
+                planner = planner.with_predictor(p.predictor()?);
+            }
             let pb = bar(calls, &format!("{mode} calls ({backend})"));
             let lock = || {
                 stats

@@ -533,6 +533,23 @@ fn config_cases() -> Vec<Case> {
         ),
         err(
             a,
+            "planner.toml `[prediction.flow] samples = 0`",
+            NR,
+            &["prediction.flow.samples"],
+            planner_edit(
+                "samples = 4                       # scenes",
+                "samples = 0 # scenes",
+            ),
+        ),
+        err(
+            a,
+            "planner.toml `[prediction.flow] robot_radius = -1`",
+            NR,
+            &["prediction.flow.robot_radius"],
+            planner_edit("robot_radius = 0.4 ", "robot_radius = -1 "),
+        ),
+        err(
+            a,
             "planner.toml `iterations_m = 1000000000`",
             "ran without an upper bound",
             &["iterations_m", "1000"],

@@ -16,7 +16,9 @@ use anyhow::{Context, anyhow, bail};
 use human2nav_core::ablation::Arm;
 use human2nav_core::human2nav::Human2NavSettings;
 use human2nav_core::lock::DirLock;
-use human2nav_flow::planner::{PlannerConfig, PlannerModel, RobotPlanner, load_model};
+use human2nav_flow::planner::{
+    PlannerConfig, PlannerModel, PredictionModel, RobotPlanner, load_model,
+};
 use human2nav_plugin::{PluginFailure, PluginHost};
 use human2nav_sim::config::MethodConfig;
 use human2nav_sim::config::{
@@ -303,6 +305,8 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
             PlannerModel::Native(model) => Some(model),
             PlannerModel::Torch(_) => None,
         };
+    let prediction = PredictionModel::load(&planner_cfg, &cfg.base_dir)
+        .with_context(|| format!("method `{}`", m.name))?;
     human2nav_flow::tch::set_num_threads(1);
 
     let mut profiles = HashMap::new();
@@ -321,7 +325,7 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
             Some(native) => PlannerModel::Native(native.clone()),
             None => load_model(&model_dir, backend)?,
         };
-        let planner = RobotPlanner::new(
+        let mut planner = RobotPlanner::new(
             profile,
             model,
             Human2NavSettings {
@@ -329,6 +333,9 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
                 ..settings
             },
         )?;
+        if let Some(p) = &prediction {
+            planner = planner.with_predictor(p.predictor()?);
+        }
         Ok(Box::new(planner.planner))
     })
     .with_replan_hz(m.replan_hz))

@@ -24,6 +24,7 @@ use crate::native::NativeCfm;
 use human2nav_core::bev::BevSpec;
 use human2nav_core::constraint::Phi;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
+use human2nav_core::forecast::{CrowdPredictor, FlowPredictor, FlowPredictorSettings};
 use human2nav_core::human2nav::{Human2Nav, Human2NavSettings, RobotModel};
 use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use human2nav_core::robot::RobotProfile;
@@ -103,6 +104,22 @@ pub struct PlannerConfig {
     pub backend: Backend,
     /// The planner's settings (sampling, guidance, selection).
     pub human2nav: Human2NavSettings,
+    /// Where the selection expects people to go (the `[prediction]` table). Without a model
+    /// (the default): constant velocity.
+    pub prediction: PredictionConfig,
+}
+
+/// The `[prediction]` table of a planner file: a goal-free flow model of people
+/// ([`Normalisation::goal_conditioned`](crate::config::Normalisation::goal_conditioned) false,
+/// `train.goal = false`) and how the [`FlowPredictor`] samples it.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PredictionConfig {
+    /// The predictor's model folder, resolved like [`PlannerConfig::model`]; `None` (the
+    /// default): constant velocity. It runs on the planner's backend.
+    pub model: Option<PathBuf>,
+    /// How it is sampled (`[prediction.flow]`).
+    pub flow: FlowPredictorSettings,
 }
 
 impl Default for PlannerConfig {
@@ -112,6 +129,7 @@ impl Default for PlannerConfig {
             threads: 1,
             backend: Backend::default(),
             human2nav: Human2NavSettings::default(),
+            prediction: PredictionConfig::default(),
         }
     }
 }
@@ -132,6 +150,14 @@ impl PlannerConfig {
             });
         }
         self.human2nav.validate()?;
+        // Checked with or without a model: a bad value is an error before it is used.
+        self.prediction.flow.validate().map_err(|e| {
+            let (key, message) = e.split_once(": ").unwrap_or(("", &e));
+            PlannerError::Setting {
+                field: format!("prediction.flow.{key}"),
+                message: message.to_owned(),
+            }
+        })?;
         Ok(())
     }
 
@@ -160,11 +186,77 @@ impl PlannerConfig {
 
     /// The model folder, resolved against `workspace` when relative.
     pub fn model_dir(&self, workspace: &Path) -> PathBuf {
-        if self.model.is_absolute() {
-            self.model.clone()
-        } else {
-            workspace.join(&self.model)
+        resolve(&self.model, workspace)
+    }
+}
+
+fn resolve(path: &Path, workspace: &Path) -> PathBuf {
+    if path.is_absolute() {
+        path.to_path_buf()
+    } else {
+        workspace.join(path)
+    }
+}
+
+/// A loaded prediction model ([`PredictionConfig`]), from which every planner gets a
+/// [`FlowPredictor`] of its own (the native weights are shared, libtorch's loaded again, so
+/// that this can be shared between threads).
+#[derive(Debug)]
+pub struct PredictionModel {
+    /// The native weights; `None` on the libtorch backend.
+    native: Option<Box<NativeCfm>>,
+    dir: PathBuf,
+    backend: Backend,
+    bev: BevSpec,
+    settings: FlowPredictorSettings,
+}
+
+impl PredictionModel {
+    /// The prediction model `cfg` names, loaded on `cfg.backend` (relative paths from
+    /// `workspace`), or `None` when it names none. A goal-conditioned model is refused: it
+    /// would predict every walker as heading for its own position.
+    pub fn load(cfg: &PlannerConfig, workspace: &Path) -> Result<Option<Self>, PlannerError> {
+        let Some(path) = &cfg.prediction.model else {
+            return Ok(None);
+        };
+        let dir = resolve(path, workspace);
+        let model = load_model(&dir, cfg.backend)?;
+        if model.card().normalisation.goal_conditioned {
+            return Err(PlannerError::Setting {
+                field: "prediction.model".into(),
+                message: format!(
+                    "{} is conditioned on goals; a predictor of people needs a goal-free \
+                     model (trained with train.goal = false)",
+                    dir.display()
+                ),
+            });
         }
+        let (bev, _) = bev_spec(model.card());
+        Ok(Some(Self {
+            native: match model {
+                PlannerModel::Native(m) => Some(m),
+                PlannerModel::Torch(_) => None,
+            },
+            dir,
+            backend: cfg.backend,
+            bev,
+            settings: cfg.prediction.flow,
+        }))
+    }
+
+    /// A predictor of its own for one planner.
+    pub fn predictor(&self) -> Result<Box<dyn CrowdPredictor>, PlannerError> {
+        let model = match &self.native {
+            Some(m) => PlannerModel::Native(m.clone()),
+            None => load_model(&self.dir, self.backend)?,
+        };
+        let p = FlowPredictor::new(model, self.bev, self.settings).map_err(|message| {
+            PlannerError::Setting {
+                field: "prediction".into(),
+                message,
+            }
+        })?;
+        Ok(Box::new(p))
     }
 }
 
@@ -445,6 +537,28 @@ impl RobotPlanner {
     /// The robot's hard limits.
     pub fn limits(&self) -> &Limits {
         &self.profile.limits
+    }
+
+    /// The same planner with the prediction `cfg` names ([`PredictionConfig`]; unchanged when
+    /// it names no model), relative paths from `workspace`.
+    pub fn with_prediction(
+        self,
+        cfg: &PlannerConfig,
+        workspace: &Path,
+    ) -> Result<Self, PlannerError> {
+        Ok(match PredictionModel::load(cfg, workspace)? {
+            Some(m) => self.with_predictor(m.predictor()?),
+            None => self,
+        })
+    }
+
+    /// The same planner with its selection scoring against `predictor`'s forecasts
+    /// ([`Human2Nav::with_predictor`]).
+    pub fn with_predictor(self, predictor: Box<dyn CrowdPredictor>) -> Self {
+        Self {
+            planner: self.planner.with_predictor(predictor),
+            ..self
+        }
     }
 }
 
@@ -735,6 +849,11 @@ mod tests {
 
     /// A small freshly initialised model saved to a temporary folder.
     fn small_model_dir(tag: &str) -> PathBuf {
+        small_model_dir_with(tag, true)
+    }
+
+    /// A small untrained model folder; `goal_conditioned: false` makes it a predictor's.
+    fn small_model_dir_with(tag: &str, goal_conditioned: bool) -> PathBuf {
         use crate::config::{NetConfig, Normalisation};
         tch::manual_seed(11);
         let net = NetConfig {
@@ -753,6 +872,7 @@ mod tests {
             velocity_std: [0.8, 0.3, 0.5],
             goal_scale: 4.0,
             speed_scale: 1.0,
+            goal_conditioned,
         };
         let dir = std::env::temp_dir().join(format!("h2n-planner-{tag}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
@@ -856,6 +976,68 @@ mod tests {
         let iterations = s.velocity_calls / n - 1;
         assert_eq!(s.vjp_calls, iterations * (n - 1), "{s:?}");
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_prediction_model_is_goal_free_and_predicts_for_the_planner() {
+        let ws = Path::new("/ws");
+        let with_model = |dir: &Path| PlannerConfig {
+            prediction: PredictionConfig {
+                model: Some(dir.to_path_buf()),
+                flow: FlowPredictorSettings::default(),
+            },
+            ..PlannerConfig::default()
+        };
+        // No [prediction] model: nothing is loaded.
+        assert!(
+            PredictionModel::load(&PlannerConfig::default(), ws)
+                .unwrap()
+                .is_none()
+        );
+        // A missing folder is named with the workspace it was resolved against.
+        let err = PredictionModel::load(&with_model(Path::new("no/such/predictor")), ws)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("/ws/no/such/predictor"), "{err}");
+        // A planner's model (conditioned on goals) is refused by field.
+        let planner_dir = small_model_dir_with("pred-goal", true);
+        let err = PredictionModel::load(&with_model(&planner_dir), ws).unwrap_err();
+        assert!(
+            matches!(err, PlannerError::Setting { ref field, ref message }
+                if field == "prediction.model" && message.contains("goal-free")),
+            "{err}"
+        );
+        // A goal-free one predicts: the planner's plan is made against its forecast.
+        let dir = small_model_dir_with("pred-free", false);
+        let robot = workspace().join("robots/diablo/robot.toml");
+        let rp = RobotPlanner::load(&robot, &planner_dir, Human2NavSettings::default())
+            .unwrap()
+            .with_prediction(&with_model(&dir), ws)
+            .unwrap();
+        let mut planner = rp.planner;
+        assert_eq!(planner.predictor().map(|p| p.name()), Some("flow"));
+        let plan = planner.plan(&observation()).unwrap();
+        assert!(plan.is_finite() && !plan.info.fallback, "{:?}", plan.info);
+        assert!(
+            !plan.info.notes.iter().any(|n| n.contains("predictor")),
+            "{:?}",
+            plan.info.notes
+        );
+        // The table's keys are checked by name.
+        let path = Path::new("planner.toml");
+        let err = PlannerConfig::from_toml_str("[prediction]\nmodle = \"m\"\n", path).unwrap_err();
+        assert!(err.to_string().contains("modle"), "{err}");
+        let err = PlannerConfig::from_toml_str(
+            "[prediction]\nmodel = \"m\"\n[prediction.flow]\nsamples = 0\n",
+            path,
+        )
+        .unwrap_err();
+        assert!(
+            err.to_string().contains("`prediction.flow.samples`"),
+            "{err}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+        let _ = std::fs::remove_dir_all(&planner_dir);
     }
 
     #[test]

@@ -24,7 +24,7 @@ use pyo3::create_exception;
 use pyo3::exceptions::{PyFileNotFoundError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -249,8 +249,9 @@ fn plan_dict<'py>(py: Python<'py>, plan: &Plan) -> PyResult<Bound<'py, PyDict>> 
 #[pymethods]
 impl PyPlanner {
     /// The Human2Nav planner for `robot` with the model folder `model_dir`. `config` is a
-    /// `planner.toml` (None: the built-in defaults, equal to the shipped configuration); the
-    /// keyword arguments override it.
+    /// `planner.toml` (None: the built-in defaults, equal to the shipped configuration; a
+    /// `[prediction]` model it names is loaded, a relative path from the current directory);
+    /// the keyword arguments override it.
     #[staticmethod]
     #[pyo3(signature = (robot, model_dir, config = None, guidance = None, seed = None, samples = None, backend = None))]
     fn human2nav(
@@ -284,6 +285,7 @@ impl PyPlanner {
         }
         let model = load_model(&model_dir, cfg.backend).map_err(planner_error)?;
         let rp = RobotPlanner::new(robot.profile.clone(), model, cfg.human2nav)
+            .and_then(|rp| rp.with_prediction(&cfg, Path::new(".")))
             .map_err(planner_error)?;
         Ok(Self::wrap(Box::new(rp.planner)))
     }

@@ -224,6 +224,16 @@ fn plan_one(
     let ep = select_episode(episodes, args.index, args.id.as_deref())?;
     let obs = observation_at(ep, step)?;
     let plan = rp.planner.plan(&obs)?;
+    // The predictor's forecast for the figure: the same observation, so the same scenes the
+    // selection scored against (a forecast depends on its observation only).
+    let forecast = match prediction {
+        Some(p) => Some(
+            p.predictor()?
+                .forecast(&obs, plan.poses.len().saturating_sub(1), plan.dt)
+                .map_err(|e| anyhow::anyhow!("predicting the pedestrians: {e}"))?,
+        ),
+        None => None,
+    };
     let guidance = cfg.human2nav.guidance.enabled;
 
     println!(
@@ -253,6 +263,7 @@ fn plan_one(
         limits: rp.limits(),
         footprint_radius: rp.profile.footprint_radius,
         bev: rp.bev,
+        forecast: forecast.as_ref(),
     };
     let out = args.out.clone().unwrap_or_else(|| {
         workspace.join(format!(

@@ -31,6 +31,7 @@ use crate::figures::{disc, draw_obstacles, star};
 use crate::replay::CrowdReplay;
 use crate::runner::StartHeading;
 use human2nav_core::bev::{self, BevSpec};
+use human2nav_core::forecast::Forecast;
 use human2nav_core::obstacle;
 use human2nav_core::tfs;
 use human2nav_core::{AgentState, Limits, Observation, Plan, Pose2, Twist2};
@@ -187,6 +188,9 @@ pub struct PlanFigure<'a> {
     pub footprint_radius: f64,
     /// The planner's BEV raster spec (inset).
     pub bev: BevSpec,
+    /// The forecast the planner's selection scored against, in the world frame (its
+    /// predictor's; `None`: not drawn).
+    pub forecast: Option<&'a Forecast>,
 }
 
 /// Numbers shown on a [`PlanFigure`].
@@ -371,6 +375,9 @@ fn draw(root: &Area<'_>, fig: &PlanFigure<'_>, numbers: &PlanFigureNumbers) -> R
     draw_obstacles(&mut chart, &obs.obstacles)?;
 
     draw_pedestrians(&mut chart, fig, &inside)?;
+    if let Some(f) = fig.forecast {
+        draw_forecast(&mut chart, f, &inside)?;
+    }
     draw_samples(&mut chart, fig)?;
     draw_plan(&mut chart, fig)?;
     draw_robot_and_goal(&mut chart, fig, half, &inside)?;
@@ -508,6 +515,41 @@ fn draw_pedestrians(
         .label("pedestrian (history dots, heading arrow)")
         .legend(|(x, y)| Circle::new((x + 8, y), 6, GREY.mix(0.65).filled()));
 
+    Ok(())
+}
+
+/// The forecast's paths of the pedestrians in view, one thin line per scene (a pedestrian
+/// predicted one way has one), and their legend entry.
+fn draw_forecast(
+    chart: &mut Chart<'_, '_>,
+    forecast: &Forecast,
+    inside: &dyn Fn([f64; 2]) -> bool,
+) -> Result<(), String> {
+    let e = |x: &dyn std::fmt::Display| x.to_string();
+    let colour = RGBColor(230, 140, 30);
+    for a in forecast.agents() {
+        for path in a
+            .paths
+            .iter()
+            .filter(|p| p.first().is_some_and(|q| inside(*q)))
+        {
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    path.iter().map(|q| (q[0], q[1])).collect::<Vec<_>>(),
+                    colour.mix(0.7).stroke_width(1),
+                )))
+                .map_err(|x| e(&x))?;
+        }
+    }
+    chart
+        .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+        .map_err(|x| e(&x))?
+        .label(format!(
+            "predicted pedestrian paths ({} scene{})",
+            forecast.scenes(),
+            if forecast.scenes() == 1 { "" } else { "s" }
+        ))
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2)));
     Ok(())
 }
 
@@ -964,6 +1006,8 @@ mod tests {
             },
         };
         let lim = limits();
+        // The pedestrians' predicted paths are drawn too (a forecast of one scene here).
+        let forecast = Forecast::constant_velocity(&obs.agents, 10, 0.1);
         let fig = PlanFigure {
             robot: "test",
             label: &ep.id,
@@ -974,6 +1018,7 @@ mod tests {
             limits: &lim,
             footprint_radius: 0.3,
             bev: BevSpec::default(),
+            forecast: Some(&forecast),
         };
         let n = plan_numbers(&fig);
         assert_eq!(n.waypoints, 10);

@@ -519,7 +519,7 @@ fn draw_pedestrians(
 }
 
 /// The forecast's paths of the pedestrians in view, one thin line per scene (a pedestrian
-/// predicted one way has one), and their legend entry.
+/// predicted one way has one) up to where it leaves the view, and their legend entry.
 fn draw_forecast(
     chart: &mut Chart<'_, '_>,
     forecast: &Forecast,
@@ -528,14 +528,16 @@ fn draw_forecast(
     let e = |x: &dyn std::fmt::Display| x.to_string();
     let colour = RGBColor(230, 140, 30);
     for a in forecast.agents() {
-        for path in a
-            .paths
-            .iter()
-            .filter(|p| p.first().is_some_and(|q| inside(*q)))
-        {
+        for path in &a.paths {
+            // Up to where it leaves the view (plotters would run it along the border).
+            let shown: Vec<(f64, f64)> = path
+                .iter()
+                .take_while(|q| inside(**q))
+                .map(|q| (q[0], q[1]))
+                .collect();
             chart
                 .draw_series(std::iter::once(PathElement::new(
-                    path.iter().map(|q| (q[0], q[1])).collect::<Vec<_>>(),
+                    shown,
                     colour.mix(0.7).stroke_width(1),
                 )))
                 .map_err(|x| e(&x))?;

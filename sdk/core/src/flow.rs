@@ -72,3 +72,26 @@ pub trait FlowModel {
         vjp: &mut [f64],
     ) -> Result<(), FlowError>;
 }
+
+/// `k` source samples of `t` poses each, flat `[k, t, 3]`: per waypoint `x0 = exp(ξ0)` with
+/// `ξ0 ~ N(0, diag(std²))` ([`FlowModel::source_std`]), drawn from `rng` in waypoint order.
+pub fn draw_source<R: rand::Rng + ?Sized>(
+    std: [f64; 3],
+    k: usize,
+    t: usize,
+    rng: &mut R,
+) -> Vec<f64> {
+    use rand_distr::{Distribution, StandardNormal};
+    let mut x0 = vec![0.0; k * t * 3];
+    for p in x0.chunks_exact_mut(3) {
+        let mut xi = [0.0; 3];
+        for (d, s) in xi.iter_mut().zip(std) {
+            let z: f64 = StandardNormal.sample(rng);
+            *d = z * s;
+        }
+        p.copy_from_slice(
+            &crate::se2::Pose2::exp(crate::se2::Twist2::new(xi[0], xi[1], xi[2])).to_array(),
+        );
+    }
+    x0
+}

@@ -15,10 +15,9 @@ use crate::bev::{self, BevSpec};
 use crate::flow::{FlowCondition, FlowModel};
 use crate::guidance::{self, GuidanceWorkspace};
 use crate::planner::{AgentState, Observation};
-use crate::se2::{Pose2, Twist2};
+use crate::se2::Pose2;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
 /// Largest number of scenes of a forecast: each one is a pass of the selection over every
@@ -381,16 +380,7 @@ impl<M: FlowModel> FlowPredictor<M> {
         let mut rng = ChaCha8Rng::seed_from_u64(
             self.settings.seed ^ obs.time.to_bits() ^ a.id.wrapping_mul(0x9e37_79b9_7f4a_7c15),
         );
-        let std = self.model.source_std();
-        let mut x0 = vec![0.0; k * t * 3];
-        for p in x0.chunks_exact_mut(3) {
-            let mut xi = [0.0; 3];
-            for (d, s) in xi.iter_mut().zip(std) {
-                let z: f64 = StandardNormal.sample(&mut rng);
-                *d = z * s;
-            }
-            p.copy_from_slice(&Pose2::exp(Twist2::new(xi[0], xi[1], xi[2])).to_array());
-        }
+        let x0 = crate::flow::draw_source(self.model.source_std(), k, t, &mut rng);
         let out = guidance::sample(
             &self.model,
             &cond,

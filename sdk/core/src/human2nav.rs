@@ -97,7 +97,6 @@ use crate::se2::{Pose2, Twist2};
 use crate::tfs;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
 /// Score added for each predicted overlap between the footprint and an agent's disc.
@@ -502,17 +501,7 @@ impl<M: FlowModel> Human2Nav<M> {
     }
 
     fn draw_source(&mut self, k: usize, t: usize) -> Vec<f64> {
-        let std = self.model.source_std();
-        let mut x0 = vec![0.0; k * t * 3];
-        for p in x0.chunks_exact_mut(3) {
-            let mut xi = [0.0; 3];
-            for (d, s) in xi.iter_mut().zip(std) {
-                let z: f64 = StandardNormal.sample(&mut self.rng);
-                *d = z * s;
-            }
-            p.copy_from_slice(&Pose2::exp(Twist2::new(xi[0], xi[1], xi[2])).to_array());
-        }
-        x0
+        crate::flow::draw_source(self.model.source_std(), k, t, &mut self.rng)
     }
 
     /// Plans within `deadline`, returning the plan or the reason the flow stage failed (for

@@ -8,8 +8,9 @@
 //! each and averages ([`crate::human2nav`]) scores its expected cost.
 //!
 //! [`Forecast::constant_velocity`] is the one-scene forecast every planner of the SDK used
-//! before predictors existed. A learned, multimodal predictor (the flow crate's goal-free
-//! model of people) implements [`CrowdPredictor`] and is handed to the planner.
+//! before predictors existed. [`FlowPredictor`], a learned, multimodal predictor, samples a
+//! goal-free flow model of people (trained with `train.goal = false`); it implements
+//! [`CrowdPredictor`] and is handed to the planner like any other.
 
 use crate::bev::{self, BevSpec};
 use crate::flow::{FlowCondition, FlowModel};
@@ -277,7 +278,8 @@ impl FlowPredictorSettings {
 /// raster, drawn as in training; the robot is in it only with
 /// [`FlowPredictorSettings::see_robot`]). Scene `s`
 /// of the forecast is every such agent's sample `s`; the other agents move on at constant
-/// velocity.
+/// velocity. The model's poses are taken to be the forecast's `dt` apart (the planner's, which
+/// must match the training data's 0.1 s); past its horizon the last pose is held.
 pub struct FlowPredictor<M> {
     model: M,
     bev: BevSpec,

@@ -106,6 +106,9 @@ fn main() -> anyhow::Result<()> {
         limits: &limits,
         footprint_radius: robot.profile.footprint_radius,
         bev: robot.bev,
+        // No predictor configured here: the pedestrians are predicted at constant velocity
+        // and not drawn as a forecast.
+        forecast: None,
     };
     let png = root.join(format!(
         "out/quickstart/{}{}.png",

@@ -401,7 +401,8 @@ const char *h2n_version(void);
  * Creates a planner from files: the robot profile `robot_toml` (its URDF is found relative to
  * it), the planner configuration `planner_toml` (NULL: the built-in defaults, equal to the
  * shipped `sdk/configs/planner.toml`) and the model folder `model_dir` (`model.toml` and its
- * weights; the configuration's `model` key is not used). On success `*out` holds the planner.
+ * weights; the configuration's `model` key is not used; a `[prediction]` model it names is
+ * loaded, a relative path from the current directory). On success `*out` holds the planner.
  *
  * # Safety
  * The strings are NULL or NUL-terminated; `out` is NULL or writable.

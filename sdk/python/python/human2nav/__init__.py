@@ -274,7 +274,8 @@ class Human2NavPlanner(Planner):
 
     ``model_dir`` is a model folder (``model.toml`` and its weights); ``config`` a
     ``planner.toml`` (None: the built-in defaults, equal to the shipped
-    ``sdk/configs/planner.toml``). ``guidance=False`` is the ablation without guidance;
+    ``sdk/configs/planner.toml``; a ``[prediction]`` model it names is loaded, a relative path
+    from the current directory). ``guidance=False`` is the ablation without guidance;
     ``seed``, ``samples`` and ``backend`` (``"native"`` or ``"torch"``) override the
     configuration.
     """

@@ -12,7 +12,7 @@
 //! goal-free flow model of people (trained with `train.goal = false`); it implements
 //! [`CrowdPredictor`] and is handed to the planner like any other.
 
-use crate::bev::{self, BevSpec};
+use crate::bev::{self, BevAgent, BevSpec};
 use crate::flow::{FlowCondition, FlowModel};
 use crate::guidance::{self, GuidanceWorkspace};
 use crate::planner::{AgentState, Observation};
@@ -353,24 +353,21 @@ impl<M: FlowModel> FlowPredictor<M> {
             a.position[1],
             a.velocity[1].atan2(a.velocity[0]),
         );
-        let mut others: Vec<AgentState> = obs
+        // The others as the rasterizer takes them (no copies of their histories), then the
+        // robot when the walkers are to see it.
+        let others = obs
             .agents
             .iter()
             .enumerate()
             .filter(|&(j, _)| j != i)
-            .map(|(_, b)| b.clone())
-            .collect();
-        if self.settings.see_robot {
-            let v = obs.ego_velocity;
-            others.push(AgentState {
-                id: u64::MAX,
-                position: [obs.ego.x, obs.ego.y],
-                velocity: obs.ego.rotate([v.vx, v.vy]),
-                radius: self.settings.robot_radius,
-                history: Vec::new(),
-            });
-        }
-        bev::rasterize(self.bev, pose, &others, &mut self.raster);
+            .map(|(_, b)| BevAgent::from(b));
+        let v = obs.ego_velocity;
+        let robot = self.settings.see_robot.then(|| BevAgent {
+            position: [obs.ego.x, obs.ego.y],
+            velocity: obs.ego.rotate([v.vx, v.vy]),
+            radius: self.settings.robot_radius,
+        });
+        bev::rasterize_agents(self.bev, pose, others.chain(robot), &mut self.raster);
         let cond = FlowCondition {
             bev: self.raster.clone(),
             goal: [0.0, 0.0],

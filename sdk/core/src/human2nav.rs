@@ -167,11 +167,6 @@ pub const MAX_MOTIONS: usize = 25_000;
 /// Duration of a motion's first segment (s) ([`crate::motions`]).
 pub const MOTION_SWITCH_S: f64 = 1.0;
 
-/// Durations of the backing-up segment of a two-point turn (s)
-/// ([`Human2NavSettings::goal_manoeuvres`]): from 1 s, when a robot moving forward has barely
-/// stopped, to 2.5 s of reversing.
-pub const MANOEUVRE_SWITCH_S: [f64; 4] = [1.0, 1.5, 2.0, 2.5];
-
 /// Largest [`Human2NavSettings::budget_ms`]: a minute is no planning budget but a typo.
 pub const MAX_BUDGET_MS: f64 = 60_000.0;
 
@@ -212,11 +207,6 @@ pub struct Human2NavSettings {
     /// [`MAX_MOTIONS`]). Default 500 (`planner.toml` says which validation run chose it). A
     /// call whose deadline has passed offers none.
     pub motions: usize,
-    /// Within this distance (m) of the goal, a robot with a turning circle that can back up (a
-    /// car) is also offered two-point turns ([`MotionGrid::manoeuvres`], each backing up for
-    /// each of [`MANOEUVRE_SWITCH_S`]): a goal inside its turning circle is otherwise reached
-    /// only by a loop of several metres. 0: never. Other robots are offered none. Default 0.
-    pub goal_manoeuvres: f64,
     /// Time budget of one [`Planner::plan`] call in milliseconds (0: none). The call then
     /// returns the best plan found within it (module docs, "Planning under a deadline").
     /// [`Planner::plan_within`] takes a deadline per call instead. Default 0.
@@ -245,7 +235,6 @@ impl Default for Human2NavSettings {
             stop_candidate: true,
             goal_approach: 1.0,
             motions: 500,
-            goal_manoeuvres: 0.0,
             budget_ms: 0.0,
             // Algorithm 1's iterations are off in the shipped planner: on the validation suite
             // the correction alone succeeded more often (ARCHITECTURE.md, "The guidance
@@ -298,9 +287,6 @@ impl Human2NavSettings {
         }
         if !(self.goal_approach.is_finite() && self.goal_approach >= 0.0) {
             return bad("goal_approach", "must be finite and ≥ 0");
-        }
-        if !(self.goal_manoeuvres.is_finite() && self.goal_manoeuvres >= 0.0) {
-            return bad("goal_manoeuvres", "must be finite and ≥ 0");
         }
         if self.motions > MAX_MOTIONS {
             return bad(
@@ -621,13 +607,7 @@ impl<M: FlowModel> Human2Nav<M> {
             // The robot's own motions are within its limits as they are: no correction. Not
             // after the deadline: scoring them takes milliseconds.
             if stages.cut_short.is_none() && !deadline.passed() {
-                self.push_motions(
-                    obs.ego_velocity,
-                    goal,
-                    horizon,
-                    &mut candidates,
-                    &mut origin,
-                );
+                self.push_motions(obs.ego_velocity, horizon, &mut candidates, &mut origin);
             }
             if !corrected.is_empty() {
                 corrected.resize(candidates.len(), true);
@@ -788,34 +768,22 @@ impl<M: FlowModel> Human2Nav<M> {
     }
 
     /// [`Human2NavSettings::motions`] of the robot's own motions from its velocity `v0`, ego
-    /// frame, `horizon` poses each, and its two-point turns when the ego-frame `goal` is within
-    /// [`Human2NavSettings::goal_manoeuvres`].
+    /// frame, `horizon` poses each.
     fn push_motions(
         &self,
         v0: Twist2,
-        goal: [f64; 2],
         horizon: usize,
         candidates: &mut Vec<Vec<Pose2>>,
         origin: &mut Vec<Source>,
     ) {
         let dt = self.settings.dt;
-        let steps = |s: f64| ((s / dt).round() as usize).max(1);
-        let mut push = |pair, switch| {
+        let switch = ((MOTION_SWITCH_S / dt).round() as usize).max(1);
+        for pair in self.motion_grid.spread(self.settings.motions) {
             let mut poses = Vec::with_capacity(horizon);
             self.motion_grid
                 .rollout(Pose2::IDENTITY, v0, pair, switch, dt, horizon, &mut poses);
             candidates.push(poses);
             origin.push(Source::Motion);
-        };
-        for pair in self.motion_grid.spread(self.settings.motions) {
-            push(pair, steps(MOTION_SWITCH_S));
-        }
-        if goal[0].hypot(goal[1]) <= self.settings.goal_manoeuvres {
-            for pair in self.motion_grid.manoeuvres() {
-                for s in MANOEUVRE_SWITCH_S {
-                    push(pair, steps(s));
-                }
-            }
         }
     }
 

@@ -76,6 +76,13 @@ pub struct EpisodeMetrics {
     /// Executed commands (before saturation) outside each limit: what pulls `tfs_executed`
     /// down.
     pub executed_violations: LimitCounts,
+    /// The robot's distance to the goal at the end (m).
+    #[serde(default)]
+    pub end_goal_distance: f64,
+    /// The gap between the goal and the nearest pedestrian's disc at the end (m; negative:
+    /// the goal lies inside it; `None` with nobody present).
+    #[serde(default)]
+    pub end_goal_crowd: Option<f64>,
 }
 
 /// How many commands broke each limit (a command can break several), out of `commands`.
@@ -180,6 +187,8 @@ impl EpisodeMetrics {
                 run.dt,
                 limits,
             )),
+            end_goal_distance: run.end_goal_distance,
+            end_goal_crowd: run.end_goal_crowd,
         }
     }
 }

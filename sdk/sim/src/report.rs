@@ -6,7 +6,7 @@
 
 use crate::bench::{ResultRow, SuiteKind};
 use crate::episode::{ScenarioClass, ScenarioTitle};
-use crate::metrics::LimitCounts;
+use crate::metrics::{EpisodeMetrics, LimitCounts};
 use crate::runner::Contact;
 use crate::stats::{self, BOOTSTRAP_RESAMPLES, DENSITY_BINS, PairedComparison, SuiteComposition};
 use std::fmt::Write as _;
@@ -16,7 +16,8 @@ pub const CSV_HEADER: &str = "suite,suite_kind,scenario,episode,scene,robot,meth
 success,collision,timeout,tfs,tfs_plan,tfs_executed,path_length,time_to_goal,duration,budget,min_clearance,\
 time_within_0_45,time_within_1_2,mean_jerk,plans,fallbacks,planner_errors,contact_robot_closing,\
 contact_pedestrian_closing,contact_pedestrian_age,commands,exec_over_speed,exec_over_reverse,\
-exec_over_acceleration,exec_over_yaw_rate,exec_over_curvature,exec_over_lateral,exec_over_coupled";
+exec_over_acceleration,exec_over_yaw_rate,exec_over_curvature,exec_over_lateral,exec_over_coupled,\
+end_goal_distance,end_goal_crowd";
 
 fn num(v: f64) -> String {
     if v.is_finite() {
@@ -74,6 +75,7 @@ fn csv_record(r: &ResultRow) -> Vec<String> {
             .iter()
             .map(|c| c.to_string()),
     )
+    .chain([num(m.end_goal_distance), opt(m.end_goal_crowd)])
     .collect()
 }
 
@@ -432,7 +434,7 @@ fn suite_section(
     paired_section(md, in_suite, ctx, &methods);
     density_section(md, in_suite, &methods);
     other_metrics_table(md, in_suite, &methods);
-    collision_table(md, in_suite, &methods);
+    failure_table(md, in_suite, &ctx.robot_names, &methods);
     violation_table(md, in_suite, &ctx.robot_names, &methods);
     let _ = writeln!(md);
 }
@@ -613,57 +615,144 @@ fn empty_suite_section(md: &mut String, in_suite: &[&ResultRow], suite: &str, ct
 /// A pedestrian whose track began less than this long before the contact (s) appeared next to
 /// the robot: the history the planners see is 0.8 s long.
 pub const APPEARED_WITHIN: f64 = 1.0;
+/// A pedestrian closing on the robot faster than this (m/s) was a cyclist or a skater: faster
+/// than any robot here can make way for, and faster than the people the planners' models
+/// learned from (90 % of the training walkers are under 1.7 m/s).
+pub const FAST_CLOSING: f64 = 2.5;
 /// A robot moving toward the pedestrian at no more than this (m/s) was walked into.
 pub const WALKED_INTO_BELOW: f64 = 0.1;
+/// A run that timed out with a pedestrian's disc this close to its goal (m) had someone at the
+/// goal.
+pub const GOAL_TAKEN_WITHIN: f64 = 0.5;
+/// A run that timed out this close to its goal (m), with nobody at it, ended near the goal.
+pub const NEAR_GOAL: f64 = 2.0;
 
-/// How the collisions of each method happened (see [`crate::Contact`]): each collision counts
-/// in the first class that applies.
-fn collision_table(md: &mut String, rows: &[&ResultRow], methods: &[String]) {
+/// Why a run failed: each failure falls in the first class that applies, in this order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Failure {
+    /// A collision with a pedestrian whose track began less than [`APPEARED_WITHIN`] before.
+    Appeared,
+    /// A collision with a pedestrian closing faster than [`FAST_CLOSING`].
+    Fast,
+    /// A collision while the robot closed at most [`WALKED_INTO_BELOW`].
+    WalkedInto,
+    /// Any other collision with a pedestrian: the robot drove into them.
+    DroveIn,
+    /// A collision with a static obstacle.
+    Obstacle,
+    /// A timeout with someone within [`GOAL_TAKEN_WITHIN`] of the goal.
+    GoalTaken,
+    /// A timeout within [`NEAR_GOAL`] of the goal, nobody at it.
+    NearGoal,
+    /// Any other timeout.
+    Timeout,
+}
+
+impl Failure {
+    /// Every class, in the order the first that applies is taken.
+    pub const ALL: [Failure; 8] = [
+        Failure::Appeared,
+        Failure::Fast,
+        Failure::WalkedInto,
+        Failure::DroveIn,
+        Failure::Obstacle,
+        Failure::GoalTaken,
+        Failure::NearGoal,
+        Failure::Timeout,
+    ];
+
+    /// The class of a failed run (`None` for a success).
+    pub fn of(m: &EpisodeMetrics) -> Option<Self> {
+        if m.collision {
+            return Some(match m.contact {
+                None => Failure::Obstacle,
+                Some(c) if c.pedestrian_age < APPEARED_WITHIN => Failure::Appeared,
+                Some(c) if c.pedestrian_closing > FAST_CLOSING => Failure::Fast,
+                Some(c) if c.robot_closing <= WALKED_INTO_BELOW => Failure::WalkedInto,
+                Some(_) => Failure::DroveIn,
+            });
+        }
+        if !m.timeout {
+            return None;
+        }
+        Some(if m.end_goal_crowd.is_some_and(|g| g < GOAL_TAKEN_WITHIN) {
+            Failure::GoalTaken
+        } else if m.end_goal_distance < NEAR_GOAL {
+            Failure::NearGoal
+        } else {
+            Failure::Timeout
+        })
+    }
+
+    /// The column heading of the class in `report.md`.
+    pub fn heading(self) -> &'static str {
+        match self {
+            Failure::Appeared => "appeared",
+            Failure::Fast => "fast",
+            Failure::WalkedInto => "walked into",
+            Failure::DroveIn => "drove in",
+            Failure::Obstacle => "obstacle",
+            Failure::GoalTaken => "someone at the goal",
+            Failure::NearGoal => "near the goal",
+            Failure::Timeout => "elsewhere",
+        }
+    }
+}
+
+/// How the runs of each robot and method failed ([`Failure`]), with the mean closing speeds
+/// at the collisions with pedestrians.
+fn failure_table(md: &mut String, rows: &[&ResultRow], robots: &[String], methods: &[String]) {
     let _ = writeln!(
         md,
-        "\n### How the collisions happened, all robots\n\n\
-         Each collision counts once, in the first class that applies: the pedestrian's track began \
-         less than {APPEARED_WITHIN} s before the contact (it appeared next to the robot); the robot \
-         was closing at most {WALKED_INTO_BELOW} m/s (standing, sidestepping or backing off: the \
-         non-reactive pedestrian walked into it); else the robot drove into the pedestrian. Closing \
-         speeds are along the line between the centres at the contact.\n"
+        "\n### How the runs failed, per robot\n\n\
+         Each failure counts once, in the first class that applies. Collisions: the pedestrian's \
+         track began less than {APPEARED_WITHIN} s before the contact (it appeared next to the \
+         robot); the pedestrian closed faster than {FAST_CLOSING} m/s (a cyclist or a skater); the \
+         robot was closing at most {WALKED_INTO_BELOW} m/s (standing, sidestepping or backing off: a \
+         pedestrian walked into it); else the robot drove in; or a static obstacle. Timeouts: \
+         someone's disc within {GOAL_TAKEN_WITHIN} m of the goal at the end; the robot within \
+         {NEAR_GOAL} m of the goal; else elsewhere. Closing speeds are along the line between the \
+         centres at the contact.\n"
     );
+    let headings: Vec<&str> = Failure::ALL.iter().map(|f| f.heading()).collect();
     let _ = writeln!(
         md,
-        "| method | collisions | appeared | walked into the robot | robot drove in | mean robot closing (m/s) | mean pedestrian closing (m/s) |\n\
-         |---|---|---|---|---|---|---|"
+        "| robot | method | runs | failed | collisions: {} | timeouts: {} | mean robot closing (m/s) | mean pedestrian closing (m/s) |\n\
+         |---|---|---|---|{}---|---|",
+        headings[..5].join(" | "),
+        headings[5..].join(" | "),
+        "---|".repeat(Failure::ALL.len())
     );
-    for m in methods {
-        let contacts: Vec<Contact> = rows
-            .iter()
-            .filter(|r| &r.method == m && r.metrics.collision)
-            .filter_map(|r| r.metrics.contact)
-            .collect();
-        let n = contacts.len();
-        let appeared = contacts
-            .iter()
-            .filter(|c| c.pedestrian_age < APPEARED_WITHIN)
-            .count();
-        let walked_into = contacts
-            .iter()
-            .filter(|c| c.pedestrian_age >= APPEARED_WITHIN && c.robot_closing <= WALKED_INTO_BELOW)
-            .count();
-        let share = |k: usize| {
-            if n == 0 {
-                "–".to_string()
-            } else {
-                format!("{k} ({:.0} %)", 100.0 * k as f64 / n as f64)
+    for r in robots {
+        for m in methods {
+            let runs: Vec<&EpisodeMetrics> = rows
+                .iter()
+                .filter(|x| &x.robot == r && &x.method == m)
+                .map(|x| &x.metrics)
+                .collect();
+            if runs.is_empty() {
+                continue;
             }
-        };
-        let _ = writeln!(
-            md,
-            "| {m} | {n} | {} | {} | {} | {} | {} |",
-            share(appeared),
-            share(walked_into),
-            share(n - appeared - walked_into),
-            opt2(mean(contacts.iter().map(|c| c.robot_closing))),
-            opt2(mean(contacts.iter().map(|c| c.pedestrian_closing)))
-        );
+            let classes: Vec<Failure> = runs.iter().filter_map(|x| Failure::of(x)).collect();
+            let counts: Vec<String> = Failure::ALL
+                .iter()
+                .map(|f| classes.iter().filter(|c| *c == f).count().to_string())
+                .collect();
+            let contacts: Vec<Contact> = runs
+                .iter()
+                .filter(|x| x.collision)
+                .filter_map(|x| x.contact)
+                .collect();
+            let _ = writeln!(
+                md,
+                "| {r} | {m} | {} | {} | {} | {} | {} |",
+                runs.len(),
+                classes.len(),
+                counts.join(" | "),
+                opt2(mean(contacts.iter().map(|c| c.robot_closing))),
+                opt2(mean(contacts.iter().map(|c| c.pedestrian_closing)))
+            );
+        }
     }
 }
 
@@ -905,7 +994,6 @@ fn composition_section(md: &mut String, composition: &[SuiteComposition]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::metrics::EpisodeMetrics;
     use crate::runner::Outcome;
 
     /// `results_csv` as it was written by hand before it used the `csv` crate (verbatim): the
@@ -964,6 +1052,7 @@ mod tests {
                     .iter()
                     .map(|c| c.to_string()),
             )
+            .chain([num(m.end_goal_distance), opt(m.end_goal_crowd)])
             .collect::<Vec<String>>();
             out.push_str(&fields.join(","));
             out.push('\n');
@@ -1024,8 +1113,57 @@ mod tests {
                     lateral: 6,
                     coupled: 0,
                 },
+                end_goal_distance: [0.25, f64::NAN, 3.5][k as usize % 3],
+                end_goal_crowd: (k % 2 == 0).then_some(-0.125 * x),
             },
         }
+    }
+
+    #[test]
+    fn each_failure_falls_in_the_first_class_that_applies() {
+        let failed = |outcome, contact: Option<Contact>, distance: f64, crowd: Option<f64>| {
+            let mut m = row("e", outcome, 1).metrics;
+            m.contact = contact;
+            m.obstacle_hit = None;
+            m.end_goal_distance = distance;
+            m.end_goal_crowd = crowd;
+            Failure::of(&m)
+        };
+        let contact = |age: f64, pedestrian: f64, robot: f64| {
+            Some(Contact {
+                pedestrian: 1,
+                robot_closing: robot,
+                pedestrian_closing: pedestrian,
+                pedestrian_age: age,
+            })
+        };
+        let c = Outcome::Collision;
+        // A fast pedestrian whose track has just begun appeared; a robot standing still hit
+        // by a cyclist was hit by someone fast.
+        assert_eq!(
+            failed(c, contact(0.5, 4.0, 0.0), 9.0, None),
+            Some(Failure::Appeared)
+        );
+        assert_eq!(
+            failed(c, contact(3.0, 4.0, 0.0), 9.0, None),
+            Some(Failure::Fast)
+        );
+        assert_eq!(
+            failed(c, contact(3.0, 1.2, 0.05), 9.0, None),
+            Some(Failure::WalkedInto)
+        );
+        assert_eq!(
+            failed(c, contact(3.0, 1.2, 0.5), 9.0, None),
+            Some(Failure::DroveIn)
+        );
+        assert_eq!(failed(c, None, 9.0, None), Some(Failure::Obstacle));
+        let t = Outcome::Timeout;
+        assert_eq!(failed(t, None, 1.0, Some(0.2)), Some(Failure::GoalTaken));
+        assert_eq!(failed(t, None, 5.0, Some(-0.1)), Some(Failure::GoalTaken));
+        assert_eq!(failed(t, None, 1.0, Some(0.8)), Some(Failure::NearGoal));
+        assert_eq!(failed(t, None, 1.0, None), Some(Failure::NearGoal));
+        assert_eq!(failed(t, None, 3.0, Some(0.8)), Some(Failure::Timeout));
+        assert_eq!(failed(Outcome::Success, None, 0.1, Some(0.0)), None);
     }
 
     #[test]

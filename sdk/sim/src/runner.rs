@@ -390,6 +390,12 @@ pub struct EpisodeRun {
     /// Index in the episode's `obstacles` of the static obstacle the robot hit, when the
     /// collision was with one.
     pub obstacle_hit: Option<usize>,
+    /// The robot's distance to the goal when the run ended (m).
+    pub end_goal_distance: f64,
+    /// The gap between the goal and the nearest pedestrian's disc when the run ended (m;
+    /// negative: the goal lies inside someone's disc; `None` with nobody present): whether a
+    /// run that timed out had someone standing at its goal.
+    pub end_goal_crowd: Option<f64>,
     /// The simulated pedestrians at each `t_n` (`N + 1` lists) when the crowd was reactive;
     /// `None` for a replayed crowd, whose pedestrians are the episode's recording.
     pub crowd: Option<Vec<Vec<PedestrianSample>>>,
@@ -485,6 +491,8 @@ pub fn run_episode_with(
         planner_errors: Vec::new(),
         contact: None,
         obstacle_hit: None,
+        end_goal_distance: 0.0,
+        end_goal_crowd: None,
         crowd: crowd.is_reactive().then(|| Vec::with_capacity(reserve + 1)),
     };
     planner.reset();
@@ -530,6 +538,13 @@ pub fn run_episode_with(
         run.commands.push(cmd);
         run.states.push(state);
     }
+    let goal = episode.goal;
+    run.end_goal_distance = (goal[0] - state.pose.x).hypot(goal[1] - state.pose.y);
+    run.end_goal_crowd = crowd
+        .present()
+        .iter()
+        .map(|p| (p.position[0] - goal[0]).hypot(p.position[1] - goal[1]) - p.radius)
+        .reduce(f64::min);
     run
 }
 

@@ -58,6 +58,8 @@ fn run_with(
         planner_errors: vec![],
         contact: None,
         obstacle_hit: None,
+        end_goal_distance: 0.0,
+        end_goal_crowd: None,
         crowd: None,
     }
 }
@@ -295,7 +297,7 @@ fn driver_writes_csv_report_and_figures() {
         "Empty-world sanity",
         "| straight | 100.0",
         "pass",
-        "How the collisions happened",
+        "How the runs failed, per robot",
         "Executed commands outside each limit",
         "| replanning rate | 10 Hz (every 2 steps); slow: 5 Hz (every 4 steps) |",
     ] {
@@ -304,7 +306,7 @@ fn driver_writes_csv_report_and_figures() {
             "report lacks `{needle}`:\n{report}"
         );
     }
-    // Every collision is classified: its three classes add up to the method's collisions.
+    // Every failure is classified, per robot and method.
     let hand: Vec<_> = res.rows.iter().filter(|r| r.suite == "hand").collect();
     check_collision_classes(&report, &hand);
     let slow_successes = check_figure_list(&res, &report, &hand);
@@ -323,41 +325,46 @@ fn driver_writes_csv_report_and_figures() {
     }
 }
 
-/// Every collision of the `hand` suite is classified: for each method, the report's three
-/// collision classes add up to its collisions.
+/// Every failure of the `hand` suite is classified: for each robot and method, the report's
+/// eight failure classes add up to its failed runs, the five collision classes to its
+/// collisions, and every collision with a pedestrian has its contact recorded.
 fn check_collision_classes(report: &str, hand: &[&ResultRow]) {
-    for m in ["straight", "slow"] {
-        let n = hand
-            .iter()
-            .filter(|r| r.method == m && r.metrics.collision)
-            .count();
-        assert!(
-            hand.iter()
-                .filter(|r| r.method == m && r.metrics.collision)
-                .all(|r| r.metrics.contact.is_some())
-        );
-        let section = &report[report
-            .find("How the collisions happened")
-            .expect("report has a collisions section")..];
-        let line = section
-            .lines()
-            .find(|l| l.starts_with(&format!("| {m} | {n} |")))
-            .unwrap_or_else(|| panic!("no collision row for {m} with {n}:\n{report}"));
-        let counts: usize = line
-            .split('|')
-            .skip(3)
-            .take(3)
-            .map(|c| {
-                c.trim()
-                    .split(' ')
-                    .next()
-                    .expect("split yields at least one piece")
-                    .parse::<usize>()
-                    .unwrap_or(0)
-            })
-            .sum();
-        assert_eq!(counts, n, "{line}");
+    let section = &report[report
+        .find("How the runs failed, per robot")
+        .expect("report has a failures section")..];
+    let mut robots: Vec<&str> = hand.iter().map(|r| r.robot.as_str()).collect();
+    robots.dedup();
+    let mut failures_seen = 0;
+    for robot in robots {
+        for m in ["straight", "slow"] {
+            let runs: Vec<_> = hand
+                .iter()
+                .filter(|r| r.robot == robot && r.method == m)
+                .collect();
+            let collisions = runs.iter().filter(|r| r.metrics.collision).count();
+            let failed = runs.iter().filter(|r| !r.metrics.success).count();
+            failures_seen += failed;
+            assert!(
+                runs.iter()
+                    .filter(|r| r.metrics.collision && r.metrics.obstacle_hit.is_none())
+                    .all(|r| r.metrics.contact.is_some())
+            );
+            let head = format!("| {robot} | {m} | {} | {failed} |", runs.len());
+            let line = section
+                .lines()
+                .find(|l| l.starts_with(&head))
+                .unwrap_or_else(|| panic!("no row `{head}`:\n{report}"));
+            let counts: Vec<usize> = line
+                .split('|')
+                .skip(5)
+                .take(8)
+                .map(|c| c.trim().parse::<usize>().unwrap_or(usize::MAX))
+                .collect();
+            assert_eq!(counts[..5].iter().sum::<usize>(), collisions, "{line}");
+            assert_eq!(counts.iter().sum::<usize>(), failed, "{line}");
+        }
     }
+    assert!(failures_seen > 0, "the hand suite has failures to classify");
 }
 
 /// The figures of the run and the report's references to them; returns the scenario classes

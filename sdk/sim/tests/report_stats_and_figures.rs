@@ -64,6 +64,12 @@ fn metrics(outcome: Outcome, tfs: f64) -> EpisodeMetrics {
             speed: 2,
             ..LimitCounts::default()
         },
+        end_goal_distance: if outcome == Outcome::Success {
+            0.2
+        } else {
+            3.0
+        },
+        end_goal_crowd: Some(1.0),
     }
 }
 

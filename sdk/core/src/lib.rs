@@ -24,6 +24,7 @@
 pub mod ablation;
 pub mod bev;
 pub mod constraint;
+pub mod dubins;
 pub mod embodiment;
 pub mod fileset;
 pub mod flow;

@@ -79,7 +79,6 @@
 
 use crate::bev::{self, BevSpec};
 use crate::constraint::{ConstraintContext, Phi};
-use crate::dubins;
 use crate::flow::{FlowCondition, FlowModel};
 use crate::forecast::{CrowdPredictor, Forecast};
 use crate::guidance::{
@@ -118,21 +117,6 @@ pub enum Progress {
     Closest,
 }
 
-/// What the selection's goal term measures distances to the goal with
-/// ([`SelectionWeights::distance`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum GoalDistance {
-    /// The straight-line distance.
-    #[default]
-    Straight,
-    /// For a robot with a turning circle, how long it needs to reach the goal from a
-    /// waypoint's pose, driving forward, backing up or both ([`dubins::time_to_point`]),
-    /// in metres at `v_max`: the straight-line distance where the goal is ahead, longer
-    /// beside or behind the robot. The straight-line distance for other robots.
-    Drive,
-}
-
 /// Weights of the selection rule (see the module docs). All finite and ≥ 0.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -152,9 +136,6 @@ pub struct SelectionWeights {
     /// Distance to the goal (m) within which a waypoint counts as arrived with
     /// [`Progress::Closest`]. Default 0.3.
     pub arrival: f64,
-    /// How the goal term measures the distance from a waypoint to the goal (arrival is always
-    /// by the straight line). Default [`GoalDistance::Straight`].
-    pub distance: GoalDistance,
 }
 
 impl Default for SelectionWeights {
@@ -167,7 +148,6 @@ impl Default for SelectionWeights {
             margin: 0.5,
             progress: Progress::Closest,
             arrival: 0.3,
-            distance: GoalDistance::Straight,
         }
     }
 }
@@ -186,11 +166,6 @@ pub const MAX_MOTIONS: usize = 25_000;
 
 /// Duration of a motion's first segment (s) ([`crate::motions`]).
 pub const MOTION_SWITCH_S: f64 = 1.0;
-
-/// Durations of the backing-up segment of a two-point turn (s)
-/// ([`Human2NavSettings::goal_manoeuvres`]): from 1 s, when a robot moving forward has barely
-/// stopped, to 2.5 s of reversing.
-pub const MANOEUVRE_SWITCH_S: [f64; 4] = [1.0, 1.5, 2.0, 2.5];
 
 /// Largest [`Human2NavSettings::budget_ms`]: a minute is no planning budget but a typo.
 pub const MAX_BUDGET_MS: f64 = 60_000.0;
@@ -232,11 +207,6 @@ pub struct Human2NavSettings {
     /// [`MAX_MOTIONS`]). Default 500 (`planner.toml` says which validation run chose it). A
     /// call whose deadline has passed offers none.
     pub motions: usize,
-    /// Within this distance (m) of the goal, a robot with a turning circle that can back up (a
-    /// car) is also offered two-point turns ([`MotionGrid::manoeuvres`], each backing up for
-    /// each of [`MANOEUVRE_SWITCH_S`]): a goal inside its turning circle is otherwise reached
-    /// only by a loop of several metres. 0: never. Other robots are offered none. Default 0.
-    pub goal_manoeuvres: f64,
     /// Time budget of one [`Planner::plan`] call in milliseconds (0: none). The call then
     /// returns the best plan found within it (module docs, "Planning under a deadline").
     /// [`Planner::plan_within`] takes a deadline per call instead. Default 0.
@@ -265,7 +235,6 @@ impl Default for Human2NavSettings {
             stop_candidate: true,
             goal_approach: 1.0,
             motions: 500,
-            goal_manoeuvres: 0.0,
             budget_ms: 0.0,
             // Algorithm 1's iterations are off in the shipped planner: on the validation suite
             // the correction alone succeeded more often (ARCHITECTURE.md, "The guidance
@@ -318,9 +287,6 @@ impl Human2NavSettings {
         }
         if !(self.goal_approach.is_finite() && self.goal_approach >= 0.0) {
             return bad("goal_approach", "must be finite and ≥ 0");
-        }
-        if !(self.goal_manoeuvres.is_finite() && self.goal_manoeuvres >= 0.0) {
-            return bad("goal_manoeuvres", "must be finite and ≥ 0");
         }
         if self.motions > MAX_MOTIONS {
             return bad(
@@ -641,13 +607,7 @@ impl<M: FlowModel> Human2Nav<M> {
             // The robot's own motions are within its limits as they are: no correction. Not
             // after the deadline: scoring them takes milliseconds.
             if stages.cut_short.is_none() && !deadline.passed() {
-                self.push_motions(
-                    obs.ego_velocity,
-                    goal,
-                    horizon,
-                    &mut candidates,
-                    &mut origin,
-                );
+                self.push_motions(obs.ego_velocity, horizon, &mut candidates, &mut origin);
             }
             if !corrected.is_empty() {
                 corrected.resize(candidates.len(), true);
@@ -808,34 +768,22 @@ impl<M: FlowModel> Human2Nav<M> {
     }
 
     /// [`Human2NavSettings::motions`] of the robot's own motions from its velocity `v0`, ego
-    /// frame, `horizon` poses each, and its two-point turns when the ego-frame `goal` is within
-    /// [`Human2NavSettings::goal_manoeuvres`].
+    /// frame, `horizon` poses each.
     fn push_motions(
         &self,
         v0: Twist2,
-        goal: [f64; 2],
         horizon: usize,
         candidates: &mut Vec<Vec<Pose2>>,
         origin: &mut Vec<Source>,
     ) {
         let dt = self.settings.dt;
-        let steps = |s: f64| ((s / dt).round() as usize).max(1);
-        let mut push = |pair, switch| {
+        let switch = ((MOTION_SWITCH_S / dt).round() as usize).max(1);
+        for pair in self.motion_grid.spread(self.settings.motions) {
             let mut poses = Vec::with_capacity(horizon);
             self.motion_grid
                 .rollout(Pose2::IDENTITY, v0, pair, switch, dt, horizon, &mut poses);
             candidates.push(poses);
             origin.push(Source::Motion);
-        };
-        for pair in self.motion_grid.spread(self.settings.motions) {
-            push(pair, steps(MOTION_SWITCH_S));
-        }
-        if goal[0].hypot(goal[1]) <= self.settings.goal_manoeuvres {
-            for pair in self.motion_grid.manoeuvres() {
-                for s in MANOEUVRE_SWITCH_S {
-                    push(pair, steps(s));
-                }
-            }
         }
     }
 
@@ -1066,14 +1014,7 @@ impl<M: FlowModel> Human2Nav<M> {
             1.0
         };
 
-        let l = &self.robot.limits;
-        let drive = |p: &Pose2| {
-            let radius = l.kappa_max.map_or(0.0, |k| 1.0 / k);
-            let reverse = l.v_reverse_max.min(l.v_max);
-            dubins::time_to_point(p, goal, radius, l.v_max, reverse) * l.v_max
-        };
-        let driven = w.distance == GoalDistance::Drive && l.kappa_max.is_some_and(|k| k > 0.0);
-        let (progress, checked) = goal_term(traj, goal, w, driven.then_some(&drive));
+        let (progress, checked) = goal_term(traj, goal, w);
 
         let scenes = forecast.scenes();
         let clearance = (0..scenes)
@@ -1142,40 +1083,22 @@ impl<M> Human2Nav<M> {
 
 /// The selection's goal term of an ego-frame candidate (`d/d_0`, module docs) and how many of
 /// its waypoints are checked for contact: all, or with [`Progress::Closest`] those up to its
-/// arrival. Distances are by the straight line; with `driven` ([`GoalDistance::Drive`]) `d` is
-/// the smaller of the driven distances from the waypoint closest by air and from the last one
-/// (two evaluations: a driven distance costs microseconds). Arrival is by the straight line.
-fn goal_term(
-    traj: &[Pose2],
-    goal: [f64; 2],
-    w: &SelectionWeights,
-    driven: Option<&dyn Fn(&Pose2) -> f64>,
-) -> (f64, usize) {
-    let straight = |p: &Pose2| (p.x - goal[0]).hypot(p.y - goal[1]);
-    let distance = |p: &Pose2| driven.map_or_else(|| straight(p), |d| d(p));
-    let d0 = distance(&Pose2::IDENTITY).max(1e-3);
+/// arrival.
+fn goal_term(traj: &[Pose2], goal: [f64; 2], w: &SelectionWeights) -> (f64, usize) {
+    let d0 = goal[0].hypot(goal[1]).max(1e-3);
+    let distance = |p: &Pose2| (p.x - goal[0]).hypot(p.y - goal[1]);
     match w.progress {
         Progress::End => (traj.last().map_or(d0, distance) / d0, traj.len()),
         Progress::Closest => {
-            let (mut closest, mut at) = (straight(&Pose2::IDENTITY), None);
+            let mut closest = d0;
             for (k, p) in traj.iter().enumerate() {
-                let by_air = straight(p);
-                if by_air <= w.arrival {
+                let d = distance(p);
+                if d <= w.arrival {
                     return (0.0, k + 1);
                 }
-                if by_air < closest {
-                    (closest, at) = (by_air, Some(p));
-                }
+                closest = closest.min(d);
             }
-            let d = match driven {
-                None => closest,
-                Some(_) => at
-                    .into_iter()
-                    .chain(traj.last())
-                    .map(distance)
-                    .fold(d0, f64::min),
-            };
-            (d / d0, traj.len())
+            (closest / d0, traj.len())
         }
     }
 }
@@ -1394,7 +1317,7 @@ mod tests {
             ..SelectionWeights::default()
         };
         // The end at (4, 0) is as far from the goal as the start.
-        let (p, checked) = goal_term(&traj, goal, &end, None);
+        let (p, checked) = goal_term(&traj, goal, &end);
         assert!((p - 1.0).abs() < 1e-12, "{p}");
         assert_eq!(checked, traj.len());
         // The closest approach is 0.5 m, at (2, 0): not within 0.3 m, so not arrived.
@@ -1402,7 +1325,7 @@ mod tests {
             progress: Progress::Closest,
             ..end
         };
-        let (p, checked) = goal_term(&traj, goal, &closest, None);
+        let (p, checked) = goal_term(&traj, goal, &closest);
         assert!((p - 0.5 / d0).abs() < 1e-12, "{p}");
         assert_eq!(checked, traj.len());
         // Within 0.6 m it arrives at (1.7, 0), the 14th waypoint, and is checked up to there.
@@ -1413,36 +1336,14 @@ mod tests {
                 arrival: 0.6,
                 ..closest
             },
-            None,
         );
         assert_eq!(p, 0.0);
         assert_eq!(checked, 14);
         assert!((traj[13].x - 1.7).abs() < 1e-12);
         // A candidate leading away: its closest approach is where the robot stands.
         let away: Vec<Pose2> = traj.iter().map(|p| Pose2::new(-p.x, 0.0, 0.0)).collect();
-        assert_eq!(goal_term(&away, goal, &closest, None).0, 1.0);
-        assert_eq!(goal_term(&[], goal, &closest, None), (1.0, 0));
-    }
-
-    #[test]
-    fn the_driven_goal_term_prefers_a_two_point_turn_to_standing_beside_the_goal() {
-        let (r, v, back) = (1.6, 1.5, 0.8);
-        let goal = [2.0, 2.0];
-        let closest = SelectionWeights::default();
-        let drive = |p: &Pose2| dubins::time_to_point(p, goal, r, v, back) * v;
-        let driven = |t: &[Pose2]| goal_term(t, goal, &closest, Some(&drive)).0;
-        let by_air = |t: &[Pose2]| goal_term(t, goal, &closest, None).0;
-        // Beside the goal, heading past it: 0.8 m by air, inside the left turning circle.
-        let beside = [Pose2::new(2.0, 1.2, 0.0)];
-        // Backed up 1.5 m from there: farther by air, but the goal is now a forward arc away.
-        let backed = [Pose2::new(0.5, 1.2, 0.0)];
-        assert!(by_air(&beside) < by_air(&backed));
-        assert!(driven(&backed) < driven(&beside));
-        // Arrival is by air whatever the measure.
-        assert_eq!(
-            goal_term(&[Pose2::new(2.0, 1.8, 0.0)], goal, &closest, Some(&drive)),
-            (0.0, 1)
-        );
+        assert_eq!(goal_term(&away, goal, &closest).0, 1.0);
+        assert_eq!(goal_term(&[], goal, &closest), (1.0, 0));
     }
 
     #[test]

@@ -24,7 +24,6 @@
 pub mod ablation;
 pub mod bev;
 pub mod constraint;
-pub mod dubins;
 pub mod embodiment;
 pub mod fileset;
 pub mod flow;

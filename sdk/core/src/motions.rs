@@ -139,42 +139,6 @@ impl MotionGrid {
         })
     }
 
-    /// Whether the robot has a turning circle it cannot get inside going forward (a curvature
-    /// limit) and can back up: the robots [`Self::manoeuvres`] are for.
-    pub fn backs_up_to_turn(&self) -> bool {
-        self.limits.kappa_max.is_some() && self.limits.v_reverse_max > 0.0
-    }
-
-    /// Two-point turns of a robot that [backs up to turn](Self::backs_up_to_turn) (none for
-    /// others): backing up at the full or half reverse speed, turning fully either way or
-    /// straight, then driving forward at a quarter or half of `v_max` on one of five turns.
-    /// They reach points inside the robot's turning circles, which the grid's motions, with
-    /// their first segment too short to reverse from speed, do not; rolled out with a switch
-    /// time of one's choice ([`Self::rollout`]).
-    pub fn manoeuvres(&self) -> Vec<(Target, Target)> {
-        if !self.backs_up_to_turn() {
-            return Vec::new();
-        }
-        let l = &self.limits;
-        let mut pairs = Vec::with_capacity(6 * 10);
-        for vx in [-l.v_reverse_max, -0.5 * l.v_reverse_max] {
-            for turn in [-1.0, 0.0, 1.0] {
-                let back = Target { vx, vy: 0.0, turn };
-                for forward in [0.25 * l.v_max, 0.5 * l.v_max] {
-                    for turn in [-1.0, -0.5, 0.0, 0.5, 1.0] {
-                        let ahead = Target {
-                            vx: forward,
-                            vy: 0.0,
-                            turn,
-                        };
-                        pairs.push((back, ahead));
-                    }
-                }
-            }
-        }
-        pairs
-    }
-
     /// The twist one step of `dt` moves `now` to on the way to `target` (module docs; `first`:
     /// the plan's first segment, half a ramp step from the current speed).
     pub fn step_twist(&self, now: Twist2, target: Target, dt: f64, first: bool) -> Twist2 {
@@ -280,11 +244,9 @@ mod tests {
                 Twist2::new(1.2, 0.0, 0.3),
                 Twist2::new(-0.3, 0.0, 0.0),
             ] {
-                let turns = grid.manoeuvres().into_iter().map(|p| (p, 20));
-                assert_eq!(turns.len(), if grid.backs_up_to_turn() { 60 } else { 0 });
-                for (pair, switch) in grid.spread(500).map(|p| (p, 10)).chain(turns) {
+                for pair in grid.spread(500) {
                     let mut plan = vec![Pose2::IDENTITY];
-                    grid.rollout(Pose2::IDENTITY, v0, pair, switch, 0.1, 32, &mut plan);
+                    grid.rollout(Pose2::IDENTITY, v0, pair, 10, 0.1, 32, &mut plan);
                     assert_eq!(plan.len(), 33);
                     let tfs = tfs_plan(&plan, 0.1, &limits, v0);
                     assert!(tfs >= 0.999, "{pair:?} from {v0:?}: TFS {tfs}");

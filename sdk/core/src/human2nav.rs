@@ -207,6 +207,13 @@ pub struct Human2NavSettings {
     /// [`MAX_MOTIONS`]). Default 500 (`planner.toml` says which validation run chose it). A
     /// call whose deadline has passed offers none.
     pub motions: usize,
+    /// For a robot with a turning circle (a car: `limits.kappa_max` set), this many motions
+    /// instead of [`Self::motions`] (0: as many as `motions`; none when `motions` is 0; at
+    /// most [`MAX_MOTIONS`]). A car
+    /// cannot turn in place, and the manoeuvres it needs near people and near its goal are
+    /// narrow: default 2401, every pair of its 7 × 7 grid (`planner.toml` says which validation
+    /// run chose it).
+    pub car_motions: usize,
     /// Time budget of one [`Planner::plan`] call in milliseconds (0: none). The call then
     /// returns the best plan found within it (module docs, "Planning under a deadline").
     /// [`Planner::plan_within`] takes a deadline per call instead. Default 0.
@@ -235,6 +242,7 @@ impl Default for Human2NavSettings {
             stop_candidate: true,
             goal_approach: 1.0,
             motions: 500,
+            car_motions: 2401,
             budget_ms: 0.0,
             // Algorithm 1's iterations are off in the shipped planner: on the validation suite
             // the correction alone succeeded more often (ARCHITECTURE.md, "The guidance
@@ -292,6 +300,12 @@ impl Human2NavSettings {
             return bad(
                 "motions",
                 &format!("must be at most {MAX_MOTIONS}, got {}", self.motions),
+            );
+        }
+        if self.car_motions > MAX_MOTIONS {
+            return bad(
+                "car_motions",
+                &format!("must be at most {MAX_MOTIONS}, got {}", self.car_motions),
             );
         }
         if !(self.budget_ms.is_finite() && (0.0..=MAX_BUDGET_MS).contains(&self.budget_ms)) {
@@ -767,8 +781,8 @@ impl<M: FlowModel> Human2Nav<M> {
         }
     }
 
-    /// [`Human2NavSettings::motions`] of the robot's own motions from its velocity `v0`, ego
-    /// frame, `horizon` poses each.
+    /// [`Human2NavSettings::motions`] (or, for a car, [`Human2NavSettings::car_motions`]) of
+    /// the robot's own motions from its velocity `v0`, ego frame, `horizon` poses each.
     fn push_motions(
         &self,
         v0: Twist2,
@@ -778,7 +792,8 @@ impl<M: FlowModel> Human2Nav<M> {
     ) {
         let dt = self.settings.dt;
         let switch = ((MOTION_SWITCH_S / dt).round() as usize).max(1);
-        for pair in self.motion_grid.spread(self.settings.motions) {
+        let count = motion_count(&self.settings, &self.robot.limits);
+        for pair in self.motion_grid.spread(count) {
             let mut poses = Vec::with_capacity(horizon);
             self.motion_grid
                 .rollout(Pose2::IDENTITY, v0, pair, switch, dt, horizon, &mut poses);
@@ -1081,6 +1096,17 @@ impl<M> Human2Nav<M> {
     }
 }
 
+/// How many of its own motions a robot with `limits` is offered:
+/// [`Human2NavSettings::car_motions`] for a car (unless 0), [`Human2NavSettings::motions`]
+/// otherwise, none when `motions` is 0.
+fn motion_count(settings: &Human2NavSettings, limits: &Limits) -> usize {
+    match (settings.motions, limits.kappa_max) {
+        (0, _) => 0,
+        (_, Some(_)) if settings.car_motions > 0 => settings.car_motions,
+        (m, _) => m,
+    }
+}
+
 /// The selection's goal term of an ego-frame candidate (`d/d_0`, module docs) and how many of
 /// its waypoints are checked for contact: all, or with [`Progress::Closest`] those up to its
 /// arrival.
@@ -1344,6 +1370,39 @@ mod tests {
         let away: Vec<Pose2> = traj.iter().map(|p| Pose2::new(-p.x, 0.0, 0.0)).collect();
         assert_eq!(goal_term(&away, goal, &closest).0, 1.0);
         assert_eq!(goal_term(&[], goal, &closest), (1.0, 0));
+    }
+
+    #[test]
+    fn a_car_is_offered_its_own_count_of_motions() {
+        let walker = Limits {
+            v_max: 1.2,
+            v_reverse_max: 0.3,
+            a_max: 1.0,
+            omega_max: 1.5,
+            kappa_max: None,
+            lateral_speed_max: 0.05,
+            coupled: None,
+        };
+        let car = Limits {
+            kappa_max: Some(1.0 / 1.6),
+            ..walker
+        };
+        let count = |motions, car_motions, limits: &Limits| {
+            let s = Human2NavSettings {
+                motions,
+                car_motions,
+                ..Human2NavSettings::default()
+            };
+            motion_count(&s, limits)
+        };
+        assert_eq!(count(500, 2401, &walker), 500);
+        assert_eq!(count(500, 2401, &car), 2401);
+        assert_eq!(count(500, 0, &car), 500, "0: as many as motions");
+        assert_eq!(count(0, 2401, &car), 0, "motions = 0: none");
+        // The shipped defaults: every pair of the car's 7 × 7 grid.
+        let d = Human2NavSettings::default();
+        let grid = MotionGrid::new(car, GridLevels::default());
+        assert_eq!(motion_count(&d, &car), grid.len());
     }
 
     #[test]

@@ -209,10 +209,9 @@ pub struct Human2NavSettings {
     pub motions: usize,
     /// For a robot with a turning circle (a car: `limits.kappa_max` set), this many motions
     /// instead of [`Self::motions`] (0: as many as `motions`; none when `motions` is 0; at
-    /// most [`MAX_MOTIONS`]). A car
-    /// cannot turn in place, and the manoeuvres it needs near people and near its goal are
-    /// narrow: default 2401, every pair of its 7 × 7 grid (`planner.toml` says which validation
-    /// run chose it).
+    /// most [`MAX_MOTIONS`]). A car cannot turn in place, and the manoeuvres it needs near
+    /// people and near its goal are narrow: default 2401, every pair of its 7 × 7 grid
+    /// (`planner.toml` says which validation run chose it).
     pub car_motions: usize,
     /// Time budget of one [`Planner::plan`] call in milliseconds (0: none). The call then
     /// returns the best plan found within it (module docs, "Planning under a deadline").

@@ -684,6 +684,18 @@ impl Failure {
         })
     }
 
+    /// Whether the class is one of collisions (else of timeouts).
+    pub fn is_collision(self) -> bool {
+        matches!(
+            self,
+            Failure::Appeared
+                | Failure::Fast
+                | Failure::WalkedInto
+                | Failure::DroveIn
+                | Failure::Obstacle
+        )
+    }
+
     /// The column heading of the class in `report.md`.
     pub fn heading(self) -> &'static str {
         match self {
@@ -714,13 +726,20 @@ fn failure_table(md: &mut String, rows: &[&ResultRow], robots: &[String], method
          {NEAR_GOAL} m of the goal; else elsewhere. Closing speeds are along the line between the \
          centres at the contact.\n"
     );
-    let headings: Vec<&str> = Failure::ALL.iter().map(|f| f.heading()).collect();
+    let headings = |collisions: bool| {
+        Failure::ALL
+            .iter()
+            .filter(|f| f.is_collision() == collisions)
+            .map(|f| f.heading())
+            .collect::<Vec<_>>()
+            .join(" | ")
+    };
     let _ = writeln!(
         md,
         "| robot | method | runs | failed | collisions: {} | timeouts: {} | mean robot closing (m/s) | mean pedestrian closing (m/s) |\n\
          |---|---|---|---|{}---|---|",
-        headings[..5].join(" | "),
-        headings[5..].join(" | "),
+        headings(true),
+        headings(false),
         "---|".repeat(Failure::ALL.len())
     );
     for r in robots {

@@ -539,7 +539,7 @@ pub fn run_episode_with(
         run.states.push(state);
     }
     let goal = episode.goal;
-    run.end_goal_distance = (goal[0] - state.pose.x).hypot(goal[1] - state.pose.y);
+    run.end_goal_distance = distance_to(goal, state.pose);
     run.end_goal_crowd = crowd
         .present()
         .iter()
@@ -578,11 +578,15 @@ fn check_end(
         run.obstacle_hit = Some(i);
         return Some(Outcome::Collision);
     }
-    let to_goal = (episode.goal[0] - state.pose.x).hypot(episode.goal[1] - state.pose.y);
-    if to_goal <= cfg.goal_tolerance {
+    if distance_to(episode.goal, state.pose) <= cfg.goal_tolerance {
         return Some(Outcome::Success);
     }
     last.then_some(Outcome::Timeout)
+}
+
+/// The distance from the robot's reference point at `pose` to `point` (m).
+fn distance_to(point: [f64; 2], pose: Pose2) -> f64 {
+    (point[0] - pose.x).hypot(point[1] - pose.y)
 }
 
 /// Step 3 of a simulation step: the planner's plan for what the robot senses at `t`, or the

@@ -93,7 +93,10 @@ case "${1:-}" in
         ;;
     test)
         setup
-        cargo build --workspace
+        # All targets in one build: the tests' dev-dependencies unify features (serde, syn,
+        # tch, ...) differently from a build of the libraries alone, which compiled most of
+        # the dependency graph twice. The plugin libraries the tests load are built here too.
+        cargo build --workspace --all-targets
         cargo test --workspace
         # The Python package, built with the test build's profile (sharing its artifacts).
         MATURIN_PEP517_ARGS="--profile dev" install_python_package

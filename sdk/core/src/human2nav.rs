@@ -77,6 +77,8 @@
 //! `info.fallback = true` and the reason in `info.notes`. An invalid observation (a non-finite
 //! input) is an error instead, because the caller must fix it.
 
+mod near;
+
 use crate::bev::{self, BevSpec};
 use crate::constraint::{ConstraintContext, Phi};
 use crate::flow::{FlowCondition, FlowModel};
@@ -95,6 +97,7 @@ use crate::projection::{self, ProjectionSettings};
 use crate::robot::footprint::{self, FootprintShape};
 use crate::se2::{Pose2, Twist2};
 use crate::tfs;
+use near::Near;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -635,8 +638,9 @@ impl<M: FlowModel> Human2Nav<M> {
         }
 
         // Stage 3: selection.
+        let near = self.near(&candidates, &forecast);
         let best = select_best(&candidates, &corrected, |c| {
-            self.score(c, goal, &forecast, obs.ego_velocity, previous_ego, true)
+            self.score(c, goal, &near, obs.ego_velocity, previous_ego, true)
         });
         let Some(chosen) = best else {
             return Err(if candidates.is_empty() {
@@ -792,13 +796,10 @@ impl<M: FlowModel> Human2Nav<M> {
         let dt = self.settings.dt;
         let switch = ((MOTION_SWITCH_S / dt).round() as usize).max(1);
         let count = motion_count(&self.settings, &self.robot.limits);
-        for pair in self.motion_grid.spread(count) {
-            let mut poses = Vec::with_capacity(horizon);
-            self.motion_grid
-                .rollout(Pose2::IDENTITY, v0, pair, switch, dt, horizon, &mut poses);
-            candidates.push(poses);
-            origin.push(Source::Motion);
-        }
+        let grid = &self.motion_grid;
+        let motions = grid.rollouts(Pose2::IDENTITY, v0, grid.spread(count), switch, dt, horizon);
+        origin.extend(std::iter::repeat_n(Source::Motion, motions.len()));
+        candidates.extend(motions);
     }
 
     /// The plan of the chosen candidate in the world frame, with its diagnostics: the samples
@@ -977,11 +978,12 @@ impl<M: FlowModel> Human2Nav<M> {
         if paper || g == 0 || g >= samples.len() {
             return (0..samples.len()).collect();
         }
+        let near = self.near(samples, forecast);
         let mut scored: Vec<(f64, usize)> = samples
             .iter()
             .enumerate()
             .map(|(i, c)| {
-                let s = self.score(c, goal, forecast, v0, previous, false);
+                let s = self.score(c, goal, &near, v0, previous, false);
                 (if s.is_finite() { s } else { f64::INFINITY }, i)
             })
             .collect();
@@ -989,6 +991,18 @@ impl<M: FlowModel> Human2Nav<M> {
         let mut keep: Vec<usize> = scored[..g].iter().map(|&(_, i)| i).collect();
         keep.sort_unstable();
         keep
+    }
+
+    /// The selection's broad phase for `candidates` against the ego-frame `forecast` and the
+    /// call's obstacles.
+    fn near(&self, candidates: &[Vec<Pose2>], forecast: &Forecast) -> Near {
+        Near::new(
+            candidates,
+            forecast,
+            &self.obstacles,
+            self.reach,
+            self.settings.selection.margin,
+        )
     }
 
     /// The previous plan re-expressed in the current ego frame at the current time, `T` future
@@ -1005,13 +1019,14 @@ impl<M: FlowModel> Human2Nav<M> {
         out.iter().all(|p| p.is_finite()).then_some(out)
     }
 
-    /// The selection score of one ego-frame candidate (lower is better) against an ego-frame
-    /// `forecast`; without `with_feasibility` the TFS term is left out.
+    /// The selection score of one ego-frame candidate (lower is better) against the agents and
+    /// obstacles `near` it (built over the candidates scored together, from the ego-frame
+    /// forecast); without `with_feasibility` the TFS term is left out.
     fn score(
         &self,
         traj: &[Pose2],
         goal: [f64; 2],
-        forecast: &Forecast,
+        near: &Near,
         v0: Twist2,
         previous: Option<&[Pose2]>,
         with_feasibility: bool,
@@ -1030,9 +1045,9 @@ impl<M: FlowModel> Human2Nav<M> {
 
         let (progress, checked) = goal_term(traj, goal, w);
 
-        let scenes = forecast.scenes();
+        let scenes = near.scenes();
         let clearance = (0..scenes)
-            .map(|s| self.clearance(&traj[..checked], traj.len(), forecast, s))
+            .map(|s| self.clearance(&traj[..checked], traj.len(), near, s))
             .sum::<f64>()
             / scenes as f64;
 
@@ -1053,31 +1068,36 @@ impl<M: FlowModel> Human2Nav<M> {
 }
 
 impl<M> Human2Nav<M> {
-    /// The clearance term `C` of a candidate against scene `scene` of `forecast` and the
-    /// static obstacles: `checked` are its waypoints checked for contact, `len` its length.
+    /// The clearance term `C` of a candidate against scene `scene` of the forecast and the
+    /// static obstacles, as far as `near` (built over the call's candidates) lets them matter:
+    /// `checked` are its waypoints checked for contact, `len` its length.
     ///
     /// A predicted overlap ends the plan: it and every later waypoint cost the penalty, so a
     /// plan that would run through a pedestrian is no better than one that stops in them, and
     /// a later contact is better than an earlier one.
-    fn clearance(&self, checked: &[Pose2], len: usize, forecast: &Forecast, scene: usize) -> f64 {
+    fn clearance(&self, checked: &[Pose2], len: usize, near: &Near, scene: usize) -> f64 {
         let margin = self.settings.selection.margin;
         let footprint = &self.robot.footprint;
         let mut clearance = 0.0;
         for (j, p) in checked.iter().enumerate() {
             let mut hit = false;
-            // Broad phase: an agent whose centre is farther than the footprint's reach, its
+            // Broad phase, for this waypoint of the call's candidates (`Near`), then for this
+            // candidate: an agent whose centre is farther than the footprint's reach, its
             // radius and the margin cannot touch the footprint nor come within the margin.
-            let agent_gaps = forecast.agents().iter().enumerate().filter_map(|(i, a)| {
-                let q = forecast.position(i, scene, j);
-                let far = self.reach + a.radius + margin;
-                let (dx, dy) = (q[0] - p.x, q[1] - p.y);
-                (dx * dx + dy * dy < far * far)
-                    .then(|| footprint::clearance_at(footprint, *p, q, a.radius))
+            // The heading's sine and cosine, once per waypoint (`footprint::clearance_at`
+            // computed them per agent).
+            let mut turn: Option<(f64, f64)> = None;
+            let agent_gaps = near.agents(scene, j).iter().filter_map(|a| {
+                let (dx, dy) = (a.q[0] - p.x, a.q[1] - p.y);
+                (dx * dx + dy * dy < a.far * a.far).then(|| {
+                    let (s, c) = *turn.get_or_insert_with(|| p.theta.sin_cos());
+                    footprint::clearance(footprint, [c * dx + s * dy, -s * dx + c * dy], a.radius)
+                })
             });
-            let obstacle_gaps = self
-                .obstacles
+            let obstacle_gaps = near
+                .obstacles(j)
                 .iter()
-                .map(|o| obstacle::footprint_clearance(footprint, *p, o));
+                .map(|&k| obstacle::footprint_clearance(footprint, *p, &self.obstacles[k]));
             for gap in agent_gaps.chain(obstacle_gaps) {
                 if gap < 0.0 {
                     hit = true;

@@ -191,14 +191,96 @@ impl MotionGrid {
         out: &mut Vec<Pose2>,
     ) {
         out.reserve(steps);
-        let mut twist = v0;
-        let mut pose = start;
+        let mut state = Rollout::new(start, v0);
         for k in 1..=steps {
             let target = if k <= switch { first } else { second };
-            twist = self.step_twist(twist, target, dt, k == 1);
-            pose = pose.euler_step(twist, dt);
-            out.push(pose);
+            out.push(state.step(self, target, dt, k == 1));
         }
+    }
+
+    /// [`Self::rollout`] of every pair of `pairs`, in order, each `steps` poses: the same poses
+    /// to the bit, with the first `switch` steps rolled out once per first target and shared
+    /// by the pairs that start with it (a whole grid has as many pairs per first target as it
+    /// has targets).
+    pub fn rollouts(
+        &self,
+        start: Pose2,
+        v0: Twist2,
+        pairs: impl IntoIterator<Item = (Target, Target)>,
+        switch: usize,
+        dt: f64,
+        steps: usize,
+    ) -> Vec<Vec<Pose2>> {
+        let head = switch.min(steps);
+        // Per first target seen so far: its first segment and the state at its end.
+        let mut prefixes: Vec<(Target, Vec<Pose2>, Rollout)> = Vec::new();
+        let mut out = Vec::new();
+        for (first, second) in pairs {
+            let k = match prefixes.iter().rposition(|(t, ..)| same_target(t, &first)) {
+                Some(k) => k,
+                None => {
+                    let mut state = Rollout::new(start, v0);
+                    let poses = (1..=head)
+                        .map(|k| state.step(self, first, dt, k == 1))
+                        .collect();
+                    prefixes.push((first, poses, state));
+                    prefixes.len() - 1
+                }
+            };
+            let (_, prefix, state) = &prefixes[k];
+            let mut state = *state;
+            let mut poses = Vec::with_capacity(steps);
+            poses.extend_from_slice(prefix);
+            poses.extend((head + 1..=steps).map(|k| state.step(self, second, dt, k == 1)));
+            out.push(poses);
+        }
+        out
+    }
+}
+
+/// Whether two targets are the same to the bit (so that sharing a rollout between them
+/// changes nothing).
+fn same_target(a: &Target, b: &Target) -> bool {
+    a.vx.to_bits() == b.vx.to_bits()
+        && a.vy.to_bits() == b.vy.to_bits()
+        && a.turn.to_bits() == b.turn.to_bits()
+}
+
+/// A rollout under way: the pose and twist reached, and the last Euler increment
+/// `exp(dt·twist)` with its twist. Once the twist has ramped to its target it stays the same
+/// from step to step, and the increment is reused instead of recomputed (the same value: the
+/// pose is `pose·exp(dt·twist)` as in [`Pose2::euler_step`]).
+#[derive(Clone, Copy, Debug)]
+struct Rollout {
+    pose: Pose2,
+    twist: Twist2,
+    increment: Option<(Twist2, Pose2)>,
+}
+
+impl Rollout {
+    fn new(pose: Pose2, twist: Twist2) -> Self {
+        Self {
+            pose,
+            twist,
+            increment: None,
+        }
+    }
+
+    /// One step of `dt` toward `target` ([`MotionGrid::step_twist`]); the new pose.
+    fn step(&mut self, grid: &MotionGrid, target: Target, dt: f64, first: bool) -> Pose2 {
+        self.twist = grid.step_twist(self.twist, target, dt, first);
+        let twist = self.twist;
+        let bits = |t: Twist2| [t.vx.to_bits(), t.vy.to_bits(), t.omega.to_bits()];
+        let increment = match self.increment {
+            Some((t, inc)) if bits(t) == bits(twist) => inc,
+            _ => {
+                let inc = Pose2::exp(twist.scale(dt));
+                self.increment = Some((twist, inc));
+                inc
+            }
+        };
+        self.pose = self.pose.compose(increment);
+        self.pose
     }
 }
 
@@ -250,6 +332,50 @@ mod tests {
                     assert_eq!(plan.len(), 33);
                     let tfs = tfs_plan(&plan, 0.1, &limits, v0);
                     assert!(tfs >= 0.999, "{pair:?} from {v0:?}: TFS {tfs}");
+                }
+            }
+        }
+    }
+
+    /// A rollout step by step with [`Pose2::euler_step`]: what `rollout` and `rollouts`
+    /// must give to the bit.
+    fn reference(
+        grid: &MotionGrid,
+        v0: Twist2,
+        (a, b): (Target, Target),
+        switch: usize,
+    ) -> Vec<Pose2> {
+        let (mut pose, mut twist) = (Pose2::new(1.0, -2.0, 0.7), v0);
+        (1..=32)
+            .map(|k| {
+                twist = grid.step_twist(twist, if k <= switch { a } else { b }, 0.1, k == 1);
+                pose = pose.euler_step(twist, 0.1);
+                pose
+            })
+            .collect()
+    }
+
+    #[test]
+    fn shared_first_segments_and_reused_increments_change_no_bit() {
+        let bits = |plan: &[Pose2]| -> Vec<[u64; 3]> {
+            plan.iter()
+                .map(|p| [p.x.to_bits(), p.y.to_bits(), p.theta.to_bits()])
+                .collect()
+        };
+        let grid = MotionGrid::new(car(), GridLevels::default());
+        let start = Pose2::new(1.0, -2.0, 0.7);
+        for v0 in [Twist2::ZERO, Twist2::new(1.2, 0.0, 0.3)] {
+            for switch in [0, 10, 40] {
+                for count in [500, grid.len()] {
+                    let all = grid.rollouts(start, v0, grid.spread(count), switch, 0.1, 32);
+                    assert_eq!(all.len(), count);
+                    for (pair, plan) in grid.spread(count).zip(&all) {
+                        let want = bits(&reference(&grid, v0, pair, switch));
+                        assert_eq!(bits(plan), want, "{pair:?} from {v0:?}, switch {switch}");
+                        let mut one = Vec::new();
+                        grid.rollout(start, v0, pair, switch, 0.1, 32, &mut one);
+                        assert_eq!(bits(&one), want);
+                    }
                 }
             }
         }

@@ -1084,14 +1084,13 @@ impl<M> Human2Nav<M> {
             // Broad phase, for this waypoint of the call's candidates (`Near`), then for this
             // candidate: an agent whose centre is farther than the footprint's reach, its
             // radius and the margin cannot touch the footprint nor come within the margin.
-            // The heading's sine and cosine, once per waypoint (`footprint::clearance_at`
-            // computed them per agent).
+            // The heading's sine and cosine, once per waypoint rather than per agent.
             let mut turn: Option<(f64, f64)> = None;
             let agent_gaps = near.agents(scene, j).iter().filter_map(|a| {
                 let (dx, dy) = (a.q[0] - p.x, a.q[1] - p.y);
                 (dx * dx + dy * dy < a.far * a.far).then(|| {
-                    let (s, c) = *turn.get_or_insert_with(|| p.theta.sin_cos());
-                    footprint::clearance(footprint, [c * dx + s * dy, -s * dx + c * dy], a.radius)
+                    let turn = *turn.get_or_insert_with(|| p.theta.sin_cos());
+                    footprint::clearance_at_turned(footprint, *p, turn, a.q, a.radius)
                 })
             });
             let obstacle_gaps = near

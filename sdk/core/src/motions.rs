@@ -216,7 +216,11 @@ impl MotionGrid {
         let mut prefixes: Vec<(Target, Vec<Pose2>, Rollout)> = Vec::new();
         let mut out = Vec::new();
         for (first, second) in pairs {
-            let k = match prefixes.iter().rposition(|(t, ..)| same_target(t, &first)) {
+            let key = [first.vx, first.vy, first.turn];
+            let k = match prefixes
+                .iter()
+                .rposition(|(t, ..)| same_bits([t.vx, t.vy, t.turn], key))
+            {
                 Some(k) => k,
                 None => {
                     let mut state = Rollout::new(start, v0);
@@ -238,12 +242,10 @@ impl MotionGrid {
     }
 }
 
-/// Whether two targets are the same to the bit (so that sharing a rollout between them
-/// changes nothing).
-fn same_target(a: &Target, b: &Target) -> bool {
-    a.vx.to_bits() == b.vx.to_bits()
-        && a.vy.to_bits() == b.vy.to_bits()
-        && a.turn.to_bits() == b.turn.to_bits()
+/// Whether two targets or twists are the same to the bit (so that sharing a rollout or an
+/// increment between them changes nothing).
+fn same_bits(a: [f64; 3], b: [f64; 3]) -> bool {
+    a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
 /// A rollout under way: the pose and twist reached, and the last Euler increment
@@ -270,9 +272,8 @@ impl Rollout {
     fn step(&mut self, grid: &MotionGrid, target: Target, dt: f64, first: bool) -> Pose2 {
         self.twist = grid.step_twist(self.twist, target, dt, first);
         let twist = self.twist;
-        let bits = |t: Twist2| [t.vx.to_bits(), t.vy.to_bits(), t.omega.to_bits()];
         let increment = match self.increment {
-            Some((t, inc)) if bits(t) == bits(twist) => inc,
+            Some((t, inc)) if same_bits(t.to_array(), twist.to_array()) => inc,
             _ => {
                 let inc = Pose2::exp(twist.scale(dt));
                 self.increment = Some((twist, inc));

@@ -130,7 +130,18 @@ pub fn clearance(shapes: &[FootprintShape], p: [f64; 2], radius: f64) -> f64 {
 /// [`clearance`] with the footprint placed at `pose` and the disc's centre `p` in the same
 /// frame as `pose`.
 pub fn clearance_at(shapes: &[FootprintShape], pose: Pose2, p: [f64; 2], radius: f64) -> f64 {
-    let (s, c) = pose.theta.sin_cos();
+    clearance_at_turned(shapes, pose, pose.theta.sin_cos(), p, radius)
+}
+
+/// [`clearance_at`] with the sine and cosine of the pose's heading given, for a caller that
+/// checks many discs against one pose.
+pub fn clearance_at_turned(
+    shapes: &[FootprintShape],
+    pose: Pose2,
+    (s, c): (f64, f64),
+    p: [f64; 2],
+    radius: f64,
+) -> f64 {
     let (dx, dy) = (p[0] - pose.x, p[1] - pose.y);
     clearance(shapes, [c * dx + s * dy, -s * dx + c * dy], radius)
 }

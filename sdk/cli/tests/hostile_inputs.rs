@@ -543,6 +543,19 @@ fn config_cases() -> Vec<Case> {
         ),
         err(
             a,
+            "planner.toml `constant_velocity_weight` without the constant-velocity scene",
+            NR,
+            &[
+                "prediction.flow.constant_velocity_weight",
+                "constant_velocity_scene",
+            ],
+            planner_edit(
+                "# constant_velocity_weight = 0.5 ",
+                "constant_velocity_weight = 0.5 ",
+            ),
+        ),
+        err(
+            a,
             "planner.toml `[prediction.flow] robot_radius = -1`",
             NR,
             &["prediction.flow.robot_radius"],

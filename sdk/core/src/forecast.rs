@@ -4,8 +4,9 @@
 //! A forecast holds `scenes` possible futures of the crowd. In each, every agent has a
 //! position at each of the plan's `horizon` waypoints (`dt` apart, the first `dt` after the
 //! observation). An agent predicted one way only (at constant velocity, say) has one path,
-//! shared by every scene. Scenes are equally likely: a selection that scores a plan against
-//! each and averages ([`crate::human2nav`]) scores its expected cost.
+//! shared by every scene. Scenes are equally likely unless the forecast carries weights
+//! ([`Forecast::with_weights`]): a selection that scores a plan against each and takes the
+//! weighted mean ([`crate::human2nav`]) scores its expected cost.
 //!
 //! [`Forecast::constant_velocity`] is the one-scene forecast every planner of the SDK used
 //! before predictors existed. [`FlowPredictor`], a learned, multimodal predictor, samples a
@@ -43,6 +44,8 @@ pub struct Forecast {
     horizon: usize,
     scenes: usize,
     agents: Vec<ForecastAgent>,
+    /// Each scene's probability (summing to 1); `None`: equally likely.
+    weights: Option<Vec<f64>>,
 }
 
 impl Forecast {
@@ -79,7 +82,49 @@ impl Forecast {
             horizon,
             scenes,
             agents,
+            weights: None,
         })
+    }
+
+    /// The same forecast with scene `s` given probability `weights[s] / Σ weights`: one finite
+    /// weight ≥ 0 per scene, not all 0.
+    pub fn with_weights(self, weights: Vec<f64>) -> Result<Self, String> {
+        if weights.len() != self.scenes {
+            return Err(format!(
+                "{} weights for {} scenes",
+                weights.len(),
+                self.scenes
+            ));
+        }
+        if let Some(w) = weights.iter().find(|w| !(w.is_finite() && **w >= 0.0)) {
+            return Err(format!("a scene weight of {w} (finite and ≥ 0 expected)"));
+        }
+        let sum: f64 = weights.iter().sum();
+        if !(sum > 0.0 && sum.is_finite()) {
+            return Err("the scene weights sum to 0".into());
+        }
+        Ok(Self {
+            weights: Some(weights.iter().map(|w| w / sum).collect()),
+            ..self
+        })
+    }
+
+    /// Scene `scene`'s probability.
+    pub fn weight(&self, scene: usize) -> f64 {
+        self.weights
+            .as_ref()
+            .map_or(1.0 / self.scenes as f64, |w| w[scene])
+    }
+
+    /// The scenes' probabilities when they are not equally likely.
+    pub(crate) fn weights(&self) -> Option<&[f64]> {
+        self.weights.as_deref()
+    }
+
+    /// The expectation over the scenes of `f(scene)`: with equally likely scenes their sum
+    /// divided by their number, otherwise the weighted sum.
+    pub fn expectation(&self, f: impl FnMut(usize) -> f64) -> f64 {
+        expectation(self.weights.as_deref(), self.scenes, f)
     }
 
     /// Every agent moving on at its observed velocity: one scene, positions at `dt, 2dt, …`
@@ -97,6 +142,7 @@ impl Forecast {
             horizon,
             scenes: 1,
             agents,
+            weights: None,
         }
     }
 
@@ -137,7 +183,24 @@ impl Forecast {
                 ..a.clone()
             })
             .collect();
-        Self { agents, ..*self }
+        Self {
+            agents,
+            weights: self.weights.clone(),
+            ..*self
+        }
+    }
+}
+
+/// The expectation of `f(scene)` over `scenes` scenes of probabilities `weights` (`None`:
+/// equally likely, the mean).
+pub(crate) fn expectation(
+    weights: Option<&[f64]>,
+    scenes: usize,
+    mut f: impl FnMut(usize) -> f64,
+) -> f64 {
+    match weights {
+        None => (0..scenes).map(&mut f).sum::<f64>() / scenes as f64,
+        Some(w) => w.iter().enumerate().map(|(s, w)| w * f(s)).sum(),
     }
 }
 
@@ -204,6 +267,10 @@ pub struct FlowPredictorSettings {
     pub max_speed: f64,
     /// Add the constant-velocity forecast as one more scene. Default false.
     pub constant_velocity_scene: bool,
+    /// The constant-velocity scene's probability (0 to 1; needs `constant_velocity_scene`),
+    /// the model's scenes sharing the rest equally. Unset (the default): every scene equally
+    /// likely, `1 / (samples + 1)` each.
+    pub constant_velocity_weight: Option<f64>,
     /// Draw the robot into each walker's raster, as a disc of `robot_radius` moving at its
     /// velocity: the walkers are predicted as people who see the robot and make way for it,
     /// as they make way for each other in the training data. Off, the robot is not in the
@@ -227,6 +294,7 @@ impl Default for FlowPredictorSettings {
             min_speed: 0.3,
             max_speed: 2.5,
             constant_velocity_scene: false,
+            constant_velocity_weight: None,
             see_robot: false,
             robot_radius: 0.4,
             seed: 0,
@@ -267,6 +335,16 @@ impl FlowPredictorSettings {
         }
         if !(self.robot_radius.is_finite() && self.robot_radius >= 0.0) {
             return Err("robot_radius: must be finite and ≥ 0".into());
+        }
+        if let Some(w) = self.constant_velocity_weight {
+            if !self.constant_velocity_scene {
+                return Err(
+                    "constant_velocity_weight: needs constant_velocity_scene = true".into(),
+                );
+            }
+            if !(0.0..=1.0).contains(&w) {
+                return Err(format!("constant_velocity_weight: must be 0 to 1, got {w}"));
+            }
         }
         Ok(())
     }
@@ -434,12 +512,18 @@ impl<M: FlowModel + Send> CrowdPredictor for FlowPredictor<M> {
                 paths,
             })
             .collect();
-        let scenes = if chosen.is_empty() {
-            1
-        } else {
-            k + usize::from(cv_scene)
-        };
-        Forecast::new(horizon, scenes, agents)
+        if chosen.is_empty() {
+            return Forecast::new(horizon, 1, agents);
+        }
+        let forecast = Forecast::new(horizon, k + usize::from(cv_scene), agents)?;
+        match self.settings.constant_velocity_weight {
+            Some(w) if cv_scene => {
+                let mut weights = vec![(1.0 - w) / k as f64; k];
+                weights.push(w);
+                forecast.with_weights(weights)
+            }
+            _ => Ok(forecast),
+        }
     }
 }
 
@@ -557,6 +641,49 @@ mod tests {
             (q[0] - 1.0).abs() < 1e-12 && (q[1] - 0.5).abs() < 1e-12,
             "{q:?}"
         );
+        assert_eq!(g.weight(3), 0.25);
+        // Weighted: the constant-velocity scene 0.4, the model's three 0.2 each; same paths.
+        let weighted = FlowPredictorSettings {
+            constant_velocity_weight: Some(0.4),
+            ..settings
+        };
+        let mut p = FlowPredictor::new(veering_left(8), BevSpec::default(), weighted).unwrap();
+        let h = p.forecast(&obs, 10, 0.1).unwrap();
+        assert_eq!(h.agents(), g.agents());
+        let w: Vec<f64> = (0..4).map(|s| h.weight(s)).collect();
+        assert!(
+            w.iter()
+                .zip([0.2, 0.2, 0.2, 0.4])
+                .all(|(a, b)| (a - b).abs() < 1e-12),
+            "{w:?}"
+        );
+    }
+
+    #[test]
+    fn the_expectation_weighs_each_scene_by_its_probability() {
+        let agent = ForecastAgent {
+            id: 1,
+            radius: 0.3,
+            paths: vec![vec![[0.0, 0.0]; 2]; 3],
+        };
+        let f = Forecast::new(2, 3, vec![agent]).unwrap();
+        let cost = |s: usize| [1.0, 2.0, 6.0][s];
+        assert_eq!(f.expectation(cost), 3.0);
+        let w = f.clone().with_weights(vec![2.0, 1.0, 1.0]).unwrap();
+        assert_eq!((w.weight(0), w.weight(2)), (0.5, 0.25));
+        assert!((w.expectation(cost) - 2.5).abs() < 1e-12);
+        // Weights survive a change of frame.
+        let moved = w.in_frame(Pose2::new(1.0, 2.0, 0.3));
+        assert_eq!(moved.weight(0), 0.5);
+        for (weights, why) in [
+            (vec![1.0, 1.0], "2 weights for 3 scenes"),
+            (vec![1.0, -1.0, 1.0], "a scene weight of -1"),
+            (vec![f64::NAN, 1.0, 1.0], "a scene weight of NaN"),
+            (vec![0.0; 3], "the scene weights sum to 0"),
+        ] {
+            let e = f.clone().with_weights(weights).unwrap_err();
+            assert!(e.starts_with(why), "{e}");
+        }
     }
 
     #[test]
@@ -580,6 +707,14 @@ mod tests {
             ..d
         });
         assert!(e.starts_with("max_speed: "), "{e}");
+        for (scene, weight) in [(false, 0.5), (true, 1.5), (true, f64::NAN)] {
+            let e = bad(FlowPredictorSettings {
+                constant_velocity_scene: scene,
+                constant_velocity_weight: Some(weight),
+                ..d
+            });
+            assert!(e.starts_with("constant_velocity_weight: "), "{e}");
+        }
         assert!(toml::from_str::<FlowPredictorSettings>("sample = 3").is_err());
     }
 

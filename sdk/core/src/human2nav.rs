@@ -34,13 +34,11 @@
 //! `max(0, margin − gap)²/margin²` with `gap` the distance between the robot's footprint (its
 //! shapes at the waypoint's pose, [`RobotModel::footprint`]) and each agent's disc, agents
 //! predicted at constant velocity (or by the planner's [`CrowdPredictor`], when it has one:
-//! `C` is then the mean over the scenes of its [`Forecast`]), and each static obstacle of the
-//! observation
-//! ([`crate::obstacle`]: circles, polygons, segments and the occupied cells of its grid), where
-//! the first waypoint with a predicted overlap and every one after it count
-//! [`COLLISION_PENALTY`] instead (a collision ends
-//! the plan: the earlier, the worse), and `D` the mean distance (m) to the previous plan at the
-//! same times (0 without one).
+//! `C` is then the expectation over the scenes of its [`Forecast`]), and each static obstacle
+//! of the observation ([`crate::obstacle`]: circles, polygons, segments and the occupied cells
+//! of its grid), where the first waypoint with a predicted overlap and every one after it
+//! count [`COLLISION_PENALTY`] instead (a collision ends the plan: the earlier, the worse),
+//! and `D` the mean distance (m) to the previous plan at the same times (0 without one).
 //!
 //! Besides the guided samples, the selection sees each of them at
 //! [`Human2NavSettings::slowdown`] of its speed along the same path and a "stop" candidate, all
@@ -1045,11 +1043,7 @@ impl<M: FlowModel> Human2Nav<M> {
 
         let (progress, checked) = goal_term(traj, goal, w);
 
-        let scenes = near.scenes();
-        let clearance = (0..scenes)
-            .map(|s| self.clearance(&traj[..checked], traj.len(), near, s))
-            .sum::<f64>()
-            / scenes as f64;
+        let clearance = near.expectation(|s| self.clearance(&traj[..checked], traj.len(), near, s));
 
         let consistency = previous.map_or(0.0, |prev| {
             let n = prev.len().min(traj.len()).max(1);

@@ -36,6 +36,8 @@ pub(super) struct NearAgent {
 pub(super) struct Near {
     /// The forecast's scenes.
     scenes: usize,
+    /// Their probabilities (`None`: equally likely), as in the forecast.
+    weights: Option<Vec<f64>>,
     /// Waypoints covered: as many as the longest candidate has, at most the forecast's.
     steps: usize,
     /// The agents of every (scene, waypoint), scene-major, each in forecast order.
@@ -79,6 +81,7 @@ impl Near {
 
         let mut near = Near {
             scenes: forecast.scenes(),
+            weights: forecast.weights().map(<[f64]>::to_vec),
             steps,
             ..Near::default()
         };
@@ -115,8 +118,14 @@ impl Near {
     }
 
     /// The forecast's scenes.
+    #[cfg(test)]
     pub(super) fn scenes(&self) -> usize {
         self.scenes
+    }
+
+    /// The expectation of `f(scene)` over the forecast's scenes ([`Forecast::expectation`]).
+    pub(super) fn expectation(&self, f: impl FnMut(usize) -> f64) -> f64 {
+        crate::forecast::expectation(self.weights.as_deref(), self.scenes, f)
     }
 
     /// The agents that may matter at waypoint `step` of scene `scene` (none past the covered

@@ -556,6 +556,13 @@ fn config_cases() -> Vec<Case> {
         ),
         err(
             a,
+            "planner.toml `deviation_horizon = 0`",
+            NR,
+            &["prediction.flow.deviation_horizon", "> 0"],
+            planner_edit("# deviation_horizon = 2.0 ", "deviation_horizon = 0.0 "),
+        ),
+        err(
+            a,
             "planner.toml `[prediction.flow] robot_radius = -1`",
             NR,
             &["prediction.flow.robot_radius"],

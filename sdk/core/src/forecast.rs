@@ -217,6 +217,21 @@ pub fn constant_velocity_path(agent: &AgentState, horizon: usize, dt: f64) -> Ve
         .collect()
 }
 
+/// From waypoint `from` on (0-based), every path in `sampled` follows `cv` (the constant-
+/// velocity path) at the offset it had at waypoint `from − 1`.
+fn hold_departure(sampled: &mut [Vec<[f64; 2]>], cv: &[[f64; 2]], from: usize) {
+    if from == 0 || from > cv.len() {
+        return;
+    }
+    for path in sampled {
+        let (p, c) = (path[from - 1], cv[from - 1]);
+        let offset = [p[0] - c[0], p[1] - c[1]];
+        for (q, c) in path.iter_mut().zip(cv).skip(from) {
+            *q = [c[0] + offset[0], c[1] + offset[1]];
+        }
+    }
+}
+
 /// A source of [`Forecast`]s for a planner.
 pub trait CrowdPredictor: Send {
     /// A short name for diagnostics (`constant-velocity`, `flow`, …).
@@ -271,6 +286,11 @@ pub struct FlowPredictorSettings {
     /// the model's scenes sharing the rest equally. Unset (the default): every scene equally
     /// likely, `1 / (samples + 1)` each.
     pub constant_velocity_weight: Option<f64>,
+    /// How long (s) the model's samples may depart from constant velocity: after this time
+    /// each sampled path moves on at the agent's observed velocity, keeping the departure it
+    /// had reached (so the scenes stop spreading). Unset (the default): the samples over the
+    /// whole plan.
+    pub deviation_horizon: Option<f64>,
     /// Draw the robot into each walker's raster, as a disc of `robot_radius` moving at its
     /// velocity: the walkers are predicted as people who see the robot and make way for it,
     /// as they make way for each other in the training data. Off, the robot is not in the
@@ -295,6 +315,7 @@ impl Default for FlowPredictorSettings {
             max_speed: 2.5,
             constant_velocity_scene: false,
             constant_velocity_weight: None,
+            deviation_horizon: None,
             see_robot: false,
             robot_radius: 0.4,
             seed: 0,
@@ -335,6 +356,13 @@ impl FlowPredictorSettings {
         }
         if !(self.robot_radius.is_finite() && self.robot_radius >= 0.0) {
             return Err("robot_radius: must be finite and ≥ 0".into());
+        }
+        if let Some(h) = self.deviation_horizon {
+            if !(h.is_finite() && h > 0.0) {
+                return Err(format!(
+                    "deviation_horizon: must be finite and > 0 (s), got {h}"
+                ));
+            }
         }
         if let Some(w) = self.constant_velocity_weight {
             if !self.constant_velocity_scene {
@@ -495,8 +523,16 @@ impl<M: FlowModel + Send> CrowdPredictor for FlowPredictor<M> {
             .collect();
         let k = self.settings.samples;
         let cv_scene = self.settings.constant_velocity_scene;
+        // Waypoints within the deviation horizon (at least the first).
+        let held_from = self
+            .settings
+            .deviation_horizon
+            .map(|h| ((h / dt).round() as usize).clamp(1, horizon.max(1)));
         for &i in &chosen {
             let mut sampled = self.sample_agent(obs, i, horizon)?;
+            if let Some(from) = held_from {
+                hold_departure(&mut sampled, &paths[i][0], from);
+            }
             if cv_scene {
                 sampled.push(paths[i][0].clone());
             }
@@ -657,6 +693,29 @@ mod tests {
                 .all(|(a, b)| (a - b).abs() < 1e-12),
             "{w:?}"
         );
+        // With a deviation horizon of 0.3 s the samples depart from the straight line for
+        // three waypoints, then keep that departure: the same paths up to the third waypoint,
+        // parallel to the straight line after it.
+        let held = FlowPredictorSettings {
+            deviation_horizon: Some(0.3),
+            ..settings
+        };
+        let mut p = FlowPredictor::new(veering_left(8), BevSpec::default(), held).unwrap();
+        let e = p.forecast(&obs, 10, 0.1).unwrap();
+        for s in 0..3 {
+            for j in 0..3 {
+                assert_eq!(e.position(0, s, j), g.position(0, s, j));
+            }
+            let gap = |j: usize| {
+                let (q, c) = (e.position(0, s, j), g.position(0, 3, j));
+                [q[0] - c[0], q[1] - c[1]]
+            };
+            assert!(gap(2)[0].abs() > 0.05, "{:?}", gap(2));
+            for j in 3..10 {
+                let d = gap(j);
+                assert!((d[0] - gap(2)[0]).abs() < 1e-12 && (d[1] - gap(2)[1]).abs() < 1e-12);
+            }
+        }
     }
 
     #[test]
@@ -707,6 +766,13 @@ mod tests {
             ..d
         });
         assert!(e.starts_with("max_speed: "), "{e}");
+        for h in [0.0, -1.0, f64::INFINITY] {
+            let e = bad(FlowPredictorSettings {
+                deviation_horizon: Some(h),
+                ..d
+            });
+            assert!(e.starts_with("deviation_horizon: "), "{e}");
+        }
         for (scene, weight) in [(false, 0.5), (true, 1.5), (true, f64::NAN)] {
             let e = bad(FlowPredictorSettings {
                 constant_velocity_scene: scene,

@@ -101,7 +101,9 @@ impl Forecast {
         }
         let sum: f64 = weights.iter().sum();
         if !(sum > 0.0 && sum.is_finite()) {
-            return Err("the scene weights sum to 0".into());
+            return Err(format!(
+                "the scene weights sum to {sum} (a positive, finite sum expected)"
+            ));
         }
         Ok(Self {
             weights: Some(weights.iter().map(|w| w / sum).collect()),
@@ -382,8 +384,11 @@ impl FlowPredictorSettings {
 /// their goals (the flow crate's goal-free model), samples where each agent near the robot
 /// goes, from the agent's own pose and velocity and the other agents around it (its BEV
 /// raster, drawn as in training; the robot is in it only with
-/// [`FlowPredictorSettings::see_robot`]). Scene `s`
-/// of the forecast is every such agent's sample `s`; the other agents move on at constant
+/// [`FlowPredictorSettings::see_robot`]). Scene `s` of the forecast is every such agent's
+/// sample `s` (held parallel to constant velocity after
+/// [`FlowPredictorSettings::deviation_horizon`]), then the constant-velocity scene with
+/// [`FlowPredictorSettings::constant_velocity_scene`], of probability
+/// [`FlowPredictorSettings::constant_velocity_weight`]; the other agents move on at constant
 /// velocity. The model's poses are taken to be the forecast's `dt` apart (the planner's, which
 /// must match the training data's 0.1 s); past its horizon the last pose is held.
 pub struct FlowPredictor<M> {
@@ -739,6 +744,7 @@ mod tests {
             (vec![1.0, -1.0, 1.0], "a scene weight of -1"),
             (vec![f64::NAN, 1.0, 1.0], "a scene weight of NaN"),
             (vec![0.0; 3], "the scene weights sum to 0"),
+            (vec![f64::MAX; 3], "the scene weights sum to inf"),
         ] {
             let e = f.clone().with_weights(weights).unwrap_err();
             assert!(e.starts_with(why), "{e}");

@@ -253,7 +253,7 @@ impl Default for PaperSettings {
 ///
 /// Defaults: Algorithm 1 as tuned for the shipped planner (`sdk/configs/planner.toml`, where the
 /// measurements behind them are; the planner itself ships with `iterations_m = 0`, see
-/// [`Human2NavSettings`](crate::Human2NavSettings)): `variant = "adaptive"`, `enabled = true`,
+/// [`Human2NavSettings`](crate::human2nav::Human2NavSettings)): `variant = "adaptive"`, `enabled = true`,
 /// `steps_n = 5`, `iterations_m = 3`,
 /// `learning_rate = 0.1`, `momentum = 1.0`, `clip = 10.0`, `tolerance = 0.01`,
 /// `precondition = false` (on the trained model every preconditioned update raised Φ),

@@ -557,8 +557,9 @@ impl<M: FlowModel + Send> CrowdPredictor for FlowPredictor<M> {
             return Forecast::new(horizon, 1, agents);
         }
         let forecast = Forecast::new(horizon, k + usize::from(cv_scene), agents)?;
+        // `validate` allows a weight only with the constant-velocity scene.
         match self.settings.constant_velocity_weight {
-            Some(w) if cv_scene => {
+            Some(w) => {
                 let mut weights = vec![(1.0 - w) / k as f64; k];
                 weights.push(w);
                 forecast.with_weights(weights)

@@ -37,7 +37,7 @@
 //! `C` is then the expectation over the scenes of its [`Forecast`]), and each static obstacle
 //! of the observation ([`crate::obstacle`]: circles, polygons, segments and the occupied cells
 //! of its grid), where the first waypoint with a predicted overlap and every one after it
-//! count [`COLLISION_PENALTY`] instead (a collision ends the plan: the earlier, the worse),
+//! count [`SelectionWeights::collision`] instead (a collision ends the plan: the earlier, the worse),
 //! and `D` the mean distance (m) to the previous plan at the same times (0 without one).
 //!
 //! Besides the guided samples, the selection sees each of them at
@@ -100,7 +100,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-/// Score added for each predicted overlap between the footprint and an agent's disc.
+/// Default of [`SelectionWeights::collision`]: the score a predicted overlap between the
+/// footprint and an agent's disc (or an obstacle) adds for it and each later waypoint.
 pub const COLLISION_PENALTY: f64 = 10.0;
 
 /// How the selection's goal term measures a candidate's progress ([`SelectionWeights::progress`]).
@@ -122,7 +123,8 @@ pub enum Progress {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SelectionWeights {
-    /// Weight of `1 − TFS`. Default 4.
+    /// Weight of `1 − TFS`. Default 0 (with the last-step correction every guided candidate is
+    /// feasible; set it when running Algorithm 1 without the correction).
     pub feasibility: f64,
     /// Weight of the remaining goal distance ratio. Default 1.
     pub goal: f64,
@@ -137,6 +139,10 @@ pub struct SelectionWeights {
     /// Distance to the goal (m) within which a waypoint counts as arrived with
     /// [`Progress::Closest`]. Default 0.3.
     pub arrival: f64,
+    /// What the first waypoint with a predicted overlap, and every waypoint after it, adds to
+    /// the clearance sum (a collision ends the plan, so an early contact costs more than a late
+    /// one). Default [`COLLISION_PENALTY`].
+    pub collision: f64,
 }
 
 impl Default for SelectionWeights {
@@ -149,6 +155,7 @@ impl Default for SelectionWeights {
             margin: 0.5,
             progress: Progress::Closest,
             arrival: 0.3,
+            collision: COLLISION_PENALTY,
         }
     }
 }
@@ -321,6 +328,7 @@ impl Human2NavSettings {
             ("selection.clearance", s.clearance),
             ("selection.consistency", s.consistency),
             ("selection.arrival", s.arrival),
+            ("selection.collision", s.collision),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(name, "must be finite and ≥ 0");
@@ -1100,7 +1108,7 @@ impl<M> Human2Nav<M> {
                 }
             }
             if hit {
-                clearance += COLLISION_PENALTY * (len - j) as f64;
+                clearance += self.settings.selection.collision * (len - j) as f64;
                 break;
             }
         }

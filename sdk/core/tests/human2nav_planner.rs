@@ -469,6 +469,36 @@ fn a_pedestrian_in_the_way_makes_the_planner_stop_instead_of_driving_into_them()
     assert!(stops.poses[32].x > 0.25 && stops.poses[32].x < 0.6);
 }
 
+/// The collision penalty is what stops the robot short of a pedestrian it predicts: without
+/// it a contact costs only the clearance of the waypoints before it, and driving through wins
+/// on progress. A penalty that is not a finite number ≥ 0 is refused, naming the field.
+#[test]
+fn the_collision_penalty_is_what_makes_the_planner_brake() {
+    use human2nav_core::human2nav::{COLLISION_PENALTY, SelectionWeights};
+    let obs = blocked();
+    let with = |collision: f64| {
+        let settings = Human2NavSettings {
+            motions: 0,
+            selection: SelectionWeights {
+                collision,
+                ..SelectionWeights::default()
+            },
+            ..Default::default()
+        };
+        Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings)
+    };
+    assert_eq!(SelectionWeights::default().collision, COLLISION_PENALTY);
+    let brakes = with(COLLISION_PENALTY).unwrap().plan(&obs).unwrap();
+    assert!(predicted_gap(&brakes.poses, &obs) > 0.0);
+    let through = with(0.0).unwrap().plan(&obs).unwrap();
+    let gap = predicted_gap(&through.poses, &obs);
+    assert!(gap < 0.0, "gap {gap}; notes {:?}", through.info.notes);
+    for bad in [f64::NAN, f64::INFINITY, -1.0] {
+        let err = with(bad).unwrap_err().to_string();
+        assert!(err.contains("selection.collision"), "{bad}: {err}");
+    }
+}
+
 /// The model's samples run straight past a goal 0.8 m ahead and to the left; within
 /// `goal_approach` the planner also offers "straight to the goal", which wins, ends at the goal
 /// and is feasible. Without it the plan ends outside the benchmark's 0.3 m goal tolerance.

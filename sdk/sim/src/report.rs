@@ -15,7 +15,7 @@ use std::fmt::Write as _;
 pub const CSV_HEADER: &str = "suite,suite_kind,scenario,episode,scene,robot,method,seed,agents,density,outcome,\
 success,collision,timeout,tfs,tfs_plan,tfs_executed,path_length,time_to_goal,duration,budget,min_clearance,\
 time_within_0_45,time_within_1_2,mean_jerk,plans,fallbacks,planner_errors,contact_robot_closing,\
-contact_pedestrian_closing,contact_pedestrian_age,commands,exec_over_speed,exec_over_reverse,\
+contact_pedestrian_closing,contact_pedestrian_age,contact_pedestrian_speed,commands,exec_over_speed,exec_over_reverse,\
 exec_over_acceleration,exec_over_yaw_rate,exec_over_curvature,exec_over_lateral,exec_over_coupled,\
 end_goal_distance,end_goal_crowd";
 
@@ -66,6 +66,7 @@ fn csv_record(r: &ResultRow) -> Vec<String> {
         opt(m.contact.map(|c| c.robot_closing)),
         opt(m.contact.map(|c| c.pedestrian_closing)),
         opt(m.contact.map(|c| c.pedestrian_age)),
+        opt(m.contact.map(|c| c.pedestrian_speed)),
         m.executed_violations.commands.to_string(),
     ]
     .into_iter()
@@ -615,10 +616,12 @@ fn empty_suite_section(md: &mut String, in_suite: &[&ResultRow], suite: &str, ct
 /// A pedestrian whose track began less than this long before the contact (s) appeared next to
 /// the robot: the history the planners see is 0.8 s long.
 pub const APPEARED_WITHIN: f64 = 1.0;
-/// A pedestrian closing on the robot faster than this (m/s) was a cyclist or a skater: faster
-/// than any robot here can make way for, and faster than the people the planners' models
-/// learned from (90 % of the training walkers are under 1.7 m/s).
-pub const FAST_CLOSING: f64 = 2.5;
+/// A pedestrian moving faster than this (m/s) at the contact, in any direction, was a cyclist
+/// or a skater: faster than any robot here can make way for, and faster than the people the
+/// planners' models learned from (90 % of the training walkers are under 1.7 m/s). Until
+/// December 2026 the class asked for this speed along the line between the centres, which
+/// missed cyclists that overtook or passed the robot and clipped it.
+pub const FAST_SPEED: f64 = 2.5;
 /// A robot moving toward the pedestrian at no more than this (m/s) was walked into.
 pub const WALKED_INTO_BELOW: f64 = 0.1;
 /// A run that timed out with a pedestrian's disc this close to its goal (m) had someone at the
@@ -632,7 +635,7 @@ pub const NEAR_GOAL: f64 = 2.0;
 pub enum Failure {
     /// A collision with a pedestrian whose track began less than [`APPEARED_WITHIN`] before.
     Appeared,
-    /// A collision with a pedestrian closing faster than [`FAST_CLOSING`].
+    /// A collision with a pedestrian moving faster than [`FAST_SPEED`].
     Fast,
     /// A collision while the robot closed at most [`WALKED_INTO_BELOW`].
     WalkedInto,
@@ -667,7 +670,7 @@ impl Failure {
             return Some(match m.contact {
                 None => Failure::Obstacle,
                 Some(c) if c.pedestrian_age < APPEARED_WITHIN => Failure::Appeared,
-                Some(c) if c.pedestrian_closing > FAST_CLOSING => Failure::Fast,
+                Some(c) if c.pedestrian_speed > FAST_SPEED => Failure::Fast,
                 Some(c) if c.robot_closing <= WALKED_INTO_BELOW => Failure::WalkedInto,
                 Some(_) => Failure::DroveIn,
             });
@@ -719,7 +722,7 @@ fn failure_table(md: &mut String, rows: &[&ResultRow], robots: &[String], method
         "\n### How the runs failed, per robot\n\n\
          Each failure counts once, in the first class that applies. Collisions: the pedestrian's \
          track began less than {APPEARED_WITHIN} s before the contact (it appeared next to the \
-         robot); the pedestrian closed faster than {FAST_CLOSING} m/s (a cyclist or a skater); the \
+         robot); the pedestrian moved faster than {FAST_SPEED} m/s (a cyclist or a skater); the \
          robot was closing at most {WALKED_INTO_BELOW} m/s (standing, sidestepping or backing off: a \
          pedestrian walked into it); else the robot drove in; or a static obstacle. Timeouts: \
          someone's disc within {GOAL_TAKEN_WITHIN} m of the goal at the end; the robot within \
@@ -1062,6 +1065,7 @@ mod tests {
                 opt(m.contact.map(|c| c.robot_closing)),
                 opt(m.contact.map(|c| c.pedestrian_closing)),
                 opt(m.contact.map(|c| c.pedestrian_age)),
+                opt(m.contact.map(|c| c.pedestrian_speed)),
                 m.executed_violations.commands.to_string(),
             ]
             .into_iter()
@@ -1120,6 +1124,7 @@ mod tests {
                     robot_closing: 0.4,
                     pedestrian_closing: -0.2,
                     pedestrian_age: f64::NAN,
+                    pedestrian_speed: 1.25,
                 }),
                 obstacle_hit: None,
                 executed_violations: LimitCounts {
@@ -1148,13 +1153,19 @@ mod tests {
             m.end_goal_crowd = crowd;
             Failure::of(&m)
         };
-        let contact = |age: f64, pedestrian: f64, robot: f64| {
+        // Closing speeds along the line between the centres; the pedestrian's speed is its
+        // closing speed unless given.
+        let moving = |age: f64, pedestrian: f64, robot: f64, speed: f64| {
             Some(Contact {
                 pedestrian: 1,
                 robot_closing: robot,
                 pedestrian_closing: pedestrian,
                 pedestrian_age: age,
+                pedestrian_speed: speed,
             })
+        };
+        let contact = |age: f64, pedestrian: f64, robot: f64| {
+            moving(age, pedestrian, robot, pedestrian.abs())
         };
         let c = Outcome::Collision;
         // A fast pedestrian whose track has just begun appeared; a robot standing still hit
@@ -1165,6 +1176,12 @@ mod tests {
         );
         assert_eq!(
             failed(c, contact(3.0, 4.0, 0.0), 9.0, None),
+            Some(Failure::Fast)
+        );
+        // A cyclist at 6 m/s that overtakes the robot and clips it closes slowly along the
+        // line between the centres (here it is already moving away) but is still fast.
+        assert_eq!(
+            failed(c, moving(3.0, -0.5, 0.3, 6.0), 9.0, None),
             Some(Failure::Fast)
         );
         assert_eq!(

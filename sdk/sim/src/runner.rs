@@ -414,6 +414,9 @@ pub struct Contact {
     pub pedestrian_closing: f64,
     /// How long the pedestrian's track had existed at contact (s).
     pub pedestrian_age: f64,
+    /// The pedestrian's speed at contact (m/s), whatever its direction: a cyclist passing the
+    /// robot closes slowly along the line between the centres but is still a cyclist.
+    pub pedestrian_speed: f64,
 }
 
 impl Contact {
@@ -440,6 +443,7 @@ impl Contact {
             robot_closing: vx * nx + vy * ny,
             pedestrian_closing: -(ped.velocity[0] * nx + ped.velocity[1] * ny),
             pedestrian_age: age,
+            pedestrian_speed: ped.velocity[0].hypot(ped.velocity[1]),
         })
     }
 }

@@ -256,6 +256,7 @@ fn standing_pedestrian_on_the_line_is_a_collision() {
     // The robot drives along +x into a pedestrian standing there since the start.
     assert!(hit.robot_closing > 0.0 && hit.robot_closing <= r.limits.v_max + 1e-9);
     assert_eq!(hit.pedestrian_closing, 0.0);
+    assert_eq!(hit.pedestrian_speed, 0.0);
     assert!((hit.pedestrian_age - run.end_time).abs() < 1e-9);
     // The robot stops at the first step whose footprint overlaps: its centre within one step of
     // travel past the contact point 2.5 − 0.3 − r_footprint.

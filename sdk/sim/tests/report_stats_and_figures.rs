@@ -57,6 +57,7 @@ fn metrics(outcome: Outcome, tfs: f64) -> EpisodeMetrics {
             robot_closing: 0.5,
             pedestrian_closing: 0.8,
             pedestrian_age: 3.0,
+            pedestrian_speed: 0.8,
         }),
         obstacle_hit: None,
         executed_violations: LimitCounts {

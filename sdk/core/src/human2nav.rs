@@ -143,7 +143,15 @@ pub struct SelectionWeights {
     /// the clearance sum (a collision ends the plan, so an early contact costs more than a late
     /// one). Default [`COLLISION_PENALTY`].
     pub collision: f64,
+    /// How long (s) a candidate that has not arrived is taken to stand at its last pose after
+    /// it, checked for contact like its waypoints: a plan that ends in someone's path scores
+    /// the contact the robot would meet once it stops there. 0 (the default): the plan alone.
+    /// At most [`MAX_HOLD_S`].
+    pub hold: f64,
 }
+
+/// Largest [`SelectionWeights::hold`] (s): longer than any plan, and a typo beyond it.
+pub const MAX_HOLD_S: f64 = 10.0;
 
 impl Default for SelectionWeights {
     fn default() -> Self {
@@ -156,6 +164,7 @@ impl Default for SelectionWeights {
             progress: Progress::Closest,
             arrival: 0.3,
             collision: COLLISION_PENALTY,
+            hold: 0.0,
         }
     }
 }
@@ -336,6 +345,12 @@ impl Human2NavSettings {
         }
         if !(s.margin.is_finite() && s.margin > 0.0) {
             return bad("selection.margin", "must be finite and > 0");
+        }
+        if !(s.hold.is_finite() && (0.0..=MAX_HOLD_S).contains(&s.hold)) {
+            return bad(
+                "selection.hold",
+                &format!("must lie in 0 to {MAX_HOLD_S} s, got {}", s.hold),
+            );
         }
         self.projection
             .validate()
@@ -537,7 +552,7 @@ impl<M: FlowModel> Human2Nav<M> {
         let k = self.settings.samples;
         let (cond, agents) = self.condition(obs);
         let mut notes = Vec::new();
-        let forecast = self.forecast(obs, &agents, horizon, &mut notes);
+        let forecast = self.forecast(obs, &agents, horizon + self.hold_steps(), &mut notes);
         self.obstacles = self.nearby_obstacles(obs, horizon);
         let x0 = self.draw_source(k, horizon);
         let goal = cond.goal;
@@ -1004,11 +1019,17 @@ impl<M: FlowModel> Human2Nav<M> {
     fn near(&self, candidates: &[Vec<Pose2>], forecast: &Forecast) -> Near {
         Near::new(
             candidates,
+            self.hold_steps(),
             forecast,
             &self.obstacles,
             self.reach,
             self.settings.selection.margin,
         )
+    }
+
+    /// [`SelectionWeights::hold`] in plan steps.
+    fn hold_steps(&self) -> usize {
+        (self.settings.selection.hold / self.settings.dt).round() as usize
     }
 
     /// The previous plan re-expressed in the current ego frame at the current time, `T` future
@@ -1051,7 +1072,15 @@ impl<M: FlowModel> Human2Nav<M> {
 
         let (progress, checked) = goal_term(traj, goal, w);
 
-        let clearance = near.expectation(|s| self.clearance(&traj[..checked], traj.len(), near, s));
+        // A candidate that arrives ends there; one that does not is also checked standing at
+        // its last pose for the hold.
+        let hold = if progress == 0.0 {
+            0
+        } else {
+            self.hold_steps()
+        };
+        let clearance =
+            near.expectation(|s| self.clearance(&traj[..checked], hold, traj.len(), near, s));
 
         let consistency = previous.map_or(0.0, |prev| {
             let n = prev.len().min(traj.len()).max(1);
@@ -1072,16 +1101,31 @@ impl<M: FlowModel> Human2Nav<M> {
 impl<M> Human2Nav<M> {
     /// The clearance term `C` of a candidate against scene `scene` of the forecast and the
     /// static obstacles, as far as `near` (built over the call's candidates) lets them matter:
-    /// `checked` are its waypoints checked for contact, `len` its length.
+    /// `checked` are its waypoints checked for contact, `len` its length; with a `hold` it is
+    /// also checked standing at its last checked pose for that many more steps, and counts
+    /// `len + hold` waypoints.
     ///
     /// A predicted overlap ends the plan: it and every later waypoint cost the penalty, so a
     /// plan that would run through a pedestrian is no better than one that stops in them, and
     /// a later contact is better than an earlier one.
-    fn clearance(&self, checked: &[Pose2], len: usize, near: &Near, scene: usize) -> f64 {
+    fn clearance(
+        &self,
+        checked: &[Pose2],
+        hold: usize,
+        len: usize,
+        near: &Near,
+        scene: usize,
+    ) -> f64 {
         let margin = self.settings.selection.margin;
         let footprint = &self.robot.footprint;
+        let held = checked.last().map_or(0, |_| hold);
+        let len = len + held;
+        let standing = checked
+            .last()
+            .into_iter()
+            .flat_map(|p| std::iter::repeat_n(p, held));
         let mut clearance = 0.0;
-        for (j, p) in checked.iter().enumerate() {
+        for (j, p) in checked.iter().chain(standing).enumerate() {
             let mut hit = false;
             // Broad phase, for this waypoint of the call's candidates (`Near`), then for this
             // candidate: an agent whose centre is farther than the footprint's reach, its

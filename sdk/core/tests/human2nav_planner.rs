@@ -499,6 +499,65 @@ fn the_collision_penalty_is_what_makes_the_planner_brake() {
     }
 }
 
+/// Someone walks down the robot's line toward it, far enough that a plan driving at the goal
+/// ends just short of them. With a hold the selection also checks each plan standing at its
+/// end for that long, sees the contact that follows, and picks a plan that leaves their path.
+#[test]
+fn a_hold_after_the_plan_keeps_the_robot_out_of_someones_path() {
+    use human2nav_core::human2nav::SelectionWeights;
+    let obs = Observation {
+        time: 0.0,
+        ego: Pose2::IDENTITY,
+        ego_velocity: Twist2::new(0.0, 0.0, 0.0),
+        goal: [8.0, 0.0],
+        agents: vec![AgentState {
+            id: 1,
+            position: [6.5, 0.0],
+            velocity: [-0.8, 0.0],
+            radius: 0.3,
+            history: vec![],
+        }],
+        ..Default::default()
+    };
+    let plan = |hold: f64| {
+        let settings = Human2NavSettings {
+            selection: SelectionWeights {
+                hold,
+                ..SelectionWeights::default()
+            },
+            ..Default::default()
+        };
+        Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings)
+            .unwrap()
+            .plan(&obs)
+            .unwrap()
+    };
+    // The plan followed by the robot standing at its end for 2 s.
+    let held = |p: &[Pose2]| {
+        let mut poses = p.to_vec();
+        poses.extend(std::iter::repeat_n(p[p.len() - 1], 20));
+        poses
+    };
+    let without = plan(0.0);
+    assert!(predicted_gap(&without.poses, &obs) > 0.0);
+    let gap = predicted_gap(&held(&without.poses), &obs);
+    assert!(gap < 0.0, "standing at its end: gap {gap}");
+    let with = plan(2.0);
+    let gap = predicted_gap(&held(&with.poses), &obs);
+    assert!(gap > 0.0, "gap {gap}; notes {:?}", with.info.notes);
+    let err = Human2NavSettings {
+        selection: SelectionWeights {
+            hold: f64::NAN,
+            ..SelectionWeights::default()
+        },
+        ..Default::default()
+    }
+    .validate()
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("selection.hold"), "{err}");
+}
+
 /// The model's samples run straight past a goal 0.8 m ahead and to the left; within
 /// `goal_approach` the planner also offers "straight to the goal", which wins, ends at the goal
 /// and is feasible. Without it the plan ends outside the benchmark's 0.3 m goal tolerance.

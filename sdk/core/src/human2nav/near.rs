@@ -51,11 +51,13 @@ pub(super) struct Near {
 }
 
 impl Near {
-    /// The broad phase of `candidates` (ego frame, starting at the robot) against `forecast`
-    /// (ego frame) and `obstacles` (ego frame), for a footprint of `reach` and the selection's
-    /// clearance `margin`.
+    /// The broad phase of `candidates` (ego frame, starting at the robot), each also standing
+    /// at its last pose for `hold` more waypoints, against `forecast` (ego frame) and
+    /// `obstacles` (ego frame), for a footprint of `reach` and the selection's clearance
+    /// `margin`.
     pub(super) fn new(
         candidates: &[Vec<Pose2>],
+        hold: usize,
         forecast: &Forecast,
         obstacles: &[Obstacle],
         reach: f64,
@@ -63,14 +65,18 @@ impl Near {
     ) -> Self {
         let steps = candidates
             .iter()
-            .map(Vec::len)
+            .map(|c| c.len() + c.last().map_or(0, |_| hold))
             .max()
             .unwrap_or(0)
             .min(forecast.horizon());
         // R_j²: non-finite waypoints are left out (they fail every exact test as well).
         let mut farthest2 = vec![0.0f64; steps];
         for c in candidates {
-            for (r2, p) in farthest2.iter_mut().zip(c) {
+            let standing = c
+                .last()
+                .into_iter()
+                .flat_map(|p| std::iter::repeat_n(p, hold));
+            for (r2, p) in farthest2.iter_mut().zip(c.iter().chain(standing)) {
                 let d2 = p.x * p.x + p.y * p.y;
                 if d2 > *r2 {
                     *r2 = d2;
@@ -207,18 +213,23 @@ mod tests {
         #![proptest_config(ProptestConfig::with_cases(64))]
 
         /// Whatever the broad phase leaves out fails the selection's exact tests for every
-        /// candidate: an agent's centre is at least `far` from the pose, an obstacle at least
-        /// the margin from the footprint.
+        /// candidate, on its waypoints and standing at its last pose for the hold: an agent's
+        /// centre is at least `far` from the pose, an obstacle at least the margin from the
+        /// footprint.
         #[test]
         fn what_is_left_out_cannot_matter(
+            hold in 0usize..12,
             twists in prop::collection::vec((-0.5f64..1.5, -1.0f64..1.0), 1..12),
             starts in prop::collection::vec(((-8.0f64..8.0, -8.0f64..8.0), (-1.5f64..1.5, -1.5f64..1.5)), 0..20),
             centres in prop::collection::vec(prop::array::uniform2(-8.0f64..8.0), 0..8),
         ) {
-            let steps = 32;
+            let plan = 32;
+            let steps = plan + hold;
             let shapes = footprint();
             let reach = footprint::reach(&shapes);
-            let cands = candidates(&twists, steps);
+            let cands = candidates(&twists, plan);
+            // Candidate `c` at waypoint `j`, standing at its last pose after it.
+            let at = |c: &Vec<Pose2>, j: usize| c[j.min(plan - 1)];
             // Two scenes: the second walks at half the speed.
             let agents = starts
                 .iter()
@@ -241,7 +252,7 @@ mod tests {
                 .collect();
             let forecast = Forecast::new(steps, 2, agents).unwrap();
             let obstacles = obstacles(&centres);
-            let near = Near::new(&cands, &forecast, &obstacles, reach, MARGIN);
+            let near = Near::new(&cands, hold, &forecast, &obstacles, reach, MARGIN);
             prop_assert_eq!(near.scenes(), 2);
             for scene in 0..2 {
                 for j in 0..steps {
@@ -253,7 +264,7 @@ mod tests {
                         }
                         let far = reach + a.radius + MARGIN;
                         for c in &cands {
-                            let (dx, dy) = (q[0] - c[j].x, q[1] - c[j].y);
+                            let (dx, dy) = (q[0] - at(c, j).x, q[1] - at(c, j).y);
                             prop_assert!(dx * dx + dy * dy >= far * far);
                         }
                     }
@@ -265,7 +276,7 @@ mod tests {
                         continue;
                     }
                     for c in &cands {
-                        prop_assert!(footprint_clearance(&shapes, c[j], o) >= MARGIN);
+                        prop_assert!(footprint_clearance(&shapes, at(c, j), o) >= MARGIN);
                     }
                 }
             }
@@ -287,6 +298,7 @@ mod tests {
         let shapes = footprint();
         let near = Near::new(
             &cands,
+            0,
             &forecast,
             &obstacles,
             footprint::reach(&shapes),

@@ -1118,14 +1118,9 @@ impl<M> Human2Nav<M> {
     ) -> f64 {
         let margin = self.settings.selection.margin;
         let footprint = &self.robot.footprint;
-        let held = checked.last().map_or(0, |_| hold);
-        let len = len + held;
-        let standing = checked
-            .last()
-            .into_iter()
-            .flat_map(|p| std::iter::repeat_n(p, held));
+        let len = len + checked.last().map_or(0, |_| hold);
         let mut clearance = 0.0;
-        for (j, p) in checked.iter().chain(standing).enumerate() {
+        for (j, p) in near::held(checked, hold).enumerate() {
             let mut hit = false;
             // Broad phase, for this waypoint of the call's candidates (`Near`), then for this
             // candidate: an agent whose centre is farther than the footprint's reach, its

@@ -50,6 +50,16 @@ pub(super) struct Near {
     obstacle_spans: Vec<Range<usize>>,
 }
 
+/// The poses of `candidate`, then its last pose `hold` more times (none when it is empty): the
+/// waypoints the selection checks for contact with a hold ([`super::SelectionWeights::hold`]).
+pub(super) fn held(candidate: &[Pose2], hold: usize) -> impl Iterator<Item = &Pose2> {
+    let standing = candidate
+        .last()
+        .into_iter()
+        .flat_map(move |p| std::iter::repeat_n(p, hold));
+    candidate.iter().chain(standing)
+}
+
 impl Near {
     /// The broad phase of `candidates` (ego frame, starting at the robot), each also standing
     /// at its last pose for `hold` more waypoints, against `forecast` (ego frame) and
@@ -72,11 +82,7 @@ impl Near {
         // R_j²: non-finite waypoints are left out (they fail every exact test as well).
         let mut farthest2 = vec![0.0f64; steps];
         for c in candidates {
-            let standing = c
-                .last()
-                .into_iter()
-                .flat_map(|p| std::iter::repeat_n(p, hold));
-            for (r2, p) in farthest2.iter_mut().zip(c.iter().chain(standing)) {
+            for (r2, p) in farthest2.iter_mut().zip(held(c, hold)) {
                 let d2 = p.x * p.x + p.y * p.y;
                 if d2 > *r2 {
                     *r2 = d2;

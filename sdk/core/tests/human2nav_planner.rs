@@ -11,7 +11,9 @@ use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use human2nav_core::forecast::{CrowdPredictor, Forecast, ForecastAgent, constant_velocity_path};
 use human2nav_core::guidance::analytic::ConstantField;
 use human2nav_core::guidance::{GuidanceVariant, PaperSettings};
-use human2nav_core::human2nav::{Human2Nav, Human2NavSettings, RobotModel, pose_at};
+use human2nav_core::human2nav::{
+    Human2Nav, Human2NavSettings, RobotModel, SelectionWeights, pose_at,
+};
 use human2nav_core::obstacle::{Obstacle, OccupancyGrid, footprint_clearance};
 use human2nav_core::robot::footprint::FootprintShape;
 use human2nav_core::tfs::tfs_plan;
@@ -469,21 +471,28 @@ fn a_pedestrian_in_the_way_makes_the_planner_stop_instead_of_driving_into_them()
     assert!(stops.poses[32].x > 0.25 && stops.poses[32].x < 0.6);
 }
 
+/// The planner's default settings with `selection`.
+fn selecting(selection: SelectionWeights) -> Human2NavSettings {
+    Human2NavSettings {
+        selection,
+        ..Default::default()
+    }
+}
+
 /// The collision penalty is what stops the robot short of a pedestrian it predicts: without
 /// it a contact costs only the clearance of the waypoints before it, and driving through wins
 /// on progress. A penalty that is not a finite number ≥ 0 is refused, naming the field.
 #[test]
 fn the_collision_penalty_is_what_makes_the_planner_brake() {
-    use human2nav_core::human2nav::{COLLISION_PENALTY, SelectionWeights};
+    use human2nav_core::human2nav::COLLISION_PENALTY;
     let obs = blocked();
     let with = |collision: f64| {
         let settings = Human2NavSettings {
             motions: 0,
-            selection: SelectionWeights {
+            ..selecting(SelectionWeights {
                 collision,
                 ..SelectionWeights::default()
-            },
-            ..Default::default()
+            })
         };
         Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings)
     };
@@ -504,7 +513,6 @@ fn the_collision_penalty_is_what_makes_the_planner_brake() {
 /// end for that long, sees the contact that follows, and picks a plan that leaves their path.
 #[test]
 fn a_hold_after_the_plan_keeps_the_robot_out_of_someones_path() {
-    use human2nav_core::human2nav::SelectionWeights;
     let obs = Observation {
         time: 0.0,
         ego: Pose2::IDENTITY,
@@ -519,15 +527,14 @@ fn a_hold_after_the_plan_keeps_the_robot_out_of_someones_path() {
         }],
         ..Default::default()
     };
+    let settings = |hold: f64| {
+        selecting(SelectionWeights {
+            hold,
+            ..SelectionWeights::default()
+        })
+    };
     let plan = |hold: f64| {
-        let settings = Human2NavSettings {
-            selection: SelectionWeights {
-                hold,
-                ..SelectionWeights::default()
-            },
-            ..Default::default()
-        };
-        Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings)
+        Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings(hold))
             .unwrap()
             .plan(&obs)
             .unwrap()
@@ -545,16 +552,7 @@ fn a_hold_after_the_plan_keeps_the_robot_out_of_someones_path() {
     let with = plan(2.0);
     let gap = predicted_gap(&held(&with.poses), &obs);
     assert!(gap > 0.0, "gap {gap}; notes {:?}", with.info.notes);
-    let err = Human2NavSettings {
-        selection: SelectionWeights {
-            hold: f64::NAN,
-            ..SelectionWeights::default()
-        },
-        ..Default::default()
-    }
-    .validate()
-    .unwrap_err()
-    .to_string();
+    let err = settings(f64::NAN).validate().unwrap_err().to_string();
     assert!(err.contains("selection.hold"), "{err}");
 }
 

@@ -21,6 +21,10 @@
 //! With `prediction = "constant_velocity"` the same search sees only what a planner sees: the
 //! pedestrians of the observation, each extrapolated at its observed velocity. The two settings
 //! separate what prediction is worth from what the search over motions is worth.
+//! `prediction = "seen"` lies between them: the recorded future of the pedestrians the robot
+//! observes now, and nothing of those it cannot see yet (out of sensor range, or not yet in the
+//! recording). It is what perfect prediction of the observed crowd would give, so the gap from
+//! it to the oracle is what no predictor, however good, can close.
 //!
 //! A motion is scored by its first contact: a pose whose footprint comes within `margin` of a
 //! pedestrian's disc (at that pose's time, from the recording) or of a static obstacle. Motions
@@ -46,6 +50,9 @@ pub enum Prediction {
     Recorded,
     /// The observed pedestrians at their observed velocities: what a planner can know.
     ConstantVelocity,
+    /// The recorded future of the pedestrians observed now (by id); nobody else: perfect
+    /// prediction of what the robot sees.
+    Seen,
 }
 
 /// Settings of the clairvoyant planner.
@@ -272,6 +279,7 @@ impl Planner for OraclePlanner {
         match self.cfg.prediction {
             Prediction::Recorded => "oracle",
             Prediction::ConstantVelocity => "search-cv",
+            Prediction::Seen => "oracle-seen",
         }
     }
 
@@ -280,6 +288,7 @@ impl Planner for OraclePlanner {
         let n = self.cfg.poses();
         // Where everybody will be at each pose's time.
         let replay = CrowdReplay::new(&self.episode);
+        let seen = |id: u64| obs.agents.iter().any(|a| a.id == id);
         let crowd: Vec<Vec<([f64; 2], f64)>> = (0..n)
             .map(|k| {
                 let dt = k as f64 * self.cfg.plan_dt;
@@ -287,6 +296,12 @@ impl Planner for OraclePlanner {
                     Prediction::Recorded => replay
                         .at(obs.time + dt)
                         .into_iter()
+                        .map(|s| (s.position, s.radius))
+                        .collect(),
+                    Prediction::Seen => replay
+                        .at(obs.time + dt)
+                        .into_iter()
+                        .filter(|s| seen(s.id))
                         .map(|s| (s.position, s.radius))
                         .collect(),
                     Prediction::ConstantVelocity => obs

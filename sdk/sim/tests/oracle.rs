@@ -7,9 +7,10 @@ use common::{episode, robot, robots, walking};
 use human2nav_core::robot::footprint::clearance_at;
 use human2nav_core::tfs::tfs_plan;
 use human2nav_core::{Observation, Planner, Pose2, Twist2};
-use human2nav_sim::episode::AgentTrack;
 use human2nav_sim::episode::ScenarioClass;
+use human2nav_sim::episode::{AgentTrack, Episode};
 use human2nav_sim::oracle::{OracleConfig, OraclePlanner, Prediction};
+use human2nav_sim::replay::CrowdReplay;
 use human2nav_sim::straight::{StraightConfig, StraightPlanner};
 use human2nav_sim::{EpisodeMetrics, MethodSpec, Outcome, SimConfig, run_episode};
 use std::f64::consts::PI;
@@ -178,14 +179,63 @@ fn the_constant_velocity_search_knows_only_the_observation() {
             .fold(f64::INFINITY, f64::min)
     };
     assert!(closest(Prediction::Recorded) >= 0.05);
-    assert!(
-        closest(Prediction::ConstantVelocity) < 0.0,
-        "it cannot know"
-    );
+    for prediction in [Prediction::ConstantVelocity, Prediction::Seen] {
+        assert!(closest(prediction) < 0.0, "{prediction:?} cannot know");
+    }
     let cfg = OracleConfig {
         prediction: Prediction::ConstantVelocity,
         ..OracleConfig::default()
     };
     let p = OraclePlanner::new(cfg, r.limits, r.footprint.clone(), ep).unwrap();
     assert_eq!(p.name(), "search-cv");
+}
+
+#[test]
+fn the_seen_oracle_knows_the_future_of_whom_the_robot_observes() {
+    let r = robot("diablo");
+    // A walker 4 m ahead comes toward the robot, steps onto its line after 1 s and stays there.
+    let mut positions: Vec<[f64; 2]> = (0..=10).map(|k| [4.0 - 0.1 * k as f64, 0.6]).collect();
+    positions.extend((1..=5).map(|k| [3.0, 0.6 - 0.12 * k as f64]));
+    positions.extend(std::iter::repeat_n([3.0, 0.0], 100));
+    let walker = AgentTrack {
+        id: 4,
+        start_step: 0,
+        positions,
+        radius: 0.3,
+    };
+    let ep = episode("steps in", ScenarioClass::CounterFlow, 0.0, vec![walker]);
+    let seen = Observation {
+        ego: ep.start,
+        goal: ep.goal,
+        agents: CrowdReplay::new(&ep).observe(0.0, [ep.start.x, ep.start.y], 10.0, 8),
+        ..Default::default()
+    };
+    assert_eq!(seen.agents.len(), 1);
+    let unseen = Observation {
+        agents: vec![],
+        ..seen.clone()
+    };
+    let plan = |prediction: Prediction, ep: &Episode, obs: &Observation| {
+        let cfg = OracleConfig {
+            prediction,
+            ..OracleConfig::default()
+        };
+        let mut p = OraclePlanner::new(cfg, r.limits, r.footprint.clone(), ep.clone()).unwrap();
+        p.plan(obs).unwrap().poses
+    };
+    let empty = episode("empty", ScenarioClass::CounterFlow, 0.0, vec![]);
+    let blind = plan(Prediction::Recorded, &empty, &unseen);
+    // Observed, the walker's recorded future is known: the plan is the oracle's, and the walker
+    // changes it.
+    let known = plan(Prediction::Seen, &ep, &seen);
+    assert_eq!(known, plan(Prediction::Recorded, &ep, &seen));
+    assert_ne!(known, blind);
+    // Out of sight, it is not: the plan is the one of an empty world.
+    assert_eq!(plan(Prediction::Seen, &ep, &unseen), blind);
+    let cfg = OracleConfig {
+        prediction: Prediction::Seen,
+        ..OracleConfig::default()
+    };
+    let p = OraclePlanner::new(cfg, r.limits, r.footprint.clone(), ep).unwrap();
+    assert_eq!(p.name(), "oracle-seen");
 }

@@ -48,7 +48,8 @@ pub struct Sample {
 /// All observations of one agent, sorted by time, as read from a file.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RawTrack {
-    /// The identity in the source file (SDD track id, ETH/UCY pedestrian id, TrajNet chunk id).
+    /// The identity in the source file (SDD track id, ETH/UCY pedestrian id, the id of a TrajNet
+    /// walk's first chunk).
     pub id: u64,
     /// What kind of agent it is.
     pub class: AgentClass,

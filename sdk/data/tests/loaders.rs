@@ -7,7 +7,7 @@ mod common;
 use approx::assert_relative_eq;
 use human2nav_data::loaders::{eth, sdd, sgan, ucy};
 use human2nav_data::resample::{median, resample};
-use human2nav_data::{DataError, RawScene, ResampleOptions};
+use human2nav_data::{AgentClass, DataError, RawScene, RawTrack, ResampleOptions, Sample};
 
 /// Median speed (m/s) of the resampled samples moving faster than 0.2 m/s.
 fn walking_speed(raw: &RawScene) -> f64 {
@@ -345,20 +345,38 @@ fn sdd_trajnet_chunks_in_metres() {
         return;
     };
     let base = root.join("sdd/trajnet_split_socialvae");
-    let (mut rows, mut chunks) = (0, 0);
+    let (mut rows, mut walks, mut joined) = (0, 0, 0);
     for split in ["train", "test"] {
         for f in std::fs::read_dir(base.join(split)).unwrap().flatten() {
             let raw = sdd::load_trajnet(&f.path(), &f.file_name().to_string_lossy()).unwrap();
-            assert!(
-                raw.tracks.iter().all(|t| t.samples.len() == 20),
-                "{}",
-                raw.name
-            );
+            // Walks of whole 20-row chunks, each continuing the last at the files' step.
+            for t in &raw.tracks {
+                assert_eq!(t.samples.len() % 20, 0, "{}: walk {}", raw.name, t.id);
+                assert!(
+                    t.samples
+                        .windows(2)
+                        .all(|w| (w[1].t - w[0].t - sdd::TRAJNET_STEP).abs() < 1e-9),
+                    "{}: walk {} skips a step",
+                    raw.name,
+                    t.id
+                );
+            }
             rows += raw.sample_count();
-            chunks += raw.tracks.len();
+            walks += raw.tracks.len();
+            joined += raw
+                .dropped
+                .iter()
+                .find(|(why, _)| why == "chunks_joined")
+                .map_or(0, |(_, n)| *n);
         }
     }
-    assert_eq!((rows, chunks), (169_880 + 56_580, 8_494 + 2_829));
+    // Every row is kept and every chunk is either a walk's first or joined to one.
+    let chunks = 8_494 + 2_829;
+    assert_eq!(rows, 169_880 + 56_580);
+    assert_eq!(walks + joined, chunks);
+    eprintln!("SDD TrajNet: {chunks} chunks joined into {walks} walks");
+    // Most chunks continue another: 8 s chunks of walks that last longer.
+    assert!(joined * 10 > chunks * 6, "{joined} of {chunks} joined");
     let raw = sdd::load_trajnet(&base.join("train/gates_4.txt"), "gates_4").unwrap();
     let t = raw.tracks.iter().find(|t| t.id == 47).unwrap();
     assert_relative_eq!(t.samples[0].p[0], 41.45325786, epsilon = 1e-9);
@@ -425,4 +443,85 @@ fn malformed_and_non_finite_lines_name_file_and_line() {
         human2nav_data::Homography::load(&p).unwrap_err(),
         DataError::SingularHomography { .. }
     ));
+}
+
+#[test]
+fn trajnet_chunks_of_one_walk_are_joined_and_others_are_not() {
+    // Frames at 30 fps, a row every 12 frames (0.4 s). Walker A walks +x at 1 m/s in two chunks
+    // (ids 5, 9); chunk 9 starts one step after chunk 5 ends, where A's last step puts it.
+    // Chunk 7 also starts then, but 2 m away: someone else. Chunk 3 starts where A would be,
+    // but two steps late: not a continuation either.
+    let row = |frame: i64, id: u64, x: f64, y: f64| format!("{frame} {id} {x} {y}\n");
+    let mut body = String::new();
+    for k in 0..20 {
+        body += &row(12 * k, 5, 0.4 * k as f64, 0.0);
+    }
+    for k in 20..40 {
+        body += &row(12 * k, 9, 0.4 * k as f64 + 0.03, 0.0);
+        body += &row(12 * k, 7, 0.4 * k as f64, 2.0);
+    }
+    for k in 41..61 {
+        body += &row(12 * k, 3, 0.4 * k as f64, 0.0);
+    }
+    let p = common::scratch("trajnet_chunks.txt");
+    std::fs::write(&p, body).unwrap();
+    let raw = sdd::load_trajnet(&p, "chunks").unwrap();
+    let ids: Vec<u64> = raw.tracks.iter().map(|t| t.id).collect();
+    assert_eq!(
+        ids,
+        vec![3, 5, 7],
+        "walk 5 absorbs chunk 9 and keeps its id"
+    );
+    let walk = &raw.tracks[1];
+    assert_eq!(walk.samples.len(), 40);
+    assert_relative_eq!(walk.samples[20].t - walk.samples[19].t, 0.4, epsilon = 1e-9);
+    assert_relative_eq!(walk.samples[39].p[0], 0.4 * 39.0 + 0.03, epsilon = 1e-9);
+    assert_eq!(
+        raw.dropped,
+        vec![("chunks_joined".to_string(), 1)],
+        "one chunk joined, no rows lost"
+    );
+    assert_eq!(raw.sample_count(), 80);
+    // The same rows in another id order give the same walks.
+    let mut lines: Vec<String> = std::fs::read_to_string(&p)
+        .unwrap()
+        .lines()
+        .map(str::to_string)
+        .collect();
+    lines.reverse();
+    std::fs::write(&p, lines.join("\n")).unwrap();
+    assert_eq!(sdd::load_trajnet(&p, "chunks").unwrap().tracks, raw.tracks);
+}
+
+#[test]
+fn of_two_chunks_that_could_continue_a_walk_the_nearer_one_does() {
+    // Walk 1 ends at x = 7.6 heading +x at 1 m/s; chunks 2 (0.3 m off) and 4 (0.1 m off) both
+    // start one step later within the join distance. Chunk 4 continues it, chunk 2 stays a walk.
+    let mut chunks = vec![RawTrack {
+        id: 1,
+        class: AgentClass::Pedestrian,
+        samples: (0..20)
+            .map(|k| Sample {
+                t: 0.4 * k as f64,
+                p: [0.4 * k as f64, 0.0],
+            })
+            .collect(),
+    }];
+    for (id, dy) in [(2, 0.3), (4, 0.1)] {
+        chunks.push(RawTrack {
+            id,
+            class: AgentClass::Pedestrian,
+            samples: (20..40)
+                .map(|k| Sample {
+                    t: 0.4 * k as f64,
+                    p: [0.4 * k as f64, dy],
+                })
+                .collect(),
+        });
+    }
+    let (walks, joined) = sdd::join_chunks(chunks, sdd::TRAJNET_STEP);
+    assert_eq!(joined, 1);
+    assert_eq!(walks.iter().map(|w| w.id).collect::<Vec<_>>(), vec![1, 2]);
+    assert_eq!(walks[0].samples.len(), 40);
+    assert_relative_eq!(walks[0].samples[25].p[1], 0.1);
 }

@@ -8,7 +8,7 @@
 //! | [`ucy::load_vsp`] | UCY `annotation.vsp` | pixels, origin at the image centre, → metres by `H` | 25 fps frames, irregular control points |
 //! | [`sgan::load`] | sgan/Trajectron `frame id x y` | metres | 25 fps frames; `biwi_eth*` files use ETH's 15 fps frame numbers |
 //! | [`sdd::load_raw`] | SDD `annotations.txt` | pixel boxes × `estimated_scales.yaml` | 30 fps |
-//! | [`sdd::load_trajnet`] | SDD TrajNet split `frame id x y` | metres, 20-row chunks | 30 fps frames, step 12 |
+//! | [`sdd::load_trajnet`] | SDD TrajNet split `frame id x y` | metres, 20-row chunks joined into walks | 30 fps frames, step 12 |
 //!
 //! SDD positions are in image axes (x right, y down); the loaders flip `y` so that every world
 //! frame of the SDK is right-handed with `z` up.

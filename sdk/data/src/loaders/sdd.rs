@@ -11,7 +11,7 @@ use crate::error::DataError;
 use crate::homography::Homography;
 use crate::limits::{self, MAX_COORDINATE};
 use crate::text;
-use crate::track::{AgentClass, RawScene, Sample, SourceTiming, group_rows};
+use crate::track::{AgentClass, RawScene, RawTrack, Sample, SourceTiming, group_rows};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -287,8 +287,24 @@ pub fn load_raw(
     Ok(scene)
 }
 
-/// Loads a TrajNet-split file (`frame id x y`, metres, image axes) as scene `name`. Every id is
-/// a 20-row chunk of one pedestrian; it becomes its own track.
+/// The TrajNet files' step between rows of a chunk (12 frames at 30 fps).
+pub const TRAJNET_STEP: f64 = 0.4;
+
+/// How far (m) a chunk's first position may lie from where the chunk before it, continued one
+/// step at its last velocity, puts the pedestrian, for the two to be joined. Over the 47 files,
+/// the nearest chunk starting one step after another ends lies a median 0.06 m from that point
+/// (90 % within 0.18 m, 99 % within 0.6 m); two different people both ending and starting on
+/// the same frames within half a metre of it are rarer than that.
+pub const CHUNK_JOIN_DISTANCE: f64 = 0.5;
+
+/// Loads a TrajNet-split file (`frame id x y`, metres, image axes) as scene `name`.
+///
+/// Every id in these files is a 20-row chunk, not a pedestrian: a longer walk is cut into
+/// chunks with new ids, each starting one step after the previous one ends. Read as separate
+/// tracks, every pedestrian in view for more than 8 s would vanish for a step and reappear
+/// with a new id, standing and without history, which a replayed crowd turns into people
+/// materialising next to the robot. So chunks are joined back into walks ([`join_chunks`]); the
+/// number joined is counted under `chunks_joined`.
 pub fn load_trajnet(path: &Path, name: &str) -> Result<RawScene, DataError> {
     let body = text::read(path)?;
     let mut rows = Vec::new();
@@ -308,13 +324,14 @@ pub fn load_trajnet(path: &Path, name: &str) -> Result<RawScene, DataError> {
             path.display()
         )));
     }
-    let (tracks, dup) = group_rows(rows);
+    let (chunks, dup) = group_rows(rows);
+    let (tracks, joined) = join_chunks(chunks, TRAJNET_STEP);
     let mut scene = RawScene {
         name: name.to_string(),
         dataset: "sdd".into(),
         format: "sdd_trajnet".into(),
         timing: SourceTiming {
-            nominal_dt: 0.4,
+            nominal_dt: TRAJNET_STEP,
             max_gap: 1.0,
             smooth_window: 0.0,
         },
@@ -322,5 +339,92 @@ pub fn load_trajnet(path: &Path, name: &str) -> Result<RawScene, DataError> {
         dropped: Vec::new(),
     };
     scene.drop_count("duplicate_time", dup);
+    scene.drop_count("chunks_joined", joined);
     Ok(scene)
+}
+
+/// Joins chunks of one walk: chunk `b` continues chunk `a` when it starts `step` seconds after
+/// `a` ends, at most [`CHUNK_JOIN_DISTANCE`] from `a`'s last position continued one step at
+/// `a`'s last velocity. Candidate pairs are taken nearest first, each chunk continuing at most
+/// one and continued by at most one, so the result does not depend on the order of the ids. A
+/// walk keeps the id of its first chunk. Returns the tracks, sorted by id, and how many chunks
+/// were joined to a predecessor.
+pub fn join_chunks(chunks: Vec<RawTrack>, step: f64) -> (Vec<RawTrack>, usize) {
+    const TIME_EPS: f64 = 1e-6;
+    let ends: Vec<Option<(f64, [f64; 2])>> = chunks
+        .iter()
+        .map(|c| {
+            let last = c.samples.last()?;
+            let next = match c.samples.len() {
+                n if n >= 2 => {
+                    let prev = c.samples[n - 2];
+                    let k = step / (last.t - prev.t).max(TIME_EPS);
+                    [
+                        last.p[0] + (last.p[0] - prev.p[0]) * k,
+                        last.p[1] + (last.p[1] - prev.p[1]) * k,
+                    ]
+                }
+                _ => last.p,
+            };
+            Some((last.t + step, next))
+        })
+        .collect();
+    // Chunks by start time (in steps), to find those starting when another one ends.
+    let key = |t: f64| (t / step).round() as i64;
+    let mut starting: BTreeMap<i64, Vec<usize>> = BTreeMap::new();
+    for (j, c) in chunks.iter().enumerate() {
+        if let Some(first) = c.samples.first() {
+            starting.entry(key(first.t)).or_default().push(j);
+        }
+    }
+    let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
+    for (i, end) in ends.iter().enumerate() {
+        let Some((t, next)) = *end else { continue };
+        for &j in starting.get(&key(t)).into_iter().flatten() {
+            let first = chunks[j].samples[0];
+            if j == i || (first.t - t).abs() > TIME_EPS {
+                continue;
+            }
+            let d = (first.p[0] - next[0]).hypot(first.p[1] - next[1]);
+            if d <= CHUNK_JOIN_DISTANCE {
+                pairs.push((d, i, j));
+            }
+        }
+    }
+    pairs.sort_by(|a, b| {
+        a.0.total_cmp(&b.0)
+            .then(chunks[a.1].id.cmp(&chunks[b.1].id))
+            .then(chunks[a.2].id.cmp(&chunks[b.2].id))
+    });
+    let mut next: Vec<Option<usize>> = vec![None; chunks.len()];
+    let mut continues = vec![false; chunks.len()];
+    for &(_, i, j) in &pairs {
+        if next[i].is_none() && !continues[j] {
+            next[i] = Some(j);
+            continues[j] = true;
+        }
+    }
+    let joined = continues.iter().filter(|&&c| c).count();
+    // Each walk from its first chunk; a successor starts after its predecessor ends, so the
+    // chains are acyclic.
+    let mut slots: Vec<Option<RawTrack>> = chunks.into_iter().map(Some).collect();
+    let mut walks = Vec::with_capacity(slots.len() - joined);
+    for first in 0..slots.len() {
+        if continues[first] {
+            continue;
+        }
+        let Some(mut walk) = slots[first].take() else {
+            continue;
+        };
+        let mut at = next[first];
+        while let Some(j) = at {
+            if let Some(chunk) = slots[j].take() {
+                walk.samples.extend(chunk.samples);
+            }
+            at = next[j];
+        }
+        walks.push(walk);
+    }
+    walks.sort_by_key(|w| w.id);
+    (walks, joined)
 }

@@ -293,15 +293,10 @@ impl Planner for OraclePlanner {
             .map(|k| {
                 let dt = k as f64 * self.cfg.plan_dt;
                 match self.cfg.prediction {
-                    Prediction::Recorded => replay
+                    Prediction::Recorded | Prediction::Seen => replay
                         .at(obs.time + dt)
                         .into_iter()
-                        .map(|s| (s.position, s.radius))
-                        .collect(),
-                    Prediction::Seen => replay
-                        .at(obs.time + dt)
-                        .into_iter()
-                        .filter(|s| seen(s.id))
+                        .filter(|s| self.cfg.prediction == Prediction::Recorded || seen(s.id))
                         .map(|s| (s.position, s.radius))
                         .collect(),
                     Prediction::ConstantVelocity => obs

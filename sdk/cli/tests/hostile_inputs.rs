@@ -1277,6 +1277,31 @@ fn card_edit(from: &'static str, to: &'static str) -> impl Fn(&Path) -> Result<(
     move |dir| model_with(dir, &edit(CARD, from, to), None)
 }
 
+/// The shipped card with the first `key = ...` (a one-line value or a multi-line array) set to
+/// `value`, whatever the trained value was: retraining changes the numbers, not the cases.
+fn card_set(key: &'static str, value: &'static str) -> impl Fn(&Path) -> Result<(), String> {
+    move |dir| {
+        let prefix = format!("{key} = ");
+        let mut out = String::with_capacity(CARD.len());
+        let mut lines = CARD.lines();
+        let mut found = false;
+        while let Some(line) = lines.next() {
+            if !found && line.starts_with(&prefix) {
+                found = true;
+                if line.trim_end().ends_with('[') {
+                    lines.by_ref().find(|l| l.trim() == "]");
+                }
+                out.push_str(&format!("{prefix}{value}\n"));
+            } else {
+                out.push_str(line);
+                out.push('\n');
+            }
+        }
+        assert!(found, "the shipped card has no `{key}`");
+        model_with(dir, &out, None)
+    }
+}
+
 fn shipped_weights() -> Vec<u8> {
     std::fs::read(root().join("models/human2nav-cfm/model.safetensors")).expect("shipped weights")
 }
@@ -1370,14 +1395,14 @@ fn model_cases() -> Vec<Case> {
             "card `position_scale = 0`",
             NR,
             &["position_scale"],
-            card_edit("position_scale = 2.237100381768482", "position_scale = 0.0"),
+            card_set("position_scale", "0.0"),
         ),
         err(
             a,
             "card `velocity_std` with a NaN",
             NR,
             &["velocity_std"],
-            card_edit("1.361509581159281", "nan"),
+            card_set("velocity_std", "[nan, 1.0, 1.0]"),
         ),
         err(a, "card missing", NR, &["model.toml"], |d| {
             std::fs::create_dir_all(d.join("model")).map_err(|e| e.to_string())?;

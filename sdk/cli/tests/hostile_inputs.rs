@@ -1277,28 +1277,22 @@ fn card_edit(from: &'static str, to: &'static str) -> impl Fn(&Path) -> Result<(
     move |dir| model_with(dir, &edit(CARD, from, to), None)
 }
 
-/// The shipped card with the first `key = ...` (a one-line value or a multi-line array) set to
-/// `value`, whatever the trained value was: retraining changes the numbers, not the cases.
-fn card_set(key: &'static str, value: &'static str) -> impl Fn(&Path) -> Result<(), String> {
+/// The shipped card with `[table] key` set to `value`, whatever the trained value was:
+/// retraining changes the numbers, not the cases.
+fn card_set(
+    table: &'static str,
+    key: &'static str,
+    value: toml::Value,
+) -> impl Fn(&Path) -> Result<(), String> {
     move |dir| {
-        let prefix = format!("{key} = ");
-        let mut out = String::with_capacity(CARD.len());
-        let mut lines = CARD.lines();
-        let mut found = false;
-        while let Some(line) = lines.next() {
-            if !found && line.starts_with(&prefix) {
-                found = true;
-                if line.trim_end().ends_with('[') {
-                    lines.by_ref().find(|l| l.trim() == "]");
-                }
-                out.push_str(&format!("{prefix}{value}\n"));
-            } else {
-                out.push_str(line);
-                out.push('\n');
-            }
-        }
-        assert!(found, "the shipped card has no `{key}`");
-        model_with(dir, &out, None)
+        let mut card: toml::Table = CARD.parse().expect("the shipped card is TOML");
+        let slot = card
+            .get_mut(table)
+            .and_then(toml::Value::as_table_mut)
+            .and_then(|t| t.get_mut(key))
+            .unwrap_or_else(|| panic!("the shipped card has no `{table}.{key}`"));
+        *slot = value.clone();
+        model_with(dir, &card.to_string(), None)
     }
 }
 
@@ -1395,14 +1389,18 @@ fn model_cases() -> Vec<Case> {
             "card `position_scale = 0`",
             NR,
             &["position_scale"],
-            card_set("position_scale", "0.0"),
+            card_set("normalisation", "position_scale", toml::Value::Float(0.0)),
         ),
         err(
             a,
             "card `velocity_std` with a NaN",
             NR,
             &["velocity_std"],
-            card_set("velocity_std", "[nan, 1.0, 1.0]"),
+            card_set(
+                "normalisation",
+                "velocity_std",
+                toml::Value::Array(vec![f64::NAN.into(), 1.0.into(), 1.0.into()]),
+            ),
         ),
         err(a, "card missing", NR, &["model.toml"], |d| {
             std::fs::create_dir_all(d.join("model")).map_err(|e| e.to_string())?;

@@ -77,6 +77,8 @@
 
 mod near;
 
+use std::borrow::Cow;
+
 use crate::bev::{self, BevSpec};
 use crate::constraint::{ConstraintContext, Phi};
 use crate::flow::{FlowCondition, FlowModel};
@@ -148,9 +150,15 @@ pub struct SelectionWeights {
     /// the contact the robot would meet once it stops there. 0 (the default): the plan alone.
     /// At most [`MAX_HOLD_S`].
     pub hold: f64,
+    /// How long (s) every candidate is taken to go on after its last pose at the twist of its
+    /// last step ([`continued`]), scored over those waypoints too: the goal term's closest
+    /// approach and the clearance term see that far ahead, while the plan sent stays the
+    /// candidate. 0 (the default): the plan alone. At most [`MAX_HOLD_S`].
+    pub lookahead: f64,
 }
 
-/// Largest [`SelectionWeights::hold`] (s): longer than any plan, and a typo beyond it.
+/// Largest [`SelectionWeights::hold`] and [`SelectionWeights::lookahead`] (s): longer than any
+/// plan, and a typo beyond it.
 pub const MAX_HOLD_S: f64 = 10.0;
 
 impl Default for SelectionWeights {
@@ -165,6 +173,7 @@ impl Default for SelectionWeights {
             arrival: 0.3,
             collision: COLLISION_PENALTY,
             hold: 0.0,
+            lookahead: 0.0,
         }
     }
 }
@@ -346,11 +355,13 @@ impl Human2NavSettings {
         if !(s.margin.is_finite() && s.margin > 0.0) {
             return bad("selection.margin", "must be finite and > 0");
         }
-        if !(s.hold.is_finite() && (0.0..=MAX_HOLD_S).contains(&s.hold)) {
-            return bad(
-                "selection.hold",
-                &format!("must lie in 0 to {MAX_HOLD_S} s, got {}", s.hold),
-            );
+        for (name, v) in [
+            ("selection.hold", s.hold),
+            ("selection.lookahead", s.lookahead),
+        ] {
+            if !(v.is_finite() && (0.0..=MAX_HOLD_S).contains(&v)) {
+                return bad(name, &format!("must lie in 0 to {MAX_HOLD_S} s, got {v}"));
+            }
         }
         self.projection
             .validate()
@@ -552,8 +563,14 @@ impl<M: FlowModel> Human2Nav<M> {
         let k = self.settings.samples;
         let (cond, agents) = self.condition(obs);
         let mut notes = Vec::new();
-        let forecast = self.forecast(obs, &agents, horizon + self.hold_steps(), &mut notes);
-        self.obstacles = self.nearby_obstacles(obs, horizon);
+        let ahead = self.lookahead_steps();
+        let forecast = self.forecast(
+            obs,
+            &agents,
+            horizon + ahead + self.hold_steps(),
+            &mut notes,
+        );
+        self.obstacles = self.nearby_obstacles(obs, horizon + ahead);
         let x0 = self.draw_source(k, horizon);
         let goal = cond.goal;
         let warm = if self.settings.warm_start {
@@ -659,8 +676,9 @@ impl<M: FlowModel> Human2Nav<M> {
         }
 
         // Stage 3: selection.
-        let near = self.near(&candidates, &forecast);
-        let best = select_best(&candidates, &corrected, |c| {
+        let scored = self.scored(&candidates);
+        let near = self.near(&scored, &forecast);
+        let best = select_best(&scored, &corrected, |c| {
             self.score(c, goal, &near, obs.ego_velocity, previous_ego, true)
         });
         let Some(chosen) = best else {
@@ -999,7 +1017,8 @@ impl<M: FlowModel> Human2Nav<M> {
         if paper || g == 0 || g >= samples.len() {
             return (0..samples.len()).collect();
         }
-        let near = self.near(samples, forecast);
+        let samples = self.scored(samples);
+        let near = self.near(&samples, forecast);
         let mut scored: Vec<(f64, usize)> = samples
             .iter()
             .enumerate()
@@ -1030,6 +1049,20 @@ impl<M: FlowModel> Human2Nav<M> {
     /// [`SelectionWeights::hold`] in plan steps.
     fn hold_steps(&self) -> usize {
         (self.settings.selection.hold / self.settings.dt).round() as usize
+    }
+
+    /// [`SelectionWeights::lookahead`] in plan steps.
+    fn lookahead_steps(&self) -> usize {
+        (self.settings.selection.lookahead / self.settings.dt).round() as usize
+    }
+
+    /// The candidates as the selection scores them: each [`continued`] for the lookahead, or
+    /// as they are without one.
+    fn scored<'a>(&self, candidates: &'a [Vec<Pose2>]) -> Cow<'a, [Vec<Pose2>]> {
+        match self.lookahead_steps() {
+            0 => Cow::Borrowed(candidates),
+            ahead => Cow::Owned(candidates.iter().map(|c| continued(c, ahead)).collect()),
+        }
     }
 
     /// The previous plan re-expressed in the current ego frame at the current time, `T` future
@@ -1276,6 +1309,28 @@ fn select_best(
     best.map(|(i, _)| i)
 }
 
+/// `traj` (ego frame, starting after the robot's pose, the identity) followed by `steps` more
+/// poses at the twist of its last step ([`SelectionWeights::lookahead`]): where the robot would
+/// be if it went on as the plan ends. A plan that ends at rest stays there; a robot's own
+/// motion ([`crate::motions`]) whose last segment has reached its twist is rolled out longer.
+pub fn continued(traj: &[Pose2], steps: usize) -> Vec<Pose2> {
+    let mut out = Vec::with_capacity(traj.len() + steps);
+    out.extend_from_slice(traj);
+    if let Some(&last) = traj.last() {
+        let before = traj
+            .len()
+            .checked_sub(2)
+            .map_or(Pose2::IDENTITY, |i| traj[i]);
+        let step = before.inverse().compose(last);
+        let mut p = last;
+        for _ in 0..steps {
+            p = p.compose(step);
+            out.push(p);
+        }
+    }
+    out
+}
+
 /// `goal`, facing it, at `speed` until the goal and resting there. Not feasible as it stands
 /// (it turns to face the goal at once and starts at `speed`); the last-step correction makes
 /// it so.
@@ -1429,6 +1484,33 @@ mod tests {
         let away: Vec<Pose2> = traj.iter().map(|p| Pose2::new(-p.x, 0.0, 0.0)).collect();
         assert_eq!(goal_term(&away, goal, &closest).0, 1.0);
         assert_eq!(goal_term(&[], goal, &closest), (1.0, 0));
+    }
+
+    #[test]
+    fn a_candidate_goes_on_at_the_twist_of_its_last_step() {
+        // An arc: 0.1 m and 0.05 rad a step from the robot's pose.
+        let step = Pose2::new(0.1, 0.0, 0.05);
+        let mut arc = vec![step];
+        for _ in 1..5 {
+            arc.push(arc[arc.len() - 1].compose(step));
+        }
+        let long = continued(&arc[..3], 2);
+        assert_eq!(long.len(), 5);
+        for (a, b) in long.iter().zip(&arc) {
+            assert!(
+                (a.x - b.x).abs() < 1e-12 && (a.y - b.y).abs() < 1e-12,
+                "{a:?} {b:?}"
+            );
+            assert!((a.theta - b.theta).abs() < 1e-12);
+        }
+        // One pose: its step is from the robot's pose (the identity).
+        let one = continued(&arc[..1], 4);
+        assert!((one[4].x - arc[4].x).abs() < 1e-12 && (one[4].y - arc[4].y).abs() < 1e-12);
+        // At rest it stays; nothing to continue from is nothing.
+        let rest = continued(&[Pose2::new(1.0, 2.0, 0.3); 2], 3);
+        assert!(rest.iter().all(|p| *p == Pose2::new(1.0, 2.0, 0.3)));
+        assert!(continued(&[], 3).is_empty());
+        assert_eq!(continued(&arc, 0), arc);
     }
 
     #[test]

@@ -556,6 +556,62 @@ fn a_hold_after_the_plan_keeps_the_robot_out_of_someones_path() {
     assert!(err.contains("selection.hold"), "{err}");
 }
 
+/// Someone walks down the robot's line toward it, far enough that every plan ends short of
+/// them. With a lookahead the selection scores each plan continued at its last step's twist
+/// for that long, sees that driving on at the goal meets them, and picks a plan that goes on
+/// out of their path. A lookahead that is not a number in 0 to 10 s is refused by name.
+#[test]
+fn a_lookahead_past_the_plan_sees_the_contact_of_driving_on() {
+    use human2nav_core::human2nav::continued;
+    let obs = Observation {
+        time: 0.0,
+        ego: Pose2::IDENTITY,
+        ego_velocity: Twist2::new(0.0, 0.0, 0.0),
+        goal: [8.0, 0.0],
+        agents: vec![AgentState {
+            id: 1,
+            position: [7.0, 0.0],
+            velocity: [-0.8, 0.0],
+            radius: 0.3,
+            history: vec![],
+        }],
+        ..Default::default()
+    };
+    let settings = |lookahead: f64| {
+        selecting(SelectionWeights {
+            lookahead,
+            ..SelectionWeights::default()
+        })
+    };
+    let plan = |lookahead: f64| {
+        Human2Nav::new(
+            fast_straight(),
+            robot(),
+            BevSpec::default(),
+            settings(lookahead),
+        )
+        .unwrap()
+        .plan(&obs)
+        .unwrap()
+    };
+    let without = plan(0.0);
+    assert!(predicted_gap(&without.poses, &obs) > 0.0);
+    let gap = predicted_gap(&continued(&without.poses, 20), &obs);
+    assert!(gap < 0.0, "driving on for 2 s: gap {gap}");
+    let with = plan(2.0);
+    assert_eq!(
+        with.poses.len(),
+        without.poses.len(),
+        "the plan sent is the candidate"
+    );
+    let gap = predicted_gap(&continued(&with.poses, 20), &obs);
+    assert!(gap > 0.0, "gap {gap}; notes {:?}", with.info.notes);
+    for bad in [f64::NAN, -0.1, 10.5] {
+        let err = settings(bad).validate().unwrap_err().to_string();
+        assert!(err.contains("selection.lookahead"), "{bad}: {err}");
+    }
+}
+
 /// The model's samples run straight past a goal 0.8 m ahead and to the left; within
 /// `goal_approach` the planner also offers "straight to the goal", which wins, ends at the goal
 /// and is feasible. Without it the plan ends outside the benchmark's 0.3 m goal tolerance.

@@ -18,7 +18,7 @@ use human2nav_core::obstacle::{Obstacle, OccupancyGrid, footprint_clearance};
 use human2nav_core::robot::footprint::FootprintShape;
 use human2nav_core::tfs::tfs_plan;
 use human2nav_core::{
-    AgentState, Deadline, GuidanceWeights, Limits, Observation, Planner, Pose2, Stage, Twist2,
+    AgentState, Deadline, GuidanceWeights, Limits, Observation, Plan, Planner, Pose2, Stage, Twist2,
 };
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -508,36 +508,47 @@ fn the_collision_penalty_is_what_makes_the_planner_brake() {
     }
 }
 
-/// Someone walks down the robot's line toward it, far enough that a plan driving at the goal
-/// ends just short of them. With a hold the selection also checks each plan standing at its
-/// end for that long, sees the contact that follows, and picks a plan that leaves their path.
-#[test]
-fn a_hold_after_the_plan_keeps_the_robot_out_of_someones_path() {
-    let obs = Observation {
+/// The robot at rest, its goal 8 m ahead, and someone at `x` m on its line walking toward it
+/// at 0.8 m/s.
+fn oncoming(x: f64) -> Observation {
+    Observation {
         time: 0.0,
         ego: Pose2::IDENTITY,
         ego_velocity: Twist2::new(0.0, 0.0, 0.0),
         goal: [8.0, 0.0],
         agents: vec![AgentState {
             id: 1,
-            position: [6.5, 0.0],
+            position: [x, 0.0],
             velocity: [-0.8, 0.0],
             radius: 0.3,
             history: vec![],
         }],
         ..Default::default()
-    };
-    let settings = |hold: f64| {
-        selecting(SelectionWeights {
-            hold,
-            ..SelectionWeights::default()
-        })
-    };
-    let plan = |hold: f64| {
-        Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings(hold))
-            .unwrap()
-            .plan(&obs)
-            .unwrap()
+    }
+}
+
+/// The plan for `obs` of the planner with the default settings but `selection`.
+fn plan_selecting(selection: SelectionWeights, obs: &Observation) -> Plan {
+    Human2Nav::new(
+        fast_straight(),
+        robot(),
+        BevSpec::default(),
+        selecting(selection),
+    )
+    .unwrap()
+    .plan(obs)
+    .unwrap()
+}
+
+/// Someone walks down the robot's line toward it, far enough that a plan driving at the goal
+/// ends just short of them. With a hold the selection also checks each plan standing at its
+/// end for that long, sees the contact that follows, and picks a plan that leaves their path.
+#[test]
+fn a_hold_after_the_plan_keeps_the_robot_out_of_someones_path() {
+    let obs = oncoming(6.5);
+    let hold = |hold: f64| SelectionWeights {
+        hold,
+        ..SelectionWeights::default()
     };
     // The plan followed by the robot standing at its end for 2 s.
     let held = |p: &[Pose2]| {
@@ -545,14 +556,17 @@ fn a_hold_after_the_plan_keeps_the_robot_out_of_someones_path() {
         poses.extend(std::iter::repeat_n(p[p.len() - 1], 20));
         poses
     };
-    let without = plan(0.0);
+    let without = plan_selecting(hold(0.0), &obs);
     assert!(predicted_gap(&without.poses, &obs) > 0.0);
     let gap = predicted_gap(&held(&without.poses), &obs);
     assert!(gap < 0.0, "standing at its end: gap {gap}");
-    let with = plan(2.0);
+    let with = plan_selecting(hold(2.0), &obs);
     let gap = predicted_gap(&held(&with.poses), &obs);
     assert!(gap > 0.0, "gap {gap}; notes {:?}", with.info.notes);
-    let err = settings(f64::NAN).validate().unwrap_err().to_string();
+    let err = selecting(hold(f64::NAN))
+        .validate()
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("selection.hold"), "{err}");
 }
 
@@ -563,42 +577,16 @@ fn a_hold_after_the_plan_keeps_the_robot_out_of_someones_path() {
 #[test]
 fn a_lookahead_past_the_plan_sees_the_contact_of_driving_on() {
     use human2nav_core::human2nav::continued;
-    let obs = Observation {
-        time: 0.0,
-        ego: Pose2::IDENTITY,
-        ego_velocity: Twist2::new(0.0, 0.0, 0.0),
-        goal: [8.0, 0.0],
-        agents: vec![AgentState {
-            id: 1,
-            position: [7.0, 0.0],
-            velocity: [-0.8, 0.0],
-            radius: 0.3,
-            history: vec![],
-        }],
-        ..Default::default()
+    let obs = oncoming(7.0);
+    let lookahead = |lookahead: f64| SelectionWeights {
+        lookahead,
+        ..SelectionWeights::default()
     };
-    let settings = |lookahead: f64| {
-        selecting(SelectionWeights {
-            lookahead,
-            ..SelectionWeights::default()
-        })
-    };
-    let plan = |lookahead: f64| {
-        Human2Nav::new(
-            fast_straight(),
-            robot(),
-            BevSpec::default(),
-            settings(lookahead),
-        )
-        .unwrap()
-        .plan(&obs)
-        .unwrap()
-    };
-    let without = plan(0.0);
+    let without = plan_selecting(lookahead(0.0), &obs);
     assert!(predicted_gap(&without.poses, &obs) > 0.0);
     let gap = predicted_gap(&continued(&without.poses, 20), &obs);
     assert!(gap < 0.0, "driving on for 2 s: gap {gap}");
-    let with = plan(2.0);
+    let with = plan_selecting(lookahead(2.0), &obs);
     assert_eq!(
         with.poses.len(),
         without.poses.len(),
@@ -607,7 +595,10 @@ fn a_lookahead_past_the_plan_sees_the_contact_of_driving_on() {
     let gap = predicted_gap(&continued(&with.poses, 20), &obs);
     assert!(gap > 0.0, "gap {gap}; notes {:?}", with.info.notes);
     for bad in [f64::NAN, -0.1, 10.5] {
-        let err = settings(bad).validate().unwrap_err().to_string();
+        let err = selecting(lookahead(bad))
+            .validate()
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("selection.lookahead"), "{bad}: {err}");
     }
 }

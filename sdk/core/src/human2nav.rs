@@ -30,9 +30,11 @@
 //! trajectory feasibility score of the candidate ([`crate::tfs`]), `d/d_0` the candidate's
 //! closest approach to the (clipped) goal relative to the current distance (0 once within
 //! [`SelectionWeights::arrival`], and then its waypoints after the arrival are not checked for
-//! contact; [`Progress`] also offers the distance at its end), `C` the mean over waypoints of
-//! `max(0, margin − gap)²/margin²` with `gap` the distance between the robot's footprint (its
-//! shapes at the waypoint's pose, [`RobotModel::footprint`]) and each agent's disc, agents
+//! contact; [`Progress`] also offers the distance at its end and how soon it could arrive;
+//! [`SelectionWeights::lookahead`] scores each candidate continued past its end), `C` the
+//! mean over waypoints of `max(0, margin − gap)²/margin²` with `gap` the distance between the
+//! robot's footprint (its shapes at the waypoint's pose, [`RobotModel::footprint`]) and each
+//! agent's disc, agents
 //! predicted at constant velocity (or by the planner's [`CrowdPredictor`], when it has one:
 //! `C` is then the expectation over the scenes of its [`Forecast`]), and each static obstacle
 //! of the observation ([`crate::obstacle`]: circles, polygons, segments and the occupied cells
@@ -119,6 +121,12 @@ pub enum Progress {
     /// checked for contact, since the run ends on arrival.
     #[default]
     Closest,
+    /// How soon the robot could be at the goal following the candidate, in metres at `v_max`,
+    /// over `d_0`: the way `v_max` covers by its arrival (as with [`Progress::Closest`]; the
+    /// waypoints after it are not checked) or, without one, by its end plus the distance left
+    /// there. Unlike the closest approach it ranks an arrival by how soon it comes, so a
+    /// candidate that dawdles to the goal scores worse than one that drives there.
+    Time,
 }
 
 /// Weights of the selection rule (see the module docs). All finite and ≥ 0.
@@ -1103,15 +1111,19 @@ impl<M: FlowModel> Human2Nav<M> {
             1.0
         };
 
-        let (progress, checked) = goal_term(traj, goal, w);
+        let reach_per_step = self.robot.limits.v_max * self.settings.dt;
+        let (progress, checked) = goal_term(traj, goal, w, reach_per_step);
+        let arrived = match w.progress {
+            Progress::End => progress == 0.0,
+            // Checked up to its arrival, if it arrives.
+            Progress::Closest | Progress::Time => traj[..checked]
+                .last()
+                .is_some_and(|p| (p.x - goal[0]).hypot(p.y - goal[1]) <= w.arrival),
+        };
 
         // A candidate that arrives ends there; one that does not is also checked standing at
         // its last pose for the hold.
-        let hold = if progress == 0.0 {
-            0
-        } else {
-            self.hold_steps()
-        };
+        let hold = if arrived { 0 } else { self.hold_steps() };
         let clearance =
             near.expectation(|s| self.clearance(&traj[..checked], hold, traj.len(), near, s));
 
@@ -1200,9 +1212,15 @@ fn motion_count(settings: &Human2NavSettings, limits: &Limits) -> usize {
 }
 
 /// The selection's goal term of an ego-frame candidate (`d/d_0`, module docs) and how many of
-/// its waypoints are checked for contact: all, or with [`Progress::Closest`] those up to its
-/// arrival.
-fn goal_term(traj: &[Pose2], goal: [f64; 2], w: &SelectionWeights) -> (f64, usize) {
+/// its waypoints are checked for contact: all, or with [`Progress::Closest`] and
+/// [`Progress::Time`] those up to its arrival. `reach_per_step` is the way `v_max` covers in
+/// one plan step.
+fn goal_term(
+    traj: &[Pose2],
+    goal: [f64; 2],
+    w: &SelectionWeights,
+    reach_per_step: f64,
+) -> (f64, usize) {
     let d0 = goal[0].hypot(goal[1]).max(1e-3);
     let distance = |p: &Pose2| (p.x - goal[0]).hypot(p.y - goal[1]);
     match w.progress {
@@ -1217,6 +1235,15 @@ fn goal_term(traj: &[Pose2], goal: [f64; 2], w: &SelectionWeights) -> (f64, usiz
                 closest = closest.min(d);
             }
             (closest / d0, traj.len())
+        }
+        Progress::Time => {
+            for (k, p) in traj.iter().enumerate() {
+                if distance(p) <= w.arrival {
+                    return ((k + 1) as f64 * reach_per_step / d0, k + 1);
+                }
+            }
+            let end = traj.last().map_or(d0, distance);
+            ((traj.len() as f64 * reach_per_step + end) / d0, traj.len())
         }
     }
 }
@@ -1457,7 +1484,7 @@ mod tests {
             ..SelectionWeights::default()
         };
         // The end at (4, 0) is as far from the goal as the start.
-        let (p, checked) = goal_term(&traj, goal, &end);
+        let (p, checked) = goal_term(&traj, goal, &end, 0.1);
         assert!((p - 1.0).abs() < 1e-12, "{p}");
         assert_eq!(checked, traj.len());
         // The closest approach is 0.5 m, at (2, 0): not within 0.3 m, so not arrived.
@@ -1465,7 +1492,7 @@ mod tests {
             progress: Progress::Closest,
             ..end
         };
-        let (p, checked) = goal_term(&traj, goal, &closest);
+        let (p, checked) = goal_term(&traj, goal, &closest, 0.1);
         assert!((p - 0.5 / d0).abs() < 1e-12, "{p}");
         assert_eq!(checked, traj.len());
         // Within 0.6 m it arrives at (1.7, 0), the 14th waypoint, and is checked up to there.
@@ -1476,14 +1503,15 @@ mod tests {
                 arrival: 0.6,
                 ..closest
             },
+            0.1,
         );
         assert_eq!(p, 0.0);
         assert_eq!(checked, 14);
         assert!((traj[13].x - 1.7).abs() < 1e-12);
         // A candidate leading away: its closest approach is where the robot stands.
         let away: Vec<Pose2> = traj.iter().map(|p| Pose2::new(-p.x, 0.0, 0.0)).collect();
-        assert_eq!(goal_term(&away, goal, &closest).0, 1.0);
-        assert_eq!(goal_term(&[], goal, &closest), (1.0, 0));
+        assert_eq!(goal_term(&away, goal, &closest, 0.1).0, 1.0);
+        assert_eq!(goal_term(&[], goal, &closest, 0.1), (1.0, 0));
     }
 
     #[test]
@@ -1511,6 +1539,48 @@ mod tests {
         assert!(rest.iter().all(|p| *p == Pose2::new(1.0, 2.0, 0.3)));
         assert!(continued(&[], 3).is_empty());
         assert_eq!(continued(&arc, 0), arc);
+    }
+
+    #[test]
+    fn the_time_goal_term_ranks_an_arrival_by_how_soon_it_comes() {
+        // v_max·dt = 0.1 m a step; the goal 2 m ahead.
+        let goal = [2.0, 0.0];
+        let w = SelectionWeights {
+            progress: Progress::Time,
+            ..SelectionWeights::default()
+        };
+        let at = |speed: f64, n: usize| -> Vec<Pose2> {
+            (1..=n)
+                .map(|k| Pose2::new(0.1 * speed * k as f64, 0.0, 0.0))
+                .collect()
+        };
+        // At full speed it arrives (within 0.3 m) on the 17th waypoint: 1.7 m covered.
+        let (fast, checked) = goal_term(&at(1.0, 40), goal, &w, 0.1);
+        assert_eq!(checked, 17);
+        assert!((fast - 1.7 / 2.0).abs() < 1e-12, "{fast}");
+        // At half speed it arrives on the 34th: twice as late, and it ranks worse.
+        let (slow, checked) = goal_term(&at(0.5, 40), goal, &w, 0.1);
+        assert_eq!(checked, 34);
+        assert!((slow - 3.4 / 2.0).abs() < 1e-12, "{slow}");
+        // Closest approach calls both arrived alike.
+        let closest = SelectionWeights::default();
+        assert_eq!(goal_term(&at(1.0, 40), goal, &closest, 0.1).0, 0.0);
+        assert_eq!(goal_term(&at(0.5, 40), goal, &closest, 0.1).0, 0.0);
+        // Not arriving: the way covered by its end plus the distance left there. Standing
+        // still for as long ranks behind it, and backing away behind that.
+        let (short, checked) = goal_term(&at(0.5, 10), goal, &w, 0.1);
+        assert_eq!(checked, 10);
+        assert!((short - (1.0 + 1.5) / 2.0).abs() < 1e-12, "{short}");
+        let (rest, _) = goal_term(&[Pose2::IDENTITY; 10], goal, &w, 0.1);
+        assert!((rest - 3.0 / 2.0).abs() < 1e-12, "{rest}");
+        let (away, _) = goal_term(&at(-0.5, 10), goal, &w, 0.1);
+        assert!((away - 3.5 / 2.0).abs() < 1e-12, "{away}");
+        assert!(fast < short && short < rest && rest < away);
+        // Over as many waypoints a late arrival still beats standing still.
+        let (rest_40, _) = goal_term(&[Pose2::IDENTITY; 40], goal, &w, 0.1);
+        assert!((rest_40 - 6.0 / 2.0).abs() < 1e-12, "{rest_40}");
+        assert!(slow < rest_40);
+        assert_eq!(goal_term(&[], goal, &w, 0.1), (1.0, 0));
     }
 
     #[test]

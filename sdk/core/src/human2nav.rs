@@ -159,9 +159,11 @@ pub struct SelectionWeights {
     /// At most [`MAX_HOLD_S`].
     pub hold: f64,
     /// How long (s) every candidate is taken to go on after its last pose at the twist of its
-    /// last step ([`continued`]), scored over those waypoints too: the goal term's closest
-    /// approach and the clearance term see that far ahead, while the plan sent stays the
-    /// candidate. 0 (the default): the plan alone. At most [`MAX_HOLD_S`].
+    /// last step ([`continued`]), scored over those waypoints too: the goal term and the
+    /// clearance term see that far ahead, while the plan sent stays the candidate. With the
+    /// closest approach ([`Progress::Closest`]) a lookahead of seconds lets most candidates
+    /// "arrive" and the robot stop making haste; [`Progress::Time`] keeps it. 0 (the default):
+    /// the plan alone. At most [`MAX_HOLD_S`].
     pub lookahead: f64,
 }
 

@@ -2,6 +2,7 @@
 
 mod baseline;
 mod bench;
+mod compare;
 mod data;
 mod plan;
 mod plugin;
@@ -47,6 +48,9 @@ enum Command {
     /// SR against the amount of training data (Fig. 5): retrain on fractions of the training
     /// scenes and run Human2Nav closed loop with each model.
     Scaling(scaling::ScalingArgs),
+    /// Compare a method of one benchmark run with a method of another, paired run by run
+    /// (exact McNemar test per suite and robot).
+    Compare(compare::CompareArgs),
 }
 
 fn main() -> ExitCode {
@@ -60,6 +64,7 @@ fn main() -> ExitCode {
         Command::Bench(args) => bench::run(args),
         Command::Baseline(cmd) => baseline::run(cmd),
         Command::Scaling(args) => scaling::run(args),
+        Command::Compare(args) => compare::run(args),
     };
     match result {
         Ok(code) => code,

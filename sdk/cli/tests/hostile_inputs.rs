@@ -1945,7 +1945,101 @@ fn catalogue() -> Vec<Case> {
     all.extend(model_cases());
     all.extend(plugin_cases());
     all.extend(resume_cases());
+    all.extend(compare_cases());
     all
+}
+
+/// A `results.csv` of `lines` (after the columns `human2nav compare` reads) in `dir`, named
+/// `name`; its path as an argument.
+fn results_file(dir: &Path, name: &str, lines: &[&str]) -> Result<String, String> {
+    let path = dir.join(name);
+    let mut text = String::from("suite,scenario,episode,robot,method,seed,success\n");
+    for l in lines {
+        text.push_str(l);
+        text.push('\n');
+    }
+    std::fs::write(&path, text).map_err(|e| e.to_string())?;
+    Ok(path.to_string_lossy().into_owned())
+}
+
+/// The cases of `human2nav compare`, run through the binary.
+fn compare_cases() -> Vec<Case> {
+    let a = "compare";
+    vec![
+        err(
+            a,
+            "a `success` that is not 0 or 1",
+            NR,
+            &["a.csv", "line 2", "not 0 or 1"],
+            |dir| {
+                let base = results_file(dir, "a.csv", &["s,co_flow,e1,r,m,7,yes"])?;
+                let cand = results_file(dir, "b.csv", &["s,co_flow,e1,r,m,7,1"])?;
+                cli(&["compare", &format!("{base}:m"), &cand])
+            },
+        ),
+        err(
+            a,
+            "a run listed twice",
+            NR,
+            &["a.csv", "line 3", "already on line 2"],
+            |dir| {
+                let run = "s,co_flow,e1,r,m,7,1";
+                let base = results_file(dir, "a.csv", &[run, run])?;
+                cli(&["compare", &base, &base])
+            },
+        ),
+        err(
+            a,
+            "a file of two methods, none named",
+            NR,
+            &["a.csv", "holds the methods m, n", "FILE:METHOD"],
+            |dir| {
+                let base = results_file(
+                    dir,
+                    "a.csv",
+                    &["s,co_flow,e1,r,m,7,1", "s,co_flow,e1,r,n,7,0"],
+                )?;
+                cli(&["compare", &base, &base])
+            },
+        ),
+        err(
+            a,
+            "a method the file does not hold",
+            NR,
+            &["a.csv", "no runs of method", "it holds"],
+            |dir| {
+                let base = results_file(dir, "a.csv", &["s,co_flow,e1,r,m,7,1"])?;
+                cli(&["compare", &format!("{base}:x"), &base])
+            },
+        ),
+        err(
+            a,
+            "two runs with no run in common",
+            NR,
+            &["share no run"],
+            |dir| {
+                let base = results_file(dir, "a.csv", &["s,co_flow,e1,r,m,7,1"])?;
+                let cand = results_file(dir, "b.csv", &["s,co_flow,e2,r,m,7,1"])?;
+                cli(&["compare", &base, &cand])
+            },
+        ),
+        err(
+            a,
+            "a file without the `success` column",
+            NR,
+            &["a.csv", "success", "column"],
+            |dir| {
+                let path = dir.join("a.csv");
+                std::fs::write(
+                    &path,
+                    "suite,scenario,episode,robot,method,seed\ns,c,e,r,m,7\n",
+                )
+                .map_err(|e| e.to_string())?;
+                let arg = format!("{}:m", path.to_string_lossy());
+                cli(&["compare", &arg, &arg])
+            },
+        ),
+    ]
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -16,10 +16,12 @@
 //! * [`report`], [`figures`]: `results.csv`, `report.md` and the PNGs; [`stats`]: the paired
 //!   tests, intervals and density bins the report uses.
 //! * [`plan_figure`]: one planning step from an episode, drawn like the paper's Fig. 4.
+//! * [`compare`]: a method of one run against a method of another, paired run by run.
 
 #![warn(missing_docs)]
 
 pub mod bench;
+pub mod compare;
 pub mod config;
 pub mod crowd;
 pub mod driver;

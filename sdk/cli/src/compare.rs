@@ -33,10 +33,7 @@ fn split(arg: &str) -> (PathBuf, Option<String>) {
 }
 
 /// The outcomes of the method `arg` names, and a label for it.
-fn side(
-    arg: &str,
-    role: &str,
-) -> anyhow::Result<(std::collections::HashMap<compare::RunKey, bool>, String)> {
+fn side(arg: &str, role: &str) -> anyhow::Result<(compare::Outcomes, String)> {
     let (file, method) = split(arg);
     if !file.is_file() {
         bail!(
@@ -44,21 +41,17 @@ fn side(
             file.display()
         );
     }
-    let method = match method {
-        Some(m) => m,
-        None => {
-            let methods = compare::methods_in(&file)?;
-            match methods.as_slice() {
-                [one] => one.clone(),
-                _ => bail!(
-                    "the {role} `{}` holds the methods {}: name one as FILE:METHOD",
-                    file.display(),
-                    methods.join(", ")
-                ),
-            }
-        }
+    let results = compare::read_results(&file)?;
+    let method = match (method, results.keys().next()) {
+        (Some(m), _) => m,
+        (None, Some(only)) if results.len() == 1 => only.clone(),
+        (None, _) => bail!(
+            "the {role} `{}` holds the methods {}: name one as FILE:METHOD",
+            file.display(),
+            results.keys().cloned().collect::<Vec<_>>().join(", ")
+        ),
     };
-    let outcomes = compare::read_outcomes(&file, &method)?;
+    let outcomes = compare::method_outcomes(results, &method, &file)?;
     Ok((outcomes, format!("{}:{method}", file.display())))
 }
 

@@ -8,8 +8,9 @@
 //! the same episodes. Runs only one side has are counted and left out.
 
 use crate::error::SimError;
+use crate::report;
 use crate::stats::PairedComparison;
-use std::collections::{BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -33,15 +34,26 @@ const COLUMNS: [&str; 7] = [
     "suite", "scenario", "episode", "robot", "method", "seed", "success",
 ];
 
-/// Whether each run of `method` in the `results.csv` at `path` succeeded. Errors name the file
-/// and, for a bad line, its number: a missing column, a `success` other than 0 or 1, a run
-/// listed twice, or a method the file does not hold (the error lists those it does).
-pub fn read_outcomes(path: &Path, method: &str) -> Result<HashMap<RunKey, bool>, SimError> {
+/// Whether each run of one method succeeded.
+pub type Outcomes = HashMap<RunKey, bool>;
+
+/// Every method's outcomes in the `results.csv` at `path`, by method name. Errors name the file
+/// and, for a bad line, its number: a missing column, a `success` other than 0 or 1, or a run
+/// a method lists twice.
+pub fn read_results(path: &Path) -> Result<BTreeMap<String, Outcomes>, SimError> {
     let parse = |message: String| SimError::Parse {
         path: path.to_path_buf(),
         message,
     };
-    let (mut reader, header) = open(path)?;
+    let file = std::fs::File::open(path).map_err(|source| SimError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let mut reader = csv::Reader::from_reader(file);
+    let header = reader
+        .headers()
+        .map_err(|e| parse(format!("its header: {e}")))?
+        .clone();
     let mut at = [0usize; COLUMNS.len()];
     for (slot, name) in at.iter_mut().zip(COLUMNS) {
         *slot = header.iter().position(|h| h == name).ok_or_else(|| {
@@ -50,18 +62,13 @@ pub fn read_outcomes(path: &Path, method: &str) -> Result<HashMap<RunKey, bool>,
             ))
         })?;
     }
-    let [suite, scenario, episode, robot, method_at, seed, success] = at;
-    // Each run's outcome and line.
-    let mut outcomes: HashMap<RunKey, (bool, u64)> = HashMap::new();
-    let mut methods = BTreeSet::new();
+    let [suite, scenario, episode, robot, method, seed, success] = at;
+    // Each method's runs: outcome and line.
+    let mut runs: BTreeMap<String, HashMap<RunKey, (bool, u64)>> = BTreeMap::new();
     for record in reader.records() {
         let record = record.map_err(|e| parse(e.to_string()))?;
         let line = record.position().map_or(0, |p| p.line());
         let field = |i: usize| record.get(i).unwrap_or("");
-        methods.insert(field(method_at).to_string());
-        if field(method_at) != method {
-            continue;
-        }
         let ok = match field(success) {
             "1" => true,
             "0" => false,
@@ -78,61 +85,52 @@ pub fn read_outcomes(path: &Path, method: &str) -> Result<HashMap<RunKey, bool>,
             episode: field(episode).to_string(),
             seed: field(seed).to_string(),
         };
-        if let Some(&(_, first)) = outcomes.get(&key) {
+        let of_method = runs.entry(field(method).to_string()).or_default();
+        if let Some(&(_, first)) = of_method.get(&key) {
             return Err(parse(format!(
-                "line {line}: method `{method}` ran episode `{}` of suite `{}` on `{}` with seed \
-                 {} already on line {first}",
-                key.episode, key.suite, key.robot, key.seed
+                "line {line}: method `{}` ran episode `{}` of suite `{}` on `{}` with seed {} \
+                 already on line {first}",
+                field(method),
+                key.episode,
+                key.suite,
+                key.robot,
+                key.seed
             )));
         }
-        outcomes.insert(key, (ok, line));
+        of_method.insert(key, (ok, line));
     }
-    if outcomes.is_empty() {
-        let held: Vec<String> = methods.into_iter().map(|m| format!("`{m}`")).collect();
-        return Err(parse(format!(
-            "no runs of method `{method}`; it holds {}",
-            if held.is_empty() {
-                "no runs at all".to_string()
-            } else {
-                held.join(", ")
-            }
-        )));
-    }
-    Ok(outcomes.into_iter().map(|(k, (ok, _))| (k, ok)).collect())
+    Ok(runs
+        .into_iter()
+        .map(|(m, of_method)| {
+            (
+                m,
+                of_method.into_iter().map(|(k, (ok, _))| (k, ok)).collect(),
+            )
+        })
+        .collect())
 }
 
-/// The CSV file at `path` and its header row.
-fn open(path: &Path) -> Result<(csv::Reader<std::fs::File>, csv::StringRecord), SimError> {
-    let file = std::fs::File::open(path).map_err(|source| SimError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let mut reader = csv::Reader::from_reader(file);
-    let header = reader.headers().map_err(|e| SimError::Parse {
-        path: path.to_path_buf(),
-        message: format!("its header: {e}"),
-    })?;
-    let header = header.clone();
-    Ok((reader, header))
-}
-
-/// The methods the `results.csv` at `path` holds, in order of name.
-pub fn methods_in(path: &Path) -> Result<Vec<String>, SimError> {
-    let parse = |message: String| SimError::Parse {
-        path: path.to_path_buf(),
-        message,
-    };
-    let (mut reader, header) = open(path)?;
-    let at = header
-        .iter()
-        .position(|h| h == "method")
-        .ok_or_else(|| parse("no `method` column".into()))?;
-    let mut methods = BTreeSet::new();
-    for record in reader.records() {
-        let record = record.map_err(|e| parse(e.to_string()))?;
-        methods.insert(record.get(at).unwrap_or("").to_string());
-    }
-    Ok(methods.into_iter().collect())
+/// The outcomes of `method` among `results` (read from `path`), or an error naming the methods
+/// the file holds.
+pub fn method_outcomes(
+    mut results: BTreeMap<String, Outcomes>,
+    method: &str,
+    path: &Path,
+) -> Result<Outcomes, SimError> {
+    results.remove(method).ok_or_else(|| {
+        let held: Vec<String> = results.keys().map(|m| format!("`{m}`")).collect();
+        SimError::Parse {
+            path: path.to_path_buf(),
+            message: format!(
+                "no runs of method `{method}`; it holds {}",
+                if held.is_empty() {
+                    "no runs at all".to_string()
+                } else {
+                    held.join(", ")
+                }
+            ),
+        }
+    })
 }
 
 /// One group's comparison: the suite (`None`: all suites) and robot (`None`: all robots).
@@ -160,10 +158,7 @@ pub struct Comparison {
 
 /// The runs of `baseline` and `candidate` paired by [`RunKey`] and compared; `None` when they
 /// share no run.
-pub fn compare(
-    baseline: &HashMap<RunKey, bool>,
-    candidate: &HashMap<RunKey, bool>,
-) -> Option<Comparison> {
+pub fn compare(baseline: &Outcomes, candidate: &Outcomes) -> Option<Comparison> {
     // In key order, so that the bootstrap sees the pairs in the same order every time.
     let mut shared: Vec<(&RunKey, bool, bool)> = baseline
         .iter()
@@ -201,9 +196,7 @@ pub fn compare(
         groups.extend(group(Some(suite), None));
     }
     groups.push(total);
-    let only = |a: &HashMap<RunKey, bool>, b: &HashMap<RunKey, bool>| {
-        a.keys().filter(|k| !b.contains_key(*k)).count()
-    };
+    let only = |a: &Outcomes, b: &Outcomes| a.keys().filter(|k| !b.contains_key(*k)).count();
     Some(Comparison {
         groups,
         only_baseline: only(baseline, candidate),
@@ -229,19 +222,19 @@ pub fn markdown(comparison: &Comparison, baseline: &str, candidate: &str) -> Str
         let p = &g.paired;
         let _ = writeln!(
             out,
-            "| {} | {} | {} | {:.1} | {:.1} | {:+.1} [{:+.1}, {:+.1}] | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {:+.1} [{:+.1}, {:+.1}] | {} | {} | {} |",
             g.suite.as_deref().unwrap_or("all"),
             g.robot.as_deref().unwrap_or("all"),
             p.n,
-            100.0 * p.sr_reference,
-            100.0 * p.sr_other,
+            report::pct(p.sr_reference),
+            report::pct(p.sr_other),
             // Candidate minus baseline; `+ 0.0` writes a zero as +0.0, not -0.0.
             -100.0 * p.difference + 0.0,
             -100.0 * p.ci.1 + 0.0,
             -100.0 * p.ci.0 + 0.0,
             p.b,
             p.c,
-            format_p(p.p_value),
+            report::p_value(p.p_value),
         );
     }
     if comparison.only_baseline + comparison.only_candidate > 0 {
@@ -254,19 +247,15 @@ pub fn markdown(comparison: &Comparison, baseline: &str, candidate: &str) -> Str
     out
 }
 
-/// A p-value to three significant digits, small ones in exponent form.
-fn format_p(p: f64) -> String {
-    if p >= 0.001 {
-        format!("{p:.3}")
-    } else {
-        format!("{p:.1e}")
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use std::io::Write as _;
+
+    /// The outcomes of `method` in the file at `path`, as `human2nav compare` reads them.
+    fn read_outcomes(path: &Path, method: &str) -> Result<Outcomes, SimError> {
+        method_outcomes(read_results(path)?, method, path)
+    }
 
     fn key(suite: &str, robot: &str, episode: &str) -> RunKey {
         RunKey {
@@ -364,7 +353,7 @@ mod tests {
         let m = read_outcomes(f.path(), "m").unwrap();
         assert_eq!(m.len(), 2);
         assert!(m[&key("s", "r", "e1")] && !m[&key("s", "r", "e2")]);
-        assert_eq!(methods_in(f.path()).unwrap(), ["m", "n"]);
+        assert!(read_results(f.path()).unwrap().keys().eq(["m", "n"]));
         let err = read_outcomes(f.path(), "x").unwrap_err().to_string();
         assert!(
             err.contains("no runs of method `x`; it holds `m`, `n`"),

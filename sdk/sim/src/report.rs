@@ -315,7 +315,8 @@ impl ReportContext {
     }
 }
 
-fn pct(v: f64) -> String {
+/// A share as a percentage with one decimal.
+pub(crate) fn pct(v: f64) -> String {
     format!("{:.1}", 100.0 * v)
 }
 
@@ -828,7 +829,8 @@ fn cell_sr(s: &Summary) -> String {
     }
 }
 
-fn p_value(p: f64) -> String {
+/// A p-value to three decimals, `< 0.001` below that.
+pub(crate) fn p_value(p: f64) -> String {
     if p < 0.001 {
         "< 0.001".into()
     } else {

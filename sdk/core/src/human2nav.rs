@@ -1114,14 +1114,11 @@ impl<M: FlowModel> Human2Nav<M> {
         };
 
         let reach_per_step = self.robot.limits.v_max * self.settings.dt;
-        let (progress, checked) = goal_term(traj, goal, w, reach_per_step);
-        let arrived = match w.progress {
-            Progress::End => progress == 0.0,
-            // Checked up to its arrival, if it arrives.
-            Progress::Closest | Progress::Time => traj[..checked]
-                .last()
-                .is_some_and(|p| (p.x - goal[0]).hypot(p.y - goal[1]) <= w.arrival),
-        };
+        let GoalTerm {
+            progress,
+            checked,
+            arrived,
+        } = goal_term(traj, goal, w, reach_per_step);
 
         // A candidate that arrives ends there; one that does not is also checked standing at
         // its last pose for the hold.
@@ -1213,41 +1210,58 @@ fn motion_count(settings: &Human2NavSettings, limits: &Limits) -> usize {
     }
 }
 
-/// The selection's goal term of an ego-frame candidate (`d/d_0`, module docs) and how many of
-/// its waypoints are checked for contact: all, or with [`Progress::Closest`] and
-/// [`Progress::Time`] those up to its arrival. `reach_per_step` is the way `v_max` covers in
-/// one plan step.
+/// The selection's goal term of a candidate ([`goal_term`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct GoalTerm {
+    /// `d/d_0` (module docs), or how soon it could arrive with [`Progress::Time`].
+    progress: f64,
+    /// How many of its waypoints are checked for contact: all, or with [`Progress::Closest`]
+    /// and [`Progress::Time`] those up to its arrival.
+    checked: usize,
+    /// Whether it arrives (within [`SelectionWeights::arrival`] of the goal; with
+    /// [`Progress::End`], ends on it).
+    arrived: bool,
+}
+
+/// The goal term of the ego-frame candidate `traj`; `reach_per_step` is the way `v_max`
+/// covers in one plan step.
 fn goal_term(
     traj: &[Pose2],
     goal: [f64; 2],
     w: &SelectionWeights,
     reach_per_step: f64,
-) -> (f64, usize) {
+) -> GoalTerm {
     let d0 = goal[0].hypot(goal[1]).max(1e-3);
     let distance = |p: &Pose2| (p.x - goal[0]).hypot(p.y - goal[1]);
-    match w.progress {
-        Progress::End => (traj.last().map_or(d0, distance) / d0, traj.len()),
-        Progress::Closest => {
-            let mut closest = d0;
-            for (k, p) in traj.iter().enumerate() {
-                let d = distance(p);
-                if d <= w.arrival {
-                    return (0.0, k + 1);
-                }
-                closest = closest.min(d);
-            }
-            (closest / d0, traj.len())
-        }
-        Progress::Time => {
-            for (k, p) in traj.iter().enumerate() {
-                if distance(p) <= w.arrival {
-                    return ((k + 1) as f64 * reach_per_step / d0, k + 1);
-                }
-            }
-            let end = traj.last().map_or(d0, distance);
-            ((traj.len() as f64 * reach_per_step + end) / d0, traj.len())
-        }
+    let term = |progress: f64, checked: usize, arrived: bool| GoalTerm {
+        progress,
+        checked,
+        arrived,
+    };
+    if w.progress == Progress::End {
+        let progress = traj.last().map_or(d0, distance) / d0;
+        return term(progress, traj.len(), progress == 0.0);
     }
+    // The first waypoint within `arrival` ends the candidate.
+    let mut closest = d0;
+    for (k, p) in traj.iter().enumerate() {
+        let d = distance(p);
+        if d <= w.arrival {
+            let progress = match w.progress {
+                Progress::Time => (k + 1) as f64 * reach_per_step / d0,
+                _ => 0.0,
+            };
+            return term(progress, k + 1, true);
+        }
+        closest = closest.min(d);
+    }
+    let progress = match w.progress {
+        Progress::Time => {
+            (traj.len() as f64 * reach_per_step + traj.last().map_or(d0, distance)) / d0
+        }
+        _ => closest / d0,
+    };
+    term(progress, traj.len(), false)
 }
 
 /// The candidates of a planning call, where each came from, the Φ before and after
@@ -1486,7 +1500,11 @@ mod tests {
             ..SelectionWeights::default()
         };
         // The end at (4, 0) is as far from the goal as the start.
-        let (p, checked) = goal_term(&traj, goal, &end, 0.1);
+        let GoalTerm {
+            progress: p,
+            checked,
+            ..
+        } = goal_term(&traj, goal, &end, 0.1);
         assert!((p - 1.0).abs() < 1e-12, "{p}");
         assert_eq!(checked, traj.len());
         // The closest approach is 0.5 m, at (2, 0): not within 0.3 m, so not arrived.
@@ -1494,11 +1512,19 @@ mod tests {
             progress: Progress::Closest,
             ..end
         };
-        let (p, checked) = goal_term(&traj, goal, &closest, 0.1);
+        let GoalTerm {
+            progress: p,
+            checked,
+            ..
+        } = goal_term(&traj, goal, &closest, 0.1);
         assert!((p - 0.5 / d0).abs() < 1e-12, "{p}");
         assert_eq!(checked, traj.len());
         // Within 0.6 m it arrives at (1.7, 0), the 14th waypoint, and is checked up to there.
-        let (p, checked) = goal_term(
+        let GoalTerm {
+            progress: p,
+            checked,
+            ..
+        } = goal_term(
             &traj,
             goal,
             &SelectionWeights {
@@ -1512,8 +1538,9 @@ mod tests {
         assert!((traj[13].x - 1.7).abs() < 1e-12);
         // A candidate leading away: its closest approach is where the robot stands.
         let away: Vec<Pose2> = traj.iter().map(|p| Pose2::new(-p.x, 0.0, 0.0)).collect();
-        assert_eq!(goal_term(&away, goal, &closest, 0.1).0, 1.0);
-        assert_eq!(goal_term(&[], goal, &closest, 0.1), (1.0, 0));
+        assert_eq!(goal_term(&away, goal, &closest, 0.1).progress, 1.0);
+        let empty = goal_term(&[], goal, &closest, 0.1);
+        assert_eq!((empty.progress, empty.checked), (1.0, 0));
     }
 
     #[test]
@@ -1557,32 +1584,47 @@ mod tests {
                 .collect()
         };
         // At full speed it arrives (within 0.3 m) on the 17th waypoint: 1.7 m covered.
-        let (fast, checked) = goal_term(&at(1.0, 40), goal, &w, 0.1);
+        let GoalTerm {
+            progress: fast,
+            checked,
+            ..
+        } = goal_term(&at(1.0, 40), goal, &w, 0.1);
         assert_eq!(checked, 17);
         assert!((fast - 1.7 / 2.0).abs() < 1e-12, "{fast}");
         // At half speed it arrives on the 34th: twice as late, and it ranks worse.
-        let (slow, checked) = goal_term(&at(0.5, 40), goal, &w, 0.1);
+        let GoalTerm {
+            progress: slow,
+            checked,
+            ..
+        } = goal_term(&at(0.5, 40), goal, &w, 0.1);
         assert_eq!(checked, 34);
         assert!((slow - 3.4 / 2.0).abs() < 1e-12, "{slow}");
         // Closest approach calls both arrived alike.
         let closest = SelectionWeights::default();
-        assert_eq!(goal_term(&at(1.0, 40), goal, &closest, 0.1).0, 0.0);
-        assert_eq!(goal_term(&at(0.5, 40), goal, &closest, 0.1).0, 0.0);
+        assert_eq!(goal_term(&at(1.0, 40), goal, &closest, 0.1).progress, 0.0);
+        assert_eq!(goal_term(&at(0.5, 40), goal, &closest, 0.1).progress, 0.0);
         // Not arriving: the way covered by its end plus the distance left there. Standing
         // still for as long ranks behind it, and backing away behind that.
-        let (short, checked) = goal_term(&at(0.5, 10), goal, &w, 0.1);
+        let GoalTerm {
+            progress: short,
+            checked,
+            ..
+        } = goal_term(&at(0.5, 10), goal, &w, 0.1);
         assert_eq!(checked, 10);
         assert!((short - (1.0 + 1.5) / 2.0).abs() < 1e-12, "{short}");
-        let (rest, _) = goal_term(&[Pose2::IDENTITY; 10], goal, &w, 0.1);
+        let GoalTerm { progress: rest, .. } = goal_term(&[Pose2::IDENTITY; 10], goal, &w, 0.1);
         assert!((rest - 3.0 / 2.0).abs() < 1e-12, "{rest}");
-        let (away, _) = goal_term(&at(-0.5, 10), goal, &w, 0.1);
+        let GoalTerm { progress: away, .. } = goal_term(&at(-0.5, 10), goal, &w, 0.1);
         assert!((away - 3.5 / 2.0).abs() < 1e-12, "{away}");
         assert!(fast < short && short < rest && rest < away);
         // Over as many waypoints a late arrival still beats standing still.
-        let (rest_40, _) = goal_term(&[Pose2::IDENTITY; 40], goal, &w, 0.1);
+        let GoalTerm {
+            progress: rest_40, ..
+        } = goal_term(&[Pose2::IDENTITY; 40], goal, &w, 0.1);
         assert!((rest_40 - 6.0 / 2.0).abs() < 1e-12, "{rest_40}");
         assert!(slow < rest_40);
-        assert_eq!(goal_term(&[], goal, &w, 0.1), (1.0, 0));
+        let empty = goal_term(&[], goal, &w, 0.1);
+        assert_eq!((empty.progress, empty.checked), (1.0, 0));
     }
 
     #[test]

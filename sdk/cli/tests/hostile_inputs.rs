@@ -764,6 +764,36 @@ fn config_cases() -> Vec<Case> {
             &["data.toml", "sorces"],
             data_edit("[sources]", "[sorces]"),
         ),
+        err(
+            a,
+            "data.toml `exclude_episodes` names a missing file",
+            NR,
+            &["interaction.exclude_episodes", "gone.json"],
+            |dir| {
+                let p = write(
+                    dir,
+                    "data.toml",
+                    edit(
+                        DATA,
+                        "exclude_episodes = [] ",
+                        "exclude_episodes = [\"gone.json\"] ",
+                    ),
+                );
+                let cfg = human2nav_data::config::DataConfig::load(&p).map_err(|e| chain(&e))?;
+                let loc = human2nav_data::pipeline::Locations {
+                    workspace: dir.to_path_buf(),
+                    data_root: dir.join("no-datasets"),
+                    cache_dir: dir.join("cache"),
+                    episodes: dir.join("episodes.json"),
+                };
+                fail(human2nav_data::pipeline::build_interaction_episodes(
+                    &cfg,
+                    &loc,
+                    Split::Val,
+                    &human2nav_data::pipeline::NoProgress,
+                ))
+            },
+        ),
         err(a, "guidance.toml unknown key", NR, &["iteration_m"], |_| {
             fail(GuidanceSettings::from_toml_str(&edit(
                 GUIDANCE,

@@ -79,7 +79,10 @@
 //! [`crate::scenario::select_across_scenes`]: `episodes.per_class` (50) per class, round-robin
 //! over density values as in the paper protocol, each density's next episode from the scene
 //! with the fewest so far (with the round-robin over densities alone, the dense ETH and UCY
-//! scenes took 114 of the 200 test episodes and zara03 118 of the 200 validation ones). The agents exported are those of the paper protocol (every track
+//! scenes took 114 of the 200 test episodes and zara03 118 of the 200 validation ones).
+//! Candidates listed in the files of `exclude_episodes` are withheld before the selection
+//! ([`withhold`]): with another `seed`, a fresh draw of the same scenes that shares no episode
+//! with the suites drawn before. The agents exported are those of the paper protocol (every track
 //! present during the budget within `episodes.export_radius` of the segment) and the time
 //! budget follows its rule.
 //!
@@ -121,7 +124,8 @@ use human2nav_core::Pose2;
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashSet};
+use std::path::PathBuf;
 
 /// Rules of the interaction-rich miner (module docs). The episode geometry comes from
 /// [`MiningOptions`] (`[episodes]`).
@@ -151,6 +155,10 @@ pub struct InteractionOptions {
     pub max_density: Option<usize>,
     /// Seed of the crowd-start draws and of the selection shuffle. Default 11.
     pub seed: u64,
+    /// Episode files (suites as `human2nav data episodes` writes them) whose episodes are never
+    /// selected: with another `seed`, a fresh draw of the same scenes, disjoint from the
+    /// suites named. Relative paths start at the workspace root. Default none.
+    pub exclude_episodes: Vec<PathBuf>,
 }
 
 impl Default for InteractionOptions {
@@ -166,12 +174,16 @@ impl Default for InteractionOptions {
             min_density: 1,
             max_density: None,
             seed: 11,
+            exclude_episodes: Vec::new(),
         }
     }
 }
 
 /// Largest `interaction.shifts_per_path` (the default is 32).
 pub const MAX_SHIFTS_PER_PATH: usize = 10_000;
+
+/// Most files in `interaction.exclude_episodes`.
+pub const MAX_EXCLUDED_FILES: usize = 100;
 
 impl InteractionOptions {
     /// Checks every option is usable; errors name the `interaction.<field>` key.
@@ -210,6 +222,11 @@ impl InteractionOptions {
                 "must be at least 1",
             ));
         }
+        count_at_most(
+            self.exclude_episodes.len(),
+            MAX_EXCLUDED_FILES,
+            "interaction.exclude_episodes",
+        )?;
         if self.reference_speeds.is_empty() {
             return Err(DataError::option(
                 "interaction.reference_speeds",
@@ -597,8 +614,12 @@ pub struct InteractionStats {
     pub not_interactive: BTreeMap<ScenarioClass, usize>,
     /// Interactive candidates, per class (every crowd start counted).
     pub interactive: BTreeMap<ScenarioClass, usize>,
-    /// Interactive candidates kept, at most one per (window, direction, class).
+    /// Interactive candidates kept, at most one per (window, direction, class), and not
+    /// withheld.
     pub kept: BTreeMap<ScenarioClass, usize>,
+    /// Kept candidates withheld because a file of `interaction.exclude_episodes` lists them,
+    /// per class.
+    pub withheld: BTreeMap<ScenarioClass, usize>,
 }
 
 impl InteractionStats {
@@ -616,6 +637,7 @@ impl InteractionStats {
             (&mut self.not_interactive, &o.not_interactive),
             (&mut self.interactive, &o.interactive),
             (&mut self.kept, &o.kept),
+            (&mut self.withheld, &o.withheld),
         ] {
             for (c, n) in theirs {
                 *mine.entry(*c).or_default() += n;
@@ -633,6 +655,25 @@ impl InteractionStats {
         self.interactive.get(&class).copied().unwrap_or(0)
             + self.not_interactive.get(&class).copied().unwrap_or(0)
     }
+}
+
+/// Removes from one scene's kept candidates those whose id is in `ids` (the episodes of the
+/// files in `interaction.exclude_episodes`), moving them from `stats.kept` to `stats.withheld`.
+pub fn withhold(
+    candidates: &mut Vec<Episode>,
+    ids: &HashSet<String>,
+    stats: &mut InteractionStats,
+) {
+    candidates.retain(|e| {
+        let keep = !ids.contains(&e.id);
+        if !keep {
+            *stats.withheld.entry(e.scenario).or_default() += 1;
+            if let Some(n) = stats.kept.get_mut(&e.scenario) {
+                *n = n.saturating_sub(1);
+            }
+        }
+        keep
+    });
 }
 
 /// All kept interactive candidates of one scene (before per-class selection), in window order.
@@ -846,6 +887,26 @@ impl InteractionReport {
             st.not_interactive.values().sum::<usize>(),
             st.no_crowd_window
         );
+        if !opts.exclude_episodes.is_empty() {
+            let files: Vec<String> = opts
+                .exclude_episodes
+                .iter()
+                .map(|p| format!("`{}`", p.display()))
+                .collect();
+            let _ = writeln!(
+                md,
+                "Withheld: {} kept candidates ({}) are episodes of {} \
+                 (`interaction.exclude_episodes`) and were not selected; `kept` counts the \
+                 others.\n",
+                st.withheld.values().sum::<usize>(),
+                classes
+                    .iter()
+                    .map(|c| format!("{c} {}", st.withheld.get(c).copied().unwrap_or(0)))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                files.join(", ")
+            );
+        }
         let _ = writeln!(
             md,
             "Selected suite (density = people within the density radius of the \
@@ -1404,5 +1465,45 @@ mod tests {
         )
         .unwrap_err();
         assert!(err.to_string().contains("test split"), "{err}");
+    }
+
+    #[test]
+    fn withheld_episodes_leave_the_kept_candidates_and_are_counted() {
+        let s = crossing_scene();
+        let geometry = MiningOptions::default();
+        let opts = InteractionOptions {
+            shifts_per_path: 1000,
+            ..InteractionOptions::default()
+        };
+        let mut st = InteractionStats::default();
+        let mut eps = mine_interaction_scene(&s, &geometry, &opts, &mut st);
+        let before = eps.clone();
+        let kept = st.kept_of(ScenarioClass::CrossFlow);
+        assert!(
+            kept >= 1 && before.len() == kept,
+            "{kept} of {}",
+            before.len()
+        );
+        // An id no candidate has changes nothing.
+        let mut unchanged = eps.clone();
+        let mut st2 = st.clone();
+        withhold(
+            &mut unchanged,
+            &HashSet::from(["elsewhere".to_string()]),
+            &mut st2,
+        );
+        assert_eq!(unchanged, before);
+        assert_eq!(st2, st);
+        // The first candidate's id withholds exactly it.
+        let gone = before[0].clone();
+        withhold(&mut eps, &HashSet::from([gone.id.clone()]), &mut st);
+        assert_eq!(eps, before[1..]);
+        assert_eq!(st.kept_of(gone.scenario), kept - 1);
+        assert_eq!(st.withheld.get(&gone.scenario), Some(&1));
+        // Summed over scenes, the withheld counts add up like the others.
+        let mut total = InteractionStats::default();
+        total.add(&st);
+        total.add(&st);
+        assert_eq!(total.withheld.get(&gone.scenario), Some(&2));
     }
 }

@@ -570,6 +570,8 @@ pub fn build_interaction_episodes(
     }
     let geometry = &cfg.episodes;
     let opts = &cfg.interaction;
+    // Read first, so that a bad file is refused whether or not the datasets are there.
+    let excluded = excluded_episode_ids(&opts.exclude_episodes, &loc.workspace)?;
     if !loc.data_root.is_dir() {
         let seed = match split {
             Split::Val => geometry.seed ^ 0x5641_4C00, // other crowds than the test fallback
@@ -581,6 +583,14 @@ pub fn build_interaction_episodes(
              interaction-rich (no time shift, no interaction criterion)",
             loc.data_root.display()
         );
+        let mut notes = vec![note];
+        if !opts.exclude_episodes.is_empty() {
+            notes.push(
+                "interaction.exclude_episodes applies to mined episodes only; the synthetic \
+                 ones are drawn as without it"
+                    .into(),
+            );
+        }
         let suite = EpisodeSuite::new(format!("synthetic ({split})"), episodes);
         return Ok(InteractionReport {
             split,
@@ -588,7 +598,7 @@ pub fn build_interaction_episodes(
             suite,
             scenes: Vec::new(),
             stats: InteractionStats::default(),
-            notes: vec![note],
+            notes,
         });
     }
     let (sources, mut notes) = discover(&loc.data_root, cfg);
@@ -620,12 +630,29 @@ pub fn build_interaction_episodes(
             let raw = load_source(src, cfg)?;
             let scene = resample(&raw, &cfg.resample);
             let mut stats = InteractionStats::default();
-            let eps = mine_interaction_scene(&scene, geometry, opts, &mut stats);
+            let mut eps = mine_interaction_scene(&scene, geometry, opts, &mut stats);
+            crate::interaction::withhold(&mut eps, &excluded, &mut stats);
             progress.inc(1);
             Ok((src.name.clone(), eps, stats))
         })
         .collect::<Result<Vec<_>, DataError>>()?;
     select_interaction_suite(split, mined, &cfg.episodes, &cfg.interaction, notes)
+}
+
+/// The ids of every episode in the files of `interaction.exclude_episodes` (relative paths
+/// against `workspace`); an unreadable or malformed file is an error naming the key and the file.
+fn excluded_episode_ids(
+    files: &[PathBuf],
+    workspace: &Path,
+) -> Result<std::collections::HashSet<String>, DataError> {
+    let mut ids = std::collections::HashSet::new();
+    for f in files {
+        let path = paths::output_path(f, workspace);
+        let suite = EpisodeSuite::load(&path)
+            .map_err(|e| DataError::option("interaction.exclude_episodes", format!("{e}")))?;
+        ids.extend(suite.episodes.into_iter().map(|e| e.id));
+    }
+    Ok(ids)
 }
 
 /// Without a dataset directory: synthetic episodes of the paper protocol (`episodes.per_class`

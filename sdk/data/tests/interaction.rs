@@ -62,6 +62,33 @@ fn synthetic_fallback_says_it_is_not_interaction_rich() {
         p.ends_with("out/data/episodes-interaction-val.json"),
         "{p:?}"
     );
+    // An excluded file that is missing or not a suite is refused, naming the key and the
+    // file, with or without the datasets.
+    std::fs::create_dir_all(&loc.workspace).unwrap();
+    std::fs::write(loc.workspace.join("not-a-suite.json"), "{\"episodes\": 3}").unwrap();
+    for name in ["missing.json", "not-a-suite.json"] {
+        let mut bad = cfg.clone();
+        bad.interaction.exclude_episodes = vec![PathBuf::from(name)];
+        let err =
+            pipeline::build_interaction_episodes(&bad, &loc, Split::Val, &NoProgress).unwrap_err();
+        let msg = err.to_string();
+        assert!(
+            msg.contains("interaction.exclude_episodes") && msg.contains(name),
+            "{msg}"
+        );
+    }
+    // A readable one is not applied to synthetic episodes, and the notes say so.
+    let earlier = loc.workspace.join("earlier.json");
+    r.suite.save(&earlier).unwrap();
+    let mut with = cfg.clone();
+    with.interaction.exclude_episodes = vec![earlier];
+    let again = pipeline::build_interaction_episodes(&with, &loc, Split::Val, &NoProgress).unwrap();
+    assert_eq!(again.suite, r.suite);
+    assert!(
+        again.notes.iter().any(|n| n.contains("exclude_episodes")),
+        "{:?}",
+        again.notes
+    );
 }
 
 /// The reference robot, written out again for the check: from rest at `accel` to `speed`
@@ -180,4 +207,43 @@ fn real_validation_scenes_yield_interactive_episodes_of_every_class() {
     let path = pipeline::interaction_episodes_path(&cfg, &loc, Split::Val).unwrap();
     r.suite.save(&path).unwrap();
     assert_eq!(EpisodeSuite::load(&path).unwrap(), r.suite);
+
+    // A fresh draw: the same mining with that file excluded (a relative path, against the
+    // workspace) selects a full suite sharing no episode with it, and the report counts the
+    // withheld candidates.
+    let mut fresh_cfg = cfg.clone();
+    fresh_cfg.interaction.exclude_episodes =
+        vec![path.strip_prefix(&loc.workspace).unwrap().into()];
+    let fresh =
+        pipeline::build_interaction_episodes(&fresh_cfg, &loc, Split::Val, &NoProgress).unwrap();
+    for c in ScenarioClass::ALL {
+        assert_eq!(
+            fresh.suite.counts[&c], geometry.per_class,
+            "{c}: {:?}",
+            fresh.notes
+        );
+        // Same seed, same candidates: exactly the first suite's episodes are withheld.
+        assert_eq!(fresh.stats.withheld[&c], geometry.per_class, "{c}");
+        assert_eq!(
+            fresh.stats.kept_of(c) + geometry.per_class,
+            r.stats.kept_of(c),
+            "{c}"
+        );
+    }
+    assert!(
+        fresh
+            .suite
+            .episodes
+            .iter()
+            .all(|e| !ids.contains(&e.id.as_str())),
+        "the fresh draw repeats an episode"
+    );
+    let md = fresh.markdown(&fresh_cfg.interaction);
+    assert!(
+        md.contains(&format!(
+            "Withheld: {} kept candidates",
+            4 * geometry.per_class
+        )),
+        "{md}"
+    );
 }

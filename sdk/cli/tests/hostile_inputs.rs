@@ -714,6 +714,23 @@ fn config_cases() -> Vec<Case> {
         ),
         err(
             a,
+            "bench.toml human2nav method `foresight = 2`",
+            NR,
+            &["methods[h].config.foresight", "0 to 1"],
+            |d| {
+                let p = write(d, "bench.toml", BENCH);
+                let cfg = human2nav_sim::config::BenchConfig::load(&p).map_err(|e| chain(&e))?;
+                let m: human2nav_sim::config::MethodConfig = toml::from_str(
+                    "name = \"h\"\nkind = \"human2nav\"\nconfig = { foresight = 2.0 }\n",
+                )
+                .map_err(|e| chain(&e))?;
+                human2nav_experiments::bench::human2nav_method(&m, &cfg)
+                    .map(|_| ())
+                    .map_err(|e| format!("{e:#}"))
+            },
+        ),
+        err(
+            a,
             "bench.toml `base` naming a missing file",
             NR,
             &["missing_base.toml"],

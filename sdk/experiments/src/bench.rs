@@ -255,20 +255,34 @@ pub fn ensure_real_episodes(
 /// configuration. Its `config` table takes `planner` (the planner TOML, relative to the
 /// workspace root; default `sdk/configs/planner.toml`) and either `guidance` (bool; `false` is
 /// the "w/o guidance" ablation) or `arm` (one of the guidance ablation's arms, `raw`, `alg1`,
-/// `qp` or `alg1+qp`, see [`human2nav_core::ablation::Arm`]). Each episode gets a fresh planner (model loaded from disk, source
+/// `qp` or `alg1+qp`, see [`human2nav_core::ablation::Arm`]), and `foresight` (0 to 1, a
+/// yardstick: the planner's forecast of people moved that share of the way from constant
+/// velocity to the episode's recording, [`human2nav_sim::foresight`]; not with a planner file
+/// that names a `[prediction]` model). Each episode gets a fresh planner (model loaded from disk, source
 /// noise seeded with the episode's seed) for the robot of that episode, with the robot's Φ
 /// including its plugin constraint terms; libtorch runs one thread per planner (the episodes
 /// already run in parallel).
 pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<MethodSpec> {
     let field = |key: &str| format!("methods[{}].config.{key}", m.name);
     for key in m.config.keys() {
-        if !["planner", "guidance", "arm"].contains(&key.as_str()) {
+        if !["planner", "guidance", "arm", "foresight"].contains(&key.as_str()) {
             bail!(
-                "{}: unknown key (expected `planner`, `guidance` or `arm`)",
+                "{}: unknown key (expected `planner`, `guidance`, `arm` or `foresight`)",
                 field(key)
             );
         }
     }
+    let foresight = match m.config.get("foresight") {
+        Some(v) => {
+            let share = v
+                .as_float()
+                .or_else(|| v.as_integer().map(|i| i as f64))
+                .filter(|s| (0.0..=1.0).contains(s))
+                .ok_or_else(|| anyhow!("{}: must be a number from 0 to 1", field("foresight")))?;
+            Some(share)
+        }
+        None => None,
+    };
     if m.config.contains_key("guidance") && m.config.contains_key("arm") {
         bail!(
             "{}: give `guidance` or `arm`, not both (`arm = \"raw\"` is `guidance = false`)",
@@ -307,6 +321,14 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
         };
     let prediction = PredictionModel::load(&planner_cfg, &cfg.base_dir)
         .with_context(|| format!("method `{}`", m.name))?;
+    if foresight.is_some() && prediction.is_some() {
+        bail!(
+            "{}: the planner file {} names a [prediction] model; foresight replaces the \
+             forecast, so give one or the other",
+            field("foresight"),
+            planner_toml.display()
+        );
+    }
     human2nav_flow::tch::set_num_threads(1);
 
     let mut profiles = HashMap::new();
@@ -335,6 +357,10 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
         )?;
         if let Some(p) = &prediction {
             planner = planner.with_predictor(p.predictor()?);
+        }
+        if let Some(share) = foresight {
+            let f = human2nav_sim::foresight::Foresight::new(ctx.episode.clone(), share)?;
+            planner = planner.with_predictor(Box::new(f));
         }
         Ok(Box::new(planner.planner))
     })

@@ -11,6 +11,8 @@
 //! * [`metrics`]: per-episode metrics.
 //! * [`straight`]: the straight-to-goal sanity baseline.
 //! * [`oracle`]: the clairvoyant yardstick (reads the recorded crowd's future).
+//! * [`foresight`]: a yardstick predictor for a planner under test, between constant velocity
+//!   and the recorded future.
 //! * [`bench`]: methods as planner factories, suites, the parallel deterministic runner.
 //! * [`config`]: the benchmark TOML and suite building.
 //! * [`report`], [`figures`]: `results.csv`, `report.md` and the PNGs; [`stats`]: the paired
@@ -28,6 +30,7 @@ pub mod driver;
 pub mod episode;
 pub mod error;
 pub mod figures;
+pub mod foresight;
 pub mod metrics;
 pub mod oracle;
 pub mod plan_figure;

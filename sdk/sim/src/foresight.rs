@@ -1,0 +1,153 @@
+//! `Foresight`: a yardstick predictor of people for a planner under test. It reads the
+//! episode's recording, so it belongs to the benchmark, never to a planner in use.
+//!
+//! Its forecast of each observed pedestrian is constant velocity moved a share `share` of the
+//! way to where the recording has that pedestrian at each waypoint:
+//! `p = p_cv + share · (p_recorded − p_cv)`. With share 0 it is constant velocity, the
+//! forecast a planner makes without a predictor; with share 1 it is the recorded future of the
+//! pedestrians observed now (the search's `oracle-seen`, [`crate::oracle`]). In between, every
+//! predicted position is off by `1 − share` of constant velocity's error, so the forecast's ADE
+//! and FDE are `1 − share` of constant velocity's on the same instants. Run with a planner's
+//! own selection, it answers how good a predictor of the observed crowd the planner would need
+//! to reach a success rate: the planner's success rate against the share, read at the ADE it
+//! corresponds to.
+//!
+//! A pedestrian the recording no longer holds at a waypoint (its track has ended) keeps its
+//! constant-velocity position there. In a reactive crowd people depart from their recording
+//! near the robot, so there the foresight is only approximately right, as the oracle's is.
+
+use crate::episode::Episode;
+use crate::replay::CrowdReplay;
+use human2nav_core::Observation;
+use human2nav_core::forecast::{CrowdPredictor, Forecast, ForecastAgent, constant_velocity_path};
+use std::collections::HashMap;
+
+/// Constant velocity moved `share` of the way to the recorded future (module docs).
+#[derive(Clone, Debug)]
+pub struct Foresight {
+    episode: Episode,
+    share: f64,
+}
+
+impl Foresight {
+    /// The foresight of `episode`'s recording at `share` (0 to 1).
+    pub fn new(episode: Episode, share: f64) -> Result<Self, String> {
+        if !(share.is_finite() && (0.0..=1.0).contains(&share)) {
+            return Err(format!("foresight must be in [0, 1], got {share}"));
+        }
+        Ok(Self { episode, share })
+    }
+}
+
+impl CrowdPredictor for Foresight {
+    fn name(&self) -> &str {
+        "foresight"
+    }
+
+    fn forecast(&mut self, obs: &Observation, horizon: usize, dt: f64) -> Result<Forecast, String> {
+        let replay = CrowdReplay::new(&self.episode);
+        let tracks: HashMap<u64, _> = self.episode.agents.iter().map(|t| (t.id, t)).collect();
+        let agents = obs
+            .agents
+            .iter()
+            .map(|a| {
+                let mut path = constant_velocity_path(a, horizon, dt);
+                if let Some(track) = tracks.get(&a.id) {
+                    for (k, p) in path.iter_mut().enumerate() {
+                        let t = obs.time + (k + 1) as f64 * dt;
+                        if let Some(s) = replay.sample(track, t) {
+                            p[0] += self.share * (s.position[0] - p[0]);
+                            p[1] += self.share * (s.position[1] - p[1]);
+                        }
+                    }
+                }
+                ForecastAgent {
+                    id: a.id,
+                    radius: a.radius,
+                    paths: vec![path],
+                }
+            })
+            .collect();
+        Forecast::new(horizon, 1, agents)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::episode::{AgentTrack, ScenarioClass};
+    use human2nav_core::{AgentState, Pose2};
+
+    /// One pedestrian recorded walking +y at 1 m/s from (2, 0) for 5 s, observed at t = 1 s
+    /// walking +x at 1 m/s (a wrong velocity, so that the recording and constant velocity
+    /// differ), and one observed pedestrian the recording does not hold.
+    fn setup() -> (Episode, Observation) {
+        let episode = Episode {
+            id: "hand".into(),
+            scene: "test/hand".into(),
+            source: "synthetic".into(),
+            scenario: ScenarioClass::CrossFlow,
+            dt: 0.1,
+            start: Pose2::IDENTITY,
+            goal: [5.0, 0.0],
+            time_budget: 12.5,
+            agents: vec![AgentTrack {
+                id: 7,
+                start_step: 0,
+                positions: (0..=50).map(|k| [2.0, 0.1 * k as f64]).collect(),
+                radius: 0.3,
+            }],
+            density: 1,
+            obstacles: Vec::new(),
+        };
+        let walker = |id, x| AgentState {
+            id,
+            position: [x, 1.0],
+            velocity: [1.0, 0.0],
+            radius: 0.3,
+            history: Vec::new(),
+        };
+        let obs = Observation {
+            time: 1.0,
+            goal: [5.0, 0.0],
+            agents: vec![walker(7, 2.0), walker(9, -3.0)],
+            ..Observation::default()
+        };
+        (episode, obs)
+    }
+
+    #[test]
+    fn the_share_moves_constant_velocity_to_the_recording() {
+        let (episode, obs) = setup();
+        let at = |share: f64, agent: usize, k: usize| {
+            let mut f = Foresight::new(episode.clone(), share).unwrap();
+            f.forecast(&obs, 10, 0.1).unwrap().position(agent, 0, k)
+        };
+        // Waypoint k is (k + 1) · 0.1 s after the observation: constant velocity has agent 7 at
+        // (2 + 0.1 (k + 1), 1), the recording at (2, 1 + 0.1 (k + 1)).
+        for k in [0, 4, 9] {
+            let s = 0.1 * (k + 1) as f64;
+            let cv = [2.0 + s, 1.0];
+            let rec = [2.0, 1.0 + s];
+            for share in [0.0, 0.25, 1.0] {
+                let p = at(share, 0, k);
+                for d in 0..2 {
+                    let want = cv[d] + share * (rec[d] - cv[d]);
+                    assert!((p[d] - want).abs() < 1e-9, "share {share}, k {k}: {p:?}");
+                }
+            }
+            // The pedestrian the recording does not hold stays at constant velocity.
+            let q = at(1.0, 1, k);
+            assert!((q[0] - (-3.0 + s)).abs() < 1e-9 && (q[1] - 1.0).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn a_share_outside_zero_to_one_is_refused() {
+        let (episode, _) = setup();
+        for share in [-0.1, 1.5, f64::NAN] {
+            let err = Foresight::new(episode.clone(), share).unwrap_err();
+            assert!(err.contains("foresight"), "{err}");
+        }
+    }
+}

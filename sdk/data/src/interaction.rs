@@ -1420,16 +1420,28 @@ mod tests {
         assert!(sum.to_string().contains("cross_flow"));
     }
 
-    #[test]
-    fn a_class_without_any_interactive_episode_is_an_error() {
-        let s = crossing_scene();
+    /// The crossing scene mined with 1000 crowd starts per path: the geometry, the options, the
+    /// kept candidates and the counters.
+    fn mined_crossing() -> (
+        MiningOptions,
+        InteractionOptions,
+        Vec<Episode>,
+        InteractionStats,
+    ) {
         let geometry = MiningOptions::default();
         let opts = InteractionOptions {
             shifts_per_path: 1000,
             ..InteractionOptions::default()
         };
         let mut st = InteractionStats::default();
-        let eps = mine_interaction_scene(&s, &geometry, &opts, &mut st);
+        let eps = mine_interaction_scene(&crossing_scene(), &geometry, &opts, &mut st);
+        (geometry, opts, eps, st)
+    }
+
+    #[test]
+    fn a_class_without_any_interactive_episode_is_an_error() {
+        let s = crossing_scene();
+        let (geometry, opts, eps, st) = mined_crossing();
         assert!(eps.iter().any(|e| e.scenario == ScenarioClass::CrossFlow));
         let mined = vec![("hand".to_string(), eps, st)];
         // Only cross-flow crowds in this scene: co-flow (the first class) has none.
@@ -1469,14 +1481,7 @@ mod tests {
 
     #[test]
     fn withheld_episodes_leave_the_kept_candidates_and_are_counted() {
-        let s = crossing_scene();
-        let geometry = MiningOptions::default();
-        let opts = InteractionOptions {
-            shifts_per_path: 1000,
-            ..InteractionOptions::default()
-        };
-        let mut st = InteractionStats::default();
-        let mut eps = mine_interaction_scene(&s, &geometry, &opts, &mut st);
+        let (_, _, mut eps, mut st) = mined_crossing();
         let before = eps.clone();
         let kept = st.kept_of(ScenarioClass::CrossFlow);
         assert!(

@@ -277,8 +277,9 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
             let share = v
                 .as_float()
                 .or_else(|| v.as_integer().map(|i| i as f64))
-                .filter(|s| (0.0..=1.0).contains(s))
-                .ok_or_else(|| anyhow!("{}: must be a number from 0 to 1", field("foresight")))?;
+                .ok_or_else(|| format!("must be a number from 0 to 1, got {v}"))
+                .and_then(human2nav_sim::foresight::check_share)
+                .map_err(|e| anyhow!("{}: {e}", field("foresight")))?;
             Some(share)
         }
         None => None,

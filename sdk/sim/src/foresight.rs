@@ -26,16 +26,37 @@ use std::collections::HashMap;
 #[derive(Clone, Debug)]
 pub struct Foresight {
     episode: Episode,
+    /// The index in `episode.agents` of each recorded id.
+    tracks: HashMap<u64, usize>,
     share: f64,
 }
 
+/// Checks a foresight share: a number from 0 to 1.
+pub fn check_share(share: f64) -> Result<f64, String> {
+    if (0.0..=1.0).contains(&share) {
+        Ok(share)
+    } else {
+        Err(format!(
+            "foresight must be a number from 0 to 1, got {share}"
+        ))
+    }
+}
+
 impl Foresight {
-    /// The foresight of `episode`'s recording at `share` (0 to 1).
+    /// The foresight of `episode`'s recording at `share` ([`check_share`]).
     pub fn new(episode: Episode, share: f64) -> Result<Self, String> {
-        if !(share.is_finite() && (0.0..=1.0).contains(&share)) {
-            return Err(format!("foresight must be in [0, 1], got {share}"));
-        }
-        Ok(Self { episode, share })
+        let share = check_share(share)?;
+        let tracks = episode
+            .agents
+            .iter()
+            .enumerate()
+            .map(|(k, t)| (t.id, k))
+            .collect();
+        Ok(Self {
+            episode,
+            tracks,
+            share,
+        })
     }
 }
 
@@ -46,13 +67,12 @@ impl CrowdPredictor for Foresight {
 
     fn forecast(&mut self, obs: &Observation, horizon: usize, dt: f64) -> Result<Forecast, String> {
         let replay = CrowdReplay::new(&self.episode);
-        let tracks: HashMap<u64, _> = self.episode.agents.iter().map(|t| (t.id, t)).collect();
         let agents = obs
             .agents
             .iter()
             .map(|a| {
                 let mut path = constant_velocity_path(a, horizon, dt);
-                if let Some(track) = tracks.get(&a.id) {
+                if let Some(track) = self.tracks.get(&a.id).map(|&k| &self.episode.agents[k]) {
                     for (k, p) in path.iter_mut().enumerate() {
                         let t = obs.time + (k + 1) as f64 * dt;
                         if let Some(s) = replay.sample(track, t) {

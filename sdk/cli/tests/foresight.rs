@@ -89,7 +89,10 @@ fn foresight_zero_is_the_shipped_planner_and_full_foresight_sees_the_recording()
             "foresight-25",
             "foresight-50",
             "foresight-75",
-            "foresight-100"
+            "foresight-100",
+            "foresight-100-within-1.5",
+            "foresight-100-within-3",
+            "foresight-100-within-5",
         ]
     );
     assert_eq!(plan(&methods[0]), shipped, "share 0 is constant velocity");
@@ -109,4 +112,7 @@ fn foresight_zero_is_the_shipped_planner_and_full_foresight_sees_the_recording()
         touches(&shipped),
         "without foresight the plan meets the walker"
     );
+    // The walker is 2.5 m from the robot: within 3 m it gets the foresight, within 1.5 m not.
+    assert_eq!(plan(&methods[6]), full);
+    assert_eq!(plan(&methods[5]), shipped);
 }

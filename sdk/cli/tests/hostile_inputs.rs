@@ -478,6 +478,19 @@ fn data_edit(from: &'static str, to: &'static str) -> impl Fn(&Path) -> Result<(
     }
 }
 
+/// A `human2nav` method of the shipped bench.toml with `config = <config>`, built.
+fn human2nav_method_with(dir: &Path, config: &str) -> Result<(), String> {
+    let p = write(dir, "bench.toml", BENCH);
+    let cfg = human2nav_sim::config::BenchConfig::load(&p).map_err(|e| chain(&e))?;
+    let m: human2nav_sim::config::MethodConfig = toml::from_str(&format!(
+        "name = \"h\"\nkind = \"human2nav\"\nconfig = {config}\n"
+    ))
+    .map_err(|e| chain(&e))?;
+    human2nav_experiments::bench::human2nav_method(&m, &cfg)
+        .map(|_| ())
+        .map_err(|e| format!("{e:#}"))
+}
+
 fn sarl_edit(from: &'static str, to: &'static str) -> impl Fn(&Path) -> Result<(), String> {
     move |dir| {
         let p = write(dir, "sarl.toml", edit(SARL, from, to));
@@ -714,20 +727,17 @@ fn config_cases() -> Vec<Case> {
         ),
         err(
             a,
+            "bench.toml human2nav method `foresight_within` without `foresight`",
+            NR,
+            &["methods[h].config.foresight_within", "needs"],
+            |d| human2nav_method_with(d, "{ foresight_within = 2.0 }"),
+        ),
+        err(
+            a,
             "bench.toml human2nav method `foresight = 2`",
             NR,
             &["methods[h].config.foresight", "0 to 1"],
-            |d| {
-                let p = write(d, "bench.toml", BENCH);
-                let cfg = human2nav_sim::config::BenchConfig::load(&p).map_err(|e| chain(&e))?;
-                let m: human2nav_sim::config::MethodConfig = toml::from_str(
-                    "name = \"h\"\nkind = \"human2nav\"\nconfig = { foresight = 2.0 }\n",
-                )
-                .map_err(|e| chain(&e))?;
-                human2nav_experiments::bench::human2nav_method(&m, &cfg)
-                    .map(|_| ())
-                    .map_err(|e| format!("{e:#}"))
-            },
+            |d| human2nav_method_with(d, "{ foresight = 2.0 }"),
         ),
         err(
             a,

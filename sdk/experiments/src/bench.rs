@@ -258,16 +258,26 @@ pub fn ensure_real_episodes(
 /// `qp` or `alg1+qp`, see [`human2nav_core::ablation::Arm`]), and `foresight` (0 to 1, a
 /// yardstick: the planner's forecast of people moved that share of the way from constant
 /// velocity to the episode's recording, [`human2nav_sim::foresight`]; not with a planner file
-/// that names a `[prediction]` model). Each episode gets a fresh planner (model loaded from disk, source
+/// that names a `[prediction]` model) with, optionally, `foresight_within` (m: only the people
+/// that close to the robot get it). Each episode gets a fresh planner (model loaded from disk, source
 /// noise seeded with the episode's seed) for the robot of that episode, with the robot's Φ
 /// including its plugin constraint terms; libtorch runs one thread per planner (the episodes
 /// already run in parallel).
 pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<MethodSpec> {
     let field = |key: &str| format!("methods[{}].config.{key}", m.name);
     for key in m.config.keys() {
-        if !["planner", "guidance", "arm", "foresight"].contains(&key.as_str()) {
+        if ![
+            "planner",
+            "guidance",
+            "arm",
+            "foresight",
+            "foresight_within",
+        ]
+        .contains(&key.as_str())
+        {
             bail!(
-                "{}: unknown key (expected `planner`, `guidance`, `arm` or `foresight`)",
+                "{}: unknown key (expected `planner`, `guidance`, `arm`, `foresight` or \
+                 `foresight_within`)",
                 field(key)
             );
         }
@@ -283,6 +293,19 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
             Some(share)
         }
         None => None,
+    };
+    let foresight_within = match m.config.get("foresight_within") {
+        Some(_) if foresight.is_none() => bail!(
+            "{}: needs `foresight` (the share the pedestrians within it get)",
+            field("foresight_within")
+        ),
+        Some(v) => v
+            .as_float()
+            .or_else(|| v.as_integer().map(|i| i as f64))
+            .ok_or_else(|| format!("must be a distance above 0 m, got {v}"))
+            .and_then(human2nav_sim::foresight::check_within)
+            .map_err(|e| anyhow!("{}: {e}", field("foresight_within")))?,
+        None => f64::INFINITY,
     };
     if m.config.contains_key("guidance") && m.config.contains_key("arm") {
         bail!(
@@ -360,7 +383,8 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
             planner = planner.with_predictor(p.predictor()?);
         }
         if let Some(share) = foresight {
-            let f = human2nav_sim::foresight::Foresight::new(ctx.episode.clone(), share)?;
+            let f = human2nav_sim::foresight::Foresight::new(ctx.episode.clone(), share)?
+                .within(foresight_within)?;
             planner = planner.with_predictor(Box::new(f));
         }
         Ok(Box::new(planner.planner))

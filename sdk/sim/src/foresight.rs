@@ -12,6 +12,10 @@
 //! to reach a success rate: the planner's success rate against the share, read at the ADE it
 //! corresponds to.
 //!
+//! With [`Foresight::within`] only the pedestrians within a radius of the robot when it plans
+//! get the foresight, and the others stay at constant velocity: whether a predictor has to be
+//! good about everyone in view or only about the people near the robot.
+//!
 //! A pedestrian the recording no longer holds at a waypoint (its track has ended) keeps its
 //! constant-velocity position there. In a reactive crowd people depart from their recording
 //! near the robot, so there the foresight is only approximately right, as the oracle's is.
@@ -29,6 +33,8 @@ pub struct Foresight {
     /// The index in `episode.agents` of each recorded id.
     tracks: HashMap<u64, usize>,
     share: f64,
+    /// Only pedestrians whose centre is this close to the robot's (m) get the foresight.
+    within: f64,
 }
 
 /// Checks a foresight share: a number from 0 to 1.
@@ -38,6 +44,17 @@ pub fn check_share(share: f64) -> Result<f64, String> {
     } else {
         Err(format!(
             "foresight must be a number from 0 to 1, got {share}"
+        ))
+    }
+}
+
+/// Checks a foresight radius: a distance above 0 m (infinite: everyone in view).
+pub fn check_within(radius: f64) -> Result<f64, String> {
+    if radius > 0.0 {
+        Ok(radius)
+    } else {
+        Err(format!(
+            "foresight_within must be a distance above 0 m, got {radius}"
         ))
     }
 }
@@ -56,6 +73,16 @@ impl Foresight {
             episode,
             tracks,
             share,
+            within: f64::INFINITY,
+        })
+    }
+
+    /// Gives the foresight only to pedestrians whose centre is within `radius` (m, > 0) of the
+    /// robot's when it plans; the others stay at constant velocity.
+    pub fn within(self, radius: f64) -> Result<Self, String> {
+        Ok(Self {
+            within: check_within(radius)?,
+            ..self
         })
     }
 }
@@ -72,7 +99,10 @@ impl CrowdPredictor for Foresight {
             .iter()
             .map(|a| {
                 let mut path = constant_velocity_path(a, horizon, dt);
-                if let Some(track) = self.tracks.get(&a.id).map(|&k| &self.episode.agents[k]) {
+                let near =
+                    (a.position[0] - obs.ego.x).hypot(a.position[1] - obs.ego.y) <= self.within;
+                let track = self.tracks.get(&a.id).map(|&k| &self.episode.agents[k]);
+                if let Some(track) = track.filter(|_| near) {
                     for (k, p) in path.iter_mut().enumerate() {
                         let t = obs.time + (k + 1) as f64 * dt;
                         if let Some(s) = replay.sample(track, t) {
@@ -159,6 +189,36 @@ mod tests {
             // The pedestrian the recording does not hold stays at constant velocity.
             let q = at(1.0, 1, k);
             assert!((q[0] - (-3.0 + s)).abs() < 1e-9 && (q[1] - 1.0).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn within_a_radius_only_the_near_get_the_foresight() {
+        let (episode, mut obs) = setup();
+        // The robot at (0, 1): agent 7 at (2, 1) is 2 m away, agent 9 at (-3, 1) 3 m.
+        obs.ego.y = 1.0;
+        obs.agents[1].id = 7; // the far one follows the same recording if it gets it
+        let cv = |agent: usize, k: usize| {
+            let s = 0.1 * (k + 1) as f64;
+            [obs.agents[agent].position[0] + s, 1.0]
+        };
+        let mut f = Foresight::new(episode.clone(), 1.0)
+            .unwrap()
+            .within(2.5)
+            .unwrap();
+        let forecast = f.forecast(&obs, 10, 0.1).unwrap();
+        for k in [0, 9] {
+            let s = 0.1 * (k + 1) as f64;
+            let near = forecast.position(0, 0, k);
+            assert!((near[0] - 2.0).abs() < 1e-9 && (near[1] - (1.0 + s)).abs() < 1e-9);
+            assert_eq!(forecast.position(1, 0, k), cv(1, k));
+        }
+        for bad in [0.0, -1.0, f64::NAN] {
+            let err = Foresight::new(episode.clone(), 1.0)
+                .unwrap()
+                .within(bad)
+                .unwrap_err();
+            assert!(err.contains("foresight_within"), "{err}");
         }
     }
 

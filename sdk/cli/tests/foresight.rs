@@ -93,6 +93,9 @@ fn foresight_zero_is_the_shipped_planner_and_full_foresight_sees_the_recording()
             "foresight-100-within-1.5",
             "foresight-100-within-3",
             "foresight-100-within-5",
+            "foresight-100-until-0.5",
+            "foresight-100-until-1",
+            "foresight-100-until-2",
         ]
     );
     assert_eq!(plan(&methods[0]), shipped, "share 0 is constant velocity");

@@ -259,26 +259,27 @@ pub fn ensure_real_episodes(
 /// yardstick: the planner's forecast of people moved that share of the way from constant
 /// velocity to the episode's recording, [`human2nav_sim::foresight`]; not with a planner file
 /// that names a `[prediction]` model) with, optionally, `foresight_within` (m: only the people
-/// that close to the robot get it). Each episode gets a fresh planner (model loaded from disk, source
+/// that close to the robot get it) and `foresight_until` (s: the recording that far ahead,
+/// constant velocity after it). Each episode gets a fresh planner (model loaded from disk, source
 /// noise seeded with the episode's seed) for the robot of that episode, with the robot's Φ
 /// including its plugin constraint terms; libtorch runs one thread per planner (the episodes
 /// already run in parallel).
 pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<MethodSpec> {
     let field = |key: &str| format!("methods[{}].config.{key}", m.name);
+    const KEYS: [&str; 6] = [
+        "planner",
+        "guidance",
+        "arm",
+        "foresight",
+        "foresight_within",
+        "foresight_until",
+    ];
     for key in m.config.keys() {
-        if ![
-            "planner",
-            "guidance",
-            "arm",
-            "foresight",
-            "foresight_within",
-        ]
-        .contains(&key.as_str())
-        {
+        if !KEYS.contains(&key.as_str()) {
             bail!(
-                "{}: unknown key (expected `planner`, `guidance`, `arm`, `foresight` or \
-                 `foresight_within`)",
-                field(key)
+                "{}: unknown key (expected one of {})",
+                field(key),
+                KEYS.map(|k| format!("`{k}`")).join(", ")
             );
         }
     }
@@ -294,19 +295,23 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
         }
         None => None,
     };
-    let foresight_within = match m.config.get("foresight_within") {
-        Some(_) if foresight.is_none() => bail!(
-            "{}: needs `foresight` (the share the pedestrians within it get)",
-            field("foresight_within")
-        ),
-        Some(v) => v
-            .as_float()
-            .or_else(|| v.as_integer().map(|i| i as f64))
-            .ok_or_else(|| format!("must be a distance above 0 m, got {v}"))
-            .and_then(human2nav_sim::foresight::check_within)
-            .map_err(|e| anyhow!("{}: {e}", field("foresight_within")))?,
-        None => f64::INFINITY,
+    // A limit of the foresight: needs `foresight`, a number above 0; unset, no limit.
+    let limit = |key: &str, what: &str| -> anyhow::Result<f64> {
+        match m.config.get(key) {
+            Some(_) if foresight.is_none() => {
+                bail!("{}: needs `foresight` (the share it limits)", field(key))
+            }
+            Some(v) => v
+                .as_float()
+                .or_else(|| v.as_integer().map(|i| i as f64))
+                .ok_or_else(|| format!("must be {what}, got {v}"))
+                .and_then(|x| human2nav_sim::foresight::check_positive(x, key, what))
+                .map_err(|e| anyhow!("{}: {e}", field(key))),
+            None => Ok(f64::INFINITY),
+        }
     };
+    let foresight_within = limit("foresight_within", "a distance above 0 m")?;
+    let foresight_until = limit("foresight_until", "a time above 0 s")?;
     if m.config.contains_key("guidance") && m.config.contains_key("arm") {
         bail!(
             "{}: give `guidance` or `arm`, not both (`arm = \"raw\"` is `guidance = false`)",
@@ -384,7 +389,8 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
         }
         if let Some(share) = foresight {
             let f = human2nav_sim::foresight::Foresight::new(ctx.episode.clone(), share)?
-                .within(foresight_within)?;
+                .within(foresight_within)?
+                .until(foresight_until)?;
             planner = planner.with_predictor(Box::new(f));
         }
         Ok(Box::new(planner.planner))

@@ -16,6 +16,10 @@
 //! get the foresight, and the others stay at constant velocity: whether a predictor has to be
 //! good about everyone in view or only about the people near the robot.
 //!
+//! With [`Foresight::until`] the recording is followed only that far ahead, and constant
+//! velocity from there on (at the velocity an observer would see then): how far ahead a
+//! predictor has to be right.
+//!
 //! A pedestrian the recording no longer holds at a waypoint (its track has ended) keeps its
 //! constant-velocity position there. In a reactive crowd people depart from their recording
 //! near the robot, so there the foresight is only approximately right, as the oracle's is.
@@ -35,6 +39,8 @@ pub struct Foresight {
     share: f64,
     /// Only pedestrians whose centre is this close to the robot's (m) get the foresight.
     within: f64,
+    /// The recording is followed this far ahead (s), constant velocity after it.
+    until: f64,
 }
 
 /// Checks a foresight share: a number from 0 to 1.
@@ -48,14 +54,13 @@ pub fn check_share(share: f64) -> Result<f64, String> {
     }
 }
 
-/// Checks a foresight radius: a distance above 0 m (infinite: everyone in view).
-pub fn check_within(radius: f64) -> Result<f64, String> {
-    if radius > 0.0 {
-        Ok(radius)
+/// Checks a foresight radius or horizon, `key`: above 0 (infinite: no limit); `what` says
+/// what it must be in the error.
+pub fn check_positive(value: f64, key: &str, what: &str) -> Result<f64, String> {
+    if value > 0.0 {
+        Ok(value)
     } else {
-        Err(format!(
-            "foresight_within must be a distance above 0 m, got {radius}"
-        ))
+        Err(format!("{key} must be {what}, got {value}"))
     }
 }
 
@@ -74,6 +79,17 @@ impl Foresight {
             tracks,
             share,
             within: f64::INFINITY,
+            until: f64::INFINITY,
+        })
+    }
+
+    /// Follows the recording only `horizon` seconds (> 0) ahead of the observation; after that
+    /// each pedestrian walks on from its recorded position then at the velocity an observer
+    /// would see then ([`CrowdReplay::observed_velocity`]).
+    pub fn until(self, horizon: f64) -> Result<Self, String> {
+        Ok(Self {
+            until: check_positive(horizon, "foresight_until", "a time above 0 s")?,
+            ..self
         })
     }
 
@@ -81,7 +97,7 @@ impl Foresight {
     /// robot's when it plans; the others stay at constant velocity.
     pub fn within(self, radius: f64) -> Result<Self, String> {
         Ok(Self {
-            within: check_within(radius)?,
+            within: check_positive(radius, "foresight_within", "a distance above 0 m")?,
             ..self
         })
     }
@@ -103,11 +119,24 @@ impl CrowdPredictor for Foresight {
                     (a.position[0] - obs.ego.x).hypot(a.position[1] - obs.ego.y) <= self.within;
                 let track = self.tracks.get(&a.id).map(|&k| &self.episode.agents[k]);
                 if let Some(track) = track.filter(|_| near) {
+                    // Where the recording is left for constant velocity, if within the horizon.
+                    let cut = obs.time + self.until;
+                    let from_cut = replay
+                        .sample(track, cut)
+                        .zip(replay.observed_velocity(track, cut));
                     for (k, p) in path.iter_mut().enumerate() {
                         let t = obs.time + (k + 1) as f64 * dt;
-                        if let Some(s) = replay.sample(track, t) {
-                            p[0] += self.share * (s.position[0] - p[0]);
-                            p[1] += self.share * (s.position[1] - p[1]);
+                        let recorded = if t <= cut {
+                            replay.sample(track, t).map(|s| s.position)
+                        } else {
+                            from_cut.map(|(s, v)| {
+                                let after = t - cut;
+                                [s.position[0] + v[0] * after, s.position[1] + v[1] * after]
+                            })
+                        };
+                        if let Some(q) = recorded {
+                            p[0] += self.share * (q[0] - p[0]);
+                            p[1] += self.share * (q[1] - p[1]);
                         }
                     }
                 }
@@ -219,6 +248,41 @@ mod tests {
                 .within(bad)
                 .unwrap_err();
             assert!(err.contains("foresight_within"), "{err}");
+        }
+    }
+
+    #[test]
+    fn until_a_horizon_the_recording_then_constant_velocity_from_it() {
+        let (mut episode, obs) = setup();
+        // Agent 7's recording turns at 1.5 s (0.5 s after the observation) from +y to +x.
+        let track = &mut episode.agents[0];
+        for (k, p) in track.positions.iter_mut().enumerate().skip(15) {
+            *p = [2.0 + 0.1 * (k - 15) as f64, 1.5];
+        }
+        let mut f = Foresight::new(episode.clone(), 1.0)
+            .unwrap()
+            .until(0.3)
+            .unwrap();
+        let forecast = f.forecast(&obs, 10, 0.1).unwrap();
+        for k in 0..10 {
+            let s = 0.1 * (k + 1) as f64;
+            // The recording up to 0.3 s, then on at +y 1 m/s from (2, 1.3).
+            let want = [2.0, 1.0 + s];
+            let p = forecast.position(0, 0, k);
+            assert!(
+                (p[0] - want[0]).abs() < 1e-9 && (p[1] - want[1]).abs() < 1e-9,
+                "k {k}: {p:?}"
+            );
+        }
+        // Without the horizon, the turn shows.
+        let mut all = Foresight::new(episode.clone(), 1.0).unwrap();
+        assert!((all.forecast(&obs, 10, 0.1).unwrap().position(0, 0, 9)[0] - 2.5).abs() < 1e-9);
+        for bad in [0.0, -1.0, f64::NAN] {
+            let err = Foresight::new(episode.clone(), 1.0)
+                .unwrap()
+                .until(bad)
+                .unwrap_err();
+            assert!(err.contains("foresight_until"), "{err}");
         }
     }
 

@@ -242,13 +242,6 @@ mod tests {
             assert!((near[0] - 2.0).abs() < 1e-9 && (near[1] - (1.0 + s)).abs() < 1e-9);
             assert_eq!(forecast.position(1, 0, k), cv(1, k));
         }
-        for bad in [0.0, -1.0, f64::NAN] {
-            let err = Foresight::new(episode.clone(), 1.0)
-                .unwrap()
-                .within(bad)
-                .unwrap_err();
-            assert!(err.contains("foresight_within"), "{err}");
-        }
     }
 
     #[test]
@@ -277,21 +270,23 @@ mod tests {
         // Without the horizon, the turn shows.
         let mut all = Foresight::new(episode.clone(), 1.0).unwrap();
         assert!((all.forecast(&obs, 10, 0.1).unwrap().position(0, 0, 9)[0] - 2.5).abs() < 1e-9);
-        for bad in [0.0, -1.0, f64::NAN] {
-            let err = Foresight::new(episode.clone(), 1.0)
-                .unwrap()
-                .until(bad)
-                .unwrap_err();
-            assert!(err.contains("foresight_until"), "{err}");
-        }
     }
 
     #[test]
-    fn a_share_outside_zero_to_one_is_refused() {
+    fn a_share_outside_zero_to_one_or_a_limit_not_above_zero_is_refused() {
         let (episode, _) = setup();
         for share in [-0.1, 1.5, f64::NAN] {
             let err = Foresight::new(episode.clone(), share).unwrap_err();
             assert!(err.contains("foresight"), "{err}");
+        }
+        let full = || Foresight::new(episode.clone(), 1.0).unwrap();
+        for bad in [0.0, -1.0, f64::NAN] {
+            for (key, err) in [
+                ("foresight_within", full().within(bad).unwrap_err()),
+                ("foresight_until", full().until(bad).unwrap_err()),
+            ] {
+                assert!(err.contains(key), "{err}");
+            }
         }
     }
 }

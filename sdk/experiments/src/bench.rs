@@ -25,6 +25,7 @@ use human2nav_sim::config::{
     BenchConfig, build_suites, builtin_method, ensure_episode_files, load_robots_with,
 };
 use human2nav_sim::driver::{self, BenchOutcome, BenchPlan};
+use human2nav_sim::foresight::ForesightSettings;
 use human2nav_sim::{MethodSpec, RobotSetup, Suite};
 use indicatif::ProgressBar;
 use std::collections::HashMap;
@@ -251,6 +252,44 @@ pub fn ensure_real_episodes(
     Ok(ensure_episode_files(cfg, data_config, log)?)
 }
 
+/// The `foresight` keys of a `human2nav` method's `config` (`None` without `foresight`),
+/// checked; `field` names a key in errors.
+fn foresight_settings(
+    m: &MethodConfig,
+    field: &dyn Fn(&str) -> String,
+) -> anyhow::Result<Option<ForesightSettings>> {
+    let number = |key: &str| -> anyhow::Result<Option<f64>> {
+        m.config
+            .get(key)
+            .map(|v| {
+                v.as_float()
+                    .or_else(|| v.as_integer().map(|i| i as f64))
+                    .ok_or_else(|| anyhow!("{}: must be a number, got {v}", field(key)))
+            })
+            .transpose()
+    };
+    let Some(share) = number("foresight")? else {
+        if let Some(key) = ["foresight_within", "foresight_until"]
+            .into_iter()
+            .find(|k| m.config.contains_key(*k))
+        {
+            bail!("{}: needs `foresight` (the share it limits)", field(key));
+        }
+        return Ok(None);
+    };
+    let unlimited = ForesightSettings::share(share);
+    let settings = ForesightSettings {
+        within: number("foresight_within")?.unwrap_or(unlimited.within),
+        until: number("foresight_until")?.unwrap_or(unlimited.until),
+        ..unlimited
+    };
+    // The message begins with the key it is about.
+    settings
+        .validate()
+        .map_err(|e| anyhow!("methods[{}].config.{e}", m.name))?;
+    Ok(Some(settings))
+}
+
 /// A `human2nav` method: the reference planner with the model and settings of a planner
 /// configuration. Its `config` table takes `planner` (the planner TOML, relative to the
 /// workspace root; default `sdk/configs/planner.toml`) and either `guidance` (bool; `false` is
@@ -283,35 +322,7 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
             );
         }
     }
-    let foresight = match m.config.get("foresight") {
-        Some(v) => {
-            let share = v
-                .as_float()
-                .or_else(|| v.as_integer().map(|i| i as f64))
-                .ok_or_else(|| format!("must be a number from 0 to 1, got {v}"))
-                .and_then(human2nav_sim::foresight::check_share)
-                .map_err(|e| anyhow!("{}: {e}", field("foresight")))?;
-            Some(share)
-        }
-        None => None,
-    };
-    // A limit of the foresight: needs `foresight`, a number above 0; unset, no limit.
-    let limit = |key: &str, what: &str| -> anyhow::Result<f64> {
-        match m.config.get(key) {
-            Some(_) if foresight.is_none() => {
-                bail!("{}: needs `foresight` (the share it limits)", field(key))
-            }
-            Some(v) => v
-                .as_float()
-                .or_else(|| v.as_integer().map(|i| i as f64))
-                .ok_or_else(|| format!("must be {what}, got {v}"))
-                .and_then(|x| human2nav_sim::foresight::check_positive(x, key, what))
-                .map_err(|e| anyhow!("{}: {e}", field(key))),
-            None => Ok(f64::INFINITY),
-        }
-    };
-    let foresight_within = limit("foresight_within", "a distance above 0 m")?;
-    let foresight_until = limit("foresight_until", "a time above 0 s")?;
+    let foresight = foresight_settings(m, &field)?;
     if m.config.contains_key("guidance") && m.config.contains_key("arm") {
         bail!(
             "{}: give `guidance` or `arm`, not both (`arm = \"raw\"` is `guidance = false`)",
@@ -387,10 +398,8 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
         if let Some(p) = &prediction {
             planner = planner.with_predictor(p.predictor()?);
         }
-        if let Some(share) = foresight {
-            let f = human2nav_sim::foresight::Foresight::new(ctx.episode.clone(), share)?
-                .within(foresight_within)?
-                .until(foresight_until)?;
+        if let Some(settings) = foresight {
+            let f = human2nav_sim::foresight::Foresight::new(ctx.episode.clone(), settings)?;
             planner = planner.with_predictor(Box::new(f));
         }
         Ok(Box::new(planner.planner))

@@ -12,11 +12,11 @@
 //! to reach a success rate: the planner's success rate against the share, read at the ADE it
 //! corresponds to.
 //!
-//! With [`Foresight::within`] only the pedestrians within a radius of the robot when it plans
+//! With [`ForesightSettings::within`] only the pedestrians within a radius of the robot when it plans
 //! get the foresight, and the others stay at constant velocity: whether a predictor has to be
 //! good about everyone in view or only about the people near the robot.
 //!
-//! With [`Foresight::until`] the recording is followed only that far ahead, and constant
+//! With [`ForesightSettings::until`] the recording is followed only that far ahead, and constant
 //! velocity from there on (at the velocity an observer would see then): how far ahead a
 //! predictor has to be right.
 //!
@@ -30,44 +30,65 @@ use human2nav_core::Observation;
 use human2nav_core::forecast::{CrowdPredictor, Forecast, ForecastAgent, constant_velocity_path};
 use std::collections::HashMap;
 
-/// Constant velocity moved `share` of the way to the recorded future (module docs).
+/// What a [`Foresight`] knows (module docs). The bench keys of a `human2nav` method are
+/// named after its fields: `foresight`, `foresight_within`, `foresight_until`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ForesightSettings {
+    /// How far the forecast moves from constant velocity to the recording, 0 to 1.
+    pub share: f64,
+    /// Only pedestrians whose centre is this close to the robot's when it plans (m, > 0) get
+    /// the foresight; infinite: everyone in view.
+    pub within: f64,
+    /// The recording is followed this far ahead (s, > 0); after that each pedestrian walks on
+    /// from its recorded position then, at the velocity an observer would see then
+    /// ([`CrowdReplay::observed_velocity`]); infinite: the whole horizon.
+    pub until: f64,
+}
+
+impl ForesightSettings {
+    /// `share` of the recording, for everyone in view and the whole horizon.
+    pub fn share(share: f64) -> Self {
+        Self {
+            share,
+            within: f64::INFINITY,
+            until: f64::INFINITY,
+        }
+    }
+
+    /// Checks every field; the error begins with the field's bench key.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(0.0..=1.0).contains(&self.share) {
+            return Err(format!(
+                "foresight must be a number from 0 to 1, got {}",
+                self.share
+            ));
+        }
+        for (key, value, what) in [
+            ("foresight_within", self.within, "a distance above 0 m"),
+            ("foresight_until", self.until, "a time above 0 s"),
+        ] {
+            if value.is_nan() || value <= 0.0 {
+                return Err(format!("{key} must be {what}, got {value}"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Constant velocity moved a share of the way to the recorded future (module docs).
 #[derive(Clone, Debug)]
 pub struct Foresight {
     episode: Episode,
     /// The index in `episode.agents` of each recorded id.
     tracks: HashMap<u64, usize>,
-    share: f64,
-    /// Only pedestrians whose centre is this close to the robot's (m) get the foresight.
-    within: f64,
-    /// The recording is followed this far ahead (s), constant velocity after it.
-    until: f64,
-}
-
-/// Checks a foresight share: a number from 0 to 1.
-pub fn check_share(share: f64) -> Result<f64, String> {
-    if (0.0..=1.0).contains(&share) {
-        Ok(share)
-    } else {
-        Err(format!(
-            "foresight must be a number from 0 to 1, got {share}"
-        ))
-    }
-}
-
-/// Checks a foresight radius or horizon, `key`: above 0 (infinite: no limit); `what` says
-/// what it must be in the error.
-pub fn check_positive(value: f64, key: &str, what: &str) -> Result<f64, String> {
-    if value > 0.0 {
-        Ok(value)
-    } else {
-        Err(format!("{key} must be {what}, got {value}"))
-    }
+    settings: ForesightSettings,
 }
 
 impl Foresight {
-    /// The foresight of `episode`'s recording at `share` ([`check_share`]).
-    pub fn new(episode: Episode, share: f64) -> Result<Self, String> {
-        let share = check_share(share)?;
+    /// The foresight of `episode`'s recording with `settings`, checked
+    /// ([`ForesightSettings::validate`]).
+    pub fn new(episode: Episode, settings: ForesightSettings) -> Result<Self, String> {
+        settings.validate()?;
         let tracks = episode
             .agents
             .iter()
@@ -77,28 +98,7 @@ impl Foresight {
         Ok(Self {
             episode,
             tracks,
-            share,
-            within: f64::INFINITY,
-            until: f64::INFINITY,
-        })
-    }
-
-    /// Follows the recording only `horizon` seconds (> 0) ahead of the observation; after that
-    /// each pedestrian walks on from its recorded position then at the velocity an observer
-    /// would see then ([`CrowdReplay::observed_velocity`]).
-    pub fn until(self, horizon: f64) -> Result<Self, String> {
-        Ok(Self {
-            until: check_positive(horizon, "foresight_until", "a time above 0 s")?,
-            ..self
-        })
-    }
-
-    /// Gives the foresight only to pedestrians whose centre is within `radius` (m, > 0) of the
-    /// robot's when it plans; the others stay at constant velocity.
-    pub fn within(self, radius: f64) -> Result<Self, String> {
-        Ok(Self {
-            within: check_positive(radius, "foresight_within", "a distance above 0 m")?,
-            ..self
+            settings,
         })
     }
 }
@@ -109,18 +109,22 @@ impl CrowdPredictor for Foresight {
     }
 
     fn forecast(&mut self, obs: &Observation, horizon: usize, dt: f64) -> Result<Forecast, String> {
+        let ForesightSettings {
+            share,
+            within,
+            until,
+        } = self.settings;
         let replay = CrowdReplay::new(&self.episode);
         let agents = obs
             .agents
             .iter()
             .map(|a| {
                 let mut path = constant_velocity_path(a, horizon, dt);
-                let near =
-                    (a.position[0] - obs.ego.x).hypot(a.position[1] - obs.ego.y) <= self.within;
+                let near = (a.position[0] - obs.ego.x).hypot(a.position[1] - obs.ego.y) <= within;
                 let track = self.tracks.get(&a.id).map(|&k| &self.episode.agents[k]);
                 if let Some(track) = track.filter(|_| near) {
                     // Where the recording is left for constant velocity, if within the horizon.
-                    let cut = obs.time + self.until;
+                    let cut = obs.time + until;
                     let from_cut = replay
                         .sample(track, cut)
                         .zip(replay.observed_velocity(track, cut));
@@ -135,8 +139,8 @@ impl CrowdPredictor for Foresight {
                             })
                         };
                         if let Some(q) = recorded {
-                            p[0] += self.share * (q[0] - p[0]);
-                            p[1] += self.share * (q[1] - p[1]);
+                            p[0] += share * (q[0] - p[0]);
+                            p[1] += share * (q[1] - p[1]);
                         }
                     }
                 }
@@ -199,7 +203,7 @@ mod tests {
     fn the_share_moves_constant_velocity_to_the_recording() {
         let (episode, obs) = setup();
         let at = |share: f64, agent: usize, k: usize| {
-            let mut f = Foresight::new(episode.clone(), share).unwrap();
+            let mut f = Foresight::new(episode.clone(), ForesightSettings::share(share)).unwrap();
             f.forecast(&obs, 10, 0.1).unwrap().position(agent, 0, k)
         };
         // Waypoint k is (k + 1) · 0.1 s after the observation: constant velocity has agent 7 at
@@ -231,10 +235,14 @@ mod tests {
             let s = 0.1 * (k + 1) as f64;
             [obs.agents[agent].position[0] + s, 1.0]
         };
-        let mut f = Foresight::new(episode.clone(), 1.0)
-            .unwrap()
-            .within(2.5)
-            .unwrap();
+        let mut f = Foresight::new(
+            episode.clone(),
+            ForesightSettings {
+                within: 2.5,
+                ..ForesightSettings::share(1.0)
+            },
+        )
+        .unwrap();
         let forecast = f.forecast(&obs, 10, 0.1).unwrap();
         for k in [0, 9] {
             let s = 0.1 * (k + 1) as f64;
@@ -252,10 +260,14 @@ mod tests {
         for (k, p) in track.positions.iter_mut().enumerate().skip(15) {
             *p = [2.0 + 0.1 * (k - 15) as f64, 1.5];
         }
-        let mut f = Foresight::new(episode.clone(), 1.0)
-            .unwrap()
-            .until(0.3)
-            .unwrap();
+        let mut f = Foresight::new(
+            episode.clone(),
+            ForesightSettings {
+                until: 0.3,
+                ..ForesightSettings::share(1.0)
+            },
+        )
+        .unwrap();
         let forecast = f.forecast(&obs, 10, 0.1).unwrap();
         for k in 0..10 {
             let s = 0.1 * (k + 1) as f64;
@@ -268,7 +280,7 @@ mod tests {
             );
         }
         // Without the horizon, the turn shows.
-        let mut all = Foresight::new(episode.clone(), 1.0).unwrap();
+        let mut all = Foresight::new(episode.clone(), ForesightSettings::share(1.0)).unwrap();
         assert!((all.forecast(&obs, 10, 0.1).unwrap().position(0, 0, 9)[0] - 2.5).abs() < 1e-9);
     }
 
@@ -276,15 +288,22 @@ mod tests {
     fn a_share_outside_zero_to_one_or_a_limit_not_above_zero_is_refused() {
         let (episode, _) = setup();
         for share in [-0.1, 1.5, f64::NAN] {
-            let err = Foresight::new(episode.clone(), share).unwrap_err();
+            let err = Foresight::new(episode.clone(), ForesightSettings::share(share)).unwrap_err();
             assert!(err.contains("foresight"), "{err}");
         }
-        let full = || Foresight::new(episode.clone(), 1.0).unwrap();
+        let full = ForesightSettings::share(1.0);
         for bad in [0.0, -1.0, f64::NAN] {
-            for (key, err) in [
-                ("foresight_within", full().within(bad).unwrap_err()),
-                ("foresight_until", full().until(bad).unwrap_err()),
+            for (key, settings) in [
+                (
+                    "foresight_within",
+                    ForesightSettings {
+                        within: bad,
+                        ..full
+                    },
+                ),
+                ("foresight_until", ForesightSettings { until: bad, ..full }),
             ] {
+                let err = Foresight::new(episode.clone(), settings).unwrap_err();
                 assert!(err.contains(key), "{err}");
             }
         }

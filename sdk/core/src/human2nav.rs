@@ -1464,6 +1464,11 @@ fn phi_context<'a>(
 mod tests {
     use super::*;
 
+    /// A goal term's progress and how many waypoints it checks.
+    fn progress_checked(t: GoalTerm) -> (f64, usize) {
+        (t.progress, t.checked)
+    }
+
     fn line(speed: f64) -> Vec<Pose2> {
         (1..=4)
             .map(|k| Pose2::new(0.1 * speed * k as f64, 0.0, 0.0))
@@ -1500,11 +1505,7 @@ mod tests {
             ..SelectionWeights::default()
         };
         // The end at (4, 0) is as far from the goal as the start.
-        let GoalTerm {
-            progress: p,
-            checked,
-            ..
-        } = goal_term(&traj, goal, &end, 0.1);
+        let (p, checked) = progress_checked(goal_term(&traj, goal, &end, 0.1));
         assert!((p - 1.0).abs() < 1e-12, "{p}");
         assert_eq!(checked, traj.len());
         // The closest approach is 0.5 m, at (2, 0): not within 0.3 m, so not arrived.
@@ -1512,19 +1513,11 @@ mod tests {
             progress: Progress::Closest,
             ..end
         };
-        let GoalTerm {
-            progress: p,
-            checked,
-            ..
-        } = goal_term(&traj, goal, &closest, 0.1);
+        let (p, checked) = progress_checked(goal_term(&traj, goal, &closest, 0.1));
         assert!((p - 0.5 / d0).abs() < 1e-12, "{p}");
         assert_eq!(checked, traj.len());
         // Within 0.6 m it arrives at (1.7, 0), the 14th waypoint, and is checked up to there.
-        let GoalTerm {
-            progress: p,
-            checked,
-            ..
-        } = goal_term(
+        let (p, checked) = progress_checked(goal_term(
             &traj,
             goal,
             &SelectionWeights {
@@ -1532,15 +1525,17 @@ mod tests {
                 ..closest
             },
             0.1,
-        );
+        ));
         assert_eq!(p, 0.0);
         assert_eq!(checked, 14);
         assert!((traj[13].x - 1.7).abs() < 1e-12);
         // A candidate leading away: its closest approach is where the robot stands.
         let away: Vec<Pose2> = traj.iter().map(|p| Pose2::new(-p.x, 0.0, 0.0)).collect();
         assert_eq!(goal_term(&away, goal, &closest, 0.1).progress, 1.0);
-        let empty = goal_term(&[], goal, &closest, 0.1);
-        assert_eq!((empty.progress, empty.checked), (1.0, 0));
+        assert_eq!(
+            progress_checked(goal_term(&[], goal, &closest, 0.1)),
+            (1.0, 0)
+        );
     }
 
     #[test]
@@ -1584,19 +1579,11 @@ mod tests {
                 .collect()
         };
         // At full speed it arrives (within 0.3 m) on the 17th waypoint: 1.7 m covered.
-        let GoalTerm {
-            progress: fast,
-            checked,
-            ..
-        } = goal_term(&at(1.0, 40), goal, &w, 0.1);
+        let (fast, checked) = progress_checked(goal_term(&at(1.0, 40), goal, &w, 0.1));
         assert_eq!(checked, 17);
         assert!((fast - 1.7 / 2.0).abs() < 1e-12, "{fast}");
         // At half speed it arrives on the 34th: twice as late, and it ranks worse.
-        let GoalTerm {
-            progress: slow,
-            checked,
-            ..
-        } = goal_term(&at(0.5, 40), goal, &w, 0.1);
+        let (slow, checked) = progress_checked(goal_term(&at(0.5, 40), goal, &w, 0.1));
         assert_eq!(checked, 34);
         assert!((slow - 3.4 / 2.0).abs() < 1e-12, "{slow}");
         // Closest approach calls both arrived alike.
@@ -1605,26 +1592,19 @@ mod tests {
         assert_eq!(goal_term(&at(0.5, 40), goal, &closest, 0.1).progress, 0.0);
         // Not arriving: the way covered by its end plus the distance left there. Standing
         // still for as long ranks behind it, and backing away behind that.
-        let GoalTerm {
-            progress: short,
-            checked,
-            ..
-        } = goal_term(&at(0.5, 10), goal, &w, 0.1);
+        let (short, checked) = progress_checked(goal_term(&at(0.5, 10), goal, &w, 0.1));
         assert_eq!(checked, 10);
         assert!((short - (1.0 + 1.5) / 2.0).abs() < 1e-12, "{short}");
-        let GoalTerm { progress: rest, .. } = goal_term(&[Pose2::IDENTITY; 10], goal, &w, 0.1);
+        let rest = goal_term(&[Pose2::IDENTITY; 10], goal, &w, 0.1).progress;
         assert!((rest - 3.0 / 2.0).abs() < 1e-12, "{rest}");
-        let GoalTerm { progress: away, .. } = goal_term(&at(-0.5, 10), goal, &w, 0.1);
+        let away = goal_term(&at(-0.5, 10), goal, &w, 0.1).progress;
         assert!((away - 3.5 / 2.0).abs() < 1e-12, "{away}");
         assert!(fast < short && short < rest && rest < away);
         // Over as many waypoints a late arrival still beats standing still.
-        let GoalTerm {
-            progress: rest_40, ..
-        } = goal_term(&[Pose2::IDENTITY; 40], goal, &w, 0.1);
+        let rest_40 = goal_term(&[Pose2::IDENTITY; 40], goal, &w, 0.1).progress;
         assert!((rest_40 - 6.0 / 2.0).abs() < 1e-12, "{rest_40}");
         assert!(slow < rest_40);
-        let empty = goal_term(&[], goal, &w, 0.1);
-        assert_eq!((empty.progress, empty.checked), (1.0, 0));
+        assert_eq!(progress_checked(goal_term(&[], goal, &w, 0.1)), (1.0, 0));
     }
 
     #[test]

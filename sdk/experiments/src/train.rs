@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use human2nav_data::cache::TupleCache;
 use human2nav_data::tuples::{CompactTuple, Split};
-use human2nav_flow::card::{ComplexityInfo, EvaluationInfo, TrainingInfo};
+use human2nav_flow::card::{ComplexityInfo, EarlyAde, EvaluationInfo, TrainingInfo};
 use human2nav_flow::eval::{EvalOptions, EvalWindow, evaluate};
 use human2nav_flow::model::CARD_FILE;
 use human2nav_flow::net::{Complexity, parameter_count};
@@ -86,7 +86,10 @@ pub struct EvalSection {
     pub steps: usize,
     /// Proximity radius, metres. Default 0.3.
     pub radius: f64,
-    /// Test windows evaluated at most (seeded subsample). Default 2000.
+    /// Split whose windows are evaluated: `test` (the default, and what a model card
+    /// reports) or `val` (to study settings without looking at the test scenes).
+    pub split: Split,
+    /// Windows evaluated at most (seeded subsample). Default 2000.
     pub max_windows: usize,
     /// Seed of the subsample and of the source noise. Default 0.
     pub seed: u64,
@@ -102,6 +105,7 @@ impl Default for EvalSection {
             samples: 20,
             steps: 10,
             radius: 0.3,
+            split: Split::Test,
             max_windows: 2000,
             seed: 0,
             data_config: PathBuf::from("sdk/configs/data.toml"),
@@ -519,9 +523,9 @@ fn export<S: human2nav_flow::train::TrainingSample>(
     Ok(())
 }
 
-/// Test windows with the other agents' true futures: the test scenes are rebuilt from the
-/// datasets with the data config and the cache's tuple options, and must reproduce the cache's
-/// test tuples exactly (same count).
+/// The windows of `eval.split` with the other agents' true futures: the split's scenes are
+/// rebuilt from the datasets with the data config and the cache's tuple options, and must
+/// reproduce the cache's tuples of that split exactly (same count).
 fn true_future_windows(
     cfg: &TrainConfig,
     cache: &TupleCache,
@@ -538,12 +542,14 @@ fn true_future_windows(
     }
     let m = cache.manifest();
     let (sources, _) = discover(&loc.data_root, &dcfg);
+    let split = cfg.eval.split;
     let mut windows = Vec::new();
-    for i in m.scenes_in(Split::Test) {
+    for i in m.scenes_in(split) {
         let name = &m.scenes[i as usize].name;
         let src = sources.iter().find(|s| &s.name == name).with_context(|| {
             format!(
-                "test scene {name} not found under {}",
+                "{} scene {name} not found under {}",
+                split.name(),
                 loc.data_root.display()
             )
         })?;
@@ -552,20 +558,21 @@ fn true_future_windows(
             &scene, i, &m.bev, &m.tuples,
         )?);
     }
-    let expected = m.counts.get(&Split::Test).copied().unwrap_or(0);
+    let expected = m.counts.get(&split).copied().unwrap_or(0);
     if windows.len() != expected {
         bail!(
-            "rebuilt {} test windows, the cache has {expected}",
-            windows.len()
+            "rebuilt {} {} windows, the cache has {expected}",
+            windows.len(),
+            split.name()
         );
     }
     human2nav_flow::eval::subsample(&mut windows, cfg.eval.max_windows, cfg.eval.seed);
     Ok(windows)
 }
 
-/// Test windows from the cache alone, see [`cache_windows`].
-fn test_windows(cfg: &TrainConfig, cache: &TupleCache) -> anyhow::Result<Vec<EvalWindow>> {
-    cache_windows(cache, Split::Test, cfg.eval.max_windows, cfg.eval.seed)
+/// The windows of `eval.split` from the cache alone, see [`cache_windows`].
+fn split_windows(cfg: &TrainConfig, cache: &TupleCache) -> anyhow::Result<Vec<EvalWindow>> {
+    cache_windows(cache, cfg.eval.split, cfg.eval.max_windows, cfg.eval.seed)
 }
 
 /// At most `max` windows of `split` (seeded subsample) from the cache alone: the cache stores
@@ -602,8 +609,9 @@ pub fn cache_windows(
         .collect())
 }
 
-/// Evaluates `model` on the test windows (with the other agents' true futures when the
-/// datasets are present, see `eval.data_config`, else extrapolated from the cache) and returns
+/// Evaluates `model` on the windows of `eval.split`, the test split unless set (with the other
+/// agents' true futures when the datasets are present, see `eval.data_config`, else
+/// extrapolated from the cache), and returns
 /// the card's evaluation record; `root` resolves `eval.data_config`.
 pub fn run_evaluation(
     cfg: &TrainConfig,
@@ -614,22 +622,26 @@ pub fn run_evaluation(
     let (windows, neighbours) = match true_future_windows(cfg, cache, root) {
         Ok(w) => (
             w,
-            "other agents' true future positions, from the test scenes rebuilt with the data \
-             config (windows identical to the cache's test tuples)",
+            "other agents' true future positions, from the split's scenes rebuilt with the data \
+             config (windows identical to the cache's tuples)",
         ),
         Err(e) => {
             eprintln!(
                 "note: true neighbour futures unavailable ({e:#}); extrapolating the cache's"
             );
             (
-                test_windows(cfg, cache)?,
+                split_windows(cfg, cache)?,
                 "other agents' future positions extrapolated at constant velocity from their \
                  state at the planning instant (the tuple cache stores neighbours only then)",
             )
         }
     };
     if windows.is_empty() {
-        bail!("the test split of {} is empty", cache.dir().display());
+        bail!(
+            "the {} split of {} is empty",
+            cfg.eval.split,
+            cache.dir().display()
+        );
     }
     let opts = EvalOptions {
         samples: cfg.eval.samples,
@@ -637,6 +649,7 @@ pub fn run_evaluation(
         dt: cache.manifest().dt,
         radius: cfg.eval.radius,
         seed: cfg.eval.seed,
+        ..EvalOptions::default()
     };
     let bar = ProgressBar::new(windows.len() as u64);
     bar.set_style(ProgressStyle::with_template(
@@ -646,11 +659,12 @@ pub fn run_evaluation(
     bar.finish_and_clear();
     let info = EvaluationInfo {
         protocol: format!(
-            "{} windows drawn (seed {}) from the test split ({}); {} samples per window, {} Euler steps; \
+            "{} windows drawn (seed {}) from the {} split ({}); {} samples per window, {} Euler steps; \
              best-of-{} ADE/FDE against the true 3.2 s future; constant velocity = ego velocity held",
             m.windows,
             cfg.eval.seed,
-            scene_names(cache, Split::Test),
+            cfg.eval.split,
+            scene_names(cache, cfg.eval.split),
             opts.samples,
             opts.steps,
             opts.samples
@@ -664,6 +678,13 @@ pub fn run_evaluation(
         cv_ade: m.cv_ade,
         cv_fde: m.cv_fde,
         ade_improvement: 1.0 - m.min_ade / m.cv_ade,
+        centroid_ade: Some(m.centroid_ade),
+        early_ade: Some(EarlyAde {
+            seconds: m.early_steps as f64 * opts.dt,
+            mean: m.early_mean_ade,
+            centroid: m.early_centroid_ade,
+            constant_velocity: m.early_cv_ade,
+        }),
         proximity_radius: opts.radius,
         proximity_model: m.proximity_model,
         proximity_truth: m.proximity_truth,
@@ -673,8 +694,9 @@ pub fn run_evaluation(
         ),
     };
     eprintln!(
-        "test: best-of-{} ADE {:.3} m FDE {:.3} m | constant velocity ADE {:.3} m FDE {:.3} m | ADE {:.1} % lower | \
+        "{}: best-of-{} ADE {:.3} m FDE {:.3} m | constant velocity ADE {:.3} m FDE {:.3} m | ADE {:.1} % lower | \
          within {} m of another agent: model {:.3}, truth {:.3}, cv {:.3}",
+        cfg.eval.split,
         opts.samples,
         m.min_ade,
         m.min_fde,
@@ -685,6 +707,18 @@ pub fn run_evaluation(
         m.proximity_model,
         m.proximity_truth,
         m.proximity_cv
+    );
+    eprintln!(
+        "{}: one sample ADE {:.3} m | the samples' mean ADE {:.3} m FDE {:.3} m | first {:.1} s: \
+         one sample {:.3} m, the samples' mean {:.3} m, constant velocity {:.3} m",
+        cfg.eval.split,
+        m.mean_ade,
+        m.centroid_ade,
+        m.centroid_fde,
+        m.early_steps as f64 * opts.dt,
+        m.early_mean_ade,
+        m.early_centroid_ade,
+        m.early_cv_ade
     );
     Ok(info)
 }

@@ -146,6 +146,14 @@ pub struct EvaluationInfo {
     pub cv_fde: f64,
     /// `1 − min_ade / cv_ade`.
     pub ade_improvement: f64,
+    /// ADE of the samples' mean, taken as one point forecast, metres (absent from cards
+    /// evaluated before it was measured).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub centroid_ade: Option<f64>,
+    /// ADE over the first second: mean over samples, the samples' mean and constant
+    /// velocity, metres (absent from cards evaluated before it was measured).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub early_ade: Option<EarlyAde>,
     /// The distance (m) to another agent's position that counts as "close" in the proximity
     /// rates below.
     pub proximity_radius: f64,
@@ -155,6 +163,20 @@ pub struct EvaluationInfo {
     pub proximity_truth: f64,
     /// How the other agents' positions were obtained for the proximity metric.
     pub proximity_note: String,
+}
+
+/// ADEs over a plan's first waypoints (see [`EvaluationInfo::early_ade`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EarlyAde {
+    /// Seconds covered.
+    pub seconds: f64,
+    /// Mean over samples, metres.
+    pub mean: f64,
+    /// The samples' mean, metres.
+    pub centroid: f64,
+    /// Constant velocity, metres.
+    pub constant_velocity: f64,
 }
 
 /// Measured latencies on the training machine.

@@ -7,6 +7,12 @@
 //!   (ADE and FDE minimised separately, the usual convention).
 //! * Constant velocity: waypoint `j` (time `(j + 1)·dt`) at `(j + 1)·dt·v` with `v` the ego
 //!   velocity of the condition (ego frame).
+//! * The samples' mean: the `K` samples averaged waypoint by waypoint, scored as one point
+//!   forecast. One sample of a model that does not know the goal is a worse guess than
+//!   constant velocity; their mean may be a better one, and a point forecast is what a
+//!   planner that must not wait for every possible turn would use.
+//! * Early ADE: the ADE over the waypoints of the first [`EvalOptions::early`] seconds only,
+//!   where a prediction's errors decide what a robot next to the walker does.
 //! * Proximity: a trajectory "comes within `r`" of another agent when, at some waypoint `j`,
 //!   its position is closer than `r` to that agent's position at the same time. Reported as the
 //!   fraction of sampled trajectories (model) and of windows (ground truth) that do.
@@ -73,6 +79,8 @@ pub struct EvalOptions {
     pub radius: f64,
     /// Seed of the source samples.
     pub seed: u64,
+    /// Seconds of the early ADEs (at least one waypoint). Default 1.
+    pub early: f64,
 }
 
 impl Default for EvalOptions {
@@ -83,6 +91,7 @@ impl Default for EvalOptions {
             dt: 0.1,
             radius: 0.3,
             seed: 0,
+            early: 1.0,
         }
     }
 }
@@ -102,6 +111,18 @@ pub struct EvalMetrics {
     pub cv_ade: f64,
     /// Final displacement error of the constant-velocity baseline (m).
     pub cv_fde: f64,
+    /// Average displacement error of the samples' mean, one point forecast (m).
+    pub centroid_ade: f64,
+    /// Final displacement error of the samples' mean (m).
+    pub centroid_fde: f64,
+    /// Waypoints of the early ADEs below.
+    pub early_steps: usize,
+    /// Mean over samples of the ADE over the first `early_steps` waypoints (m).
+    pub early_mean_ade: f64,
+    /// The samples' mean's ADE over the first `early_steps` waypoints (m).
+    pub early_centroid_ade: f64,
+    /// Constant velocity's ADE over the first `early_steps` waypoints (m).
+    pub early_cv_ade: f64,
     /// Fraction of sampled trajectories within `radius` of another agent.
     pub proximity_model: f64,
     /// Fraction of true futures within `radius` of another agent.
@@ -110,15 +131,16 @@ pub struct EvalMetrics {
     pub proximity_cv: f64,
 }
 
-/// `(ADE, FDE)` of a predicted trajectory (flat `[T, 3]`) against the truth.
+/// `(ADE, FDE)` of a predicted trajectory (flat `[T, 3]`) against the truth, over the
+/// waypoints both have (a prefix of either scores that prefix).
 pub fn displacement_errors(pred: &[f64], truth: &[Pose2]) -> (f64, f64) {
-    let mut sum = 0.0;
-    let mut last = 0.0;
+    let (mut sum, mut last, mut n) = (0.0, 0.0, 0usize);
     for (p, q) in pred.chunks_exact(3).zip(truth) {
         last = ((p[0] - q.x).powi(2) + (p[1] - q.y).powi(2)).sqrt();
         sum += last;
+        n += 1;
     }
-    (sum / truth.len().max(1) as f64, last)
+    (sum / n.max(1) as f64, last)
 }
 
 /// The constant-velocity prediction of `horizon` waypoints, flat `[T, 3]` (heading along the
@@ -250,6 +272,8 @@ pub fn evaluate<M: FlowModel + ?Sized>(
     }
     let mut rng = ChaCha8Rng::seed_from_u64(opts.seed);
     let mut close_samples = 0usize;
+    let early = ((opts.early / opts.dt).round() as usize).clamp(1, t);
+    m.early_steps = early;
     for (w, win) in windows.iter().enumerate() {
         if win.future.len() != t {
             return Err(FlowError::Shape(format!(
@@ -259,15 +283,23 @@ pub fn evaluate<M: FlowModel + ?Sized>(
         }
         let x = sample(model, &win.cond, opts.samples, opts.steps, &mut rng)?;
         let (mut best_ade, mut best_fde, mut mean_ade) = (f64::INFINITY, f64::INFINITY, 0.0);
+        let mut centroid = vec![0.0; 3 * t];
+        let share = 1.0 / opts.samples as f64;
         for traj in x.chunks_exact(3 * t) {
             let (ade, fde) = displacement_errors(traj, &win.future);
             best_ade = best_ade.min(ade);
             best_fde = best_fde.min(fde);
-            mean_ade += ade / opts.samples as f64;
+            mean_ade += ade * share;
+            m.early_mean_ade += displacement_errors(&traj[..3 * early], &win.future).0 * share;
+            for (c, p) in centroid.chunks_exact_mut(3).zip(traj.chunks_exact(3)) {
+                c[0] += p[0] * share;
+                c[1] += p[1] * share;
+            }
             if comes_close(traj, &win.others, opts.radius) {
                 close_samples += 1;
             }
         }
+        let (centroid_ade, centroid_fde) = displacement_errors(&centroid, &win.future);
         let cv = constant_velocity(win.cond.velocity, t, opts.dt);
         let (cv_ade, cv_fde) = displacement_errors(&cv, &win.future);
         let truth: Vec<f64> = win.future.iter().flat_map(|p| p.to_array()).collect();
@@ -276,6 +308,10 @@ pub fn evaluate<M: FlowModel + ?Sized>(
         m.mean_ade += mean_ade;
         m.cv_ade += cv_ade;
         m.cv_fde += cv_fde;
+        m.centroid_ade += centroid_ade;
+        m.centroid_fde += centroid_fde;
+        m.early_centroid_ade += displacement_errors(&centroid[..3 * early], &win.future).0;
+        m.early_cv_ade += displacement_errors(&cv[..3 * early], &win.future).0;
         m.proximity_truth += f64::from(u8::from(comes_close(&truth, &win.others, opts.radius)));
         m.proximity_cv += f64::from(u8::from(comes_close(&cv, &win.others, opts.radius)));
         progress(w + 1);
@@ -286,6 +322,11 @@ pub fn evaluate<M: FlowModel + ?Sized>(
     m.mean_ade /= n;
     m.cv_ade /= n;
     m.cv_fde /= n;
+    m.centroid_ade /= n;
+    m.centroid_fde /= n;
+    m.early_mean_ade /= n;
+    m.early_centroid_ade /= n;
+    m.early_cv_ade /= n;
     m.proximity_truth /= n;
     m.proximity_cv /= n;
     m.proximity_model = close_samples as f64 / (n * opts.samples as f64);
@@ -537,6 +578,50 @@ mod tests {
         };
         let err = guided_windows(&model, &[short], &phi, &limits, &on, &opts, |_| ()).unwrap_err();
         assert!(err.to_string().contains("3 future poses"), "{err}");
+    }
+
+    /// A field of zero leaves every sample where the source put it, scattered about the
+    /// truth (the origin): one sample misses by about √(π/2) of the source's standard
+    /// deviation, the mean of twenty by about a √20th of that; the early errors score the
+    /// first second's waypoints only.
+    #[test]
+    fn the_samples_mean_is_scored_as_one_forecast() {
+        use human2nav_core::guidance::analytic::ConstantField;
+        let t = 16;
+        let model = ConstantField {
+            twists: vec![0.0; 3 * t],
+        };
+        let mut future = vec![Pose2::IDENTITY; t];
+        // The truth leaves the origin after the first second: only the late errors see it.
+        for (j, p) in future.iter_mut().enumerate().skip(10) {
+            p.x = (j - 9) as f64;
+        }
+        let window = EvalWindow {
+            cond: FlowCondition {
+                bev: Vec::new(),
+                goal: [0.0, 0.0],
+                velocity: [0.0, 0.0],
+            },
+            future,
+            others: Vec::new(),
+        };
+        let opts = EvalOptions {
+            samples: 20,
+            steps: 2,
+            ..EvalOptions::default()
+        };
+        let m = evaluate(&model, &vec![window; 40], &opts, |_| ()).unwrap();
+        assert_eq!(m.early_steps, 10);
+        let one = std::f64::consts::FRAC_PI_2.sqrt();
+        assert!((m.early_mean_ade - one).abs() < 0.1, "{m:?}");
+        assert!(m.early_centroid_ade < 0.45, "{m:?}");
+        assert_relative_eq!(m.early_cv_ade, 0.0);
+        // Over the whole horizon constant velocity (standing) misses the truth's last six
+        // metres: (1 + … + 6) / 16.
+        assert_relative_eq!(m.cv_ade, 21.0 / 16.0, epsilon = 1e-12);
+        assert_relative_eq!(m.cv_fde, 6.0, epsilon = 1e-12);
+        assert!(m.centroid_ade < m.mean_ade, "{m:?}");
+        assert!((m.centroid_fde - 6.0).abs() < 0.5, "{m:?}");
     }
 
     #[test]

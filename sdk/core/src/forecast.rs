@@ -219,6 +219,19 @@ pub fn constant_velocity_path(agent: &AgentState, horizon: usize, dt: f64) -> Ve
         .collect()
 }
 
+/// The mean of equally long `paths`, position by position.
+fn mean_path(paths: &[Vec<[f64; 2]>]) -> Vec<[f64; 2]> {
+    let share = 1.0 / paths.len().max(1) as f64;
+    let mut mean = vec![[0.0; 2]; paths.first().map_or(0, Vec::len)];
+    for path in paths {
+        for (m, p) in mean.iter_mut().zip(path) {
+            m[0] += p[0] * share;
+            m[1] += p[1] * share;
+        }
+    }
+    mean
+}
+
 /// From waypoint `from` on (0-based), every path in `sampled` follows `cv` (the constant-
 /// velocity path) at the offset it had at waypoint `from − 1`.
 fn hold_departure(sampled: &mut [Vec<[f64; 2]>], cv: &[[f64; 2]], from: usize) {
@@ -282,6 +295,12 @@ pub struct FlowPredictorSettings {
     /// a track that jumps, are outside what the model saw (walkers, 90 % of them under 1.7
     /// m/s), and its samples for them scatter over metres. Default 2.5.
     pub max_speed: f64,
+    /// Replace each agent's samples by their mean, position by position: one scene, a point
+    /// forecast. One sample of a goal-free model is a worse guess than constant velocity, the
+    /// mean of several a better one (on the validation windows, 16 samples of 5 steps: ADE
+    /// 0.489 m over 3.2 s against constant velocity's 0.572). Default false: each sample is
+    /// a scene.
+    pub mean_of_samples: bool,
     /// Add the constant-velocity forecast as one more scene. Default false.
     pub constant_velocity_scene: bool,
     /// The constant-velocity scene's probability (0 to 1; needs `constant_velocity_scene`),
@@ -315,6 +334,7 @@ impl Default for FlowPredictorSettings {
             max_agents: 8,
             min_speed: 0.3,
             max_speed: 2.5,
+            mean_of_samples: false,
             constant_velocity_scene: false,
             constant_velocity_weight: None,
             deviation_horizon: None,
@@ -386,7 +406,8 @@ impl FlowPredictorSettings {
 /// raster, drawn as in training; the robot is in it only with
 /// [`FlowPredictorSettings::see_robot`]). Scene `s` of the forecast is every such agent's
 /// sample `s` (held parallel to constant velocity after
-/// [`FlowPredictorSettings::deviation_horizon`]), then the constant-velocity scene with
+/// [`FlowPredictorSettings::deviation_horizon`]), or the one scene of their means with
+/// [`FlowPredictorSettings::mean_of_samples`], then the constant-velocity scene with
 /// [`FlowPredictorSettings::constant_velocity_scene`], of probability
 /// [`FlowPredictorSettings::constant_velocity_weight`]; the other agents move on at constant
 /// velocity. The model's poses are taken to be the forecast's `dt` apart (the planner's, which
@@ -526,7 +547,11 @@ impl<M: FlowModel + Send> CrowdPredictor for FlowPredictor<M> {
             .iter()
             .map(|a| vec![constant_velocity_path(a, horizon, dt)])
             .collect();
-        let k = self.settings.samples;
+        let k = if self.settings.mean_of_samples {
+            1
+        } else {
+            self.settings.samples
+        };
         let cv_scene = self.settings.constant_velocity_scene;
         // Waypoints within the deviation horizon (at least the first).
         let held_from = self
@@ -535,6 +560,9 @@ impl<M: FlowModel + Send> CrowdPredictor for FlowPredictor<M> {
             .map(|h| ((h / dt).round() as usize).clamp(1, horizon.max(1)));
         for &i in &chosen {
             let mut sampled = self.sample_agent(obs, i, horizon)?;
+            if self.settings.mean_of_samples {
+                sampled = vec![mean_path(&sampled)];
+            }
             if let Some(from) = held_from {
                 hold_departure(&mut sampled, &paths[i][0], from);
             }
@@ -722,6 +750,59 @@ mod tests {
                 assert!((d[0] - gap(2)[0]).abs() < 1e-12 && (d[1] - gap(2)[1]).abs() < 1e-12);
             }
         }
+    }
+
+    /// With `mean_of_samples` the samples of a model that leaves them scattered (a field of
+    /// zero: each sample is where its source noise put it) are averaged into one scene, the
+    /// mean of the very samples the scenes would have been.
+    #[test]
+    fn the_mean_of_samples_is_one_scene_of_their_average() {
+        let model = || crate::guidance::analytic::ConstantField {
+            twists: vec![0.0; 3 * 8],
+        };
+        let settings = FlowPredictorSettings {
+            samples: 5,
+            ..FlowPredictorSettings::default()
+        };
+        let obs = Observation {
+            agents: vec![walker(1, [1.0, 0.0], [0.0, 1.0])],
+            ..Observation::default()
+        };
+        let scattered = FlowPredictor::new(model(), BevSpec::default(), settings)
+            .unwrap()
+            .forecast(&obs, 8, 0.1)
+            .unwrap();
+        assert_eq!(scattered.scenes(), 5);
+        let averaged = FlowPredictorSettings {
+            mean_of_samples: true,
+            constant_velocity_scene: true,
+            constant_velocity_weight: Some(0.3),
+            ..settings
+        };
+        let mean = FlowPredictor::new(model(), BevSpec::default(), averaged)
+            .unwrap()
+            .forecast(&obs, 8, 0.1)
+            .unwrap();
+        assert_eq!(mean.scenes(), 2);
+        assert_eq!((mean.weight(0), mean.weight(1)), (0.7, 0.3));
+        for j in 0..8 {
+            let expect = (0..5).fold([0.0; 2], |acc, s| {
+                let q = scattered.position(0, s, j);
+                [acc[0] + q[0] / 5.0, acc[1] + q[1] / 5.0]
+            });
+            let q = mean.position(0, 0, j);
+            assert!(
+                (q[0] - expect[0]).abs() < 1e-12 && (q[1] - expect[1]).abs() < 1e-12,
+                "{q:?} against {expect:?}"
+            );
+            // The second scene is the walker at constant velocity.
+            let c = mean.position(0, 1, j);
+            assert!((c[0] - 1.0).abs() < 1e-12 && (c[1] - 0.1 * (j + 1) as f64).abs() < 1e-12);
+        }
+        let spread = (0..5)
+            .map(|s| scattered.position(0, s, 3)[0])
+            .fold(0.0f64, |m, x| m.max((x - 1.0).abs()));
+        assert!(spread > 0.1, "the samples should scatter: {spread}");
     }
 
     #[test]

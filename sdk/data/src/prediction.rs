@@ -12,6 +12,9 @@
 //! * [`Predictor::LastStep`]: the last step's velocity held (what the planners use);
 //! * [`Predictor::MeanVelocity`]: the mean velocity over the last `n` steps, held;
 //! * [`Predictor::Static`]: the present position held;
+//! * [`Predictor::ConstantTurn`]: the last step's speed held, its direction turning on at the
+//!   rate it turned over the last `n` steps (constant turn rate and velocity, the classical
+//!   model of a walker in a turn);
 //! * [`Predictor::Ridge`]: a linear model learned from data. In the frame of the pedestrian's
 //!   heading, it maps the `history` step velocities (and a constant) to the future's departure
 //!   from the last-step prediction, fitted by ridge regression. It is scored leave-one-scene-out:
@@ -85,6 +88,8 @@ pub enum Predictor {
     MeanVelocity(usize),
     /// The present position, held.
     Static,
+    /// The last step's speed, turning at the rate of the last `n` steps.
+    ConstantTurn(usize),
     /// The ridge model on the history's velocities, leave-one-scene-out.
     Ridge,
 }
@@ -95,6 +100,7 @@ impl std::fmt::Display for Predictor {
             Self::LastStep => write!(f, "last-step velocity (the planners')"),
             Self::MeanVelocity(n) => write!(f, "mean velocity over {n} steps"),
             Self::Static => write!(f, "standing still"),
+            Self::ConstantTurn(n) => write!(f, "last step turning at the rate of {n} steps"),
             Self::Ridge => write!(f, "ridge on the history, leave-one-scene-out"),
         }
     }
@@ -192,6 +198,33 @@ fn heading(past: &[[f64; 2]]) -> Pose2 {
         }
     }
     Pose2::new(0.0, 0.0, 0.0)
+}
+
+/// The constant-turn prediction of a window (`horizon` positions): the last step's length,
+/// its direction turning by the mean turn per step of the last `n` steps (the angle from the
+/// step `n` steps before the last one to the last one, over `n`). Steps shorter than 1 mm have
+/// no direction: then no turn.
+fn constant_turn(w: &Window, n: usize, horizon: usize) -> Vec<[f64; 2]> {
+    let m = w.past.len();
+    let last = sub(w.past[m - 1], w.past[m - 2]);
+    let n = n.min(m - 2);
+    let before = sub(w.past[m - 1 - n], w.past[m - 2 - n]);
+    let speed = last[0].hypot(last[1]);
+    let turn = if n == 0 || speed < 1e-3 || before[0].hypot(before[1]) < 1e-3 {
+        0.0
+    } else {
+        let a = last[1].atan2(last[0]) - before[1].atan2(before[0]);
+        a.sin().atan2(a.cos()) / n as f64
+    };
+    let mut heading = last[1].atan2(last[0]);
+    let mut p = w.past[m - 1];
+    (0..horizon)
+        .map(|_| {
+            heading += turn;
+            p = [p[0] + speed * heading.cos(), p[1] + speed * heading.sin()];
+            p
+        })
+        .collect()
 }
 
 /// The ridge model's features of a window: the history's step displacements in the heading
@@ -332,8 +365,11 @@ pub fn study(suite: &EpisodeSuite, o: PredictionOptions) -> Result<PredictionRep
         Predictor::MeanVelocity(4.min(o.history)),
         Predictor::MeanVelocity(o.history),
         Predictor::Static,
+        Predictor::ConstantTurn(2.min(o.history - 1)),
+        Predictor::ConstantTurn(4.min(o.history - 1)),
         Predictor::Ridge,
     ];
+    predictors.retain(|p| !matches!(p, Predictor::ConstantTurn(0)));
     predictors.dedup();
     let mut overall: BTreeMap<Predictor, Errors> = BTreeMap::new();
     let mut per_scene: BTreeMap<String, BTreeMap<Predictor, Errors>> = BTreeMap::new();
@@ -350,6 +386,7 @@ pub fn study(suite: &EpisodeSuite, o: PredictionOptions) -> Result<PredictionRep
                     (0..o.horizon).map(|i| held(now, v, i)).collect()
                 }
                 Predictor::Static => vec![now; o.horizon],
+                Predictor::ConstantTurn(k) => constant_turn(w, k, o.horizon),
                 Predictor::Ridge => ridge(w, &weights[w.scene], &cv),
             };
             score(overall.entry(p).or_default(), &prediction, &w.future, first);
@@ -462,6 +499,8 @@ mod tests {
             Predictor::LastStep,
             Predictor::MeanVelocity(4),
             Predictor::MeanVelocity(8),
+            Predictor::ConstantTurn(2),
+            Predictor::ConstantTurn(4),
         ] {
             assert!(r.overall[&p].ade < 1e-9, "{p}: {:?}", r.overall[&p]);
         }
@@ -471,6 +510,30 @@ mod tests {
         // 60 positions, windows at 8, 13, 18, 23 (23 + 32 < 60 and 28 + 32 >= 60).
         assert_eq!(r.per_scene["a"][&Predictor::LastStep].windows, 4);
         assert_eq!(r.tracks, 2);
+    }
+
+    /// Walkers on circles (one turning left, one right) are foreseen exactly by the constant
+    /// turn, which the held velocity overshoots by metres.
+    #[test]
+    fn the_constant_turn_follows_a_walker_round_a_circle() {
+        let circle = |centre: [f64; 2], radius: f64, turn: f64| -> Vec<[f64; 2]> {
+            (0..60)
+                .map(|k| {
+                    let a = turn * k as f64;
+                    [centre[0] + radius * a.cos(), centre[1] + radius * a.sin()]
+                })
+                .collect()
+        };
+        let s = suite(vec![
+            episode("a", vec![circle([0.0, 0.0], 3.0, 0.04)]),
+            episode("b", vec![circle([2.0, 1.0], 2.0, -0.05)]),
+        ]);
+        let r = study(&s, PredictionOptions::default()).expect("study");
+        for n in [2, 4] {
+            let e = r.overall[&Predictor::ConstantTurn(n)];
+            assert!(e.fde < 1e-9, "{n}: {e:?}");
+        }
+        assert!(r.overall[&Predictor::LastStep].fde > 1.0);
     }
 
     #[test]

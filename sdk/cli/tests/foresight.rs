@@ -96,6 +96,8 @@ fn foresight_zero_is_the_shipped_planner_and_full_foresight_sees_the_recording()
             "foresight-100-until-0.5",
             "foresight-100-until-1",
             "foresight-100-until-2",
+            "foresight-100-within-3-until-1",
+            "foresight-50-within-3-until-1",
         ]
     );
     assert_eq!(plan(&methods[0]), shipped, "share 0 is constant velocity");

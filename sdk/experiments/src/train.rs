@@ -87,7 +87,7 @@ pub struct EvalSection {
     /// Proximity radius, metres. Default 0.3.
     pub radius: f64,
     /// Split whose windows are evaluated: `test` (the default, and what a model card
-    /// reports) or `val` (to study settings without looking at the test scenes).
+    /// reports), `val` (to study settings without looking at the test scenes) or `train`.
     pub split: Split,
     /// Windows evaluated at most (seeded subsample). Default 2000.
     pub max_windows: usize,
@@ -611,8 +611,8 @@ pub fn cache_windows(
 
 /// Evaluates `model` on the windows of `eval.split`, the test split unless set (with the other
 /// agents' true futures when the datasets are present, see `eval.data_config`, else
-/// extrapolated from the cache), and returns
-/// the card's evaluation record; `root` resolves `eval.data_config`.
+/// extrapolated from the cache), and returns the card's evaluation record; `root` resolves
+/// `eval.data_config`.
 pub fn run_evaluation(
     cfg: &TrainConfig,
     cache: &TupleCache,

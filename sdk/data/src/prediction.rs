@@ -15,6 +15,13 @@
 //! * [`Predictor::ConstantTurn`]: the last step's speed held, its direction turning on at the
 //!   rate it turned over the last `n` steps (constant turn rate and velocity, the classical
 //!   model of a walker in a turn);
+//! * [`Predictor::SocialForce`]: the pedestrian and the people within 6 m of it walk on at
+//!   their last steps' velocities while keeping clear of each other, by the social force model
+//!   of Helbing & Molnár (1995, Phys. Rev. E 51, 4282) with their parameters: relaxation time
+//!   0.5 s towards the last step's velocity, repulsion `(V0/σ)·exp(−d/σ)` between discs `d`
+//!   apart (`V0/σ = 7 m/s²`, `σ = 0.3 m`), weighted 0.5 from behind a walker's 200° field of
+//!   view, speed capped at 1.3 times the last step's (at least 0.5 m/s). The one predictor here
+//!   that sees the other people, as an interaction-aware predictor must;
 //! * [`Predictor::Ridge`]: a linear model learned from data. In the frame of the pedestrian's
 //!   heading, it maps the `history` step velocities (and a constant) to the future's departure
 //!   from the last-step prediction, fitted by ridge regression. It is scored leave-one-scene-out:
@@ -90,6 +97,8 @@ pub enum Predictor {
     Static,
     /// The last step's speed, turning at the rate of the last `n` steps.
     ConstantTurn(usize),
+    /// The last step's velocity as the desired one, with the social force of the people near.
+    SocialForce,
     /// The ridge model on the history's velocities, leave-one-scene-out.
     Ridge,
 }
@@ -101,6 +110,7 @@ impl std::fmt::Display for Predictor {
             Self::MeanVelocity(n) => write!(f, "mean velocity over {n} steps"),
             Self::Static => write!(f, "standing still"),
             Self::ConstantTurn(n) => write!(f, "last step turning at the rate of {n} steps"),
+            Self::SocialForce => write!(f, "last step with the social force of the people near"),
             Self::Ridge => write!(f, "ridge on the history, leave-one-scene-out"),
         }
     }
@@ -139,6 +149,21 @@ struct Window {
     past: Vec<[f64; 2]>,
     future: Vec<[f64; 2]>,
     frame: Pose2,
+    /// The pedestrian's radius, then the others of its episode within [`NEAR`] of it now.
+    radius: f64,
+    near: Vec<Walker>,
+}
+
+/// How far from a pedestrian the others count for [`Predictor::SocialForce`] (m): the range
+/// the planners predict people in.
+const NEAR: f64 = 6.0;
+
+/// A pedestrian as the social force model moves it: position, velocity (per step), radius.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Walker {
+    p: [f64; 2],
+    v: [f64; 2],
+    radius: f64,
 }
 
 /// The windows of every distinct track of `suite`, and the scene names they index.
@@ -154,7 +179,7 @@ fn windows(suite: &EpisodeSuite, o: &PredictionOptions) -> (Vec<Window>, Vec<Str
                 scenes.len() - 1
             }
         };
-        for a in &e.agents {
+        for (i, a) in e.agents.iter().enumerate() {
             let Some(first) = a.positions.first() else {
                 continue;
             };
@@ -165,17 +190,40 @@ fn windows(suite: &EpisodeSuite, o: &PredictionOptions) -> (Vec<Window>, Vec<Str
             let mut k = o.history;
             while k + o.horizon < p.len() {
                 let past = &p[k - o.history..=k];
+                let step = a.start_step + k;
+                let near = e
+                    .agents
+                    .iter()
+                    .enumerate()
+                    .filter(|&(j, _)| j != i)
+                    .filter_map(|(_, b)| walker_at(b, step))
+                    .filter(|w| (w.p[0] - p[k][0]).hypot(w.p[1] - p[k][1]) <= NEAR)
+                    .collect();
                 out.push(Window {
                     scene,
                     past: past.to_vec(),
                     future: p[k + 1..=k + o.horizon].to_vec(),
                     frame: heading(past),
+                    radius: a.radius,
+                    near,
                 });
                 k += o.stride;
             }
         }
     }
     (out, scenes, seen.len())
+}
+
+/// Agent `b` at episode step `step` with its last step's velocity, if it is there and was
+/// there a step before.
+fn walker_at(b: &crate::scenario::AgentTrack, step: usize) -> Option<Walker> {
+    let k = step.checked_sub(b.start_step)?;
+    let (now, before) = (*b.positions.get(k)?, *b.positions.get(k.checked_sub(1)?)?);
+    Some(Walker {
+        p: now,
+        v: sub(now, before),
+        radius: b.radius,
+    })
 }
 
 fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
@@ -225,6 +273,74 @@ fn constant_turn(w: &Window, n: usize, horizon: usize) -> Vec<[f64; 2]> {
             p
         })
         .collect()
+}
+
+/// The social force prediction of a window (module docs): the pedestrian (walker 0) and the
+/// people near it moved together, `horizon` steps of `dt`, each driven towards its last
+/// step's velocity and pushed off the others; the pedestrian's positions.
+fn social_force(w: &Window, horizon: usize, dt: f64) -> Vec<[f64; 2]> {
+    const RELAXATION: f64 = 0.5;
+    const STRENGTH: f64 = 7.0;
+    const RANGE: f64 = 0.3;
+    const BEHIND: f64 = 0.5;
+    // Half the field of view (200°) as a cosine: someone at a larger angle from the walking
+    // direction is behind.
+    let seen = (100f64).to_radians().cos();
+    let m = w.past.len();
+    let now = w.past[m - 1];
+    // Velocities in m/s from here on.
+    let per_s = |v: [f64; 2]| [v[0] / dt, v[1] / dt];
+    let mut walkers: Vec<Walker> = std::iter::once(Walker {
+        p: now,
+        v: per_s(sub(now, w.past[m - 2])),
+        radius: w.radius,
+    })
+    .chain(w.near.iter().map(|n| Walker {
+        v: per_s(n.v),
+        ..*n
+    }))
+    .collect();
+    let desired: Vec<[f64; 2]> = walkers.iter().map(|a| a.v).collect();
+    let cap: Vec<f64> = desired
+        .iter()
+        .map(|v| 1.3 * v[0].hypot(v[1]).max(0.5))
+        .collect();
+    let mut out = Vec::with_capacity(horizon);
+    let mut accel = vec![[0.0; 2]; walkers.len()];
+    for _ in 0..horizon {
+        for (i, a) in walkers.iter().enumerate() {
+            let mut f = [
+                (desired[i][0] - a.v[0]) / RELAXATION,
+                (desired[i][1] - a.v[1]) / RELAXATION,
+            ];
+            let speed = a.v[0].hypot(a.v[1]);
+            for (j, b) in walkers.iter().enumerate() {
+                let d = sub(a.p, b.p);
+                let centres = d[0].hypot(d[1]);
+                if j == i || centres < 1e-9 {
+                    continue;
+                }
+                let n = [d[0] / centres, d[1] / centres];
+                let gap = (centres - a.radius - b.radius).max(-a.radius);
+                // Behind the walker: the cosine between its heading and the direction to b.
+                let ahead = speed < 1e-9 || -(n[0] * a.v[0] + n[1] * a.v[1]) / speed >= seen;
+                let push = STRENGTH * (-gap / RANGE).exp() * if ahead { 1.0 } else { BEHIND };
+                f[0] += push * n[0];
+                f[1] += push * n[1];
+            }
+            accel[i] = f;
+        }
+        for ((a, f), cap) in walkers.iter_mut().zip(&accel).zip(&cap) {
+            a.v = [a.v[0] + f[0] * dt, a.v[1] + f[1] * dt];
+            let speed = a.v[0].hypot(a.v[1]);
+            if speed > *cap {
+                a.v = [a.v[0] * cap / speed, a.v[1] * cap / speed];
+            }
+            a.p = [a.p[0] + a.v[0] * dt, a.p[1] + a.v[1] * dt];
+        }
+        out.push(walkers[0].p);
+    }
+    out
 }
 
 /// The ridge model's features of a window: the history's step displacements in the heading
@@ -367,6 +483,7 @@ pub fn study(suite: &EpisodeSuite, o: PredictionOptions) -> Result<PredictionRep
         Predictor::Static,
         Predictor::ConstantTurn(2.min(o.history - 1)),
         Predictor::ConstantTurn(4.min(o.history - 1)),
+        Predictor::SocialForce,
         Predictor::Ridge,
     ];
     predictors.retain(|p| !matches!(p, Predictor::ConstantTurn(0)));
@@ -387,6 +504,7 @@ pub fn study(suite: &EpisodeSuite, o: PredictionOptions) -> Result<PredictionRep
                 }
                 Predictor::Static => vec![now; o.horizon],
                 Predictor::ConstantTurn(k) => constant_turn(w, k, o.horizon),
+                Predictor::SocialForce => social_force(w, o.horizon, dt),
                 Predictor::Ridge => ridge(w, &weights[w.scene], &cv),
             };
             score(overall.entry(p).or_default(), &prediction, &w.future, first);
@@ -501,6 +619,8 @@ mod tests {
             Predictor::MeanVelocity(8),
             Predictor::ConstantTurn(2),
             Predictor::ConstantTurn(4),
+            // Alone in its episode, nobody pushes it off its velocity.
+            Predictor::SocialForce,
         ] {
             assert!(r.overall[&p].ade < 1e-9, "{p}: {:?}", r.overall[&p]);
         }
@@ -534,6 +654,34 @@ mod tests {
             assert!(e.fde < 1e-9, "{n}: {e:?}");
         }
         assert!(r.overall[&Predictor::LastStep].fde > 1.0);
+    }
+
+    /// Two walkers meeting head-on, 0.2 m off each other's line: the social force turns the
+    /// one predicted aside, away from the other, and slows it; someone 5 m behind it, walking
+    /// as fast, barely moves it.
+    #[test]
+    fn the_social_force_steps_a_walker_aside_from_one_coming_at_it() {
+        let walking = |p: [f64; 2], v: [f64; 2]| Walker { p, v, radius: 0.3 };
+        let window = |near: Vec<Walker>| Window {
+            scene: 0,
+            past: vec![[-0.13, 0.0], [0.0, 0.0]],
+            future: Vec::new(),
+            frame: Pose2::IDENTITY,
+            radius: 0.3,
+            near,
+        };
+        let alone = social_force(&window(Vec::new()), 30, 0.1);
+        assert!((alone[29][0] - 3.9).abs() < 1e-9 && alone[29][1].abs() < 1e-12);
+        let oncoming = walking([4.0, 0.2], [-0.13, 0.0]);
+        let met = social_force(&window(vec![oncoming]), 30, 0.1);
+        let aside = met.iter().map(|p| p[1]).fold(0.0f64, f64::min);
+        assert!(
+            aside < -0.2,
+            "it should step to −y, away from the other: {aside}"
+        );
+        assert!(met[29][0] < alone[29][0] - 0.1, "{:?}", met[29]);
+        let far = social_force(&window(vec![walking([-5.0, 0.0], [0.13, 0.0])]), 30, 0.1);
+        assert!((far[29][0] - alone[29][0]).abs() < 1e-3, "{:?}", far[29]);
     }
 
     #[test]

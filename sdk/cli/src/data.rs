@@ -69,6 +69,11 @@ pub enum DataCommand {
         /// Ridge regularisation of the learned model (>= 0).
         #[arg(long, default_value_t = 1.0)]
         lambda: f64,
+        /// Also fit the ridge model on the training scenes of this data config (e.g.
+        /// sdk/configs/data.toml) and score it on the file's crowds; the file's scenes must
+        /// not be among them.
+        #[arg(long, value_name = "DATA_TOML")]
+        fit_on: Option<PathBuf>,
     },
 }
 
@@ -146,6 +151,7 @@ pub fn run(cmd: DataCommand) -> anyhow::Result<ExitCode> {
             horizon,
             stride,
             lambda,
+            fit_on,
         } => predict(
             &episodes,
             PredictionOptions {
@@ -154,13 +160,52 @@ pub fn run(cmd: DataCommand) -> anyhow::Result<ExitCode> {
                 stride,
                 ridge_lambda: lambda,
             },
+            fit_on.as_deref(),
         ),
     }
 }
 
-fn predict(path: &Path, options: PredictionOptions) -> anyhow::Result<ExitCode> {
+fn predict(
+    path: &Path,
+    options: PredictionOptions,
+    fit_on: Option<&Path>,
+) -> anyhow::Result<ExitCode> {
     let suite = EpisodeSuite::load(path).with_context(|| format!("loading {}", path.display()))?;
-    let report = prediction::study(&suite, options)
+    let training = match fit_on {
+        None => Vec::new(),
+        Some(config) => {
+            let (cfg, loc) = load_config(config)?;
+            let (scenes, _, notes) = pipeline::scenes(&cfg, &loc, &Bars::new())?;
+            for note in notes {
+                eprintln!("note: {note}");
+            }
+            let training: Vec<_> = scenes
+                .into_iter()
+                .filter(|s| cfg.split.of(&s.name) == Some(Split::Train))
+                .collect();
+            if let Some(e) = suite
+                .episodes
+                .iter()
+                .find(|e| training.iter().any(|s| s.name == e.scene))
+            {
+                anyhow::bail!(
+                    "{}: scene `{}` of episode {} is in the training split of {}; the model \
+                     fitted on that split would be scored on its own data",
+                    path.display(),
+                    e.scene,
+                    e.id,
+                    config.display()
+                );
+            }
+            eprintln!(
+                "fitting the ridge model on {} training scenes of {}",
+                training.len(),
+                config.display()
+            );
+            training
+        }
+    };
+    let report = prediction::study_with_training(&suite, options, &training)
         .with_context(|| format!("predicting the crowds of {}", path.display()))?;
     println!("{}: {}\n", path.display(), suite.source);
     print!("{}", report.markdown());

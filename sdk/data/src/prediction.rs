@@ -26,12 +26,15 @@
 //!   heading, it maps the `history` step velocities (and a constant) to the future's departure
 //!   from the last-step prediction, fitted by ridge regression. It is scored leave-one-scene-out:
 //!   the windows of each scene are predicted by a model fitted on the other scenes' windows, so
-//!   that no scene is scored by a model that has seen it.
+//!   that no scene is scored by a model that has seen it;
+//! * [`Predictor::RidgeTrained`]: the same model fitted on the windows of other scenes handed to
+//!   [`study_with_training`] (the training split's, many more than the file's own), when given.
 //!
 //! The same pedestrian appears in many episodes of a file (the crowds of nearby episodes
 //! overlap), so tracks are taken once per scene, identity and first position.
 
 use crate::error::DataError;
+use crate::resample::Scene;
 use crate::scenario::EpisodeSuite;
 use human2nav_core::se2::Pose2;
 use nalgebra::{DMatrix, DVector};
@@ -101,6 +104,8 @@ pub enum Predictor {
     SocialForce,
     /// The ridge model on the history's velocities, leave-one-scene-out.
     Ridge,
+    /// The ridge model fitted on training scenes ([`study_with_training`]).
+    RidgeTrained,
 }
 
 impl std::fmt::Display for Predictor {
@@ -112,6 +117,7 @@ impl std::fmt::Display for Predictor {
             Self::ConstantTurn(n) => write!(f, "last step turning at the rate of {n} steps"),
             Self::SocialForce => write!(f, "last step with the social force of the people near"),
             Self::Ridge => write!(f, "ridge on the history, leave-one-scene-out"),
+            Self::RidgeTrained => write!(f, "ridge on the history, fitted on the training scenes"),
         }
     }
 }
@@ -187,31 +193,43 @@ fn windows(suite: &EpisodeSuite, o: &PredictionOptions) -> (Vec<Window>, Vec<Str
                 continue;
             }
             let p = &a.positions;
-            let mut k = o.history;
-            while k + o.horizon < p.len() {
-                let past = &p[k - o.history..=k];
+            out.extend(cut(scene, p, a.radius, o, |k| {
                 let step = a.start_step + k;
-                let near = e
-                    .agents
+                e.agents
                     .iter()
                     .enumerate()
                     .filter(|&(j, _)| j != i)
                     .filter_map(|(_, b)| walker_at(b, step))
                     .filter(|w| (w.p[0] - p[k][0]).hypot(w.p[1] - p[k][1]) <= NEAR)
-                    .collect();
-                out.push(Window {
-                    scene,
-                    past: past.to_vec(),
-                    future: p[k + 1..=k + o.horizon].to_vec(),
-                    frame: heading(past),
-                    radius: a.radius,
-                    near,
-                });
-                k += o.stride;
-            }
+                    .collect()
+            }));
         }
     }
     (out, scenes, seen.len())
+}
+
+/// The windows of one track's `positions` (module docs); `near(k)`: the people near it at its
+/// step `k`.
+fn cut<'a>(
+    scene: usize,
+    positions: &'a [[f64; 2]],
+    radius: f64,
+    o: &'a PredictionOptions,
+    mut near: impl FnMut(usize) -> Vec<Walker> + 'a,
+) -> impl Iterator<Item = Window> + 'a {
+    (o.history..positions.len().saturating_sub(o.horizon))
+        .step_by(o.stride)
+        .map(move |k| {
+            let past = &positions[k - o.history..=k];
+            Window {
+                scene,
+                past: past.to_vec(),
+                future: positions[k + 1..=k + o.horizon].to_vec(),
+                frame: heading(past),
+                radius,
+                near: near(k),
+            }
+        })
 }
 
 /// Agent `b` at episode step `step` with its last step's velocity, if it is there and was
@@ -435,6 +453,19 @@ fn score(sum: &mut Errors, prediction: &[[f64; 2]], future: &[[f64; 2]], first: 
 /// shorter than `history + horizon + 1` steps) or the ridge model cannot be fitted (fewer than
 /// two scenes, or a scene whose complement has too few windows to determine it).
 pub fn study(suite: &EpisodeSuite, o: PredictionOptions) -> Result<PredictionReport, DataError> {
+    study_with_training(suite, o, &[])
+}
+
+/// [`study`], with [`Predictor::RidgeTrained`] fitted on the tracks of `training` (scenes of
+/// other splits, every agent class) when it is not empty.
+///
+/// # Errors
+/// Those of [`study`], and when the training scenes yield too few windows to fit the model.
+pub fn study_with_training(
+    suite: &EpisodeSuite,
+    o: PredictionOptions,
+    training: &[Scene],
+) -> Result<PredictionReport, DataError> {
     o.validate()?;
     let (windows, scenes, tracks) = windows(suite, &o);
     let fail = |message: String| DataError::Option {
@@ -476,6 +507,24 @@ pub fn study(suite: &EpisodeSuite, o: PredictionOptions) -> Result<PredictionRep
             ))
         })?);
     }
+    let trained = if training.is_empty() {
+        None
+    } else {
+        let mut normal = Normal::new(nf, m);
+        for (t, scene) in training.iter().enumerate() {
+            for track in &scene.tracks {
+                for w in cut(t, &track.positions, 0.0, &o, |_| Vec::new()) {
+                    normal.add(&features(&w), &targets(&w, &last_step(&w, o.horizon)));
+                }
+            }
+        }
+        Some(normal.solve(o.ridge_lambda).ok_or_else(|| {
+            fail(
+                "the ridge model of the training scenes is undetermined (raise ridge_lambda)"
+                    .into(),
+            )
+        })?)
+    };
     let mut predictors = vec![
         Predictor::LastStep,
         Predictor::MeanVelocity(4.min(o.history)),
@@ -486,6 +535,9 @@ pub fn study(suite: &EpisodeSuite, o: PredictionOptions) -> Result<PredictionRep
         Predictor::SocialForce,
         Predictor::Ridge,
     ];
+    if trained.is_some() {
+        predictors.push(Predictor::RidgeTrained);
+    }
     predictors.retain(|p| !matches!(p, Predictor::ConstantTurn(0)));
     predictors.dedup();
     let mut overall: BTreeMap<Predictor, Errors> = BTreeMap::new();
@@ -506,6 +558,10 @@ pub fn study(suite: &EpisodeSuite, o: PredictionOptions) -> Result<PredictionRep
                 Predictor::ConstantTurn(k) => constant_turn(w, k, o.horizon),
                 Predictor::SocialForce => social_force(w, o.horizon, dt),
                 Predictor::Ridge => ridge(w, &weights[w.scene], &cv),
+                Predictor::RidgeTrained => match &trained {
+                    Some(t) => ridge(w, t, &cv),
+                    None => continue,
+                },
             };
             score(overall.entry(p).or_default(), &prediction, &w.future, first);
             let scene = per_scene.entry(scenes[w.scene].clone()).or_default();
@@ -719,6 +775,65 @@ mod tests {
         );
         assert!(cv.fde > 0.5, "the held velocity overshoots: {cv:?}");
         assert!(ridge.fde < 1e-3 * cv.fde, "ridge {ridge:?} against {cv:?}");
+    }
+
+    /// Fitted on other scenes in which everyone slows the same way, the trained ridge model
+    /// foresees the file's slowing walkers, which the held velocity overshoots; without
+    /// training scenes it is not reported.
+    #[test]
+    fn the_ridge_model_fitted_on_training_scenes_learns_their_deceleration() {
+        use crate::resample::{ResampleStats, Track};
+        use crate::track::AgentClass;
+        let slowing = |i: usize, j: usize| {
+            track(
+                [i as f64, j as f64],
+                0.9 * (i * 5 + j) as f64,
+                0.15 + 0.01 * j as f64,
+                -0.002,
+                60,
+            )
+        };
+        let training: Vec<Scene> = (0..2)
+            .map(|i| Scene {
+                name: format!("train/{i}"),
+                dataset: "train".into(),
+                format: "hand".into(),
+                dt: 0.1,
+                tracks: (0..5)
+                    .map(|j| {
+                        let positions = slowing(i, j);
+                        Track {
+                            id: j as u64,
+                            source_id: j as u64,
+                            class: AgentClass::Pedestrian,
+                            start: 0,
+                            velocities: vec![[0.0; 2]; positions.len()],
+                            headings: vec![0.0; positions.len()],
+                            positions,
+                        }
+                    })
+                    .collect(),
+                stats: ResampleStats::default(),
+                dropped: Vec::new(),
+            })
+            .collect();
+        let file = suite(vec![
+            episode("a", vec![slowing(7, 1)]),
+            episode("b", vec![slowing(8, 2)]),
+        ]);
+        let o = PredictionOptions {
+            ridge_lambda: 1e-9,
+            ..PredictionOptions::default()
+        };
+        let r = study_with_training(&file, o, &training).expect("study");
+        let (cv, trained) = (
+            r.overall[&Predictor::LastStep],
+            r.overall[&Predictor::RidgeTrained],
+        );
+        assert!(cv.fde > 0.5, "{cv:?}");
+        assert!(trained.fde < 1e-3 * cv.fde, "{trained:?} against {cv:?}");
+        let untrained = study(&file, o).expect("study");
+        assert!(!untrained.overall.contains_key(&Predictor::RidgeTrained));
     }
 
     #[test]

@@ -74,6 +74,10 @@ pub enum DataCommand {
         /// not be among them.
         #[arg(long, value_name = "DATA_TOML")]
         fit_on: Option<PathBuf>,
+        /// Write the model fitted with --fit-on here (TOML): a predictor of people for
+        /// `human2nav bench` (a `human2nav` method's `history_ridge`).
+        #[arg(long, value_name = "FILE", requires = "fit_on")]
+        export: Option<PathBuf>,
     },
 }
 
@@ -152,6 +156,7 @@ pub fn run(cmd: DataCommand) -> anyhow::Result<ExitCode> {
             stride,
             lambda,
             fit_on,
+            export,
         } => predict(
             &episodes,
             PredictionOptions {
@@ -161,6 +166,7 @@ pub fn run(cmd: DataCommand) -> anyhow::Result<ExitCode> {
                 ridge_lambda: lambda,
             },
             fit_on.as_deref(),
+            export.as_deref(),
         ),
     }
 }
@@ -169,6 +175,7 @@ fn predict(
     path: &Path,
     options: PredictionOptions,
     fit_on: Option<&Path>,
+    export: Option<&Path>,
 ) -> anyhow::Result<ExitCode> {
     let suite = EpisodeSuite::load(path).with_context(|| format!("loading {}", path.display()))?;
     let training = match fit_on {
@@ -209,6 +216,14 @@ fn predict(
         .with_context(|| format!("predicting the crowds of {}", path.display()))?;
     println!("{}: {}\n", path.display(), suite.source);
     print!("{}", report.markdown());
+    if let (Some(out), Some(model)) = (export, &report.trained) {
+        let text = toml::to_string(model).context("writing the model as TOML")?;
+        std::fs::write(out, text).with_context(|| format!("writing {}", out.display()))?;
+        println!(
+            "\nthe model fitted on the training scenes: {}",
+            out.display()
+        );
+    }
     Ok(ExitCode::SUCCESS)
 }
 

@@ -741,6 +741,25 @@ fn config_cases() -> Vec<Case> {
         ),
         err(
             a,
+            "bench.toml human2nav method `history_ridge` of the wrong shape",
+            NR,
+            &[
+                "methods[h].config.history_ridge",
+                "ridge.toml",
+                "weights",
+                "needs 6",
+            ],
+            |d| {
+                let p = write(
+                    d,
+                    "ridge.toml",
+                    "history = 1\nhorizon = 1\ndt = 0.1\nfitted_on = \"\"\nweights = [0.0]\n",
+                );
+                human2nav_method_with(d, &format!("{{ history_ridge = {:?} }}", p.display()))
+            },
+        ),
+        err(
+            a,
             "bench.toml `base` naming a missing file",
             NR,
             &["missing_base.toml"],

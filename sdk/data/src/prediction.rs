@@ -36,6 +36,7 @@
 use crate::error::DataError;
 use crate::resample::Scene;
 use crate::scenario::EpisodeSuite;
+use human2nav_core::forecast::HistoryRidge;
 use human2nav_core::se2::Pose2;
 use nalgebra::{DMatrix, DVector};
 use std::collections::{BTreeMap, BTreeSet};
@@ -146,6 +147,8 @@ pub struct PredictionReport {
     pub overall: BTreeMap<Predictor, Errors>,
     /// Per scene (`dataset/scene`), every predictor over that scene's windows.
     pub per_scene: BTreeMap<String, BTreeMap<Predictor, Errors>>,
+    /// The ridge model fitted on the training scenes, when there were any.
+    pub trained: Option<HistoryRidge>,
 }
 
 /// One window: the history (`history + 1` positions, the last the present), the future, and
@@ -225,7 +228,7 @@ fn cut<'a>(
                 scene,
                 past: past.to_vec(),
                 future: positions[k + 1..=k + o.horizon].to_vec(),
-                frame: heading(past),
+                frame: HistoryRidge::heading(past),
                 radius,
                 near: near(k),
             }
@@ -252,18 +255,6 @@ fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
 fn held(p: [f64; 2], v: [f64; 2], i: usize) -> [f64; 2] {
     let s = (i + 1) as f64;
     [p[0] + v[0] * s, p[1] + v[1] * s]
-}
-
-/// The pedestrian's heading frame (a rotation): the last step's direction, or the history's
-/// displacement when the last step is (nearly) zero, or the world's axes.
-fn heading(past: &[[f64; 2]]) -> Pose2 {
-    let n = past.len();
-    for d in [sub(past[n - 1], past[n - 2]), sub(past[n - 1], past[0])] {
-        if d[0].hypot(d[1]) > 1e-4 {
-            return Pose2::new(0.0, 0.0, d[1].atan2(d[0]));
-        }
-    }
-    Pose2::new(0.0, 0.0, 0.0)
 }
 
 /// The constant-turn prediction of a window (`horizon` positions): the last step's length,
@@ -361,17 +352,9 @@ fn social_force(w: &Window, horizon: usize, dt: f64) -> Vec<[f64; 2]> {
     out
 }
 
-/// The ridge model's features of a window: the history's step displacements in the heading
-/// frame, then 1.
+/// The ridge model's features of a window ([`HistoryRidge::features`]).
 fn features(w: &Window) -> DVector<f64> {
-    let steps = w
-        .past
-        .windows(2)
-        .map(|p| w.frame.inverse_rotate(sub(p[1], p[0])));
-    DVector::from_iterator(
-        2 * (w.past.len() - 1) + 1,
-        steps.flatten().chain(std::iter::once(1.0)),
-    )
+    DVector::from_vec(HistoryRidge::features(&w.past, w.frame))
 }
 
 /// The last-step prediction of a window.
@@ -419,17 +402,27 @@ impl Normal {
     }
 }
 
-/// The ridge prediction of a window from its last-step prediction `cv`, with `weights`
-/// (features × 2·horizon).
-fn ridge(w: &Window, weights: &DMatrix<f64>, cv: &[[f64; 2]]) -> Vec<[f64; 2]> {
-    let d = weights.tr_mul(&features(w));
-    cv.iter()
-        .enumerate()
-        .map(|(i, p)| {
-            let d = w.frame.rotate([d[2 * i], d[2 * i + 1]]);
-            [p[0] + d[0], p[1] + d[1]]
-        })
-        .collect()
+/// The fitted weights (features × 2·horizon) as the planners' predictor.
+fn model(
+    weights: &DMatrix<f64>,
+    o: &PredictionOptions,
+    dt: f64,
+    fitted_on: String,
+) -> HistoryRidge {
+    HistoryRidge {
+        history: o.history,
+        horizon: o.horizon,
+        dt,
+        fitted_on,
+        weights: weights.transpose().as_slice().to_vec(),
+    }
+}
+
+/// A ridge model's prediction of a window (its history is the model's length).
+fn ridged(model: &HistoryRidge, w: &Window, horizon: usize) -> Vec<[f64; 2]> {
+    model
+        .predict(&w.past, horizon)
+        .expect("windows hold the model's history")
 }
 
 /// Adds one window's errors (ADE, FDE, ADE over the first `first` steps) to a running sum.
@@ -501,11 +494,12 @@ pub fn study_with_training(
             rest.xtx += &other.xtx;
             rest.xty += &other.xty;
         }
-        weights.push(rest.solve(o.ridge_lambda).ok_or_else(|| {
+        let w = rest.solve(o.ridge_lambda).ok_or_else(|| {
             fail(format!(
                 "the ridge model without scene `{name}` is undetermined (raise ridge_lambda)"
             ))
-        })?);
+        })?;
+        weights.push(model(&w, &o, dt, format!("the file's scenes but `{name}`")));
     }
     let trained = if training.is_empty() {
         None
@@ -518,12 +512,19 @@ pub fn study_with_training(
                 }
             }
         }
-        Some(normal.solve(o.ridge_lambda).ok_or_else(|| {
+        let w = normal.solve(o.ridge_lambda).ok_or_else(|| {
             fail(
                 "the ridge model of the training scenes is undetermined (raise ridge_lambda)"
                     .into(),
             )
-        })?)
+        })?;
+        let names: Vec<&str> = training.iter().map(|s| s.name.as_str()).collect();
+        Some(model(
+            &w,
+            &o,
+            dt,
+            format!("{} scenes: {}", names.len(), names.join(", ")),
+        ))
     };
     let mut predictors = vec![
         Predictor::LastStep,
@@ -557,9 +558,9 @@ pub fn study_with_training(
                 Predictor::Static => vec![now; o.horizon],
                 Predictor::ConstantTurn(k) => constant_turn(w, k, o.horizon),
                 Predictor::SocialForce => social_force(w, o.horizon, dt),
-                Predictor::Ridge => ridge(w, &weights[w.scene], &cv),
+                Predictor::Ridge => ridged(&weights[w.scene], w, o.horizon),
                 Predictor::RidgeTrained => match &trained {
-                    Some(t) => ridge(w, t, &cv),
+                    Some(t) => ridged(t, w, o.horizon),
                     None => continue,
                 },
             };
@@ -582,6 +583,7 @@ pub fn study_with_training(
         tracks,
         overall,
         per_scene,
+        trained,
     })
 }
 

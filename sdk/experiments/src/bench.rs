@@ -14,7 +14,9 @@
 
 use anyhow::{Context, anyhow, bail};
 use human2nav_core::ablation::Arm;
+use human2nav_core::forecast::HistoryRidge;
 use human2nav_core::human2nav::Human2NavSettings;
+use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use human2nav_core::lock::DirLock;
 use human2nav_flow::planner::{
     PlannerConfig, PlannerModel, PredictionModel, RobotPlanner, load_model,
@@ -252,6 +254,18 @@ pub fn ensure_real_episodes(
     Ok(ensure_episode_files(cfg, data_config, log)?)
 }
 
+/// A predictor of people fitted by `human2nav data predict --fit-on … --export <path>`.
+fn load_history_ridge(path: &Path) -> anyhow::Result<HistoryRidge> {
+    let text = read_user_file(path, "history model", MAX_CONFIG_BYTES)
+        .with_context(|| format!("reading {}", path.display()))?;
+    let model: HistoryRidge =
+        toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+    model
+        .validate()
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    Ok(model)
+}
+
 /// The `foresight` keys of a `human2nav` method's `config` (`None` without `foresight`),
 /// checked; `field` names a key in errors.
 fn foresight_settings(
@@ -299,19 +313,21 @@ fn foresight_settings(
 /// velocity to the episode's recording, [`human2nav_sim::foresight`]; not with a planner file
 /// that names a `[prediction]` model) with, optionally, `foresight_within` (m: only the people
 /// that close to the robot get it) and `foresight_until` (s: the recording that far ahead,
-/// constant velocity after it). Each episode gets a fresh planner (model loaded from disk, source
+/// constant velocity after it), or `history_ridge` (the path of a predictor of people fitted by
+/// `human2nav data predict --fit-on … --export`, [`HistoryRidge`]). Each episode gets a fresh planner (model loaded from disk, source
 /// noise seeded with the episode's seed) for the robot of that episode, with the robot's Φ
 /// including its plugin constraint terms; libtorch runs one thread per planner (the episodes
 /// already run in parallel).
 pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<MethodSpec> {
     let field = |key: &str| format!("methods[{}].config.{key}", m.name);
-    const KEYS: [&str; 6] = [
+    const KEYS: [&str; 7] = [
         "planner",
         "guidance",
         "arm",
         "foresight",
         "foresight_within",
         "foresight_until",
+        "history_ridge",
     ];
     for key in m.config.keys() {
         if !KEYS.contains(&key.as_str()) {
@@ -323,6 +339,22 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
         }
     }
     let foresight = foresight_settings(m, &field)?;
+    let history_ridge = match m.config.get("history_ridge") {
+        None => None,
+        Some(v) => {
+            let path = cfg
+                .resolve(Path::new(v.as_str().ok_or_else(|| {
+                    anyhow!("{}: must be a path", field("history_ridge"))
+                })?));
+            Some(load_history_ridge(&path).with_context(|| field("history_ridge"))?)
+        }
+    };
+    if foresight.is_some() && history_ridge.is_some() {
+        bail!(
+            "{}: foresight replaces the forecast, so give one or the other",
+            field("history_ridge")
+        );
+    }
     if m.config.contains_key("guidance") && m.config.contains_key("arm") {
         bail!(
             "{}: give `guidance` or `arm`, not both (`arm = \"raw\"` is `guidance = false`)",
@@ -361,6 +393,13 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
         };
     let prediction = PredictionModel::load(&planner_cfg, &cfg.base_dir)
         .with_context(|| format!("method `{}`", m.name))?;
+    if history_ridge.is_some() && prediction.is_some() {
+        bail!(
+            "{}: the planner file {} names a [prediction] model; give one predictor",
+            field("history_ridge"),
+            planner_toml.display()
+        );
+    }
     if foresight.is_some() && prediction.is_some() {
         bail!(
             "{}: the planner file {} names a [prediction] model; foresight replaces the \
@@ -397,6 +436,9 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
         )?;
         if let Some(p) = &prediction {
             planner = planner.with_predictor(p.predictor()?);
+        }
+        if let Some(model) = &history_ridge {
+            planner = planner.with_predictor(Box::new(model.clone()));
         }
         if let Some(settings) = foresight {
             let f = human2nav_sim::foresight::Foresight::new(ctx.episode.clone(), settings)?;

@@ -132,20 +132,37 @@ impl Forecast {
     /// Every agent moving on at its observed velocity: one scene, positions at `dt, 2dt, …`
     /// after the observation, in the agents' frame.
     pub fn constant_velocity(agents: &[AgentState], horizon: usize, dt: f64) -> Self {
+        Self {
+            horizon,
+            scenes: 1,
+            agents: agents
+                .iter()
+                .map(|a| ForecastAgent {
+                    id: a.id,
+                    radius: a.radius,
+                    paths: vec![constant_velocity_path(a, horizon, dt)],
+                })
+                .collect(),
+            weights: None,
+        }
+    }
+
+    /// A one-scene forecast of `agents`: `path(a)` for each, checked as [`Forecast::new`]
+    /// checks (a point forecast such as a predictor that makes one guess per person returns).
+    pub fn one_path_each(
+        agents: &[AgentState],
+        horizon: usize,
+        mut path: impl FnMut(&AgentState) -> Vec<[f64; 2]>,
+    ) -> Result<Self, String> {
         let agents = agents
             .iter()
             .map(|a| ForecastAgent {
                 id: a.id,
                 radius: a.radius,
-                paths: vec![constant_velocity_path(a, horizon, dt)],
+                paths: vec![path(a)],
             })
             .collect();
-        Self {
-            horizon,
-            scenes: 1,
-            agents,
-            weights: None,
-        }
+        Self::new(horizon, 1, agents)
     }
 
     /// Waypoints per path.
@@ -392,26 +409,15 @@ impl CrowdPredictor for HistoryRidge {
                 self.dt
             ));
         }
-        let agents = obs
-            .agents
-            .iter()
-            .map(|a| {
-                let h = &a.history;
-                let past = h
-                    .get(h.len().saturating_sub(self.history + 1)..)
-                    .unwrap_or(&[]);
-                let path = self
-                    .predict(past, horizon)
-                    .filter(|p| p.iter().flatten().all(|v| v.is_finite()))
-                    .unwrap_or_else(|| constant_velocity_path(a, horizon, dt));
-                ForecastAgent {
-                    id: a.id,
-                    radius: a.radius,
-                    paths: vec![path],
-                }
-            })
-            .collect();
-        Forecast::new(horizon, 1, agents)
+        Forecast::one_path_each(&obs.agents, horizon, |a| {
+            let h = &a.history;
+            let past = h
+                .get(h.len().saturating_sub(self.history + 1)..)
+                .unwrap_or(&[]);
+            self.predict(past, horizon)
+                .filter(|p| p.iter().flatten().all(|v| v.is_finite()))
+                .unwrap_or_else(|| constant_velocity_path(a, horizon, dt))
+        })
     }
 }
 

@@ -8,7 +8,7 @@ use human2nav_core::ablation::Arm;
 use human2nav_core::bev::BevSpec;
 use human2nav_core::constraint::Phi;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
-use human2nav_core::forecast::{CrowdPredictor, Forecast, ForecastAgent, constant_velocity_path};
+use human2nav_core::forecast::{CrowdPredictor, Forecast, constant_velocity_path};
 use human2nav_core::guidance::analytic::ConstantField;
 use human2nav_core::guidance::{GuidanceVariant, PaperSettings};
 use human2nav_core::human2nav::{
@@ -1029,32 +1029,21 @@ impl CrowdPredictor for Scripted {
         if self.fail {
             return Err("no forecast today".into());
         }
-        let agents = obs
-            .agents
-            .iter()
-            .map(|a| {
-                let path = if a.id == self.id {
-                    (1..=horizon)
-                        .map(|j| {
-                            let s = (j as f64 * dt).min(1.0);
-                            let p = a.position;
-                            [
-                                p[0] + s * (self.to[0] - p[0]),
-                                p[1] + s * (self.to[1] - p[1]),
-                            ]
-                        })
-                        .collect()
-                } else {
-                    constant_velocity_path(a, horizon, dt)
-                };
-                ForecastAgent {
-                    id: a.id,
-                    radius: a.radius,
-                    paths: vec![path],
-                }
-            })
-            .collect();
-        Forecast::new(horizon, 1, agents)
+        Forecast::one_path_each(&obs.agents, horizon, |a| {
+            if a.id != self.id {
+                return constant_velocity_path(a, horizon, dt);
+            }
+            (1..=horizon)
+                .map(|j| {
+                    let s = (j as f64 * dt).min(1.0);
+                    let p = a.position;
+                    [
+                        p[0] + s * (self.to[0] - p[0]),
+                        p[1] + s * (self.to[1] - p[1]),
+                    ]
+                })
+                .collect()
+        })
     }
 }
 

@@ -27,7 +27,7 @@
 use crate::episode::Episode;
 use crate::replay::CrowdReplay;
 use human2nav_core::Observation;
-use human2nav_core::forecast::{CrowdPredictor, Forecast, ForecastAgent, constant_velocity_path};
+use human2nav_core::forecast::{CrowdPredictor, Forecast, constant_velocity_path};
 use std::collections::HashMap;
 
 /// What a [`Foresight`] knows (module docs). The bench keys of a `human2nav` method are
@@ -115,43 +115,34 @@ impl CrowdPredictor for Foresight {
             until,
         } = self.settings;
         let replay = CrowdReplay::new(&self.episode);
-        let agents = obs
-            .agents
-            .iter()
-            .map(|a| {
-                let mut path = constant_velocity_path(a, horizon, dt);
-                let near = (a.position[0] - obs.ego.x).hypot(a.position[1] - obs.ego.y) <= within;
-                let track = self.tracks.get(&a.id).map(|&k| &self.episode.agents[k]);
-                if let Some(track) = track.filter(|_| near) {
-                    // Where the recording is left for constant velocity, if within the horizon.
-                    let cut = obs.time + until;
-                    let from_cut = replay
-                        .sample(track, cut)
-                        .zip(replay.observed_velocity(track, cut));
-                    for (k, p) in path.iter_mut().enumerate() {
-                        let t = obs.time + (k + 1) as f64 * dt;
-                        let recorded = if t <= cut {
-                            replay.sample(track, t).map(|s| s.position)
-                        } else {
-                            from_cut.map(|(s, v)| {
-                                let after = t - cut;
-                                [s.position[0] + v[0] * after, s.position[1] + v[1] * after]
-                            })
-                        };
-                        if let Some(q) = recorded {
-                            p[0] += share * (q[0] - p[0]);
-                            p[1] += share * (q[1] - p[1]);
-                        }
+        Forecast::one_path_each(&obs.agents, horizon, |a| {
+            let mut path = constant_velocity_path(a, horizon, dt);
+            let near = (a.position[0] - obs.ego.x).hypot(a.position[1] - obs.ego.y) <= within;
+            let track = self.tracks.get(&a.id).map(|&k| &self.episode.agents[k]);
+            if let Some(track) = track.filter(|_| near) {
+                // Where the recording is left for constant velocity, if within the horizon.
+                let cut = obs.time + until;
+                let from_cut = replay
+                    .sample(track, cut)
+                    .zip(replay.observed_velocity(track, cut));
+                for (k, p) in path.iter_mut().enumerate() {
+                    let t = obs.time + (k + 1) as f64 * dt;
+                    let recorded = if t <= cut {
+                        replay.sample(track, t).map(|s| s.position)
+                    } else {
+                        from_cut.map(|(s, v)| {
+                            let after = t - cut;
+                            [s.position[0] + v[0] * after, s.position[1] + v[1] * after]
+                        })
+                    };
+                    if let Some(q) = recorded {
+                        p[0] += share * (q[0] - p[0]);
+                        p[1] += share * (q[1] - p[1]);
                     }
                 }
-                ForecastAgent {
-                    id: a.id,
-                    radius: a.radius,
-                    paths: vec![path],
-                }
-            })
-            .collect();
-        Forecast::new(horizon, 1, agents)
+            }
+            path
+        })
     }
 }
 

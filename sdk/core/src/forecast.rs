@@ -135,14 +135,7 @@ impl Forecast {
         Self {
             horizon,
             scenes: 1,
-            agents: agents
-                .iter()
-                .map(|a| ForecastAgent {
-                    id: a.id,
-                    radius: a.radius,
-                    paths: vec![constant_velocity_path(a, horizon, dt)],
-                })
-                .collect(),
+            agents: one_path_per_agent(agents, |a| constant_velocity_path(a, horizon, dt)),
             weights: None,
         }
     }
@@ -152,17 +145,9 @@ impl Forecast {
     pub fn one_path_each(
         agents: &[AgentState],
         horizon: usize,
-        mut path: impl FnMut(&AgentState) -> Vec<[f64; 2]>,
+        path: impl FnMut(&AgentState) -> Vec<[f64; 2]>,
     ) -> Result<Self, String> {
-        let agents = agents
-            .iter()
-            .map(|a| ForecastAgent {
-                id: a.id,
-                radius: a.radius,
-                paths: vec![path(a)],
-            })
-            .collect();
-        Self::new(horizon, 1, agents)
+        Self::new(horizon, 1, one_path_per_agent(agents, path))
     }
 
     /// Waypoints per path.
@@ -221,6 +206,21 @@ pub(crate) fn expectation(
         None => (0..scenes).map(&mut f).sum::<f64>() / scenes as f64,
         Some(w) => w.iter().enumerate().map(|(s, w)| w * f(s)).sum(),
     }
+}
+
+/// Each of `agents` with the one path `path` gives it.
+fn one_path_per_agent(
+    agents: &[AgentState],
+    mut path: impl FnMut(&AgentState) -> Vec<[f64; 2]>,
+) -> Vec<ForecastAgent> {
+    agents
+        .iter()
+        .map(|a| ForecastAgent {
+            id: a.id,
+            radius: a.radius,
+            paths: vec![path(a)],
+        })
+        .collect()
 }
 
 /// `horizon` positions of `agent` moving on at its velocity, `dt` apart from `dt` on.
@@ -411,9 +411,7 @@ impl CrowdPredictor for HistoryRidge {
         }
         Forecast::one_path_each(&obs.agents, horizon, |a| {
             let h = &a.history;
-            let past = h
-                .get(h.len().saturating_sub(self.history + 1)..)
-                .unwrap_or(&[]);
+            let past = &h[h.len().saturating_sub(self.history + 1)..];
             self.predict(past, horizon)
                 .filter(|p| p.iter().flatten().all(|v| v.is_finite()))
                 .unwrap_or_else(|| constant_velocity_path(a, horizon, dt))

@@ -314,10 +314,10 @@ fn foresight_settings(
 /// that names a `[prediction]` model) with, optionally, `foresight_within` (m: only the people
 /// that close to the robot get it) and `foresight_until` (s: the recording that far ahead,
 /// constant velocity after it), or `history_ridge` (the path of a predictor of people fitted by
-/// `human2nav data predict --fit-on … --export`, [`HistoryRidge`]). Each episode gets a fresh planner (model loaded from disk, source
-/// noise seeded with the episode's seed) for the robot of that episode, with the robot's Φ
-/// including its plugin constraint terms; libtorch runs one thread per planner (the episodes
-/// already run in parallel).
+/// `human2nav data predict --fit-on … --export`, [`HistoryRidge`]). Each episode gets a fresh
+/// planner (model loaded from disk, source noise seeded with the episode's seed) for the robot
+/// of that episode, with the robot's Φ including its plugin constraint terms; libtorch runs one
+/// thread per planner (the episodes already run in parallel).
 pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<MethodSpec> {
     let field = |key: &str| format!("methods[{}].config.{key}", m.name);
     const KEYS: [&str; 7] = [
@@ -349,12 +349,6 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
             Some(load_history_ridge(&path).with_context(|| field("history_ridge"))?)
         }
     };
-    if foresight.is_some() && history_ridge.is_some() {
-        bail!(
-            "{}: foresight replaces the forecast, so give one or the other",
-            field("history_ridge")
-        );
-    }
     if m.config.contains_key("guidance") && m.config.contains_key("arm") {
         bail!(
             "{}: give `guidance` or `arm`, not both (`arm = \"raw\"` is `guidance = false`)",
@@ -393,19 +387,27 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
         };
     let prediction = PredictionModel::load(&planner_cfg, &cfg.base_dir)
         .with_context(|| format!("method `{}`", m.name))?;
-    if history_ridge.is_some() && prediction.is_some() {
+    // Each replaces the planner's forecast of people, so at most one may be given.
+    let predictors: Vec<String> = [
+        foresight.map(|_| format!("`{}`", field("foresight"))),
+        history_ridge
+            .as_ref()
+            .map(|_| format!("`{}`", field("history_ridge"))),
+        prediction.as_ref().map(|_| {
+            format!(
+                "the [prediction] model of the planner file {}",
+                planner_toml.display()
+            )
+        }),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    if predictors.len() > 1 {
         bail!(
-            "{}: the planner file {} names a [prediction] model; give one predictor",
-            field("history_ridge"),
-            planner_toml.display()
-        );
-    }
-    if foresight.is_some() && prediction.is_some() {
-        bail!(
-            "{}: the planner file {} names a [prediction] model; foresight replaces the \
-             forecast, so give one or the other",
-            field("foresight"),
-            planner_toml.display()
+            "methods[{}].config: give one predictor of people, not {}",
+            m.name,
+            predictors.join(" and ")
         );
     }
     human2nav_flow::tch::set_num_threads(1);

@@ -92,6 +92,7 @@ fn evaluate(term: &dyn ConstraintTerm, data: &[f64], b: usize, t: usize) -> (Vec
         limits: &l,
         initial_velocity: Twist2::ZERO,
         agents: &a,
+        scene: Default::default(),
     };
     let mut cost = vec![0.0; b];
     let mut grad = vec![0.0; data.len()];
@@ -331,6 +332,7 @@ fn constraint_shape_errors_are_reported_not_crashed() {
         limits: &l,
         initial_velocity: Twist2::ZERO,
         agents: &[],
+        scene: Default::default(),
     };
     let data = batch(2, 4);
     let batch = TrajBatch {
@@ -590,6 +592,7 @@ fn a_panicking_constraint_is_marked_unusable_and_the_process_lives_on() {
         limits: &l,
         initial_velocity: Twist2::ZERO,
         agents: &[],
+        scene: Default::default(),
     };
     let run = |term: &dyn ConstraintTerm| {
         let mut cost = vec![0.0; 2];

@@ -69,6 +69,7 @@ fn evaluate(term: &dyn ConstraintTerm) -> Result<(), ConstraintError> {
         limits: &l,
         initial_velocity: Twist2::ZERO,
         agents: &[],
+        scene: Default::default(),
     };
     let data = [0.0, 0.0, 0.0, 0.1, 0.0, 0.0];
     let (mut cost, mut grad) = ([0.0], [0.0; 6]);
@@ -468,6 +469,7 @@ fn a_constraint_that_never_returns_fails_and_is_dead_afterwards() {
         limits: &l,
         initial_velocity: Twist2::ZERO,
         agents: &agents,
+        scene: Default::default(),
     };
     let data: Vec<f64> = (0..12).map(|k| 0.05 * k as f64).collect();
     let run = |t: &dyn ConstraintTerm| {

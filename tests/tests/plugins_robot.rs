@@ -120,6 +120,7 @@ fn the_tracked_robot_loads_and_drives_through_its_plugin_embodiment() {
             limits: &limits,
             initial_velocity: twist,
             agents,
+            scene: Default::default(),
         };
         let (mut c, mut g) = (vec![0.0], vec![0.0; data.len()]);
         phi.evaluate(
@@ -228,6 +229,7 @@ fn the_track_speed_limit_reaches_tfs_phi_and_the_correction() {
             limits,
             initial_velocity: twist,
             agents: &[],
+            scene: Default::default(),
         };
         let mut cost = [0.0];
         let mut grad = vec![0.0; data.len()];

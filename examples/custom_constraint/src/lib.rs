@@ -236,6 +236,7 @@ mod tests {
             limits: &limits,
             initial_velocity: Twist2::ZERO,
             agents: &agents,
+            scene: Default::default(),
         };
         let mut cost = vec![0.0; b];
         let mut grad = vec![0.0; data.len()];

@@ -11,6 +11,7 @@
 
 use anyhow::{Context, bail};
 use clap::Parser;
+use human2nav::core::ablation::Arm;
 use human2nav::flow::tch;
 use human2nav::prelude::*;
 use std::path::PathBuf;
@@ -22,14 +23,15 @@ use std::path::PathBuf;
 struct Args {
     /// The robot profile (default: robots/diablo/robot.toml in the workspace).
     robot: Option<PathBuf>,
-    /// Plan without feasibility guidance (the paper's ablation).
+    /// Plan with the raw samples of the model (the guidance ablation's `raw` arm: no
+    /// correction, no extra candidates, no motions of the robot's own).
     #[arg(long)]
-    no_guidance: bool,
+    raw: bool,
 }
 
 fn main() -> anyhow::Result<()> {
     let args = Args::parse();
-    let no_guidance = args.no_guidance;
+    let raw = args.raw;
 
     // Paths in the SDK are relative to the workspace root (the folder with the top Cargo.toml).
     let cwd = std::env::current_dir()?;
@@ -41,7 +43,9 @@ fn main() -> anyhow::Result<()> {
 
     // 1. The planner settings (K samples, guidance, selection) and the model folder.
     let mut config = PlannerConfig::load(&root.join("sdk/configs/planner.toml"))?;
-    config.human2nav.guidance.enabled = !no_guidance;
+    if raw {
+        config.human2nav = Arm::Raw.settings(&config.human2nav);
+    }
     tch::set_num_threads(1);
     let model_dir = config.model_dir(&root);
     if !model_dir.join("model.toml").is_file() {
@@ -99,7 +103,7 @@ fn main() -> anyhow::Result<()> {
     let fig = PlanFigure {
         robot: &robot.profile.name,
         label: &episode.id,
-        guidance: !no_guidance,
+        guidance: config.human2nav.guidance.enabled,
         observation: &obs,
         start: Some(episode.start),
         plan: &plan,
@@ -113,7 +117,7 @@ fn main() -> anyhow::Result<()> {
     let png = root.join(format!(
         "out/quickstart/{}{}.png",
         robot.profile.name,
-        if no_guidance { "-noguide" } else { "" }
+        if raw { "-raw" } else { "" }
     ));
     let numbers = draw_plan_figure(&png, &fig)?;
     let phi = |v: Option<f64>| v.map_or_else(|| "–".to_string(), |x| format!("{x:.3}"));

@@ -267,6 +267,7 @@ pub fn run_observation(input: &[u8]) -> Reached {
         limits: &limits,
         initial_velocity: obs.ego_velocity,
         agents: &obs.agents,
+        scene: Default::default(),
     };
     // Outputs of the right size, or (one call in eight) of a wrong one.
     let wrong = usize::from(d.u8() % 8 == 0);

@@ -260,6 +260,7 @@ mod tests {
             limits: &l,
             initial_velocity: Twist2::ZERO,
             agents,
+            scene: Default::default(),
         };
         let mut cost = vec![0.0; b];
         let mut grad = vec![0.0; data.len()];

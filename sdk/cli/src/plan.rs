@@ -63,9 +63,15 @@ pub struct PlanArgs {
     /// Model folder (overrides the configuration's `model`).
     #[arg(long)]
     pub model: Option<PathBuf>,
-    /// Turn feasibility guidance off (the ablation).
+    /// Run Algorithm 1 (feasibility guidance through the network) on the shortlisted samples;
+    /// the shipped planner does not.
+    #[arg(long, conflicts_with = "arm")]
+    pub guidance: bool,
+    /// Plan as one arm of the guidance ablation instead of the configured planner: `raw` (the
+    /// model's samples as they come), `alg1` (Algorithm 1, no correction), `qp` (the
+    /// correction: the shipped planner without its own motions) or `alg1+qp`.
     #[arg(long)]
-    pub no_guidance: bool,
+    pub arm: Option<Arm>,
     /// Seed of the planner's source noise (overrides the configuration).
     #[arg(long)]
     pub seed: Option<u64>,
@@ -138,8 +144,11 @@ pub fn run(args: PlanArgs) -> anyhow::Result<ExitCode> {
     if let Some(b) = args.backend {
         cfg.backend = b;
     }
-    if args.no_guidance {
-        cfg.human2nav.guidance.enabled = false;
+    if args.guidance {
+        cfg.human2nav.guidance.enabled = true;
+    }
+    if let Some(arm) = args.arm {
+        cfg.human2nav = arm.settings(&cfg.human2nav);
     }
     if let Some(b) = args.budget_ms {
         cfg.human2nav.budget_ms = b;
@@ -270,7 +279,8 @@ fn plan_one(
             "out/plan/{}-{}{}.png",
             rp.profile.name,
             args.id.as_deref().map_or(args.index.to_string(), sanitize),
-            if guidance { "" } else { "-noguide" }
+            args.arm
+                .map_or(String::new(), |a| format!("-{}", a.key().replace('+', "")))
         ))
     });
     let numbers = draw_plan_figure(&out, &fig)?;
@@ -480,8 +490,8 @@ fn eval(
     }
     println!();
     println!(
-        "Arms: raw samples (no guidance, no correction), Algorithm 1 only, QP only (M = 0: the \
-         correction of the same candidates), Algorithm 1 + QP (the configured planner); every arm \
+        "Arms: raw samples (no Algorithm 1, no correction, no extra candidates), Algorithm 1 only, \
+         QP only (the correction of the same candidates), Algorithm 1 + QP (the configured planner); every arm \
          draws the same source samples. TFS: mean plan TFS (pose 0 = the robot at rest/--speed); \
          all-feasible: share of windows with TFS = 1; Φ before/after: the kept sample before and \
          after Algorithm 1; displacement vs raw: mean distance to the raw arm's plan at equal \

@@ -72,7 +72,7 @@ fn foresight_zero_is_the_shipped_planner_and_full_foresight_sees_the_recording()
     let plan = |spec: &MethodSpec| spec.make(&ctx).unwrap().plan(&obs).unwrap().poses;
     let shipped: MethodConfig = toml::from_str(
         "name = \"shipped\"\nkind = \"human2nav\"\n\
-         config = { planner = \"sdk/configs/planner.toml\", guidance = true }\n",
+         config = { planner = \"sdk/configs/planner.toml\" }\n",
     )
     .unwrap();
     let shipped = plan(&human2nav_method(&shipped, &cfg).unwrap());

@@ -40,6 +40,7 @@ fn bench_phi(c: &mut Criterion) {
         limits: &l,
         initial_velocity: Twist2::new(0.8, 0.0, 0.0),
         agents: &[],
+        scene: Default::default(),
     };
     let phi = Phi::from_weights(&GuidanceWeights::default(), &l);
     let batch = TrajBatch::new(&data, b, t).expect("demo batch has the right shape");
@@ -86,6 +87,7 @@ fn bench_guidance(c: &mut Criterion) {
         limits: &l,
         initial_velocity: Twist2::new(1.0, 0.0, 0.0),
         agents: &[],
+        scene: Default::default(),
     };
     let phi = Phi::from_weights(&GuidanceWeights::default(), &l);
     let cond = FlowCondition {

@@ -1,12 +1,14 @@
 //! The guidance ablation: one planning step under the four configurations ("arms") that tell
 //! apart what Algorithm 1 and the last-step correction each contribute.
 //!
-//! | arm | Algorithm 1 | last-step correction (QP) |
-//! |---|---|---|
-//! | [`Arm::Raw`] | off | off (the planner without guidance: selection among all `K` samples) |
-//! | [`Arm::Alg1`] | on | off |
-//! | [`Arm::Qp`] | on with `M = 0` (shortlist, slowed and stop candidates, no iteration) | on (the shipped planner, bar its own motions) |
-//! | [`Arm::Both`] | on | on |
+//! | arm | Algorithm 1 | last-step correction (QP) | slowed, stop and goal candidates |
+//! |---|---|---|---|
+//! | [`Arm::Raw`] | off | off | off (the selection among all `K` samples as they come) |
+//! | [`Arm::Alg1`] | on | off | on |
+//! | [`Arm::Qp`] | off | on | on (the shipped planner, bar its own motions) |
+//! | [`Arm::Both`] | on | on | on |
+//!
+//! Every arm samples, and every arm selects (with Φ, like the shipped planner).
 //!
 //! No arm offers the robot's own motions (`Human2NavSettings::motions`, a lever of the
 //! selection, not a guidance stage), so the shipped planner is `qp` plus those motions.
@@ -78,14 +80,17 @@ impl Arm {
             Arm::Raw => {
                 s.guidance.enabled = false;
                 s.projection.enabled = false;
+                s.guided_samples = 0;
+                s.slowdown = 1.0;
+                s.stop_candidate = false;
+                s.goal_approach = 0.0;
             }
             Arm::Alg1 => {
                 s.guidance.enabled = true;
                 s.projection.enabled = false;
             }
             Arm::Qp => {
-                s.guidance.enabled = true;
-                s.guidance.iterations_m = 0;
+                s.guidance.enabled = false;
                 s.projection.enabled = true;
             }
             Arm::Both => {
@@ -348,9 +353,11 @@ mod tests {
         let base = Human2NavSettings::default();
         let raw = Arm::Raw.settings(&base);
         assert!(!raw.guidance.enabled && !raw.projection.enabled);
-        // The shipped planner runs no Algorithm 1 iterations: it is the QP arm, and the arms
-        // with Algorithm 1 run its tuned count.
-        assert_eq!(base.guidance.iterations_m, 0);
+        assert!(raw.slowdown == 1.0 && !raw.stop_candidate && raw.goal_approach == 0.0);
+        assert_eq!(raw.guided_samples, 0);
+        // The shipped planner runs no Algorithm 1: it is the QP arm plus the robot's motions,
+        // and the arms with Algorithm 1 switch it on with its tuned count.
+        assert!(!base.guidance.enabled);
         assert!(base.motions > 0);
         assert_eq!(
             Arm::Qp.settings(&base),
@@ -359,6 +366,7 @@ mod tests {
         assert!(Arm::ALL.iter().all(|a| a.settings(&base).motions == 0));
         let tuned = GuidanceSettings::default().iterations_m;
         assert!(tuned > 0);
+        assert_eq!(base.guidance.iterations_m, tuned);
         let alg1 = Arm::Alg1.settings(&base);
         assert!(alg1.guidance.enabled && !alg1.projection.enabled);
         assert_eq!(alg1.guidance.iterations_m, tuned);
@@ -367,12 +375,12 @@ mod tests {
         assert_eq!(both.guidance.iterations_m, tuned);
         assert_eq!(both.samples, base.samples);
         assert_eq!(both.selection, base.selection);
-        // A configured count is kept by the arms that run Algorithm 1 and dropped by QP only.
+        // A configured count is kept by the arms that run Algorithm 1; QP switches it off.
         let mut five = base;
         five.guidance.iterations_m = 5;
         assert_eq!(Arm::Alg1.settings(&five).guidance.iterations_m, 5);
         assert_eq!(Arm::Both.settings(&five).guidance.iterations_m, 5);
-        assert_eq!(Arm::Qp.settings(&five).guidance.iterations_m, 0);
+        assert!(!Arm::Qp.settings(&five).guidance.enabled);
     }
 
     #[test]

@@ -7,8 +7,11 @@
 //! The built-in soft-margin terms of Eq. 8 are [`BuiltinTerm`]s (see [`builtin`] for the exact
 //! formulas); [`Phi`] is their weighted sum (Eq. 9) plus any plugin terms.
 
+use crate::forecast::Forecast;
 use crate::limits::Limits;
+use crate::obstacle::Obstacle;
 use crate::planner::AgentState;
+use crate::robot::footprint::FootprintShape;
 use crate::se2::Twist2;
 
 /// A read-only view of `batch` trajectories of `horizon` poses, flat `[B, T, 3]` (`x, y, θ`).
@@ -57,6 +60,26 @@ pub struct ConstraintContext<'a> {
     pub initial_velocity: Twist2,
     /// Other agents, in the same frame as the trajectories (for clearance-style terms).
     pub agents: &'a [AgentState],
+    /// What the planner knows of the scene beyond the agents' current states (empty unless
+    /// the caller fills it: `scene: Default::default()`).
+    pub scene: SceneContext<'a>,
+}
+
+/// The planning scene as the Human2Nav planner hands it to Φ, in the trajectories' frame: where
+/// the people are expected to go, the static obstacles, the robot's body and its goal. The
+/// built-in [`Clearance`] term reads it; plugin terms see the agents of [`ConstraintContext`]
+/// only (the plugin ABI carries no more).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SceneContext<'a> {
+    /// The forecast of the agents over the trajectories' waypoints (`None`: constant velocity
+    /// from [`ConstraintContext::agents`]).
+    pub forecast: Option<&'a Forecast>,
+    /// Static obstacles near the robot.
+    pub obstacles: &'a [Obstacle],
+    /// The robot's footprint, placed at each pose.
+    pub footprint: &'a [FootprintShape],
+    /// The goal the trajectories head for, if any.
+    pub goal: Option<[f64; 2]>,
 }
 
 /// Why a constraint term could not be evaluated.
@@ -89,12 +112,29 @@ pub trait ConstraintTerm: Send + Sync {
         cost: &mut [f64],
         grad: &mut [f64],
     ) -> Result<(), ConstraintError>;
+
+    /// Adds this term's cost of trajectory `b` into `cost[b]`, without the gradient: what a
+    /// planner's selection needs to score hundreds of candidates. The default evaluates the
+    /// gradient into a scratch buffer and drops it; a term whose gradient is expensive
+    /// overrides it.
+    fn cost(
+        &self,
+        batch: TrajBatch<'_>,
+        ctx: &ConstraintContext<'_>,
+        cost: &mut [f64],
+    ) -> Result<(), ConstraintError> {
+        let mut grad = vec![0.0; batch.data.len()];
+        self.evaluate(batch, ctx, cost, &mut grad)
+    }
 }
 
 pub mod builtin;
+mod clearance;
+pub(crate) mod near;
 mod phi;
 
 pub use builtin::{BuiltinKind, BuiltinTerm, SMOOTH_ABS_EPS, SoftMargin, sigmoid, softplus};
+pub use clearance::{CLEARANCE, Clearance};
 pub use phi::{Phi, PhiScratch};
 
 #[cfg(test)]

@@ -269,7 +269,7 @@ impl Default for PaperSettings {
 pub struct GuidanceSettings {
     /// Which form of Algorithm 1 runs.
     pub variant: GuidanceVariant,
-    /// When false, sampling is the plain rollout (the "w/o guidance" ablation).
+    /// Whether Algorithm 1 runs; when false, sampling is the plain rollout.
     pub enabled: bool,
     /// Number of Euler integration steps `N` (1 to [`MAX_STEPS_N`]).
     pub steps_n: usize,

@@ -77,12 +77,10 @@
 //! `info.fallback = true` and the reason in `info.notes`. An invalid observation (a non-finite
 //! input) is an error instead, because the caller must fix it.
 
-mod near;
-
 use std::borrow::Cow;
 
 use crate::bev::{self, BevSpec};
-use crate::constraint::{ConstraintContext, Phi};
+use crate::constraint::{Clearance, ConstraintContext, Phi, PhiScratch, SceneContext, TrajBatch};
 use crate::flow::{FlowCondition, FlowModel};
 use crate::forecast::{CrowdPredictor, Forecast};
 use crate::guidance::{
@@ -90,7 +88,7 @@ use crate::guidance::{
 };
 use crate::limits::Limits;
 use crate::motions::{GridLevels, MotionGrid};
-use crate::obstacle::{self, Obstacle};
+use crate::obstacle::Obstacle;
 use crate::planner::{
     AgentState, Deadline, Observation, Plan, PlanError, PlanInfo, Planner, Stage, StageProgress,
     Stages,
@@ -99,7 +97,6 @@ use crate::projection::{self, ProjectionSettings};
 use crate::robot::footprint::{self, FootprintShape};
 use crate::se2::{Pose2, Twist2};
 use crate::tfs;
-use near::Near;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -138,7 +135,11 @@ pub struct SelectionWeights {
     pub feasibility: f64,
     /// Weight of the remaining goal distance ratio. Default 1.
     pub goal: f64,
-    /// Weight of the clearance penalty. Default 2.
+    /// Weight of Φ, the robot's cost ([`RobotModel::phi`]: its built-in terms with the
+    /// profile's `[cost]` weights, its plugin terms, and the clearance term), in the score.
+    /// Default 1.
+    pub phi: f64,
+    /// Weight of the built-in clearance term ([`Clearance`]) in Φ. Default 2.
     pub clearance: f64,
     /// Weight of the distance to the previous plan (m). Default 0.1.
     pub consistency: f64,
@@ -176,6 +177,7 @@ impl Default for SelectionWeights {
         Self {
             feasibility: 0.0,
             goal: 1.0,
+            phi: 1.0,
             clearance: 2.0,
             consistency: 0.1,
             margin: 0.5,
@@ -253,10 +255,12 @@ pub struct Human2NavSettings {
     /// returns the best plan found within it (module docs, "Planning under a deadline").
     /// [`Planner::plan_within`] takes a deadline per call instead. Default 0.
     pub budget_ms: f64,
-    /// Algorithm 1's parameters; `guidance.enabled = false` is the "w/o guidance" ablation
-    /// (it also turns the last-step correction and the slowed, stop and goal candidates off).
-    /// Default: [`GuidanceSettings::default`] with `iterations_m = 0` (the shortlist and the
-    /// extra candidates without Algorithm 1's iterations, as `planner.toml` ships).
+    /// Algorithm 1 (the paper's feasibility guidance) on the shortlisted samples:
+    /// `guidance.enabled` switches it, and nothing else, on or off. Default: off, with
+    /// [`GuidanceSettings::default`]'s tuned iterations when switched on (as `planner.toml`
+    /// ships). The other stages have their own switches: `projection.enabled` (the
+    /// correction), `slowdown`, `stop_candidate` and `goal_approach` (the extra candidates),
+    /// `motions` (the robot's own motions); [`crate::ablation::Arm`] names the combinations.
     pub guidance: GuidanceSettings,
     /// The exact last-step correction applied after Algorithm 1 ([`crate::projection`]).
     pub projection: ProjectionSettings,
@@ -279,12 +283,11 @@ impl Default for Human2NavSettings {
             motions: 500,
             car_motions: 2401,
             budget_ms: 0.0,
-            // Algorithm 1's iterations are off in the shipped planner: on the validation suite
-            // the correction alone succeeded more often (ARCHITECTURE.md, "The guidance
-            // ablation"); the guidance stage still shortlists and offers slowed and stop
-            // candidates.
+            // Algorithm 1 is off in the shipped planner: on the validation suite the correction
+            // alone succeeded more often (ARCHITECTURE.md, "The guidance ablation"). Switched
+            // on, it runs its tuned iterations.
             guidance: GuidanceSettings {
-                iterations_m: 0,
+                enabled: false,
                 ..GuidanceSettings::default()
             },
             projection: ProjectionSettings::default(),
@@ -353,6 +356,7 @@ impl Human2NavSettings {
         for (name, v) in [
             ("selection.feasibility", s.feasibility),
             ("selection.goal", s.goal),
+            ("selection.phi", s.phi),
             ("selection.clearance", s.clearance),
             ("selection.consistency", s.consistency),
             ("selection.arrival", s.arrival),
@@ -430,7 +434,8 @@ impl<M> std::fmt::Debug for Human2Nav<M> {
 }
 
 impl<M: FlowModel> Human2Nav<M> {
-    /// A planner named `human2nav` (or `human2nav-noguide` when guidance is off).
+    /// A planner named `human2nav`. The built-in clearance term ([`Clearance`], weighted by
+    /// [`SelectionWeights::clearance`]) joins the robot's Φ.
     pub fn new(
         model: M,
         robot: RobotModel,
@@ -450,13 +455,20 @@ impl<M: FlowModel> Human2Nav<M> {
                 "flow model has a horizon of 0 poses".into(),
             ));
         }
-        let name = if settings.guidance.enabled {
-            "human2nav"
-        } else {
-            "human2nav-noguide"
+        let mut robot = robot;
+        let sel = &settings.selection;
+        let clearance = Clearance {
+            margin: sel.margin,
+            collision: sel.collision,
+            hold: steps(sel.hold, settings.dt),
+            arrival: (sel.progress != Progress::End).then_some(sel.arrival),
         };
+        clearance
+            .validate()
+            .and_then(|()| robot.phi.push(sel.clearance, Box::new(clearance)))
+            .map_err(|e| PlanError::InvalidSettings(format!("human2nav.selection: {e}")))?;
         Ok(Self {
-            name: name.to_string(),
+            name: "human2nav".to_string(),
             raster: vec![0.0; bev.len()],
             obstacles: Vec::new(),
             rng: ChaCha8Rng::seed_from_u64(settings.seed),
@@ -568,7 +580,7 @@ impl<M: FlowModel> Human2Nav<M> {
     /// A little over 120 lines: stage 2 fills half a dozen locals the selection and the plan's
     /// diagnostics read (candidates, their origin, Φ, the corrected flags, stages, notes);
     /// splitting it further would pass all of them back and forth.
-    fn try_plan(&mut self, obs: &Observation, deadline: &Deadline) -> Result<Plan, String> {
+    fn try_plan(&mut self, obs: &Observation, deadline: &Deadline) -> Result<Plan, Failure> {
         let horizon = self.model.horizon();
         let k = self.settings.samples;
         let (cond, agents) = self.condition(obs);
@@ -599,104 +611,112 @@ impl<M: FlowModel> Human2Nav<M> {
         };
 
         // Stage 1: the K samples of the flow model, without guidance (Φ for diagnostics).
-        let first =
-            self.sample_stage(obs, &cond, &x0, &agents, deadline, &mut stages, &mut notes)?;
+        let first = self.sample_stage(
+            obs,
+            &cond,
+            &x0,
+            &agents,
+            &forecast,
+            deadline,
+            &mut stages,
+            &mut notes,
+        )?;
         let unguided: Vec<Vec<Pose2>> = first
             .as_ref()
             .map(|f| (0..k).map(|i| f.unguided_poses(i)).collect())
             .unwrap_or_default();
-
-        // Stage 2 (guidance on): Algorithm 1 on the shortlist, its slowed copies and the stop
-        // candidate, then the last-step correction of all of them.
-        let mut candidates: Vec<Vec<Pose2>>;
-        let mut origin: Vec<Source>;
-        let mut phi: Vec<(f64, f64)> = first
+        let phi_unguided: Vec<(f64, f64)> = first
             .as_ref()
             .map(|f| f.phi_before.iter().map(|&p| (p, p)).collect())
             .unwrap_or_default();
+
+        // The samples that go on: the shortlist (all of them unless `guided_samples` says
+        // fewer), guided by Algorithm 1 when it is on and time is left.
+        let shortlist = if unguided.is_empty() {
+            Vec::new()
+        } else {
+            let ctx = self.phi_context(obs, &agents, &forecast, goal);
+            self.shortlist(&unguided, goal, &ctx, obs.ego_velocity, previous_ego)?
+        };
+        let mut candidates: Vec<Vec<Pose2>>;
+        let phi: Vec<(f64, f64)>;
         let mut guidance_iterations = None;
+        if guidance.enabled && !shortlist.is_empty() && stages.cut_short.is_none() {
+            stages.guidance.planned = guidance.iterations_m;
+            let guided = self.guide_stage(
+                obs,
+                &cond,
+                &agents,
+                &forecast,
+                &shortlist,
+                deadline,
+                &mut stages,
+                &mut notes,
+            )?;
+            guidance_iterations = Some(guided.iterations_run);
+            candidates = (0..shortlist.len())
+                .map(|j| guided.guided_poses(j))
+                .collect();
+            phi = guided
+                .phi_before
+                .iter()
+                .copied()
+                .zip(guided.phi_after.iter().copied())
+                .collect();
+        } else {
+            candidates = shortlist.iter().map(|&i| unguided[i].clone()).collect();
+            phi = shortlist.iter().map(|&i| phi_unguided[i]).collect();
+        }
+        let mut origin: Vec<Source> = shortlist.iter().map(|&i| Source::Sample(i)).collect();
+        self.push_extra_candidates(
+            &shortlist,
+            goal,
+            horizon,
+            warm.as_ref(),
+            &mut candidates,
+            &mut origin,
+        );
         // Which candidates the last-step correction made feasible (empty when it did not run).
         let mut corrected: Vec<bool> = Vec::new();
-        if guidance.enabled {
-            stages.guidance.planned = guidance.iterations_m;
-            let shortlist = if unguided.is_empty() {
-                Vec::new()
-            } else {
-                self.shortlist(&unguided, goal, &forecast, obs.ego_velocity, previous_ego)
-            };
-            if shortlist.is_empty() || stages.cut_short.is_some() {
-                // No time left for Algorithm 1: the shortlist goes on unguided.
-                candidates = shortlist.iter().map(|&i| unguided[i].clone()).collect();
-                phi = shortlist.iter().map(|&i| phi[i]).collect();
-            } else {
-                let guided = self.guide_stage(
-                    obs,
-                    &cond,
-                    &agents,
-                    &shortlist,
-                    deadline,
-                    &mut stages,
-                    &mut notes,
-                )?;
-                guidance_iterations = Some(guided.iterations_run);
-                candidates = (0..shortlist.len())
-                    .map(|j| guided.guided_poses(j))
-                    .collect();
-                phi = guided
-                    .phi_before
-                    .iter()
-                    .copied()
-                    .zip(guided.phi_after.iter().copied())
-                    .collect();
-            }
-            origin = shortlist.iter().map(|&i| Source::Sample(i)).collect();
-            self.push_extra_candidates(
-                &shortlist,
-                goal,
-                horizon,
-                warm.as_ref(),
+        if self.settings.projection.enabled {
+            corrected = self.correct(
                 &mut candidates,
                 &mut origin,
+                obs.ego_velocity,
+                deadline,
+                &mut stages,
+                &mut notes,
             );
-            if self.settings.projection.enabled {
-                corrected = self.correct(
-                    &mut candidates,
-                    &mut origin,
-                    obs.ego_velocity,
-                    deadline,
-                    &mut stages,
-                    &mut notes,
-                );
-            }
-            // The robot's own motions are within its limits as they are: no correction. Not
-            // after the deadline: scoring them takes milliseconds.
-            if stages.cut_short.is_none() && !deadline.passed() {
-                self.push_motions(obs.ego_velocity, horizon, &mut candidates, &mut origin);
-            }
-            if !corrected.is_empty() {
-                corrected.resize(candidates.len(), true);
-            }
-        } else {
-            candidates = unguided.clone();
-            origin = (0..unguided.len()).map(Source::Sample).collect();
-            if let Some(prev) = &warm {
-                candidates.push(prev.clone());
-                origin.push(Source::Previous);
-            }
+        }
+        // The robot's own motions are within its limits as they are: no correction. Not
+        // after the deadline: scoring them takes milliseconds.
+        if stages.cut_short.is_none() && !deadline.passed() {
+            self.push_motions(obs.ego_velocity, horizon, &mut candidates, &mut origin);
+        }
+        if !corrected.is_empty() {
+            corrected.resize(candidates.len(), true);
         }
 
-        // Stage 3: selection.
+        // Stage 3: selection, every candidate scored with Φ.
         let scored = self.scored(&candidates);
-        let near = self.near(&scored, &forecast);
-        let best = select_best(&scored, &corrected, |c| {
-            self.score(c, goal, &near, obs.ego_velocity, previous_ego, true)
+        let ctx = self.phi_context(obs, &agents, &forecast, goal);
+        let phi_cost = self.phi_costs(&scored, &ctx)?;
+        let best = select_best(&scored, &corrected, |i| {
+            self.score(
+                &scored[i],
+                goal,
+                phi_cost[i],
+                obs.ego_velocity,
+                previous_ego,
+                true,
+            )
         });
         let Some(chosen) = best else {
-            return Err(if candidates.is_empty() {
-                "the deadline passed before sampling began, and there was no previous plan".into()
+            return Err(Failure::from(if candidates.is_empty() {
+                "the deadline passed before sampling began, and there was no previous plan"
             } else {
-                "every candidate trajectory was non-finite".into()
-            });
+                "every candidate trajectory was non-finite"
+            }));
         };
         Ok(self.assemble_plan(
             obs,
@@ -722,12 +742,19 @@ impl<M: FlowModel> Human2Nav<M> {
         cond: &FlowCondition,
         x0: &[f64],
         agents: &[AgentState],
+        forecast: &Forecast,
         deadline: &Deadline,
         stages: &mut Stages,
         notes: &mut Vec<String>,
-    ) -> Result<Option<GuidanceResult>, String> {
+    ) -> Result<Option<GuidanceResult>, Failure> {
         let guidance = self.settings.guidance;
-        let ctx = phi_context(self.settings.dt, &self.robot.limits, obs, agents);
+        let scene = SceneContext {
+            forecast: Some(forecast),
+            obstacles: &self.obstacles,
+            footprint: &self.robot.footprint,
+            goal: Some(cond.goal),
+        };
+        let ctx = phi_context(self.settings.dt, &self.robot.limits, obs, agents, scene);
         let plain = GuidanceSettings {
             enabled: false,
             ..guidance
@@ -759,7 +786,7 @@ impl<M: FlowModel> Human2Nav<M> {
                     notes.push("deadline: it passed before sampling began".into());
                     None
                 }
-                Err(e) => return Err(format!("sampling failed: {e}")),
+                Err(e) => return Err(Failure::guidance("sampling failed", e)),
             },
         )
     }
@@ -771,13 +798,20 @@ impl<M: FlowModel> Human2Nav<M> {
         obs: &Observation,
         cond: &FlowCondition,
         agents: &[AgentState],
+        forecast: &Forecast,
         shortlist: &[usize],
         deadline: &Deadline,
         stages: &mut Stages,
         notes: &mut Vec<String>,
-    ) -> Result<GuidanceResult, String> {
+    ) -> Result<GuidanceResult, Failure> {
         let guidance = self.settings.guidance;
-        let ctx = phi_context(self.settings.dt, &self.robot.limits, obs, agents);
+        let scene = SceneContext {
+            forecast: Some(forecast),
+            obstacles: &self.obstacles,
+            footprint: &self.robot.footprint,
+            goal: Some(cond.goal),
+        };
+        let ctx = phi_context(self.settings.dt, &self.robot.limits, obs, agents, scene);
         let result = guidance::guide_subset_until(
             &self.model,
             cond,
@@ -788,7 +822,7 @@ impl<M: FlowModel> Human2Nav<M> {
             &mut self.workspace,
             deadline,
         )
-        .map_err(|e| format!("guidance failed: {e}"))?;
+        .map_err(|e| Failure::guidance("guidance failed", e))?;
         stages.guidance.done = result.iterations_run;
         if result.cut_short {
             stages.cut_short = Some(Stage::Guidance);
@@ -869,7 +903,6 @@ impl<M: FlowModel> Human2Nav<M> {
             index: chosen,
         } = chosen;
         let dt = self.settings.dt;
-        let guidance = self.settings.guidance;
         let to_world = |traj: &[Pose2]| -> Vec<Pose2> {
             std::iter::once(obs.ego)
                 .chain(traj.iter().map(|p| obs.ego.compose(*p)))
@@ -898,7 +931,7 @@ impl<M: FlowModel> Human2Nav<M> {
             Source::Previous => notes.push("kept the previous plan".into()),
             Source::Motion => notes.push("one of the robot's own motions".into()),
         }
-        let guided: Vec<Vec<Pose2>> = if guidance.enabled {
+        let guided: Vec<Vec<Pose2>> = if guidance_iterations.is_some() {
             candidates
                 .iter()
                 .zip(origin)
@@ -1010,60 +1043,102 @@ impl<M: FlowModel> Human2Nav<M> {
         corrected
     }
 
-    /// The samples Algorithm 1 runs on: the [`Human2NavSettings::guided_samples`] best by the
-    /// selection score without its feasibility term (guidance is what fixes feasibility), all
-    /// of them when that is 0 or at least `K`, or when the paper variant of Algorithm 1 is
-    /// selected (the paper guides every sample). Indices in sample order.
+    /// The samples that go on past sampling (to Algorithm 1, the slowed copies and the
+    /// correction): the [`Human2NavSettings::guided_samples`] best by the selection score
+    /// without its feasibility term (guidance and the correction are what fix feasibility),
+    /// all of them when that is 0 or at least `K`, or when the paper variant of Algorithm 1
+    /// runs (the paper guides every sample). Indices in sample order.
     fn shortlist(
         &self,
         samples: &[Vec<Pose2>],
         goal: [f64; 2],
-        forecast: &Forecast,
+        ctx: &ConstraintContext<'_>,
         v0: Twist2,
         previous: Option<&[Pose2]>,
-    ) -> Vec<usize> {
+    ) -> Result<Vec<usize>, Failure> {
         let g = self.settings.guided_samples;
-        let paper = self.settings.guidance.variant == GuidanceVariant::Paper;
+        let paper = self.settings.guidance.enabled
+            && self.settings.guidance.variant == GuidanceVariant::Paper;
         if paper || g == 0 || g >= samples.len() {
-            return (0..samples.len()).collect();
+            return Ok((0..samples.len()).collect());
         }
         let samples = self.scored(samples);
-        let near = self.near(&samples, forecast);
+        let phi = self.phi_costs(&samples, ctx)?;
         let mut scored: Vec<(f64, usize)> = samples
             .iter()
             .enumerate()
             .map(|(i, c)| {
-                let s = self.score(c, goal, &near, v0, previous, false);
+                let s = self.score(c, goal, phi[i], v0, previous, false);
                 (if s.is_finite() { s } else { f64::INFINITY }, i)
             })
             .collect();
         scored.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let mut keep: Vec<usize> = scored[..g].iter().map(|&(_, i)| i).collect();
         keep.sort_unstable();
-        keep
+        Ok(keep)
     }
 
-    /// The selection's broad phase for `candidates` against the ego-frame `forecast` and the
-    /// call's obstacles.
-    fn near(&self, candidates: &[Vec<Pose2>], forecast: &Forecast) -> Near {
-        Near::new(
-            candidates,
-            self.hold_steps(),
-            forecast,
-            &self.obstacles,
-            self.reach,
-            self.settings.selection.margin,
-        )
+    /// Φ's context for this call: the plan step, the limits, the robot's velocity, the
+    /// ego-frame agents, and the scene the clearance term reads (the forecast, the nearby
+    /// obstacles, the footprint and the clipped goal).
+    fn phi_context<'a>(
+        &'a self,
+        obs: &Observation,
+        agents: &'a [AgentState],
+        forecast: &'a Forecast,
+        goal: [f64; 2],
+    ) -> ConstraintContext<'a> {
+        let scene = SceneContext {
+            forecast: Some(forecast),
+            obstacles: &self.obstacles,
+            footprint: &self.robot.footprint,
+            goal: Some(goal),
+        };
+        phi_context(self.settings.dt, &self.robot.limits, obs, agents, scene)
+    }
+
+    /// Φ of every ego-frame candidate (each with the robot's pose, the identity, prepended as
+    /// pose 0), without gradients. A term that fails or answers a non-finite cost is an error
+    /// naming it: the selection never scores without a term.
+    fn phi_costs(
+        &self,
+        candidates: &[Vec<Pose2>],
+        ctx: &ConstraintContext<'_>,
+    ) -> Result<Vec<f64>, Failure> {
+        let Some(first) = candidates.first() else {
+            return Ok(Vec::new());
+        };
+        let poses = first.len() + 1;
+        let mut data = Vec::with_capacity(candidates.len() * poses * 3);
+        for c in candidates {
+            if c.len() + 1 != poses {
+                return Err(Failure::from(format!(
+                    "candidates of {} and {} poses cannot be scored together",
+                    first.len(),
+                    c.len()
+                )));
+            }
+            data.extend_from_slice(&[0.0; 3]);
+            data.extend(c.iter().flat_map(|p| p.to_array()));
+        }
+        let batch = TrajBatch::new(&data, candidates.len(), poses)
+            .map_err(|e| Failure::from(e.to_string()))?;
+        let mut cost = vec![0.0; candidates.len()];
+        self.robot
+            .phi
+            .costs(batch, ctx, &mut cost, &mut PhiScratch::default())
+            .map_err(|e| Failure::term(format!("scoring the candidates with Φ: {e}")))?;
+        Ok(cost)
     }
 
     /// [`SelectionWeights::hold`] in plan steps.
     fn hold_steps(&self) -> usize {
-        (self.settings.selection.hold / self.settings.dt).round() as usize
+        steps(self.settings.selection.hold, self.settings.dt)
     }
 
     /// [`SelectionWeights::lookahead`] in plan steps.
     fn lookahead_steps(&self) -> usize {
-        (self.settings.selection.lookahead / self.settings.dt).round() as usize
+        steps(self.settings.selection.lookahead, self.settings.dt)
     }
 
     /// The candidates as the selection scores them: each [`continued`] for the lookahead, or
@@ -1089,14 +1164,14 @@ impl<M: FlowModel> Human2Nav<M> {
         out.iter().all(|p| p.is_finite()).then_some(out)
     }
 
-    /// The selection score of one ego-frame candidate (lower is better) against the agents and
-    /// obstacles `near` it (built over the candidates scored together, from the ego-frame
-    /// forecast); without `with_feasibility` the TFS term is left out.
+    /// The selection score of one ego-frame candidate (lower is better), given its Φ (the
+    /// robot's constraint terms and the clearance term, [`Self::phi_costs`]); without
+    /// `with_feasibility` the TFS term is left out.
     fn score(
         &self,
         traj: &[Pose2],
         goal: [f64; 2],
-        near: &Near,
+        phi: f64,
         v0: Twist2,
         previous: Option<&[Pose2]>,
         with_feasibility: bool,
@@ -1112,20 +1187,8 @@ impl<M: FlowModel> Human2Nav<M> {
         } else {
             1.0
         };
-
         let reach_per_step = self.robot.limits.v_max * self.settings.dt;
-        let GoalTerm {
-            progress,
-            checked,
-            arrived,
-        } = goal_term(traj, goal, w, reach_per_step);
-
-        // A candidate that arrives ends there; one that does not is also checked standing at
-        // its last pose for the hold.
-        let hold = if arrived { 0 } else { self.hold_steps() };
-        let clearance =
-            near.expectation(|s| self.clearance(&traj[..checked], hold, traj.len(), near, s));
-
+        let progress = goal_term(traj, goal, w, reach_per_step);
         let consistency = previous.map_or(0.0, |prev| {
             let n = prev.len().min(traj.len()).max(1);
             prev.iter()
@@ -1135,68 +1198,13 @@ impl<M: FlowModel> Human2Nav<M> {
                 / n as f64
         });
 
-        w.feasibility * (1.0 - feas)
-            + w.goal * progress
-            + w.clearance * clearance
-            + w.consistency * consistency
+        w.feasibility * (1.0 - feas) + w.goal * progress + w.phi * phi + w.consistency * consistency
     }
 }
 
-impl<M> Human2Nav<M> {
-    /// The clearance term `C` of a candidate against scene `scene` of the forecast and the
-    /// static obstacles, as far as `near` (built over the call's candidates) lets them matter:
-    /// `checked` are its waypoints checked for contact, `len` its length; with a `hold` it is
-    /// also checked standing at its last checked pose for that many more steps, and counts
-    /// `len + hold` waypoints.
-    ///
-    /// A predicted overlap ends the plan: it and every later waypoint cost the penalty, so a
-    /// plan that would run through a pedestrian is no better than one that stops in them, and
-    /// a later contact is better than an earlier one.
-    fn clearance(
-        &self,
-        checked: &[Pose2],
-        hold: usize,
-        len: usize,
-        near: &Near,
-        scene: usize,
-    ) -> f64 {
-        let margin = self.settings.selection.margin;
-        let footprint = &self.robot.footprint;
-        let len = len + checked.last().map_or(0, |_| hold);
-        let mut clearance = 0.0;
-        for (j, p) in near::held(checked, hold).enumerate() {
-            let mut hit = false;
-            // Broad phase, for this waypoint of the call's candidates (`Near`), then for this
-            // candidate: an agent whose centre is farther than the footprint's reach, its
-            // radius and the margin cannot touch the footprint nor come within the margin.
-            // The heading's sine and cosine, once per waypoint rather than per agent.
-            let mut turn: Option<(f64, f64)> = None;
-            let agent_gaps = near.agents(scene, j).iter().filter_map(|a| {
-                let (dx, dy) = (a.q[0] - p.x, a.q[1] - p.y);
-                (dx * dx + dy * dy < a.far * a.far).then(|| {
-                    let turn = *turn.get_or_insert_with(|| p.theta.sin_cos());
-                    footprint::clearance_at_turned(footprint, *p, turn, a.q, a.radius)
-                })
-            });
-            let obstacle_gaps = near
-                .obstacles(j)
-                .iter()
-                .map(|&k| obstacle::footprint_clearance(footprint, *p, &self.obstacles[k]));
-            for gap in agent_gaps.chain(obstacle_gaps) {
-                if gap < 0.0 {
-                    hit = true;
-                    break;
-                } else if gap < margin {
-                    clearance += ((margin - gap) / margin).powi(2);
-                }
-            }
-            if hit {
-                clearance += self.settings.selection.collision * (len - j) as f64;
-                break;
-            }
-        }
-        clearance / len.max(1) as f64
-    }
+/// A duration in whole plan steps of `dt`.
+fn steps(seconds: f64, dt: f64) -> usize {
+    (seconds / dt).round() as usize
 }
 
 /// How many of its own motions a robot with `limits` is offered:
@@ -1210,58 +1218,34 @@ fn motion_count(settings: &Human2NavSettings, limits: &Limits) -> usize {
     }
 }
 
-/// The selection's goal term of a candidate ([`goal_term`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct GoalTerm {
-    /// `d/d_0` (module docs), or how soon it could arrive with [`Progress::Time`].
-    progress: f64,
-    /// How many of its waypoints are checked for contact: all, or with [`Progress::Closest`]
-    /// and [`Progress::Time`] those up to its arrival.
-    checked: usize,
-    /// Whether it arrives (within [`SelectionWeights::arrival`] of the goal; with
-    /// [`Progress::End`], ends on it).
-    arrived: bool,
-}
-
-/// The goal term of the ego-frame candidate `traj`; `reach_per_step` is the way `v_max`
-/// covers in one plan step.
-fn goal_term(
-    traj: &[Pose2],
-    goal: [f64; 2],
-    w: &SelectionWeights,
-    reach_per_step: f64,
-) -> GoalTerm {
+/// The selection's goal term of the ego-frame candidate `traj`: `d/d_0` (module docs), or
+/// how soon it could arrive with [`Progress::Time`]; `reach_per_step` is the way `v_max`
+/// covers in one plan step. Which of its waypoints the clearance term scores (those up to its
+/// arrival) is the term's own business ([`Clearance::arrival`]).
+fn goal_term(traj: &[Pose2], goal: [f64; 2], w: &SelectionWeights, reach_per_step: f64) -> f64 {
     let d0 = goal[0].hypot(goal[1]).max(1e-3);
     let distance = |p: &Pose2| (p.x - goal[0]).hypot(p.y - goal[1]);
-    let term = |progress: f64, checked: usize, arrived: bool| GoalTerm {
-        progress,
-        checked,
-        arrived,
-    };
     if w.progress == Progress::End {
-        let progress = traj.last().map_or(d0, distance) / d0;
-        return term(progress, traj.len(), progress == 0.0);
+        return traj.last().map_or(d0, distance) / d0;
     }
     // The first waypoint within `arrival` ends the candidate.
     let mut closest = d0;
     for (k, p) in traj.iter().enumerate() {
         let d = distance(p);
         if d <= w.arrival {
-            let progress = match w.progress {
+            return match w.progress {
                 Progress::Time => (k + 1) as f64 * reach_per_step / d0,
                 _ => 0.0,
             };
-            return term(progress, k + 1, true);
         }
         closest = closest.min(d);
     }
-    let progress = match w.progress {
+    match w.progress {
         Progress::Time => {
             (traj.len() as f64 * reach_per_step + traj.last().map_or(d0, distance)) / d0
         }
         _ => closest / d0,
-    };
-    term(progress, traj.len(), false)
+    }
 }
 
 /// The candidates of a planning call, where each came from, the Φ before and after
@@ -1271,6 +1255,37 @@ struct Chosen<'a> {
     origin: &'a [Source],
     phi: &'a [(f64, f64)],
     index: usize,
+}
+
+/// Why a planning call stops in place instead: the reason, and whether a term of Φ failed
+/// (a constraint term that errs or answers a non-finite value is never left out in silence).
+struct Failure {
+    why: String,
+    term: bool,
+}
+
+impl Failure {
+    /// A term of Φ failed.
+    fn term(why: String) -> Self {
+        Self { why, term: true }
+    }
+
+    /// A guidance call (sampling or Algorithm 1) failed; through a term of Φ or not.
+    fn guidance(stage: &str, e: GuidanceError) -> Self {
+        Self {
+            term: matches!(e, GuidanceError::Constraint(_)),
+            why: format!("{stage}: {e}"),
+        }
+    }
+}
+
+impl<S: Into<String>> From<S> for Failure {
+    fn from(why: S) -> Self {
+        Self {
+            why: why.into(),
+            term: false,
+        }
+    }
 }
 
 /// Where a candidate of the selection came from.
@@ -1335,7 +1350,7 @@ pub fn time_scaled(traj: &[Pose2], scale: f64) -> Vec<Pose2> {
 fn select_best(
     candidates: &[Vec<Pose2>],
     corrected: &[bool],
-    mut score: impl FnMut(&[Pose2]) -> f64,
+    mut score: impl FnMut(usize) -> f64,
 ) -> Option<usize> {
     let any_corrected = corrected.contains(&true);
     let mut best: Option<(usize, f64)> = None;
@@ -1344,7 +1359,7 @@ fn select_best(
         if !eligible || !c.iter().all(|p| p.is_finite()) {
             continue;
         }
-        let s = score(c);
+        let s = score(i);
         if s.is_finite() && best.is_none_or(|(_, b)| s < b) {
             best = Some((i, s));
         }
@@ -1438,35 +1453,56 @@ impl<M: FlowModel + Send> Planner for Human2Nav<M> {
                 self.model.horizon() + 1,
                 "the selected plan was not finite",
             ),
-            Err(why) => Plan::stop_in_place(obs, self.settings.dt, self.model.horizon() + 1, why),
+            Err(Failure { why, term }) => {
+                let mut plan =
+                    Plan::stop_in_place(obs, self.settings.dt, self.model.horizon() + 1, &why);
+                // A term of Φ that fails is a broken extension, not the planner's own
+                // fallback: callers count the call as failed (the benchmark records it).
+                plan.info.error = term.then_some(why);
+                plan
+            }
         };
         self.previous = (!plan.info.fallback).then(|| plan.clone());
         Ok(plan)
     }
 }
 
-/// Φ's context at a planning instant: the plan step, the robot's limits, its velocity and the
-/// nearby pedestrians (a free function so that it borrows the limits, not the whole planner).
+/// Φ's context at a planning instant: the plan step, the robot's limits, its velocity, the
+/// nearby pedestrians and the scene (a free function so that it borrows fields, not the whole
+/// planner).
 fn phi_context<'a>(
     dt: f64,
     limits: &'a Limits,
     obs: &Observation,
     agents: &'a [AgentState],
+    scene: SceneContext<'a>,
 ) -> ConstraintContext<'a> {
     ConstraintContext {
         dt,
         limits,
         initial_velocity: obs.ego_velocity,
         agents,
+        scene,
     }
 }
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// A goal term's progress and how many waypoints it checks.
-    fn progress_checked(t: GoalTerm) -> (f64, usize) {
-        (t.progress, t.checked)
+    /// A candidate's goal term, and how many of its waypoints the clearance term scores.
+    fn progress_checked(
+        (traj, goal, w, reach): (&[Pose2], [f64; 2], &SelectionWeights, f64),
+    ) -> (f64, usize) {
+        let clearance = Clearance {
+            margin: w.margin,
+            collision: w.collision,
+            hold: 0,
+            arrival: (w.progress != Progress::End).then_some(w.arrival),
+        };
+        (
+            goal_term(traj, goal, w, reach),
+            clearance.checked(traj, Some(goal)).0,
+        )
     }
 
     fn line(speed: f64) -> Vec<Pose2> {
@@ -1479,15 +1515,15 @@ mod tests {
     fn an_uncorrected_candidate_never_wins_over_a_corrected_one() {
         // Candidate 0 scores best but the correction failed on it.
         let candidates = vec![line(1.0), line(2.0), line(3.0)];
-        let score = |c: &[Pose2]| c[0].x;
+        let score = |i: usize| candidates[i][0].x;
         assert_eq!(
-            select_best(&candidates, &[false, true, true], score),
+            select_best(&candidates, &[false, true, true], &score),
             Some(1)
         );
         // Without the correction, or when it failed on all, the score alone decides.
-        assert_eq!(select_best(&candidates, &[], score), Some(0));
+        assert_eq!(select_best(&candidates, &[], &score), Some(0));
         assert_eq!(
-            select_best(&candidates, &[false, false, false], score),
+            select_best(&candidates, &[false, false, false], &score),
             Some(0)
         );
     }
@@ -1505,7 +1541,7 @@ mod tests {
             ..SelectionWeights::default()
         };
         // The end at (4, 0) is as far from the goal as the start.
-        let (p, checked) = progress_checked(goal_term(&traj, goal, &end, 0.1));
+        let (p, checked) = progress_checked((&traj, goal, &end, 0.1));
         assert!((p - 1.0).abs() < 1e-12, "{p}");
         assert_eq!(checked, traj.len());
         // The closest approach is 0.5 m, at (2, 0): not within 0.3 m, so not arrived.
@@ -1513,11 +1549,11 @@ mod tests {
             progress: Progress::Closest,
             ..end
         };
-        let (p, checked) = progress_checked(goal_term(&traj, goal, &closest, 0.1));
+        let (p, checked) = progress_checked((&traj, goal, &closest, 0.1));
         assert!((p - 0.5 / d0).abs() < 1e-12, "{p}");
         assert_eq!(checked, traj.len());
         // Within 0.6 m it arrives at (1.7, 0), the 14th waypoint, and is checked up to there.
-        let (p, checked) = progress_checked(goal_term(
+        let (p, checked) = progress_checked((
             &traj,
             goal,
             &SelectionWeights {
@@ -1531,11 +1567,8 @@ mod tests {
         assert!((traj[13].x - 1.7).abs() < 1e-12);
         // A candidate leading away: its closest approach is where the robot stands.
         let away: Vec<Pose2> = traj.iter().map(|p| Pose2::new(-p.x, 0.0, 0.0)).collect();
-        assert_eq!(goal_term(&away, goal, &closest, 0.1).progress, 1.0);
-        assert_eq!(
-            progress_checked(goal_term(&[], goal, &closest, 0.1)),
-            (1.0, 0)
-        );
+        assert_eq!(goal_term(&away, goal, &closest, 0.1), 1.0);
+        assert_eq!(progress_checked((&[], goal, &closest, 0.1)), (1.0, 0));
     }
 
     #[test]
@@ -1579,32 +1612,32 @@ mod tests {
                 .collect()
         };
         // At full speed it arrives (within 0.3 m) on the 17th waypoint: 1.7 m covered.
-        let (fast, checked) = progress_checked(goal_term(&at(1.0, 40), goal, &w, 0.1));
+        let (fast, checked) = progress_checked((&at(1.0, 40), goal, &w, 0.1));
         assert_eq!(checked, 17);
         assert!((fast - 1.7 / 2.0).abs() < 1e-12, "{fast}");
         // At half speed it arrives on the 34th: twice as late, and it ranks worse.
-        let (slow, checked) = progress_checked(goal_term(&at(0.5, 40), goal, &w, 0.1));
+        let (slow, checked) = progress_checked((&at(0.5, 40), goal, &w, 0.1));
         assert_eq!(checked, 34);
         assert!((slow - 3.4 / 2.0).abs() < 1e-12, "{slow}");
         // Closest approach calls both arrived alike.
         let closest = SelectionWeights::default();
-        assert_eq!(goal_term(&at(1.0, 40), goal, &closest, 0.1).progress, 0.0);
-        assert_eq!(goal_term(&at(0.5, 40), goal, &closest, 0.1).progress, 0.0);
+        assert_eq!(goal_term(&at(1.0, 40), goal, &closest, 0.1), 0.0);
+        assert_eq!(goal_term(&at(0.5, 40), goal, &closest, 0.1), 0.0);
         // Not arriving: the way covered by its end plus the distance left there. Standing
         // still for as long ranks behind it, and backing away behind that.
-        let (short, checked) = progress_checked(goal_term(&at(0.5, 10), goal, &w, 0.1));
+        let (short, checked) = progress_checked((&at(0.5, 10), goal, &w, 0.1));
         assert_eq!(checked, 10);
         assert!((short - (1.0 + 1.5) / 2.0).abs() < 1e-12, "{short}");
-        let rest = goal_term(&[Pose2::IDENTITY; 10], goal, &w, 0.1).progress;
+        let rest = goal_term(&[Pose2::IDENTITY; 10], goal, &w, 0.1);
         assert!((rest - 3.0 / 2.0).abs() < 1e-12, "{rest}");
-        let away = goal_term(&at(-0.5, 10), goal, &w, 0.1).progress;
+        let away = goal_term(&at(-0.5, 10), goal, &w, 0.1);
         assert!((away - 3.5 / 2.0).abs() < 1e-12, "{away}");
         assert!(fast < short && short < rest && rest < away);
         // Over as many waypoints a late arrival still beats standing still.
-        let rest_40 = goal_term(&[Pose2::IDENTITY; 40], goal, &w, 0.1).progress;
+        let rest_40 = goal_term(&[Pose2::IDENTITY; 40], goal, &w, 0.1);
         assert!((rest_40 - 6.0 / 2.0).abs() < 1e-12, "{rest_40}");
         assert!(slow < rest_40);
-        assert_eq!(progress_checked(goal_term(&[], goal, &w, 0.1)), (1.0, 0));
+        assert_eq!(progress_checked((&[], goal, &w, 0.1)), (1.0, 0));
     }
 
     #[test]
@@ -1645,8 +1678,12 @@ mod tests {
         let mut bad = line(1.0);
         bad[2].y = f64::NAN;
         let candidates = vec![bad, line(2.0), line(3.0)];
-        assert_eq!(select_best(&candidates, &[], |c| c[0].x), Some(1));
-        let nan_for_second = |c: &[Pose2]| {
+        assert_eq!(
+            select_best(&candidates, &[], |i| candidates[i][0].x),
+            Some(1)
+        );
+        let nan_for_second = |i: usize| {
+            let c = &candidates[i];
             if c[0].x > 0.15 && c[0].x < 0.25 {
                 f64::NAN
             } else {
@@ -1654,6 +1691,9 @@ mod tests {
             }
         };
         assert_eq!(select_best(&candidates, &[], nan_for_second), Some(2));
-        assert_eq!(select_best(&candidates[..1], &[], |c| c[0].x), None);
+        assert_eq!(
+            select_best(&candidates[..1], &[], |i| candidates[i][0].x),
+            None
+        );
     }
 }

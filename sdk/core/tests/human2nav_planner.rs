@@ -113,9 +113,13 @@ fn observation() -> Observation {
     }
 }
 
-fn planner(guided: bool) -> Human2Nav<HumanFuture> {
-    let mut settings = Human2NavSettings::default();
-    settings.guidance.enabled = guided;
+/// The shipped planner, or (`shipped = false`) the raw samples of the guidance ablation.
+fn planner(shipped: bool) -> Human2Nav<HumanFuture> {
+    let settings = if shipped {
+        Human2NavSettings::default()
+    } else {
+        Arm::Raw.settings(&Human2NavSettings::default())
+    };
     Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings).unwrap()
 }
 
@@ -169,6 +173,10 @@ fn algorithm_1_alone_makes_an_infeasible_human_trajectory_feasible() {
         ..Default::default()
     };
     settings.projection.enabled = false;
+    settings.guidance.enabled = true;
+    // Φ of the robot's limits alone, as in the paper: the straight future runs into the
+    // pedestrian, and the clearance term's contact penalty is not what this test is about.
+    settings.selection.clearance = 0.0;
     // The preconditioned direction: a uniform over-speed is what it removes and the plain
     // gradient (the shipped default) does not (guidance module docs).
     settings.guidance.precondition = true;
@@ -188,12 +196,12 @@ fn algorithm_1_alone_makes_an_infeasible_human_trajectory_feasible() {
 }
 
 #[test]
-fn the_default_pipeline_guides_a_shortlist_and_ends_feasible() {
+fn algorithm_1_and_the_correction_guide_a_shortlist_and_end_feasible() {
     // 16 samples (the default is 4, all of them shortlisted), so that the shortlist is one.
-    let settings = Human2NavSettings {
+    let settings = Arm::Both.settings(&Human2NavSettings {
         samples: 16,
         ..Default::default()
-    };
+    });
     let mut p = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings).unwrap();
     let (tfs_u, tfs_g, before, after, guided) = tfs_pair(&mut p);
     assert!(tfs_u < 0.1, "unguided TFS {tfs_u}");
@@ -433,14 +441,13 @@ fn a_pedestrian_in_the_way_makes_the_planner_stop_instead_of_driving_into_them()
     // Without the slowed copies and the stop candidate every candidate drives straight at
     // the model's pace (corrected to v_max): through the pedestrian. (The robot's own motions
     // are off here; `the_robots_own_motions_steer_round_what_the_samples_run_into` has them.)
-    let mut only_samples = Human2NavSettings {
+    let only_samples = Human2NavSettings {
         slowdown: 1.0,
         stop_candidate: false,
         warm_start: false,
         motions: 0,
         ..Default::default()
     };
-    only_samples.guidance.enabled = true;
     let through = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), only_samples)
         .unwrap()
         .plan(&obs)
@@ -762,7 +769,12 @@ fn a_deadline_anywhere_in_the_call_gives_a_feasible_plan_and_no_late_network_cal
         } else {
             2 * n - 1
         };
-        assert_eq!(total, n + settings.guidance.iterations_m * per_iteration);
+        let m = if settings.guidance.enabled {
+            settings.guidance.iterations_m
+        } else {
+            0
+        };
+        assert_eq!(total, n + m * per_iteration);
         for at in 0..=total + 1 {
             let (mut p, deadline) = ticking(settings, at);
             let plan = p.plan_within(&obs, &deadline).unwrap();
@@ -778,7 +790,7 @@ fn a_deadline_anywhere_in_the_call_gives_a_feasible_plan_and_no_late_network_cal
             assert_eq!(stages.sampling.planned, n);
             if at > total {
                 assert_eq!(stages.cut_short, None, "deadline at {at}");
-                assert_eq!(stages.guidance.done, settings.guidance.iterations_m);
+                assert_eq!(stages.guidance.done, m);
                 assert!(stages.correction.complete());
             } else {
                 // Passed during sampling, during guidance, or just as the last network call
@@ -829,9 +841,9 @@ fn a_deadline_before_sampling_keeps_the_previous_plan_or_brakes() {
         second.info.notes
     );
 
-    // Guidance off: no samples and no previous plan leave only the stop-in-place fallback.
-    let mut off = Human2NavSettings::default();
-    off.guidance.enabled = false;
+    // The raw samples (no correction, hence no stop candidate): no samples and no previous
+    // plan leave only the stop-in-place fallback.
+    let off = Arm::Raw.settings(&Human2NavSettings::default());
     let (mut p, deadline) = ticking(off, 0);
     let plan = p.plan_within(&obs, &deadline).unwrap();
     assert!(plan.info.fallback && plan.is_finite());

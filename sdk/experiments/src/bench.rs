@@ -306,9 +306,10 @@ fn foresight_settings(
 
 /// A `human2nav` method: the reference planner with the model and settings of a planner
 /// configuration. Its `config` table takes `planner` (the planner TOML, relative to the
-/// workspace root; default `sdk/configs/planner.toml`) and either `guidance` (bool; `false` is
-/// the "w/o guidance" ablation) or `arm` (one of the guidance ablation's arms, `raw`, `alg1`,
-/// `qp` or `alg1+qp`, see [`human2nav_core::ablation::Arm`]), and `foresight` (0 to 1, a
+/// workspace root; default `sdk/configs/planner.toml`) and either `algorithm1` (bool: Algorithm 1
+/// on or off, nothing else; the shipped planner runs none) or `arm` (one of the guidance
+/// ablation's arms, `raw`, `alg1`, `qp` or `alg1+qp`, see [`human2nav_core::ablation::Arm`]),
+/// and `foresight` (0 to 1, a
 /// yardstick: the planner's forecast of people moved that share of the way from constant
 /// velocity to the episode's recording, [`human2nav_sim::foresight`]; not with a planner file
 /// that names a `[prediction]` model) with, optionally, `foresight_within` (m: only the people
@@ -322,13 +323,21 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
     let field = |key: &str| format!("methods[{}].config.{key}", m.name);
     const KEYS: [&str; 7] = [
         "planner",
-        "guidance",
+        "algorithm1",
         "arm",
         "foresight",
         "foresight_within",
         "foresight_until",
         "history_ridge",
     ];
+    if m.config.contains_key("guidance") {
+        bail!(
+            "{}: renamed in December 2026, when it stopped switching the correction and the \
+             robot's motions too: `guidance = false` (the raw samples) is now `arm = \"raw\"`; \
+             Algorithm 1 alone is `algorithm1 = true` or `false`",
+            field("guidance")
+        );
+    }
     for key in m.config.keys() {
         if !KEYS.contains(&key.as_str()) {
             bail!(
@@ -349,9 +358,9 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
             Some(load_history_ridge(&path).with_context(|| field("history_ridge"))?)
         }
     };
-    if m.config.contains_key("guidance") && m.config.contains_key("arm") {
+    if m.config.contains_key("algorithm1") && m.config.contains_key("arm") {
         bail!(
-            "{}: give `guidance` or `arm`, not both (`arm = \"raw\"` is `guidance = false`)",
+            "{}: give `algorithm1` or `arm`, not both (an arm says whether Algorithm 1 runs)",
             field("arm")
         );
     }
@@ -363,10 +372,10 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
         None => cfg.resolve(Path::new("sdk/configs/planner.toml")),
     };
     let mut planner_cfg = PlannerConfig::load(&planner_toml)?;
-    if let Some(v) = m.config.get("guidance") {
+    if let Some(v) = m.config.get("algorithm1") {
         planner_cfg.human2nav.guidance.enabled = v
             .as_bool()
-            .ok_or_else(|| anyhow!("{}: must be true or false", field("guidance")))?;
+            .ok_or_else(|| anyhow!("{}: must be true or false", field("algorithm1")))?;
     }
     if let Some(v) = m.config.get("arm") {
         let arm: Arm = v

@@ -1037,7 +1037,6 @@ fn closed_loop(
         "planner".into(),
         toml::Value::String(planner.display().to_string()),
     );
-    method_table.insert("guidance".into(), toml::Value::Boolean(true));
     let method = human2nav_method(
         &MethodConfig {
             name: METHOD.into(),

@@ -401,6 +401,7 @@ pub fn guided_windows<M: FlowModel + ?Sized>(
             limits,
             initial_velocity: v0,
             agents: &[],
+            scene: Default::default(),
         };
         let x0 = sample_source(opts.samples, t, model.source_std(), &mut rng);
         let r = guidance::sample_guided(model, &win.cond, &x0, phi, &ctx, settings, &mut ws)?;

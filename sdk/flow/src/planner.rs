@@ -429,7 +429,7 @@ fn resolution_from_record(data: &str) -> Option<f64> {
 }
 
 /// Φ of a robot: the profile's built-in soft-margin terms (Eq. 8-9, weighted by its
-/// `[guidance]` table) plus every `[[constraint]]` plugin term it names.
+/// `[cost]` table) plus every `[[constraint]]` plugin term it names.
 pub fn robot_phi(profile: &RobotProfile) -> Result<Phi, PlannerError> {
     PluginHost::new()
         .phi(profile)
@@ -917,10 +917,9 @@ mod tests {
         assert_eq!(guided.profile.name, "diablo");
         assert_eq!(guided.bev.cells, 16);
         assert_eq!(guided.bev_origin, BevOrigin::Default);
-        let mut off = settings;
-        off.guidance.enabled = false;
+        let off = Arm::Raw.settings(&settings);
         let mut unguided = RobotPlanner::load(&robot, &dir, off).unwrap();
-        assert_eq!(unguided.planner.name(), "human2nav-noguide");
+        assert_eq!(unguided.planner.name(), "human2nav");
 
         let obs = observation();
         let limits = *guided.limits();

@@ -29,6 +29,7 @@ fn boundary(c: &mut Criterion) {
         limits: &limits,
         initial_velocity: Twist2::ZERO,
         agents: &agents,
+        scene: Default::default(),
     };
     let data = trajectories(BATCH);
     let direct = match PersonalSpace::new(&PersonalSpaceConfig::default(), Some(0.3)) {

@@ -100,6 +100,7 @@ fn constraint(c: &mut Criterion) {
         limits: &limits,
         initial_velocity: Twist2::ZERO,
         agents: &agents,
+        scene: Default::default(),
     };
     for batch in [4, 64] {
         let data = trajectories(batch);

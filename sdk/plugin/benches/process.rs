@@ -114,6 +114,7 @@ fn constraint(c: &mut Criterion) {
         limits: &limits,
         initial_velocity: Twist2::ZERO,
         agents: &agents,
+        scene: Default::default(),
     };
     let batch = 4;
     let data = trajectories(batch);

@@ -382,6 +382,7 @@ unsafe extern "C" fn constraint_evaluate<T: ConstraintTerm + 'static>(
                 limits: &limits,
                 initial_velocity: ctx.initial_velocity.into(),
                 agents: &agents,
+                scene: Default::default(),
             };
             let view = TrajBatch::new(data, batch.batch, batch.horizon)
                 .map_err(|e| Fail::invalid(e.to_string()))?;

@@ -1107,6 +1107,7 @@ pub(crate) fn serve(input: &mut dyn Read, out: &mut dyn Write) -> std::io::Resul
                     limits: &limits,
                     initial_velocity: eval.initial_velocity,
                     agents: &eval.agents,
+                    scene: Default::default(),
                 };
                 let batch = TrajBatch {
                     data: &eval.data,

@@ -334,6 +334,7 @@ impl PluginHost {
             limits: &profile.limits,
             initial_velocity: Twist2::ZERO,
             agents: &[],
+            scene: Default::default(),
         };
         let (mut cost, mut grad) = ([0.0], [0.0; 6]);
         let batch = TrajBatch::new(&data, 1, 2).map_err(|e| probe(e.to_string()))?;

@@ -151,6 +151,7 @@ fn a_well_behaved_constraint_answers_bit_for_bit_as_in_process() {
         limits: &limits,
         initial_velocity: Twist2::new(0.2, 0.0, 0.1),
         agents: &o.agents,
+        scene: Default::default(),
     };
     let batch = TrajBatch::new(&data, 4, 32).expect("batch");
     let (mut c1, mut g1) = (vec![0.5; 4], vec![0.25; data.len()]);
@@ -188,6 +189,7 @@ fn mismatched_buffers_are_refused_before_the_plugin_is_called() {
         limits: &limits,
         initial_velocity: Twist2::ZERO,
         agents: &[],
+        scene: Default::default(),
     };
     let good = TrajBatch::new(&data, 2, 4).expect("batch");
     // `TrajBatch`'s fields are public, so a caller can hand over a view that does not add up.
@@ -311,6 +313,7 @@ fn the_host_survives_a_constraint_that_segfaults_or_aborts() {
             limits: &limits,
             initial_velocity: Twist2::ZERO,
             agents: &[],
+            scene: Default::default(),
         };
         let data = [0.0, 0.0, 0.0, 1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 1.0, 2.0, 0.0];
         let eval = |batch: usize| {

@@ -309,7 +309,7 @@ impl PyPlanner {
         Ok(Self::wrap(Box::new(planner)))
     }
 
-    /// The planner's name (`human2nav`, `human2nav-noguide`, `orca`).
+    /// The planner's name (`human2nav`, `orca`).
     #[getter]
     fn name(&self) -> &str {
         &self.name

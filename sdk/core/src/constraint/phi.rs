@@ -119,11 +119,46 @@ impl Phi {
             scratch.cost.fill(0.0);
             scratch.grad.fill(0.0);
             term.evaluate(batch, ctx, &mut scratch.cost, &mut scratch.grad)?;
+            check_finite(term.as_ref(), &scratch.cost, batch.batch, "cost")?;
+            check_finite(term.as_ref(), &scratch.grad, batch.batch, "gradient")?;
             for (c, s) in cost.iter_mut().zip(&scratch.cost) {
                 *c += w * s;
             }
             for (g, s) in grad.iter_mut().zip(&scratch.grad) {
                 *g += w * s;
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes `Φ` of every trajectory into `cost` (length `B`, overwritten) without its
+    /// gradient ([`ConstraintTerm::cost`]): how a planner's selection scores its candidates.
+    /// A term that fails or returns a non-finite cost is an error naming the term.
+    pub fn costs(
+        &self,
+        batch: TrajBatch<'_>,
+        ctx: &ConstraintContext<'_>,
+        cost: &mut [f64],
+        scratch: &mut PhiScratch,
+    ) -> Result<(), ConstraintError> {
+        if cost.len() != batch.batch {
+            return Err(ConstraintError::Shape(format!(
+                "`phi`: cost buffer holds {} values for {} trajectories",
+                cost.len(),
+                batch.batch
+            )));
+        }
+        cost.fill(0.0);
+        scratch.cost.resize(cost.len(), 0.0);
+        for (w, term) in &self.terms {
+            if *w == 0.0 {
+                continue;
+            }
+            scratch.cost.fill(0.0);
+            term.cost(batch, ctx, &mut scratch.cost)?;
+            check_finite(term.as_ref(), &scratch.cost, batch.batch, "cost")?;
+            for (c, s) in cost.iter_mut().zip(&scratch.cost) {
+                *c += w * s;
             }
         }
         Ok(())
@@ -154,4 +189,27 @@ impl Phi {
         }
         Ok(())
     }
+}
+
+/// An error naming `term` when one of its `values` (a cost per trajectory, or a gradient of
+/// `batch` trajectories) is not finite: Φ never passes such a value on, and never drops a term
+/// in silence.
+fn check_finite(
+    term: &dyn ConstraintTerm,
+    values: &[f64],
+    batch: usize,
+    what: &str,
+) -> Result<(), ConstraintError> {
+    let Some(i) = values.iter().position(|v| !v.is_finite()) else {
+        return Ok(());
+    };
+    let per = (values.len() / batch.max(1)).max(1);
+    Err(ConstraintError::Failed {
+        term: term.name().to_owned(),
+        message: format!(
+            "returned a non-finite {what} ({}) for trajectory {} of {batch}",
+            values[i],
+            i / per
+        ),
+    })
 }

@@ -41,6 +41,7 @@ fn ctx(l: &Limits) -> ConstraintContext<'_> {
         limits: l,
         initial_velocity: Twist2::new(0.7, 0.0, 0.1),
         agents: &[],
+        scene: Default::default(),
     }
 }
 
@@ -437,4 +438,64 @@ fn unicycle_arcs_cost_nothing_laterally() {
         &ctx(&l),
     );
     assert_relative_eq!(cost[0], softplus(-9.5) / 10.0, epsilon = 1e-12);
+}
+
+/// A term that answers NaN for every trajectory.
+struct NotANumber;
+
+impl ConstraintTerm for NotANumber {
+    fn name(&self) -> &str {
+        "broken_term"
+    }
+
+    fn evaluate(
+        &self,
+        _batch: TrajBatch<'_>,
+        _ctx: &ConstraintContext<'_>,
+        cost: &mut [f64],
+        _grad: &mut [f64],
+    ) -> Result<(), ConstraintError> {
+        cost.fill(f64::NAN);
+        Ok(())
+    }
+}
+
+#[test]
+fn a_term_that_answers_nan_is_an_error_naming_it() {
+    let limits = Limits {
+        v_max: 1.0,
+        v_reverse_max: 0.3,
+        a_max: 1.0,
+        omega_max: 1.0,
+        kappa_max: None,
+        lateral_speed_max: 0.05,
+        coupled: None,
+    };
+    let mut phi = Phi::new();
+    phi.push(1.0, Box::new(NotANumber)).unwrap();
+    let ctx = ConstraintContext {
+        dt: 0.1,
+        limits: &limits,
+        initial_velocity: Twist2::new(0.0, 0.0, 0.0),
+        agents: &[],
+        scene: Default::default(),
+    };
+    let data = vec![0.0; 2 * 4 * 3];
+    let batch = TrajBatch::new(&data, 2, 4).unwrap();
+    let mut scratch = PhiScratch::default();
+    let (mut cost, mut grad) = (vec![0.0; 2], vec![0.0; data.len()]);
+    let full = phi
+        .evaluate(batch, &ctx, &mut cost, &mut grad, &mut scratch)
+        .unwrap_err()
+        .to_string();
+    let fast = phi
+        .costs(batch, &ctx, &mut cost, &mut scratch)
+        .unwrap_err()
+        .to_string();
+    for err in [full, fast] {
+        assert!(
+            err.contains("broken_term") && err.contains("non-finite"),
+            "{err}"
+        );
+    }
 }

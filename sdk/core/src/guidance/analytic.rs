@@ -129,6 +129,65 @@ impl FlowModel for ConstantField {
     }
 }
 
+/// Samples that land on one fixed path, waypoint `k` at `path_k` (ego frame), from source noise
+/// of `source_std` (small: every sample is the same walk): a [`ConstantField`] of
+/// `log(path_k)` started from (almost) the identity. What a test of the selection needs from a
+/// flow model: a person's way, and nothing that reacts to the scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FixedWalk {
+    field: ConstantField,
+    source_std: f64,
+}
+
+impl FixedWalk {
+    /// Straight ahead, `step` metres a waypoint, for `horizon` waypoints (source noise 1e-4).
+    pub fn straight(step: f64, horizon: usize) -> Self {
+        let twists = (1..=horizon)
+            .flat_map(|k| {
+                crate::Pose2::new(step * k as f64, 0.0, 0.0)
+                    .log()
+                    .to_array()
+            })
+            .collect();
+        Self {
+            field: ConstantField { twists },
+            source_std: 1e-4,
+        }
+    }
+}
+
+impl FlowModel for FixedWalk {
+    fn horizon(&self) -> usize {
+        self.field.horizon()
+    }
+
+    fn source_std(&self) -> [f64; 3] {
+        [self.source_std; 3]
+    }
+
+    fn velocity(
+        &self,
+        x: &[f64],
+        t: f64,
+        c: &FlowCondition,
+        out: &mut [f64],
+    ) -> Result<(), FlowError> {
+        self.field.velocity(x, t, c, out)
+    }
+
+    fn velocity_vjp(
+        &self,
+        x: &[f64],
+        t: f64,
+        c: &FlowCondition,
+        cotangent: &[f64],
+        out: &mut [f64],
+        vjp: &mut [f64],
+    ) -> Result<(), FlowError> {
+        self.field.velocity_vjp(x, t, c, cotangent, out, vjp)
+    }
+}
+
 /// The flow-matching field towards a fixed target trajectory `x*` (`[T, 3]` poses, shared by
 /// every sample): `f_k(x, t) = log(x_k⁻¹·x*_k) / max(1 − t, MIN_REMAINING_TIME)`.
 #[derive(Clone, Debug, PartialEq)]

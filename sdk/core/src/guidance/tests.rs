@@ -50,6 +50,7 @@ fn ctx(l: &Limits, v0: Twist2) -> ConstraintContext<'_> {
         limits: l,
         initial_velocity: v0,
         agents: &[],
+        scene: Default::default(),
     }
 }
 

@@ -25,7 +25,8 @@
 //! lateral_speed_max = 0.05
 //!
 //! [controller]                     # ControllerGains, all optional (documented defaults)
-//! [guidance]                       # GuidanceWeights, all optional (documented defaults)
+//! [cost]                           # GuidanceWeights: Φ's built-in terms, all optional
+//!                                  # (documented defaults; read as `[guidance]` too)
 //!
 //! [[constraint]]                   # zero or more plugin constraint terms
 //! library = "..."                  # relative to this file; OS extension and `lib` optional
@@ -341,7 +342,7 @@ pub struct RobotProfile {
     pub controller: ControllerGains,
     /// Whether `controller` was written in robot.toml ([`Origin::Profile`]) or defaulted.
     pub controller_source: Origin,
-    /// Weights and shape of the feasibility penalty Φ (`[guidance]`, else the defaults),
+    /// Weights and shape of the feasibility penalty Φ (`[cost]`, else the defaults),
     /// checked finite, `>= 0`, `gamma > 0`, `delta < 1`.
     pub guidance: GuidanceWeights,
     /// Whether `guidance` was written in robot.toml ([`Origin::Profile`]) or defaulted.
@@ -369,7 +370,8 @@ struct RawProfile {
     limits: RawLimits,
     #[serde(default)]
     controller: Option<ControllerGains>,
-    #[serde(default)]
+    /// `[cost]`; `[guidance]`, its name until December 2026, is still read.
+    #[serde(default, rename = "cost", alias = "guidance")]
     guidance: Option<GuidanceWeights>,
     #[serde(default, rename = "constraint")]
     constraints: Vec<RawConstraint>,

@@ -2,7 +2,7 @@
 //! `from_raw` runs them, which is the order errors are reported in:
 //!
 //! 1. [`check_values`]: `name`, `urdf`, `[limits]`, `[footprint]`, `[controller]` and
-//!    `[guidance]`, before the URDF is opened, so a bad scalar is reported even when the URDF
+//!    `[cost]`, before the URDF is opened, so a bad scalar is reported even when the URDF
 //!    is broken too;
 //! 2. [`embodiment`] and [`constraints`]: the `[embodiment]` section and the `[[constraint]]`
 //!    plugin terms, with their paths resolved against the profile's directory;
@@ -122,14 +122,14 @@ pub(super) struct Checked {
     pub(super) controller: ControllerGains,
     /// Whether `controller` was written or defaulted.
     pub(super) controller_source: Origin,
-    /// `[guidance]`, or the defaults when the section is absent.
+    /// `[cost]`, or the defaults when the section is absent.
     pub(super) guidance: GuidanceWeights,
     /// Whether `guidance` was written or defaulted.
     pub(super) guidance_source: Origin,
 }
 
 /// Checks the scalars of robot.toml (`name`, `urdf`, `[limits]`, `[footprint] radius`,
-/// `[controller]`, `[guidance]`), in that order, before anything else is looked at.
+/// `[controller]`, `[cost]`), in that order, before anything else is looked at.
 pub(super) fn check_values(raw: &RawProfile, ck: &Checker<'_>) -> Result<Checked, ProfileError> {
     ck.non_empty("name", &raw.name)?;
     ck.non_empty("urdf", &raw.urdf)?;

@@ -216,7 +216,7 @@ class Planner:
 
     @property
     def name(self) -> str:
-        """``human2nav``, ``human2nav-noguide`` or ``orca``."""
+        """``human2nav`` or ``orca``."""
         return self._native.name
 
     def reset(self) -> None:
@@ -275,7 +275,8 @@ class Human2NavPlanner(Planner):
     ``model_dir`` is a model folder (``model.toml`` and its weights); ``config`` a
     ``planner.toml`` (None: the built-in defaults, equal to the shipped
     ``sdk/configs/planner.toml``; a ``[prediction]`` model it names is loaded, a relative path
-    from the current directory). ``guidance=False`` is the ablation without guidance;
+    from the current directory). ``guidance=True`` runs Algorithm 1 (the shipped
+    planner does not) and switches nothing else;
     ``seed``, ``samples`` and ``backend`` (``"native"`` or ``"torch"``) override the
     configuration.
     """

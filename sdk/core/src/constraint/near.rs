@@ -21,7 +21,7 @@ const SLACK: f64 = 1e-9;
 
 /// An agent at one waypoint of one scene.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct NearAgent {
+pub(crate) struct NearAgent {
     /// Its position, ego frame.
     pub q: [f64; 2],
     /// Radius of its disc (m).
@@ -33,7 +33,7 @@ pub(super) struct NearAgent {
 
 /// Agents and obstacles per waypoint of one planning call (module docs).
 #[derive(Debug, Default)]
-pub(super) struct Near {
+pub(crate) struct Near {
     /// The forecast's scenes.
     scenes: usize,
     /// Their probabilities (`None`: equally likely), as in the forecast.
@@ -51,8 +51,8 @@ pub(super) struct Near {
 }
 
 /// The poses of `candidate`, then its last pose `hold` more times (none when it is empty): the
-/// waypoints the selection checks for contact with a hold ([`super::SelectionWeights::hold`]).
-pub(super) fn held(candidate: &[Pose2], hold: usize) -> impl Iterator<Item = &Pose2> {
+/// waypoints the selection checks for contact with a hold ([`crate::human2nav::SelectionWeights::hold`]).
+pub(crate) fn held(candidate: &[Pose2], hold: usize) -> impl Iterator<Item = &Pose2> {
     let standing = candidate
         .last()
         .into_iter()
@@ -65,7 +65,7 @@ impl Near {
     /// at its last pose for `hold` more waypoints, against `forecast` (ego frame) and
     /// `obstacles` (ego frame), for a footprint of `reach` and the selection's clearance
     /// `margin`.
-    pub(super) fn new(
+    pub(crate) fn new(
         candidates: &[Vec<Pose2>],
         hold: usize,
         forecast: &Forecast,
@@ -130,19 +130,25 @@ impl Near {
     }
 
     /// The forecast's scenes.
-    #[cfg(test)]
-    pub(super) fn scenes(&self) -> usize {
+    pub(crate) fn scenes(&self) -> usize {
         self.scenes
     }
 
+    /// The probability of scene `scene` (equally likely scenes: `1 / scenes`).
+    pub(crate) fn weight(&self, scene: usize) -> f64 {
+        self.weights
+            .as_ref()
+            .map_or(1.0 / self.scenes as f64, |w| w[scene])
+    }
+
     /// The expectation of `f(scene)` over the forecast's scenes ([`Forecast::expectation`]).
-    pub(super) fn expectation(&self, f: impl FnMut(usize) -> f64) -> f64 {
+    pub(crate) fn expectation(&self, f: impl FnMut(usize) -> f64) -> f64 {
         crate::forecast::expectation(self.weights.as_deref(), self.scenes, f)
     }
 
     /// The agents that may matter at waypoint `step` of scene `scene` (none past the covered
     /// waypoints).
-    pub(super) fn agents(&self, scene: usize, step: usize) -> &[NearAgent] {
+    pub(crate) fn agents(&self, scene: usize, step: usize) -> &[NearAgent] {
         if step >= self.steps {
             return &[];
         }
@@ -152,7 +158,7 @@ impl Near {
     }
 
     /// Indices of the obstacles that may matter at waypoint `step`.
-    pub(super) fn obstacles(&self, step: usize) -> &[usize] {
+    pub(crate) fn obstacles(&self, step: usize) -> &[usize] {
         self.obstacle_spans
             .get(step)
             .map_or(&[], |span| &self.obstacles[span.clone()])

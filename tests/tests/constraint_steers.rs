@@ -2,6 +2,8 @@
 //! plugins, in Rust and in C, loaded for real, change which side the robot passes someone on.
 //! Run after `cargo build --workspace` (as `sdk/dev.sh test` does).
 
+#![allow(clippy::unwrap_used)] // test helpers outside #[test] functions unwrap too
+
 use human2nav_core::bev::BevSpec;
 use human2nav_core::constraint::{ConstraintTerm, Phi};
 use human2nav_core::guidance::analytic::FixedWalk;

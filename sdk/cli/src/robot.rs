@@ -174,7 +174,7 @@ fn describe(p: &RobotProfile, resolution: &RobotResolution) -> String {
     let g = &p.guidance;
     let _ = writeln!(
         s,
-        "guidance    lambda_v {}, lambda_a {}, lambda_omega {}, lambda_kappa {}, lambda_lateral {}, \
+        "cost        lambda_v {}, lambda_a {}, lambda_omega {}, lambda_kappa {}, lambda_lateral {}, \
          lambda_reverse {}, lambda_coupled {}, gamma {}, delta {}  [{}]",
         g.lambda_v,
         g.lambda_a,

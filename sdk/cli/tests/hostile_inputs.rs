@@ -586,7 +586,7 @@ fn config_cases() -> Vec<Case> {
             "planner.toml `iterations_m = 1000000000`",
             "ran without an upper bound",
             &["iterations_m", "1000"],
-            planner_edit("iterations_m = 0 ", "iterations_m = 1000000000 "),
+            planner_edit("iterations_m = 3 ", "iterations_m = 1000000000 "),
         ),
         err(
             a,

@@ -66,6 +66,7 @@ fn one_step_is_planned_printed_and_drawn() {
             "robots/diablo/robot.toml",
             "--index",
             "1",
+            "--guidance",
             "--out",
             png.to_str().unwrap(),
         ],
@@ -85,7 +86,8 @@ fn one_step_is_planned_printed_and_drawn() {
         &[
             "--robot",
             "robots/ackermann/robot.toml",
-            "--no-guidance",
+            "--arm",
+            "raw",
             "--time",
             "1.0",
             "--out",

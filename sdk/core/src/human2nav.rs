@@ -8,39 +8,46 @@
 //!    body velocity;
 //! 2. draws `K` source samples `x0 = exp(ξ0)`, `ξ0 ~ N(0, diag(σ²))` with `σ` from
 //!    [`FlowModel::source_std`], and integrates them in one batch ([`guidance::sample`]);
-//! 3. with guidance on: shortlists the [`Human2NavSettings::guided_samples`] best samples by
-//!    the selection score without its feasibility term, runs Algorithm 1 on them, continuing
-//!    from their rollout ([`guidance::guide_subset`]), and applies the exact last-step correction
-//!    ([`crate::projection`]) to them, to their slowed copies, to the stop and goal candidates
-//!    and to the warm-start candidate (see "Selection rule"). Guiding a shortlist instead of all `K`
-//!    samples divides the cost of the `M` iterations (a forward and a vector-Jacobian product
-//!    through the network per integration step) by `K / guided_samples`;
-//!    `guided_samples = 0` guides all of them, as in the paper, and so does the paper variant
-//!    of Algorithm 1 ([`guidance::GuidanceVariant::Paper`]) whatever `guided_samples` says;
+//! 3. shortlists the [`Human2NavSettings::guided_samples`] best samples by the selection score
+//!    without its feasibility term (`0`: all of them go on); with Algorithm 1 on
+//!    (`guidance.enabled`) runs it on them, continuing from their rollout
+//!    ([`guidance::guide_subset`]); adds their slowed copies, the stop and goal candidates and
+//!    the warm-start candidate as their settings allow; with the correction on
+//!    (`projection.enabled`) applies the exact last-step correction ([`crate::projection`]) to
+//!    all of these; then adds the robot's own motions (`motions`). Guiding a shortlist instead
+//!    of all `K` samples divides the cost of the `M` iterations (a forward and a
+//!    vector-Jacobian product through the network per integration step) by
+//!    `K / guided_samples`; the paper variant of Algorithm 1
+//!    ([`guidance::GuidanceVariant::Paper`]) guides all of them whatever `guided_samples` says;
 //! 4. scores every candidate (and the previous plan, shifted to the current time: the warm
 //!    start of receding-horizon use) and keeps the lowest score (see [`SelectionWeights`]);
 //! 5. returns the plan in the world frame: the current pose followed by the `T` future poses at
 //!    `dt` = [`Human2NavSettings::dt`].
 //!
-//! With guidance off (the "w/o guidance" ablation) step 3's guidance and correction are
-//! skipped and all `K` samples are scored as they come from the model.
+//! Every stage but sampling and selection has its own switch; [`crate::ablation::Arm`] names
+//! the combinations the guidance ablation compares (`raw`: the `K` samples as they come).
 //!
 //! # Selection rule
-//! `score = w_feas·(1 − TFS) + w_goal·d/d_0 + w_clear·C + w_cons·D`, where TFS is the
+//! `score = w_feas·(1 − TFS) + w_goal·d/d_0 + w_Φ·Φ + w_cons·D`, where TFS is the
 //! trajectory feasibility score of the candidate ([`crate::tfs`]), `d/d_0` the candidate's
 //! closest approach to the (clipped) goal relative to the current distance (0 once within
-//! [`SelectionWeights::arrival`], and then its waypoints after the arrival are not checked for
-//! contact; [`Progress`] also offers the distance at its end and how soon it could arrive;
-//! [`SelectionWeights::lookahead`] scores each candidate continued past its end), `C` the
-//! mean over waypoints of `max(0, margin − gap)²/margin²` with `gap` the distance between the
-//! robot's footprint (its shapes at the waypoint's pose, [`RobotModel::footprint`]) and each
-//! agent's disc, agents
-//! predicted at constant velocity (or by the planner's [`CrowdPredictor`], when it has one:
-//! `C` is then the expectation over the scenes of its [`Forecast`]), and each static obstacle
-//! of the observation ([`crate::obstacle`]: circles, polygons, segments and the occupied cells
-//! of its grid), where the first waypoint with a predicted overlap and every one after it
-//! count [`SelectionWeights::collision`] instead (a collision ends the plan: the earlier, the worse),
-//! and `D` the mean distance (m) to the previous plan at the same times (0 without one).
+//! [`SelectionWeights::arrival`]; [`Progress`] also offers the distance at its end and how
+//! soon it could arrive; [`SelectionWeights::lookahead`] scores each candidate continued past
+//! its end), `D` the mean distance (m) to the previous plan at the same times (0 without one),
+//! and Φ the robot's cost ([`RobotModel::phi`], the paper's Eq. 9) of the candidate with the
+//! robot's pose prepended: its built-in soft-limit terms, its plugin terms, and the built-in
+//! clearance term ([`Clearance`], weight [`SelectionWeights::clearance`]): the mean over
+//! waypoints of `max(0, margin − gap)²/margin²` with `gap` the distance between the robot's
+//! footprint (its shapes at the waypoint's pose, [`RobotModel::footprint`]) and each agent's
+//! disc, agents predicted at constant velocity (or by the planner's [`CrowdPredictor`], when
+//! it has one: then the expectation over the scenes of its [`Forecast`]), and each static
+//! obstacle of the observation ([`crate::obstacle`]: circles, polygons, segments and the
+//! occupied cells of its grid), where the first waypoint with a predicted overlap and every
+//! one after it count [`SelectionWeights::collision`] instead (a collision ends the plan: the
+//! earlier, the worse), and the waypoints after the candidate's arrival are not checked. Φ
+//! is the cost Algorithm 1 descends too: one definition steers samples and chooses among
+//! candidates. A term that fails or answers a non-finite value stops the robot in place with
+//! [`PlanInfo::error`] naming it.
 //!
 //! Besides the guided samples, the selection sees each of them at
 //! [`Human2NavSettings::slowdown`] of its speed along the same path and a "stop" candidate, all
@@ -68,8 +75,8 @@
 //!   candidate or braking to a stop.
 //!
 //! [`PlanInfo::stages`] says how far each stage got and which one the deadline cut short.
-//! Without guidance there is no correction, and a call cut before its first integration step
-//! keeps the previous plan or falls back to stopping in place.
+//! Without the correction (`projection.enabled = false`) a call cut before its first
+//! integration step keeps the previous plan or falls back to stopping in place.
 //!
 //! # Safe fallback
 //! A planner never returns a non-finite number. If the flow model or guidance fails, or every
@@ -909,7 +916,7 @@ impl<M: FlowModel> Human2Nav<M> {
                 .collect()
         };
         // Φ before and after Algorithm 1 of the sample whose path is kept (`phi` is in the
-        // order of the first candidates: the shortlist, or every sample without guidance).
+        // order of the first candidates: the shortlist).
         let sample_pos = |i: usize| {
             origin
                 .iter()

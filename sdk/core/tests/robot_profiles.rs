@@ -353,9 +353,9 @@ fn negative_zero_and_non_finite_limits() {
     });
     expect_invalid(result, &toml, "limits.lateral_speed_max", "> 0");
     let (toml, result) = load_edited("go2", |t| set_line(t, "gamma", "gamma = -inf"));
-    expect_invalid(result, &toml, "guidance.gamma", "finite");
+    expect_invalid(result, &toml, "cost.gamma", "finite");
     let (toml, result) = load_edited("go2", |t| set_line(t, "delta", "delta = 1.5"));
-    expect_invalid(result, &toml, "guidance.delta", "< 1");
+    expect_invalid(result, &toml, "cost.delta", "< 1");
     let (toml, result) = load_edited("go2", |t| set_line(t, "lookahead", "lookahead = 0"));
     expect_invalid(result, &toml, "controller.lookahead", "> 0");
     let (toml, result) = load_edited("go2", |t| format!("{t}\n[footprint]\nradius = -0.2\n"));
@@ -364,6 +364,10 @@ fn negative_zero_and_non_finite_limits() {
         format!("{t}\n[[constraint]]\nlibrary = \"x\"\nplugin = \"y\"\nweight = nan\n")
     });
     expect_invalid(result, &toml, "constraint[0].weight", "finite");
+    let (toml, result) = load_edited("go2", |t| {
+        format!("{t}\n[[constraint]]\nlibrary = \"x\"\nplugin = \"y\"\nweight = -1\n")
+    });
+    expect_invalid(result, &toml, "constraint[0].weight", "plugin `y`");
 }
 
 #[test]

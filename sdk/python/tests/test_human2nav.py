@@ -65,7 +65,8 @@ def test_human2nav_plans_from_numpy_arrays(planner):
     assert plan.dt == pytest.approx(0.1)
     assert plan.times[-1] == pytest.approx(3.2)
     assert plan.candidates.shape == (shipped_setting("samples"), 33, 3)
-    assert plan.guided.shape[0] == min(shipped_setting("guided_samples"), shipped_setting("samples"))
+    # The shipped planner runs no Algorithm 1: no guided samples.
+    assert plan.guided.shape[0] == 0
     assert not plan.info["fallback"]
     stages = plan.info["stages"]
     assert stages["sampling"] == (5, 5) and stages["cut_short"] is None

@@ -74,17 +74,17 @@ impl Checker<'_> {
     }
 
     fn guidance(&self, w: &GuidanceWeights) -> Result<(), ProfileError> {
-        self.non_negative("guidance.lambda_v", w.lambda_v)?;
-        self.non_negative("guidance.lambda_a", w.lambda_a)?;
-        self.non_negative("guidance.lambda_omega", w.lambda_omega)?;
-        self.non_negative("guidance.lambda_kappa", w.lambda_kappa)?;
-        self.non_negative("guidance.lambda_lateral", w.lambda_lateral)?;
-        self.non_negative("guidance.lambda_reverse", w.lambda_reverse)?;
-        self.non_negative("guidance.lambda_coupled", w.lambda_coupled)?;
-        self.positive("guidance.gamma", w.gamma)?;
-        self.non_negative("guidance.delta", w.delta)?;
+        self.non_negative("cost.lambda_v", w.lambda_v)?;
+        self.non_negative("cost.lambda_a", w.lambda_a)?;
+        self.non_negative("cost.lambda_omega", w.lambda_omega)?;
+        self.non_negative("cost.lambda_kappa", w.lambda_kappa)?;
+        self.non_negative("cost.lambda_lateral", w.lambda_lateral)?;
+        self.non_negative("cost.lambda_reverse", w.lambda_reverse)?;
+        self.non_negative("cost.lambda_coupled", w.lambda_coupled)?;
+        self.positive("cost.gamma", w.gamma)?;
+        self.non_negative("cost.delta", w.delta)?;
         if w.delta >= 1.0 {
-            return Err(self.invalid("guidance.delta", format!("must be < 1, got {}", w.delta)));
+            return Err(self.invalid("cost.delta", format!("must be < 1, got {}", w.delta)));
         }
         Ok(())
     }
@@ -269,7 +269,21 @@ pub(super) fn constraints(
     for (i, c) in raw.iter().enumerate() {
         ck.non_empty(&format!("constraint[{i}].library"), &c.library)?;
         ck.non_empty(&format!("constraint[{i}].plugin"), &c.plugin)?;
-        let weight = ck.non_negative(&format!("constraint[{i}].weight"), c.weight)?;
+        let weight = ck
+            .non_negative(&format!("constraint[{i}].weight"), c.weight)
+            .map_err(|e| match e {
+                // Which term it is about: the plugin's name in the message.
+                ProfileError::Invalid {
+                    file,
+                    field,
+                    message,
+                } => ProfileError::Invalid {
+                    file,
+                    field,
+                    message: format!("{message} (plugin `{}`)", c.plugin),
+                },
+                other => other,
+            })?;
         if let Some(ms) = c.deadline_ms {
             let field = format!("constraint[{i}].deadline_ms");
             let ms = ck.non_negative(&field, ms)?;

@@ -88,7 +88,7 @@ use std::borrow::Cow;
 
 use crate::bev::{self, BevSpec};
 use crate::constraint::{Clearance, ConstraintContext, Phi, PhiScratch, SceneContext, TrajBatch};
-use crate::flow::{FlowCondition, FlowModel};
+use crate::flow::{CrowdGuidance, FlowCondition, FlowModel};
 use crate::forecast::{CrowdPredictor, Forecast};
 use crate::guidance::{
     self, GuidanceError, GuidanceResult, GuidanceSettings, GuidanceVariant, GuidanceWorkspace,
@@ -212,6 +212,10 @@ pub const MAX_MOTIONS: usize = 25_000;
 /// Duration of a motion's first segment (s) ([`crate::motions`]).
 pub const MOTION_SWITCH_S: f64 = 1.0;
 
+/// Largest [`Human2NavSettings::crowd_weight`]: far past any weight that leaves samples a
+/// model would draw; a typo beyond it.
+pub const MAX_CROWD_WEIGHT: f64 = 100.0;
+
 /// Largest [`Human2NavSettings::budget_ms`]: a minute is no planning budget but a typo.
 pub const MAX_BUDGET_MS: f64 = 60_000.0;
 
@@ -229,6 +233,11 @@ pub struct Human2NavSettings {
     pub goal_clip: f64,
     /// Seed of the source noise; the planner is deterministic given the seed and the inputs.
     pub seed: u64,
+    /// Classifier-free guidance on the crowd ([`CrowdGuidance`]): the model's field is drawn
+    /// `w` times as far from its field with an empty raster as the crowd moves it (0 to
+    /// [`MAX_CROWD_WEIGHT`]). 1 (the default): the model as it is; above 1, two network calls
+    /// where one was.
+    pub crowd_weight: f64,
     /// Keep the previous plan as a candidate (warm start). Default true.
     pub warm_start: bool,
     /// How many of the `K` samples Algorithm 1 runs on (0: all; at most [`MAX_SAMPLES`]).
@@ -282,6 +291,7 @@ impl Default for Human2NavSettings {
             dt: 0.1,
             goal_clip: 6.0,
             seed: 0,
+            crowd_weight: 1.0,
             warm_start: true,
             guided_samples: 4,
             slowdown: 0.5,
@@ -331,6 +341,16 @@ impl Human2NavSettings {
         }
         if !(self.dt.is_finite() && self.dt > 0.0) {
             return bad("dt", "must be finite and > 0");
+        }
+        if !(self.crowd_weight.is_finite() && (0.0..=MAX_CROWD_WEIGHT).contains(&self.crowd_weight))
+        {
+            return bad(
+                "crowd_weight",
+                &format!(
+                    "must lie in 0 to {MAX_CROWD_WEIGHT}, got {}",
+                    self.crowd_weight
+                ),
+            );
         }
         if !(self.goal_clip.is_finite() && self.goal_clip > 0.0) {
             return bad("goal_clip", "must be finite and > 0");
@@ -768,7 +788,10 @@ impl<M: FlowModel> Human2Nav<M> {
         };
         Ok(
             match guidance::sample_guided_until(
-                &self.model,
+                &CrowdGuidance {
+                    model: &self.model,
+                    weight: self.settings.crowd_weight,
+                },
                 cond,
                 x0,
                 &self.robot.phi,
@@ -820,7 +843,10 @@ impl<M: FlowModel> Human2Nav<M> {
         };
         let ctx = phi_context(self.settings.dt, &self.robot.limits, obs, agents, scene);
         let result = guidance::guide_subset_until(
-            &self.model,
+            &CrowdGuidance {
+                model: &self.model,
+                weight: self.settings.crowd_weight,
+            },
             cond,
             shortlist,
             &self.robot.phi,

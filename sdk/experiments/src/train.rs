@@ -4,11 +4,14 @@
 //! on the held-out test scenes. Progress is drawn with indicatif and reported on stderr.
 
 use anyhow::{Context, bail};
+use human2nav_core::flow::CrowdGuidance;
 use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use human2nav_data::cache::TupleCache;
 use human2nav_data::tuples::{CompactTuple, Split};
-use human2nav_flow::card::{ComplexityInfo, EarlyAde, EvaluationInfo, TrainingInfo};
-use human2nav_flow::eval::{EvalOptions, EvalWindow, evaluate};
+use human2nav_flow::card::{
+    ComplexityInfo, CrowdProbeInfo, EarlyAde, EvaluationInfo, TrainingInfo,
+};
+use human2nav_flow::eval::{EvalOptions, EvalWindow, crowd_probe, evaluate};
 use human2nav_flow::model::CARD_FILE;
 use human2nav_flow::net::{Complexity, parameter_count};
 use human2nav_flow::tch;
@@ -28,15 +31,44 @@ pub struct DataSection {
     pub cache: PathBuf,
     /// Fraction of the training scenes to use (seeded choice). Default 1.
     pub train_fraction: f64,
+    /// How many times each *interacting* training window is used per epoch (1 to
+    /// [`MAX_INTERACTION_REPEAT`]): a window where the walker, going on at its velocity, would
+    /// come within [`INTERACTION_CONTACT`] of someone going on at theirs, where what the
+    /// crowd does matters to where the walker goes. Default 1: every window once.
+    pub interaction_repeat: usize,
 }
+
+/// Largest [`DataSection::interaction_repeat`].
+pub const MAX_INTERACTION_REPEAT: usize = 100;
+
+/// Distance between centres (m) at which two constant-velocity paths meet, for
+/// [`DataSection::interaction_repeat`]: two pedestrian discs of 0.3 m touching.
+pub const INTERACTION_CONTACT: f64 = 0.6;
 
 impl Default for DataSection {
     fn default() -> Self {
         Self {
             cache: PathBuf::from("out/data/cache"),
             train_fraction: 1.0,
+            interaction_repeat: 1,
         }
     }
+}
+
+/// Whether the walker of `t`, going on at its velocity, comes within `contact` of one of its
+/// neighbours going on at theirs over its future's waypoints, `dt` apart.
+pub fn interacting(t: &CompactTuple, dt: f64, contact: f64) -> bool {
+    let v = [f64::from(t.velocity[0]), f64::from(t.velocity[1])];
+    (1..=t.future.len()).any(|j| {
+        let s = j as f64 * dt;
+        t.agents.iter().any(|a| {
+            let q = [
+                f64::from(a[0]) + f64::from(a[2]) * s,
+                f64::from(a[1]) + f64::from(a[3]) * s,
+            ];
+            (q[0] - v[0] * s).hypot(q[1] - v[1] * s) < contact
+        })
+    })
 }
 
 /// Run bookkeeping.
@@ -86,6 +118,13 @@ pub struct EvalSection {
     pub steps: usize,
     /// Proximity radius, metres. Default 0.3.
     pub radius: f64,
+    /// Distance between centres (m) at which a sample meets someone in the crowd-awareness
+    /// probe ([`human2nav_flow::eval::CrowdProbe`]): two pedestrian discs of the raster's
+    /// 0.3 m touching. Default 0.6.
+    pub contact: f64,
+    /// Crowd-guidance weights the probe runs ([`human2nav_core::flow::CrowdGuidance`]; 1:
+    /// the model as it is). Default `[1]`.
+    pub crowd_weights: Vec<f64>,
     /// Split whose windows are evaluated: `test` (the default, and what a model card
     /// reports), `val` (to study settings without looking at the test scenes) or `train`.
     pub split: Split,
@@ -105,6 +144,8 @@ impl Default for EvalSection {
             samples: 20,
             steps: 10,
             radius: 0.3,
+            contact: 0.6,
+            crowd_weights: vec![1.0],
             split: Split::Test,
             max_windows: 2000,
             seed: 0,
@@ -142,6 +183,12 @@ impl TrainConfig {
     pub fn validate(&self) -> anyhow::Result<()> {
         self.net.validate()?;
         self.train.validate()?;
+        if !(1..=MAX_INTERACTION_REPEAT).contains(&self.data.interaction_repeat) {
+            bail!(
+                "data.interaction_repeat: {} is not in 1..={MAX_INTERACTION_REPEAT}",
+                self.data.interaction_repeat
+            );
+        }
         let f = self.data.train_fraction;
         if !(f > 0.0 && f <= 1.0) {
             bail!("data.train_fraction must lie in (0, 1], got {f}");
@@ -166,8 +213,22 @@ impl TrainConfig {
             || self.eval.steps == 0
             || self.eval.radius.is_nan()
             || self.eval.radius <= 0.0
+            || !(self.eval.contact.is_finite() && self.eval.contact > 0.0)
         {
-            bail!("eval.samples, eval.steps and eval.radius must be positive");
+            bail!(
+                "eval.samples, eval.steps, eval.radius and eval.contact must be positive and finite"
+            );
+        }
+        if let Some(w) = self
+            .eval
+            .crowd_weights
+            .iter()
+            .find(|w| !(w.is_finite() && **w >= 0.0))
+        {
+            bail!("eval.crowd_weights: {w} must be finite and >= 0");
+        }
+        if self.eval.crowd_weights.len() > 16 {
+            bail!("eval.crowd_weights: at most 16 weights (each is a pass over the windows)");
         }
         Ok(())
     }
@@ -199,10 +260,41 @@ fn training_tuples(
     cfg: &TrainConfig,
     cache: &TupleCache,
 ) -> anyhow::Result<Vec<human2nav_data::tuples::TrainingTuple>> {
-    let train_set = cache.load_scenes(Split::Train, cfg.data.train_fraction, cfg.train.seed)?;
-    if train_set.is_empty() {
+    let repeat = cfg.data.interaction_repeat;
+    if repeat == 1 {
+        let train_set = cache.load_scenes(Split::Train, cfg.data.train_fraction, cfg.train.seed)?;
+        if train_set.is_empty() {
+            bail!("the training split of {} is empty", cache.dir().display());
+        }
+        return Ok(train_set);
+    }
+    let keep = cache.pick_scenes(Split::Train, cfg.data.train_fraction, cfg.train.seed)?;
+    let (spec, dt) = (cache.manifest().bev, cache.manifest().dt);
+    let compact: Vec<CompactTuple> = cache
+        .load_compact(Split::Train)?
+        .into_iter()
+        .filter(|t| keep.binary_search(&t.scene).is_ok())
+        .collect();
+    if compact.is_empty() {
         bail!("the training split of {} is empty", cache.dir().display());
     }
+    let mut train_set = Vec::with_capacity(compact.len());
+    let mut interactions = 0;
+    for t in &compact {
+        let copies = if interacting(t, dt, INTERACTION_CONTACT) {
+            interactions += 1;
+            repeat
+        } else {
+            1
+        };
+        let tuple = t.to_tuple(&spec);
+        train_set.extend(std::iter::repeat_n(tuple, copies));
+    }
+    eprintln!(
+        "{interactions} of {} training windows interact (a walker going on at its velocity \
+         meets someone going on at theirs); each is used {repeat} times",
+        compact.len()
+    );
     Ok(train_set)
 }
 
@@ -592,19 +684,23 @@ pub fn cache_windows(
         .iter()
         .map(|c| {
             let t = c.to_tuple(&spec);
-            let others = c
+            let others_cv: Vec<Vec<[f64; 2]>> = c
                 .agents
                 .iter()
                 .map(|a| {
                     (1..=t.future.len())
                         .map(|j| {
                             let s = j as f64 * dt;
-                            Some([a[0] as f64 + a[2] as f64 * s, a[1] as f64 + a[3] as f64 * s])
+                            [a[0] as f64 + a[2] as f64 * s, a[1] as f64 + a[3] as f64 * s]
                         })
                         .collect()
                 })
                 .collect();
-            EvalWindow::from_tuple(t, others)
+            let others = others_cv
+                .iter()
+                .map(|path| path.iter().copied().map(Some).collect())
+                .collect();
+            EvalWindow::from_tuple(t, others, others_cv)
         })
         .collect())
 }
@@ -657,6 +753,19 @@ pub fn run_evaluation(
     )?);
     let m = evaluate(model, &windows, &opts, |i| bar.set_position(i as u64))?;
     bar.finish_and_clear();
+    let mut probes = Vec::with_capacity(cfg.eval.crowd_weights.len());
+    for &weight in &cfg.eval.crowd_weights {
+        let bar = ProgressBar::new(windows.len() as u64);
+        bar.set_style(ProgressStyle::with_template(&format!(
+            "probing the crowd's effect, w = {weight} [{{wide_bar}}] {{pos}}/{{len}} windows  ETA {{eta}}"
+        ))?);
+        let guided = CrowdGuidance::new(model, weight)?;
+        let probe = crowd_probe(&guided, &windows, &opts, cfg.eval.contact, |i| {
+            bar.set_position(i as u64)
+        })?;
+        bar.finish_and_clear();
+        probes.push((weight, probe));
+    }
     let info = EvaluationInfo {
         protocol: format!(
             "{} windows drawn (seed {}) from the {} split ({}); {} samples per window, {} Euler steps; \
@@ -692,6 +801,10 @@ pub fn run_evaluation(
             "{neighbours}; constant-velocity ego prediction within the radius: {:.4}",
             m.proximity_cv
         ),
+        crowd_probe: probes
+            .iter()
+            .map(|&(weight, p)| CrowdProbeInfo::of(p, weight))
+            .collect(),
     };
     eprintln!(
         "{}: best-of-{} ADE {:.3} m FDE {:.3} m | constant velocity ADE {:.3} m FDE {:.3} m | ADE {:.1} % lower | \
@@ -720,6 +833,23 @@ pub fn run_evaluation(
         m.early_centroid_ade,
         m.early_cv_ade
     );
+    for (weight, probe) in &probes {
+        eprintln!(
+            "{}: crowd probe, crowd guidance w = {weight} (the same samples with the crowd in the \
+             raster and with it emptied; meeting = centres within {} m): recorded futures {:.3} \
+             observed / {:.3} hidden (the human {:.3}); constant velocity {:.3} / {:.3} (the \
+             human {:.3}); samples {:.3} m apart",
+            cfg.eval.split,
+            probe.contact,
+            probe.observed_recorded,
+            probe.hidden_recorded,
+            probe.human_recorded,
+            probe.observed_cv,
+            probe.hidden_cv,
+            probe.human_cv,
+            probe.displacement
+        );
+    }
     Ok(info)
 }
 
@@ -765,4 +895,44 @@ pub fn open_cache(
         );
     }
     Ok(cache)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A walker at 1 m/s along x, with `agents` (`[x, y, v_x, v_y, radius]`, ego frame).
+    fn window(agents: Vec<[f32; 5]>) -> CompactTuple {
+        CompactTuple {
+            scene: 0,
+            class: None,
+            goal: [5.0, 0.0],
+            velocity: [1.0, 0.0],
+            future: vec![[0.0; 3]; 32],
+            agents,
+        }
+    }
+
+    #[test]
+    fn a_window_interacts_when_the_straight_walk_meets_someone() {
+        // Someone coming the other way on the same line: they meet after 1.5 s.
+        assert!(interacting(
+            &window(vec![[3.0, 0.0, -1.0, 0.0, 0.3]]),
+            0.1,
+            0.6
+        ));
+        // The same person 1 m to the side passes at 1 m: no meeting at 0.6 m.
+        assert!(!interacting(
+            &window(vec![[3.0, 1.0, -1.0, 0.0, 0.3]]),
+            0.1,
+            0.6
+        ));
+        // Someone standing 4 m ahead is reached only after the 3.2 s horizon.
+        assert!(!interacting(
+            &window(vec![[4.0, 0.0, 0.0, 0.0, 0.3]]),
+            0.1,
+            0.6
+        ));
+        assert!(!interacting(&window(vec![]), 0.1, 0.6));
+    }
 }

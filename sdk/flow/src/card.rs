@@ -163,6 +163,44 @@ pub struct EvaluationInfo {
     pub proximity_truth: f64,
     /// How the other agents' positions were obtained for the proximity metric.
     pub proximity_note: String,
+    /// Whether the samples react to the crowd in the model's input (absent from cards
+    /// evaluated before it was measured).
+    /// One entry per crowd-guidance weight probed.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub crowd_probe: Vec<CrowdProbeInfo>,
+}
+
+/// The crowd-awareness probe of a model card ([`crate::eval::CrowdProbe`]): the same source
+/// samples drawn with the crowd in the BEV raster and with the raster emptied.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CrowdProbeInfo {
+    /// The crowd-guidance weight the samples were drawn with (1: the model as it is).
+    pub crowd_weight: f64,
+    /// Distance between centres (m) at which a sample meets someone.
+    pub contact: f64,
+    /// Share of samples meeting someone on their recorded future: crowd observed, hidden.
+    pub recorded: [f64; 2],
+    /// Share of samples meeting someone walking on at constant velocity: observed, hidden.
+    pub constant_velocity: [f64; 2],
+    /// The recorded human's own share at the same windows: recorded futures, constant velocity.
+    pub human: [f64; 2],
+    /// Mean distance (m) between a sample and its twin drawn with the crowd hidden.
+    pub displacement: f64,
+}
+
+impl CrowdProbeInfo {
+    /// The card's record of probe `p`, drawn with crowd-guidance weight `crowd_weight`.
+    pub fn of(p: crate::eval::CrowdProbe, crowd_weight: f64) -> Self {
+        Self {
+            crowd_weight,
+            contact: p.contact,
+            recorded: [p.observed_recorded, p.hidden_recorded],
+            constant_velocity: [p.observed_cv, p.hidden_cv],
+            human: [p.human_recorded, p.human_cv],
+            displacement: p.displacement,
+        }
+    }
 }
 
 /// ADEs over a plan's first waypoints (see [`EvaluationInfo::early_ade`]).

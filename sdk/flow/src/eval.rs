@@ -19,7 +19,7 @@
 
 use crate::cfm::sample_source;
 use crate::error::CfmError;
-use crate::sampler::sample;
+use crate::sampler::{integrate, sample};
 use human2nav_core::bev::BevSpec;
 use human2nav_core::constraint::{ConstraintContext, Phi};
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
@@ -44,12 +44,19 @@ pub struct EvalWindow {
     /// Other agents' positions over the same `T` future steps, ego frame; `None` where an
     /// agent is not observed. Empty when unknown.
     pub others: Vec<Vec<Option<[f64; 2]>>>,
+    /// The agents observed at the window's start walking on at their velocity then: `T`
+    /// positions each, ego frame (what a planner predicts of them). Empty when unknown.
+    pub others_cv: Vec<Vec<[f64; 2]>>,
 }
 
 impl EvalWindow {
     /// The window of a training tuple (its BEV, goal, velocity and future) with the other
-    /// agents' future positions `others`.
-    pub fn from_tuple(t: TrainingTuple, others: Vec<Vec<Option<[f64; 2]>>>) -> Self {
+    /// agents' future positions `others` and their constant-velocity futures `others_cv`.
+    pub fn from_tuple(
+        t: TrainingTuple,
+        others: Vec<Vec<Option<[f64; 2]>>>,
+        others_cv: Vec<Vec<[f64; 2]>>,
+    ) -> Self {
         Self {
             cond: FlowCondition {
                 bev: t.bev,
@@ -62,6 +69,7 @@ impl EvalWindow {
                 .map(|p| Pose2::new(p[0] as f64, p[1] as f64, p[2] as f64))
                 .collect(),
             others,
+            others_cv,
         }
     }
 }
@@ -242,9 +250,132 @@ pub fn scene_windows(
                     .collect()
             })
             .collect();
-        out.push(EvalWindow::from_tuple(tup.to_tuple(spec), others));
+        // Everyone seen now and a step before, walking on at that step's velocity.
+        let others_cv = index
+            .at(step)
+            .iter()
+            .map(|&i| i as usize)
+            .filter(|&i| i != e)
+            .filter_map(|i| {
+                let t = &scene.tracks[i];
+                let (now, before) = (t.local(step)?, t.local(step - 1)?);
+                let (p, q) = (t.positions[now], t.positions[before]);
+                let v = [(p[0] - q[0]) / scene.dt, (p[1] - q[1]) / scene.dt];
+                Some(
+                    (1..=h)
+                        .map(|j| {
+                            let s = j as f64 * scene.dt;
+                            pose.inverse_act([p[0] + v[0] * s, p[1] + v[1] * s])
+                        })
+                        .collect(),
+                )
+            })
+            .collect();
+        out.push(EvalWindow::from_tuple(
+            tup.to_tuple(spec),
+            others,
+            others_cv,
+        ));
     }
     Ok(out)
+}
+
+/// How much a model's samples react to the crowd in their input (the crowd-awareness probe):
+/// the same source samples integrated with the window's BEV raster as observed and emptied.
+/// Shares are over every sample of every window.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CrowdProbe {
+    /// Windows probed.
+    pub windows: usize,
+    /// Distance between centres (m) below which a sample meets someone.
+    pub contact: f64,
+    /// Share of samples meeting someone on their recorded future, crowd observed.
+    pub observed_recorded: f64,
+    /// The same with the crowd hidden from the model.
+    pub hidden_recorded: f64,
+    /// Share of samples meeting someone walking on at constant velocity, crowd observed.
+    pub observed_cv: f64,
+    /// The same with the crowd hidden.
+    pub hidden_cv: f64,
+    /// The recorded human's own share at the same windows, against the recorded futures.
+    pub human_recorded: f64,
+    /// The recorded human's share against constant-velocity futures.
+    pub human_cv: f64,
+    /// Mean distance (m) between a sample and its twin drawn with the crowd hidden, over
+    /// samples and waypoints.
+    pub displacement: f64,
+}
+
+/// Whether a trajectory (flat `[T, 3]`) comes within `contact` of any of `paths`.
+fn meets(traj: &[f64], paths: &[Vec<[f64; 2]>], contact: f64) -> bool {
+    paths.iter().any(|path| {
+        traj.chunks_exact(3)
+            .zip(path)
+            .any(|(p, o)| (p[0] - o[0]).hypot(p[1] - o[1]) < contact)
+    })
+}
+
+/// The crowd-awareness probe of `model` on `windows` ([`CrowdProbe`]): `opts.samples` source
+/// samples per window (seeded by `opts.seed`), each integrated in `opts.steps` steps once with
+/// the window's raster and once with an empty one; `progress` is called after each window.
+pub fn crowd_probe<M: FlowModel + ?Sized>(
+    model: &M,
+    windows: &[EvalWindow],
+    opts: &EvalOptions,
+    contact: f64,
+    mut progress: impl FnMut(usize),
+) -> Result<CrowdProbe, FlowError> {
+    let t = model.horizon();
+    let mut probe = CrowdProbe {
+        windows: windows.len(),
+        contact,
+        ..CrowdProbe::default()
+    };
+    if windows.is_empty() {
+        return Ok(probe);
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(opts.seed);
+    let count = |b: bool| f64::from(u8::from(b));
+    for (w, win) in windows.iter().enumerate() {
+        let x0 = sample_source(opts.samples, t, model.source_std(), &mut rng);
+        let mut observed = x0.clone();
+        integrate(model, &mut observed, &win.cond, opts.steps)?;
+        let hidden_cond = FlowCondition {
+            bev: vec![0.0; win.cond.bev.len()],
+            ..win.cond.clone()
+        };
+        let mut hidden = x0;
+        integrate(model, &mut hidden, &hidden_cond, opts.steps)?;
+        for (o, h) in observed.chunks_exact(3 * t).zip(hidden.chunks_exact(3 * t)) {
+            probe.observed_recorded += count(comes_close(o, &win.others, contact));
+            probe.hidden_recorded += count(comes_close(h, &win.others, contact));
+            probe.observed_cv += count(meets(o, &win.others_cv, contact));
+            probe.hidden_cv += count(meets(h, &win.others_cv, contact));
+            probe.displacement += o
+                .chunks_exact(3)
+                .zip(h.chunks_exact(3))
+                .map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1]))
+                .sum::<f64>()
+                / t as f64;
+        }
+        let truth: Vec<f64> = win.future.iter().flat_map(|p| p.to_array()).collect();
+        probe.human_recorded += count(comes_close(&truth, &win.others, contact));
+        probe.human_cv += count(meets(&truth, &win.others_cv, contact));
+        progress(w + 1);
+    }
+    let samples = (windows.len() * opts.samples) as f64;
+    for v in [
+        &mut probe.observed_recorded,
+        &mut probe.hidden_recorded,
+        &mut probe.observed_cv,
+        &mut probe.hidden_cv,
+        &mut probe.displacement,
+    ] {
+        *v /= samples;
+    }
+    probe.human_recorded /= windows.len() as f64;
+    probe.human_cv /= windows.len() as f64;
+    Ok(probe)
 }
 
 /// Keeps a seeded random subset of at most `n` items (order shuffled).
@@ -537,6 +668,7 @@ mod tests {
             },
             future,
             others: Vec::new(),
+            others_cv: Vec::new(),
         };
         let phi = Phi::from_weights(&GuidanceWeights::default(), &limits);
         let opts = EvalOptions {
@@ -605,6 +737,7 @@ mod tests {
             },
             future,
             others: Vec::new(),
+            others_cv: Vec::new(),
         };
         let opts = EvalOptions {
             samples: 20,
@@ -653,5 +786,101 @@ mod tests {
         assert!(!comes_close(&traj, &swapped, 0.3));
         let unobserved = vec![vec![None, None]];
         assert!(!comes_close(&traj, &unobserved, 0.3));
+    }
+
+    /// A field that walks straight ahead with an empty raster and swings 1 m to the left
+    /// around whatever its raster shows: a model that looks at the crowd.
+    struct Avoids {
+        straight: human2nav_core::guidance::analytic::ConstantField,
+        around: human2nav_core::guidance::analytic::ConstantField,
+    }
+
+    impl Avoids {
+        fn new(t: usize) -> Self {
+            let field = |lateral: f64| human2nav_core::guidance::analytic::ConstantField {
+                twists: (1..=t)
+                    .flat_map(|k| Pose2::new(0.1 * k as f64, lateral, 0.0).log().to_array())
+                    .collect(),
+            };
+            Self {
+                straight: field(0.0),
+                around: field(1.0),
+            }
+        }
+
+        fn pick(&self, c: &FlowCondition) -> &human2nav_core::guidance::analytic::ConstantField {
+            if c.bev.iter().any(|v| *v != 0.0) {
+                &self.around
+            } else {
+                &self.straight
+            }
+        }
+    }
+
+    impl FlowModel for Avoids {
+        fn horizon(&self) -> usize {
+            self.straight.horizon()
+        }
+        fn source_std(&self) -> [f64; 3] {
+            [1e-4; 3]
+        }
+        fn velocity(
+            &self,
+            x: &[f64],
+            t: f64,
+            c: &FlowCondition,
+            out: &mut [f64],
+        ) -> Result<(), FlowError> {
+            self.pick(c).velocity(x, t, c, out)
+        }
+        fn velocity_vjp(
+            &self,
+            x: &[f64],
+            t: f64,
+            c: &FlowCondition,
+            cot: &[f64],
+            out: &mut [f64],
+            vjp: &mut [f64],
+        ) -> Result<(), FlowError> {
+            self.pick(c).velocity_vjp(x, t, c, cot, out, vjp)
+        }
+    }
+
+    /// The probe tells a model that goes round the person in its raster from one that does
+    /// not look: the share meeting someone drops with the crowd observed, and the twin samples
+    /// move apart; a model blind to its raster draws the same samples either way.
+    #[test]
+    fn the_crowd_probe_tells_a_model_that_looks_from_one_that_does_not() {
+        let t = 16;
+        // Someone standing 1 m ahead, on the human's own straight way.
+        let standing = vec![[1.0, 0.0]; t];
+        let window = EvalWindow {
+            cond: FlowCondition {
+                bev: vec![0.0, 1.0, 0.0, 0.0],
+                goal: [3.0, 0.0],
+                velocity: [1.0, 0.0],
+            },
+            future: (1..=t)
+                .map(|k| Pose2::new(0.1 * k as f64, 0.0, 0.0))
+                .collect(),
+            others: vec![standing.iter().copied().map(Some).collect()],
+            others_cv: vec![standing],
+        };
+        let opts = EvalOptions {
+            samples: 4,
+            steps: 4,
+            ..EvalOptions::default()
+        };
+        let windows = vec![window; 3];
+        let looks = crowd_probe(&Avoids::new(t), &windows, &opts, 0.6, |_| ()).unwrap();
+        assert_eq!(looks.windows, 3);
+        assert_eq!((looks.observed_recorded, looks.hidden_recorded), (0.0, 1.0));
+        assert_eq!((looks.observed_cv, looks.hidden_cv), (0.0, 1.0));
+        assert_eq!((looks.human_recorded, looks.human_cv), (1.0, 1.0));
+        assert!(looks.displacement > 0.5, "{looks:?}");
+        let blind = crowd_probe(&Avoids::new(t).straight, &windows, &opts, 0.6, |_| ()).unwrap();
+        assert_eq!(blind.observed_recorded, blind.hidden_recorded);
+        assert_eq!(blind.observed_cv, blind.hidden_cv);
+        assert_eq!(blind.displacement, 0.0);
     }
 }

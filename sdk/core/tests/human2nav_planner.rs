@@ -1130,3 +1130,23 @@ fn a_failing_predictor_leaves_constant_velocity_and_a_note() {
         plan.info.notes
     );
 }
+
+#[test]
+fn crowd_guidance_is_checked_and_leaves_a_model_blind_to_its_raster_unchanged() {
+    let obs = observation();
+    let with = |w: f64| Human2NavSettings {
+        crowd_weight: w,
+        ..Human2NavSettings::default()
+    };
+    // The analytic field ignores its raster: guided by the crowd or not, it draws the same.
+    let plain = planner(true).plan(&obs).unwrap();
+    let guided = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), with(4.0))
+        .unwrap()
+        .plan(&obs)
+        .unwrap();
+    assert_eq!(plain.poses, guided.poses);
+    for bad in [-1.0, f64::NAN, f64::INFINITY, 101.0] {
+        let err = with(bad).validate().unwrap_err().to_string();
+        assert!(err.contains("crowd_weight"), "{err}");
+    }
+}

@@ -907,9 +907,13 @@ mod tests {
         let dir = small_model_dir("e2e");
         let robot = workspace().join("robots/diablo/robot.toml");
         // Algorithm 1's iterations on (the shipped planner runs none), so that its plumbing
-        // and call counts are exercised.
+        // and call counts are exercised; only the samples on offer (no slowed copies, stop or
+        // goal candidates), so that the plan is a guided sample whatever Φ makes of braking.
         let settings = Arm::Both.settings(&Human2NavSettings {
             samples: 6,
+            slowdown: 1.0,
+            stop_candidate: false,
+            goal_approach: 0.0,
             ..Human2NavSettings::default()
         });
         assert!(settings.guidance.iterations_m > 0);

@@ -134,7 +134,7 @@ pub(crate) mod near;
 mod phi;
 
 pub use builtin::{BuiltinKind, BuiltinTerm, SMOOTH_ABS_EPS, SoftMargin, sigmoid, softplus};
-pub use clearance::{CLEARANCE, Clearance};
+pub use clearance::{CLEARANCE, Clearance, arrival};
 pub use phi::{Phi, PhiScratch};
 
 #[cfg(test)]

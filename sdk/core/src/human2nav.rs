@@ -87,7 +87,9 @@
 use std::borrow::Cow;
 
 use crate::bev::{self, BevSpec};
-use crate::constraint::{Clearance, ConstraintContext, Phi, PhiScratch, SceneContext, TrajBatch};
+use crate::constraint::{
+    Clearance, ConstraintContext, Phi, PhiScratch, SceneContext, TrajBatch, arrival,
+};
 use crate::flow::{CrowdGuidance, FlowCondition, FlowModel};
 use crate::forecast::{CrowdPredictor, Forecast};
 use crate::guidance::{
@@ -1262,22 +1264,17 @@ fn goal_term(traj: &[Pose2], goal: [f64; 2], w: &SelectionWeights, reach_per_ste
         return traj.last().map_or(d0, distance) / d0;
     }
     // The first waypoint within `arrival` ends the candidate.
-    let mut closest = d0;
-    for (k, p) in traj.iter().enumerate() {
-        let d = distance(p);
-        if d <= w.arrival {
-            return match w.progress {
-                Progress::Time => (k + 1) as f64 * reach_per_step / d0,
-                _ => 0.0,
-            };
-        }
-        closest = closest.min(d);
+    if let Some(k) = arrival(traj, goal, w.arrival) {
+        return match w.progress {
+            Progress::Time => (k + 1) as f64 * reach_per_step / d0,
+            _ => 0.0,
+        };
     }
     match w.progress {
         Progress::Time => {
             (traj.len() as f64 * reach_per_step + traj.last().map_or(d0, distance)) / d0
         }
-        _ => closest / d0,
+        _ => traj.iter().map(distance).fold(d0, f64::min) / d0,
     }
 }
 

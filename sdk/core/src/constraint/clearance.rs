@@ -90,13 +90,12 @@ impl Clearance {
         let Some(goal) = goal else {
             return (traj.len(), false);
         };
-        let distance = |p: &Pose2| (p.x - goal[0]).hypot(p.y - goal[1]);
         match self.arrival {
-            Some(r) => traj
-                .iter()
-                .position(|p| distance(p) <= r)
-                .map_or((traj.len(), false), |k| (k + 1, true)),
-            None => (traj.len(), traj.last().is_some_and(|p| distance(p) == 0.0)),
+            Some(r) => arrival(traj, goal, r).map_or((traj.len(), false), |k| (k + 1, true)),
+            None => (
+                traj.len(),
+                traj.last().is_some_and(|p| distance(p, goal) == 0.0),
+            ),
         }
     }
 
@@ -224,6 +223,17 @@ impl Clearance {
         }
         sum
     }
+}
+
+/// The distance (m) from a pose to a point.
+fn distance(p: &Pose2, q: [f64; 2]) -> f64 {
+    (p.x - q[0]).hypot(p.y - q[1])
+}
+
+/// The index of the first waypoint of `traj` within `radius` of `goal`, where a run following
+/// it ends: the rule the selection's goal term and this term's scored waypoints share.
+pub fn arrival(traj: &[Pose2], goal: [f64; 2], radius: f64) -> Option<usize> {
+    traj.iter().position(|p| distance(p, goal) <= radius)
 }
 
 /// One trajectory as the term scores it: its scored waypoints, the hold after them and the

@@ -9,7 +9,7 @@ use human2nav_core::bev::BevSpec;
 use human2nav_core::constraint::Phi;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use human2nav_core::forecast::{CrowdPredictor, Forecast, constant_velocity_path};
-use human2nav_core::guidance::analytic::ConstantField;
+use human2nav_core::guidance::analytic::FixedWalk;
 use human2nav_core::guidance::{GuidanceVariant, PaperSettings};
 use human2nav_core::human2nav::{
     Human2Nav, Human2NavSettings, RobotModel, SelectionWeights, pose_at,
@@ -57,43 +57,10 @@ fn robot() -> RobotModel {
 /// identity, so the plain rollout lands on the target and any steering survives to the end:
 /// the behaviour of a trained field whose data has spread, unlike a field that snaps every
 /// sample onto one fixed target.
-#[derive(Debug)]
-struct HumanFuture(ConstantField);
+type HumanFuture = FixedWalk;
 
 fn fast_straight() -> HumanFuture {
-    let twists = (1..=32)
-        .flat_map(|k| Pose2::new(0.16 * k as f64, 0.0, 0.0).log().to_array())
-        .collect();
-    HumanFuture(ConstantField { twists })
-}
-
-impl FlowModel for HumanFuture {
-    fn horizon(&self) -> usize {
-        self.0.horizon()
-    }
-    fn source_std(&self) -> [f64; 3] {
-        [1e-4; 3]
-    }
-    fn velocity(
-        &self,
-        x: &[f64],
-        t: f64,
-        c: &FlowCondition,
-        out: &mut [f64],
-    ) -> Result<(), FlowError> {
-        self.0.velocity(x, t, c, out)
-    }
-    fn velocity_vjp(
-        &self,
-        x: &[f64],
-        t: f64,
-        c: &FlowCondition,
-        cot: &[f64],
-        out: &mut [f64],
-        vjp: &mut [f64],
-    ) -> Result<(), FlowError> {
-        self.0.velocity_vjp(x, t, c, cot, out, vjp)
-    }
+    FixedWalk::straight(0.16, 32)
 }
 
 fn observation() -> Observation {

@@ -597,6 +597,7 @@ pub fn guided_windows<M: FlowModel + ?Sized>(
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+    use human2nav_core::guidance::analytic::FixedWalk;
 
     #[test]
     fn scene_windows_match_tuples_and_carry_true_neighbour_futures() {
@@ -788,27 +789,25 @@ mod tests {
         assert!(!comes_close(&traj, &unobserved, 0.3));
     }
 
-    /// A field that walks straight ahead with an empty raster and swings 1 m to the left
-    /// around whatever its raster shows: a model that looks at the crowd.
+    /// A field that walks straight ahead with an empty raster and 1 m to the left of
+    /// whatever its raster shows: a model that looks at the crowd.
     struct Avoids {
-        straight: human2nav_core::guidance::analytic::ConstantField,
-        around: human2nav_core::guidance::analytic::ConstantField,
+        straight: FixedWalk,
+        around: FixedWalk,
     }
 
     impl Avoids {
         fn new(t: usize) -> Self {
-            let field = |lateral: f64| human2nav_core::guidance::analytic::ConstantField {
-                twists: (1..=t)
-                    .flat_map(|k| Pose2::new(0.1 * k as f64, lateral, 0.0).log().to_array())
-                    .collect(),
+            let walk = |lateral: f64| {
+                FixedWalk::along((1..=t).map(|k| Pose2::new(0.1 * k as f64, lateral, 0.0)))
             };
             Self {
-                straight: field(0.0),
-                around: field(1.0),
+                straight: walk(0.0),
+                around: walk(1.0),
             }
         }
 
-        fn pick(&self, c: &FlowCondition) -> &human2nav_core::guidance::analytic::ConstantField {
+        fn pick(&self, c: &FlowCondition) -> &FixedWalk {
             if c.bev.iter().any(|v| *v != 0.0) {
                 &self.around
             } else {
@@ -822,7 +821,7 @@ mod tests {
             self.straight.horizon()
         }
         fn source_std(&self) -> [f64; 3] {
-            [1e-4; 3]
+            self.straight.source_std()
         }
         fn velocity(
             &self,

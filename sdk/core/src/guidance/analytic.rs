@@ -140,19 +140,18 @@ pub struct FixedWalk {
 }
 
 impl FixedWalk {
-    /// Straight ahead, `step` metres a waypoint, for `horizon` waypoints (source noise 1e-4).
-    pub fn straight(step: f64, horizon: usize) -> Self {
-        let twists = (1..=horizon)
-            .flat_map(|k| {
-                crate::Pose2::new(step * k as f64, 0.0, 0.0)
-                    .log()
-                    .to_array()
-            })
-            .collect();
+    /// Along `path`, one waypoint per pose (source noise 1e-4).
+    pub fn along(path: impl IntoIterator<Item = crate::Pose2>) -> Self {
+        let twists = path.into_iter().flat_map(|p| p.log().to_array()).collect();
         Self {
             field: ConstantField { twists },
             source_std: 1e-4,
         }
+    }
+
+    /// Straight ahead, `step` metres a waypoint, for `horizon` waypoints (source noise 1e-4).
+    pub fn straight(step: f64, horizon: usize) -> Self {
+        Self::along((1..=horizon).map(|k| crate::Pose2::new(step * k as f64, 0.0, 0.0)))
     }
 }
 

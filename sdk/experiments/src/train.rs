@@ -4,14 +4,16 @@
 //! on the held-out test scenes. Progress is drawn with indicatif and reported on stderr.
 
 use anyhow::{Context, bail};
+use human2nav_core::AgentState;
 use human2nav_core::flow::CrowdGuidance;
+use human2nav_core::forecast::constant_velocity_path;
 use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use human2nav_data::cache::TupleCache;
 use human2nav_data::tuples::{CompactTuple, Split};
 use human2nav_flow::card::{
     ComplexityInfo, CrowdProbeInfo, EarlyAde, EvaluationInfo, TrainingInfo,
 };
-use human2nav_flow::eval::{EvalOptions, EvalWindow, crowd_probe, evaluate};
+use human2nav_flow::eval::{EvalOptions, EvalWindow, crowd_probe, evaluate, meets};
 use human2nav_flow::model::CARD_FILE;
 use human2nav_flow::net::{Complexity, parameter_count};
 use human2nav_flow::tch;
@@ -58,17 +60,40 @@ impl Default for DataSection {
 /// Whether the walker of `t`, going on at its velocity, comes within `contact` of one of its
 /// neighbours going on at theirs over its future's waypoints, `dt` apart.
 pub fn interacting(t: &CompactTuple, dt: f64, contact: f64) -> bool {
-    let v = [f64::from(t.velocity[0]), f64::from(t.velocity[1])];
-    (1..=t.future.len()).any(|j| {
-        let s = j as f64 * dt;
-        t.agents.iter().any(|a| {
-            let q = [
-                f64::from(a[0]) + f64::from(a[2]) * s,
-                f64::from(a[1]) + f64::from(a[3]) * s,
-            ];
-            (q[0] - v[0] * s).hypot(q[1] - v[1] * s) < contact
+    let walker = moving(
+        [0.0, 0.0],
+        [f64::from(t.velocity[0]), f64::from(t.velocity[1])],
+    );
+    let straight: Vec<f64> = constant_velocity_path(&walker, t.future.len(), dt)
+        .into_iter()
+        .flat_map(|[x, y]| [x, y, 0.0])
+        .collect();
+    meets(&straight, &neighbour_paths(t, dt), contact)
+}
+
+/// Someone at `position` with `velocity`, for a constant-velocity path.
+fn moving(position: [f64; 2], velocity: [f64; 2]) -> AgentState {
+    AgentState {
+        id: 0,
+        position,
+        velocity,
+        radius: 0.0,
+        history: Vec::new(),
+    }
+}
+
+/// The neighbours of `t` going on at their velocity, over its future's waypoints, `dt` apart.
+fn neighbour_paths(t: &CompactTuple, dt: f64) -> Vec<Vec<[f64; 2]>> {
+    t.agents
+        .iter()
+        .map(|a| {
+            let agent = moving(
+                [f64::from(a[0]), f64::from(a[1])],
+                [f64::from(a[2]), f64::from(a[3])],
+            );
+            constant_velocity_path(&agent, t.future.len(), dt)
         })
-    })
+        .collect()
 }
 
 /// Run bookkeeping.
@@ -684,18 +709,7 @@ pub fn cache_windows(
         .iter()
         .map(|c| {
             let t = c.to_tuple(&spec);
-            let others_cv: Vec<Vec<[f64; 2]>> = c
-                .agents
-                .iter()
-                .map(|a| {
-                    (1..=t.future.len())
-                        .map(|j| {
-                            let s = j as f64 * dt;
-                            [a[0] as f64 + a[2] as f64 * s, a[1] as f64 + a[3] as f64 * s]
-                        })
-                        .collect()
-                })
-                .collect();
+            let others_cv = neighbour_paths(c, dt);
             let others = others_cv
                 .iter()
                 .map(|path| path.iter().copied().map(Some).collect())

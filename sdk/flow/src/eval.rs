@@ -306,8 +306,9 @@ pub struct CrowdProbe {
     pub displacement: f64,
 }
 
-/// Whether a trajectory (flat `[T, 3]`) comes within `contact` of any of `paths`.
-fn meets(traj: &[f64], paths: &[Vec<[f64; 2]>], contact: f64) -> bool {
+/// Whether a trajectory (flat `[T, 3]`) comes within `contact` of any of `paths` at the same
+/// waypoint.
+pub fn meets(traj: &[f64], paths: &[Vec<[f64; 2]>], contact: f64) -> bool {
     paths.iter().any(|path| {
         traj.chunks_exact(3)
             .zip(path)

@@ -13,11 +13,13 @@ use human2nav_data::tuples::{CompactTuple, Split};
 use human2nav_flow::card::{
     ComplexityInfo, CrowdProbeInfo, EarlyAde, EvaluationInfo, TrainingInfo,
 };
-use human2nav_flow::eval::{EvalOptions, EvalWindow, crowd_probe, evaluate, meets};
+use human2nav_flow::eval::{
+    EvalOptions, EvalWindow, counterfactual_probe, crowd_probe, evaluate, meets,
+};
 use human2nav_flow::model::CARD_FILE;
 use human2nav_flow::net::{Complexity, parameter_count};
 use human2nav_flow::tch;
-use human2nav_flow::train::{TrainOptions, Trainer};
+use human2nav_flow::train::{Counterfactual, TrainOptions, Trainer, TrainingSample};
 use human2nav_flow::{CfmModel, NetConfig, Normalisation};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Deserialize;
@@ -150,6 +152,10 @@ pub struct EvalSection {
     /// Crowd-guidance weights the probe runs ([`human2nav_core::flow::CrowdGuidance`]; 1:
     /// the model as it is). Default `[1]`.
     pub crowd_weights: Vec<f64>,
+    /// Also run [`human2nav_flow::eval::counterfactual_probe`]: a standing person placed on
+    /// each window's constant-velocity line where the recorded future avoided it, the samples
+    /// with and without that person in the raster. Default false.
+    pub counterfactual_probe: bool,
     /// Split whose windows are evaluated: `test` (the default, and what a model card
     /// reports), `val` (to study settings without looking at the test scenes) or `train`.
     pub split: Split,
@@ -171,6 +177,7 @@ impl Default for EvalSection {
             radius: 0.3,
             contact: 0.6,
             crowd_weights: vec![1.0],
+            counterfactual_probe: false,
             split: Split::Test,
             max_windows: 2000,
             seed: 0,
@@ -341,6 +348,29 @@ pub fn train(
         val_set.len(),
         load_start.elapsed().as_secs_f64()
     );
+    if let Some(c) = &cfg.train.counterfactual {
+        // A standing person, wherever one fits: the windows the augmentation can touch.
+        let fits = train_set
+            .iter()
+            .filter(|t| {
+                let future: Vec<_> = (0..t.future_len()).map(|j| t.future_pose(j)).collect();
+                let always = Counterfactual {
+                    probability: 1.0,
+                    ..c.clone()
+                };
+                always
+                    .person(&future, t.velocity(), [0.0, 0.5, 0.0, 0.0])
+                    .is_some()
+            })
+            .count();
+        eprintln!(
+            "counterfactual walkers: a standing person fits in {fits} of {} training windows \
+             ({:.1} %); probability {} each time one is drawn",
+            train_set.len(),
+            100.0 * fits as f64 / train_set.len().max(1) as f64,
+            c.probability
+        );
+    }
 
     let ckpt = out_dir.join("checkpoint");
     let resume_from = if fresh {
@@ -590,6 +620,7 @@ fn export<S: human2nav_flow::train::TrainingSample>(
         ),
         path_sigma: cfg.train.path_sigma,
         mirror: cfg.train.mirror,
+        counterfactual: cfg.train.counterfactual.clone(),
         optimiser: cfg.train.describe_optimiser(),
         wall_time_s: wall,
         threads: cfg.run.threads,
@@ -780,6 +811,32 @@ pub fn run_evaluation(
         bar.finish_and_clear();
         probes.push((weight, probe));
     }
+    if cfg.eval.counterfactual_probe {
+        let person = Counterfactual {
+            cell: cache.manifest().bev.resolution,
+            step: cache.manifest().dt,
+            ..cfg.train.counterfactual.clone().unwrap_or_default()
+        };
+        let bar = ProgressBar::new(windows.len() as u64);
+        bar.set_style(ProgressStyle::with_template(
+            "probing a counterfactual person [{wide_bar}] {pos}/{len} windows  ETA {eta}",
+        )?);
+        let p = counterfactual_probe(model, &windows, &opts, &person, cfg.eval.contact, |i| {
+            bar.set_position(i as u64)
+        })?;
+        bar.finish_and_clear();
+        eprintln!(
+            "{}: counterfactual probe (a standing person on the straight line, clear of the \
+             recorded future; {} of {} windows): samples meeting the person {:.3} seen / {:.3} \
+             unseen; {:.3} m apart",
+            cfg.eval.split,
+            p.windows,
+            windows.len(),
+            p.observed,
+            p.hidden,
+            p.displacement
+        );
+    }
     let info = EvaluationInfo {
         protocol: format!(
             "{} windows drawn (seed {}) from the {} split ({}); {} samples per window, {} Euler steps; \
@@ -907,6 +964,25 @@ pub fn open_cache(
             cfg.net.horizon,
             cfg.net.bev_cells
         );
+    }
+    let cells = [
+        ("net.crowd.cell", cfg.net.crowd.as_ref().map(|c| c.cell)),
+        (
+            "train.counterfactual.cell",
+            cfg.train.counterfactual.as_ref().map(|c| c.cell),
+        ),
+    ];
+    for (field, cell) in cells {
+        if let Some(cell) = cell
+            && (cell - manifest.bev.resolution).abs() > 1e-9
+        {
+            bail!(
+                "{}: {field} = {cell} but the cache {} has cells of {} m",
+                config_path.display(),
+                cache_dir.display(),
+                manifest.bev.resolution
+            );
+        }
     }
     Ok(cache)
 }

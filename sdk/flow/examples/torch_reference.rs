@@ -70,19 +70,29 @@ fn main() -> anyhow::Result<()> {
             .map(|c| Twist2::new(c[0], c[1], c[2]))
             .collect(),
         path: Vec::new(),
+        counterfactual: Vec::new(),
     };
     let Batch {
         x,
         t: tt,
         bev,
         goal_vel: gv,
+        points,
         target,
-    } = batch_from_draws(&tuples, &rows_idx, net, norm, &draws, tch::Device::Cpu);
+    } = batch_from_draws(
+        &tuples,
+        &rows_idx,
+        net,
+        norm,
+        &draws,
+        None,
+        tch::Device::Cpu,
+    );
     let (b, t) = (rows as i64, t_len as i64);
 
     // The trainer's loss: condition encoding, FiLM, U-Net, MSE; then its gradients.
     let cond = model.net().encode_condition(&bev, &gv);
-    let pred = model.net().forward(&x, &tt, &cond);
+    let pred = model.net().forward(&x, &tt, &cond, &points);
     let loss = pred.mse_loss(&target, tch::Reduction::Mean);
     loss.backward();
 

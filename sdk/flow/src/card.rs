@@ -106,6 +106,10 @@ pub struct TrainingInfo {
     /// probability 1/2; cards written before the field existed were trained without).
     #[serde(default)]
     pub mirror: bool,
+    /// The counterfactual walkers the windows were augmented with
+    /// ([`crate::train::Counterfactual`]); absent: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub counterfactual: Option<crate::train::Counterfactual>,
     /// Optimiser and schedule, in words.
     pub optimiser: String,
     /// Wall time of training in seconds.
@@ -271,6 +275,18 @@ impl ModelCard {
                         bev.cells, card.net.bev_cells
                     ),
                 });
+            }
+            if let Some(c) = &card.net.crowd {
+                if (c.cell - bev.resolution).abs() > 1e-9 {
+                    return Err(CfmError::Toml {
+                        path: path.to_path_buf(),
+                        message: format!(
+                            "[bev] resolution = {} but net.crowd.cell = {}: the crowd pathway \
+                             would place the raster's cells at the wrong distances",
+                            bev.resolution, c.cell
+                        ),
+                    });
+                }
             }
         }
         Ok(card)

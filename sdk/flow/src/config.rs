@@ -35,6 +35,74 @@ pub struct NetConfig {
     pub bev_embed_dim: usize,
     /// Width of the goal-and-velocity embedding. Default 64.
     pub goal_embed_dim: usize,
+    /// The per-waypoint crowd pathway ([`CrowdConfig`]); absent (the default, and every model
+    /// trained before it existed): the crowd reaches the U-Net only through the pooled BEV
+    /// embedding's FiLM.
+    pub crowd: Option<CrowdConfig>,
+}
+
+/// The per-waypoint crowd pathway of [`crate::net::CondUnet1d`].
+///
+/// The BEV embedding conditions the U-Net through FiLM, a per-channel scale and shift that is
+/// the same at every waypoint: it can say "there are people around" but not "this waypoint
+/// is 0.4 m from where that person will be". The pathway gives the network that relation.
+/// The raster's occupied cells nearest the ego are read as points, each with its cell's
+/// velocity ([`crate::model::crowd_points`]); at every waypoint `i` of the trajectory being
+/// integrated, each point is carried on at its velocity to the waypoint's time
+/// `(i + 1)·step` and expressed in the waypoint's own frame (offset, distance, velocity); a
+/// shared two-layer MLP embeds every (point, waypoint) pair and a max over the points gives
+/// `width` features per waypoint, which join the trajectory's input channels. It reads the
+/// same raster as the BEV encoder (no other input), so everything that builds a raster, the
+/// planner and the crowd-hidden probe included, feeds it unchanged.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CrowdConfig {
+    /// Occupied raster cells read per condition, nearest to the ego first. Default 40 (about
+    /// ten people: a pedestrian's disc covers three to five cells of 0.3 m).
+    pub points: usize,
+    /// Features per waypoint (the MLP's width). Default 32.
+    pub width: usize,
+    /// Edge of one raster cell, metres: the model card's `bev.resolution` (checked when the
+    /// model is loaded and when training starts). Default 0.3.
+    pub cell: f64,
+    /// Seconds between waypoints. Default 0.1.
+    pub step: f64,
+}
+
+impl Default for CrowdConfig {
+    fn default() -> Self {
+        Self {
+            points: 40,
+            width: 32,
+            cell: 0.3,
+            step: 0.1,
+        }
+    }
+}
+
+impl CrowdConfig {
+    /// Checks the pathway can be built.
+    pub fn validate(&self) -> Result<(), CfmError> {
+        if self.points == 0 || self.points > 1024 {
+            return Err(CfmError::option(
+                "net.crowd.points",
+                "must be between 1 and 1024",
+            ));
+        }
+        if self.width == 0 || self.width > 1024 {
+            return Err(CfmError::option(
+                "net.crowd.width",
+                "must be between 1 and 1024",
+            ));
+        }
+        if !(self.cell.is_finite() && self.cell > 0.0) {
+            return Err(CfmError::option("net.crowd.cell", "must be finite and > 0"));
+        }
+        if !(self.step.is_finite() && self.step > 0.0) {
+            return Err(CfmError::option("net.crowd.step", "must be finite and > 0"));
+        }
+        Ok(())
+    }
 }
 
 impl Default for NetConfig {
@@ -52,6 +120,7 @@ impl Default for NetConfig {
             bev_channels: [16, 32, 64],
             bev_embed_dim: 128,
             goal_embed_dim: 64,
+            crowd: None,
         }
     }
 }
@@ -139,7 +208,22 @@ impl NetConfig {
         if self.bev_embed_dim == 0 || self.goal_embed_dim == 0 {
             return Err(CfmError::option("net.*_embed_dim", "must be positive"));
         }
+        if let Some(c) = &self.crowd {
+            c.validate()?;
+        }
         Ok(())
+    }
+
+    /// Input channels of the U-Net: the trajectory's own and the crowd pathway's.
+    pub fn unet_in_channels(&self) -> usize {
+        crate::net::TRAJ_CHANNELS as usize + self.crowd.as_ref().map_or(0, |c| c.width)
+    }
+
+    /// Values of one condition's crowd points, `points × 5` (0 without the pathway).
+    pub fn crowd_len(&self) -> usize {
+        self.crowd
+            .as_ref()
+            .map_or(0, |c| c.points * crate::net::CROWD_FEATURES as usize)
     }
 
     /// Length of one BEV raster, `3·H·W`.

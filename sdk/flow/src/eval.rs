@@ -379,6 +379,89 @@ pub fn crowd_probe<M: FlowModel + ?Sized>(
     Ok(probe)
 }
 
+/// What [`counterfactual_probe`] measured: over the windows where a standing person fits on
+/// the walker's constant-velocity line clear of its recorded future
+/// ([`crate::train::Counterfactual::person`]), the share of samples that come within
+/// `contact` of that person with the person in the raster (`observed`) and without
+/// (`hidden`, the window as recorded), and the mean distance between the two sample sets.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CounterfactualProbe {
+    /// Windows where a person fitted (of those probed).
+    pub windows: usize,
+    /// Share of samples meeting the person, person in the raster.
+    pub observed: f64,
+    /// Share of samples meeting the person's place, person not in the raster.
+    pub hidden: f64,
+    /// Mean distance (m) between a sample with and without the person.
+    pub displacement: f64,
+}
+
+/// Does the model avoid a person it sees on its way, whom the recorded human's future
+/// avoided? On each window a standing person is placed as the counterfactual augmentation
+/// would place one (`person`, drawn with probability 1), and the same source samples are
+/// integrated with and without that person in the raster (cell edge `cell`).
+pub fn counterfactual_probe<M: FlowModel + ?Sized>(
+    model: &M,
+    windows: &[EvalWindow],
+    opts: &EvalOptions,
+    person: &crate::train::Counterfactual,
+    contact: f64,
+    mut progress: impl FnMut(usize),
+) -> Result<CounterfactualProbe, FlowError> {
+    use rand::Rng;
+    let t = model.horizon();
+    let always = crate::train::Counterfactual {
+        probability: 1.0,
+        ..person.clone()
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(opts.seed ^ 0x00c0_ffee);
+    let mut probe = CounterfactualProbe::default();
+    let (mut disc, mut samples) = (Vec::new(), 0usize);
+    for (w, win) in windows.iter().enumerate() {
+        progress(w + 1);
+        let u1: f64 = rng.random();
+        let Some(a) = always.person(&win.future, win.cond.velocity, [0.0, u1, 0.0, 0.0]) else {
+            continue;
+        };
+        let cells = ((win.cond.bev.len() / 3) as f64).sqrt().round() as usize;
+        let spec = BevSpec {
+            cells,
+            resolution: always.cell,
+        };
+        let mut seen = win.cond.clone();
+        disc.resize(seen.bev.len(), 0.0);
+        crate::train::stamp(spec, a, &mut seen.bev, &mut disc);
+        let x0 = sample_source(opts.samples, t, model.source_std(), &mut rng);
+        let mut observed = x0.clone();
+        integrate(model, &mut observed, &seen, opts.steps)?;
+        let mut hidden = x0;
+        integrate(model, &mut hidden, &win.cond, opts.steps)?;
+        let meets = |s: &[f64]| {
+            s.chunks_exact(3)
+                .any(|p| (p[0] - a.position[0]).hypot(p[1] - a.position[1]) < contact)
+        };
+        for (o, h) in observed.chunks_exact(3 * t).zip(hidden.chunks_exact(3 * t)) {
+            probe.observed += f64::from(u8::from(meets(o)));
+            probe.hidden += f64::from(u8::from(meets(h)));
+            probe.displacement += o
+                .chunks_exact(3)
+                .zip(h.chunks_exact(3))
+                .map(|(p, q)| (p[0] - q[0]).hypot(p[1] - q[1]))
+                .sum::<f64>()
+                / t as f64;
+            samples += 1;
+        }
+        probe.windows += 1;
+    }
+    if samples > 0 {
+        let n = samples as f64;
+        probe.observed /= n;
+        probe.hidden /= n;
+        probe.displacement /= n;
+    }
+    Ok(probe)
+}
+
 /// Keeps a seeded random subset of at most `n` items (order shuffled).
 pub fn subsample<T>(items: &mut Vec<T>, n: usize, seed: u64) {
     use rand::seq::SliceRandom;

@@ -8,10 +8,11 @@
 //! few microseconds), so there are no false hits.
 
 use crate::card::{FORMAT_VERSION, ModelCard, SourceInfo};
-use crate::config::{NetConfig, Normalisation};
+use crate::config::{CrowdConfig, NetConfig, Normalisation};
 use crate::error::CfmError;
 use crate::io_map::{self, check_len};
 use crate::net::{CondUnet1d, Film, store_kind};
+use human2nav_core::bev::BevSpec;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use human2nav_core::input::read_user_bytes;
 use std::collections::BTreeMap;
@@ -55,6 +56,52 @@ pub fn normalise_condition(
     goal_out[3] = (velocity[1] / norm.speed_scale) as f32;
 }
 
+/// Writes the crowd points of one raster (`[3, H, W]`, velocities in m/s as rasterized) into
+/// `out` (`crowd.points × 5`): the occupied cells nearest the ego (ties by cell order), each
+/// as `[x/s, y/s, v_x/s, v_y/s, 1]` with `(x, y)` the cell's centre in the ego frame and
+/// `(v_x, v_y)` its velocity, so that `position + velocity·τ` is the cell carried on for `τ`
+/// seconds in the network's units; unused rows are zero (`present = 0`).
+///
+/// Training and inference both go through this function.
+pub fn crowd_points(
+    crowd: &CrowdConfig,
+    norm: &Normalisation,
+    cells: usize,
+    bev: &[f32],
+    out: &mut [f32],
+) {
+    let spec = BevSpec {
+        cells,
+        resolution: crowd.cell,
+    };
+    let plane = cells * cells;
+    let mut occupied: Vec<(f64, usize)> = bev[..plane]
+        .iter()
+        .enumerate()
+        .filter(|(_, o)| **o > 0.5)
+        .map(|(i, _)| {
+            let [x, y] = spec.cell_center(i / cells, i % cells);
+            (x.hypot(y), i)
+        })
+        .collect();
+    let n = crowd.points.min(occupied.len());
+    if n < occupied.len() {
+        occupied.select_nth_unstable_by(n, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        occupied.truncate(n);
+    }
+    occupied.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    out.fill(0.0);
+    let inv = 1.0 / norm.position_scale;
+    for (row, &(_, i)) in out.chunks_exact_mut(5).zip(&occupied) {
+        let [x, y] = spec.cell_center(i / cells, i % cells);
+        row[0] = (x * inv) as f32;
+        row[1] = (y * inv) as f32;
+        row[2] = (f64::from(bev[plane + i]) * inv) as f32;
+        row[3] = (f64::from(bev[2 * plane + i]) * inv) as f32;
+        row[4] = 1.0;
+    }
+}
+
 /// Trajectory features of normalised poses (flat `[T, 3]`, translations already divided by
 /// `s`), written channel-major `[5, T]` into `out`: `x, y, cos θ, sin θ, (i + 1)/T`.
 pub fn trajectory_features(poses: &[f64], out: &mut [f32]) {
@@ -74,6 +121,8 @@ const FILM_CACHE: usize = 64;
 struct CachedCondition {
     cond: FlowCondition,
     embedding: Tensor,
+    /// The crowd points `[1, N, 5]` (`N = 0` without the crowd pathway).
+    points: Tensor,
     /// FiLM parameters per flow time (keyed by the bits of `t`).
     films: Vec<(u64, Film)>,
 }
@@ -331,12 +380,34 @@ impl CfmModel {
         self.with_cached(cond, |c| Ok(c.embedding.shallow_clone()))
     }
 
-    /// FiLM parameters for `(t, cond)`, from the cache when both are unchanged.
-    fn film(&self, cond: &FlowCondition, t: f64) -> Result<Film, FlowError> {
+    /// The crowd points `[1, N, 5]` of one condition ([`crowd_points`]; `N = 0` without the
+    /// crowd pathway), in the model's kind.
+    pub fn crowd_tensor(&self, cond: &FlowCondition) -> Tensor {
+        let net = &self.card.net;
+        let mut pts = vec![0f32; net.crowd_len()];
+        if let Some(c) = &net.crowd {
+            crowd_points(
+                c,
+                &self.card.normalisation,
+                net.bev_cells,
+                &cond.bev,
+                &mut pts,
+            );
+        }
+        Tensor::from_slice(&pts)
+            .view([1, -1, crate::net::CROWD_FEATURES])
+            .to_kind(self.kind())
+            .to_device(self.device())
+    }
+
+    /// FiLM parameters and crowd points for `(t, cond)`, from the cache when both are
+    /// unchanged.
+    fn film(&self, cond: &FlowCondition, t: f64) -> Result<(Film, Tensor), FlowError> {
         self.with_cached(cond, |c| {
             let key = t.to_bits();
+            let points = c.points.shallow_clone();
             if let Some((_, f)) = c.films.iter().find(|(k, _)| *k == key) {
-                return Ok(f.shallow_clone());
+                return Ok((f.shallow_clone(), points));
             }
             let tt = Tensor::from_slice(&[t])
                 .to_kind(self.kind())
@@ -346,7 +417,7 @@ impl CfmModel {
                 c.films.remove(0);
             }
             c.films.push((key, film.shallow_clone()));
-            Ok(film)
+            Ok((film, points))
         })
     }
 
@@ -366,6 +437,7 @@ impl CfmModel {
             *cache = Some(CachedCondition {
                 cond: cond.clone(),
                 embedding,
+                points: self.crowd_tensor(cond),
                 films: Vec::new(),
             });
         }
@@ -458,8 +530,8 @@ impl FlowModel for CfmModel {
     ) -> Result<(), FlowError> {
         check_len("out", out.len(), x.len())?;
         let (feat, _) = self.feature_tensor(x)?;
-        let film = self.film(cond, t)?;
-        let v = tch::no_grad(|| self.net.forward_film(&feat, &film));
+        let (film, points) = self.film(cond, t)?;
+        let v = tch::no_grad(|| self.net.forward_film(&feat, &film, &points));
         self.write_velocity(&v, out)
     }
 
@@ -479,7 +551,7 @@ impl FlowModel for CfmModel {
         check_len("cotangent", cotangent.len(), x.len())?;
         let h = self.card.net.horizon;
         let (feat, k) = self.feature_tensor(x)?;
-        let film = self.film(cond, t)?;
+        let (film, points) = self.film(cond, t)?;
         // Cotangent of the standardised output [K, 3, T].
         let mut cot = vec![0f64; x.len()];
         io_map::for_each_output_cotangent(cotangent, h, self.out_scale, |b, c, j, v| {
@@ -488,7 +560,7 @@ impl FlowModel for CfmModel {
         let cot = tensor_of(&cot, &[k as i64, 3, h as i64], self.kind(), self.device());
         let (v, grad) = tch::with_grad(|| -> Result<(Tensor, Tensor), FlowError> {
             let feat = feat.set_requires_grad(true);
-            let v = self.net.forward_film(&feat, &film);
+            let v = self.net.forward_film(&feat, &film, &points);
             let s = (&v * &cot).sum(v.kind());
             let grads = Tensor::f_run_backward(&[&s], &[&feat], false, false)
                 .map_err(|e| FlowError::Backend(e.to_string()))?;
@@ -581,6 +653,7 @@ mod tests {
             blocks_per_level: 2,
             mid_blocks: 2,
             activation: crate::config::Activation::Mish,
+            crowd: None,
         }
     }
 
@@ -645,11 +718,26 @@ mod tests {
         }
     }
 
-    /// The autograd VJP equals central finite differences of `cotangent · f(x)` (float64).
+    /// The autograd VJP equals central finite differences of `cotangent · f(x)` (float64),
+    /// with and without the crowd pathway.
     #[test]
     fn vjp_matches_finite_differences() {
+        let crowd = NetConfig {
+            crowd: Some(CrowdConfig {
+                points: 6,
+                width: 8,
+                ..CrowdConfig::default()
+            }),
+            ..small()
+        };
+        for cfg in [small(), crowd] {
+            vjp_matches_finite_differences_for(&cfg);
+        }
+    }
+
+    fn vjp_matches_finite_differences_for(cfg: &NetConfig) {
         tch::manual_seed(1);
-        let cfg = small();
+        let cfg = cfg.clone();
         let mut model = CfmModel::new(&cfg, &norm(), Device::Cpu).unwrap();
         model.to_double();
         let cond = condition(&cfg, 3);

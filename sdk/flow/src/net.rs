@@ -14,6 +14,11 @@
 //!   `(g_x, g_y)/goal_scale, (v_x, v_y)/speed_scale`. Time: sinusoidal embedding of `100·t`
 //!   followed by a two-layer MLP.
 //!
+//! * Crowd pathway (optional, [`crate::config::CrowdConfig`]): per waypoint, `width` features
+//!   of the raster's occupied cells carried on at their velocities to the waypoint's time and
+//!   seen from the waypoint (a shared MLP per pair, max over the cells), concatenated to the
+//!   trajectory input.
+//!
 //! The BEV and goal embeddings (the "static" part of `c`) depend only on the planning
 //! condition, so [`CondUnet1d::encode_condition`] is separate from [`CondUnet1d::forward`] and
 //! can be computed once per planning call.
@@ -28,6 +33,11 @@ pub const TRAJ_CHANNELS: i64 = 5;
 pub const OUT_CHANNELS: i64 = 3;
 /// Inputs of the goal encoder: `g_x, g_y, v_x, v_y`.
 pub const GOAL_FEATURES: i64 = 4;
+/// Values per crowd point ([`crate::model::crowd_points`]): `x/s, y/s, v_x/s, v_y/s, present`.
+pub const CROWD_FEATURES: i64 = 5;
+/// Inputs of the crowd pathway's MLP per (point, waypoint): the point's offset from the
+/// waypoint in the waypoint's frame (2), its distance (1) and its velocity in that frame (2).
+pub const CROWD_PAIR_FEATURES: i64 = 5;
 /// Frequency multiplier of the sinusoidal time embedding (flow time `t ∈ [0, 1]`).
 const TIME_SCALE: f64 = 100.0;
 
@@ -148,6 +158,8 @@ pub struct CondUnet1d {
     bev_fc: nn::Linear,
     goal_fc0: nn::Linear,
     goal_fc1: nn::Linear,
+    /// The crowd pathway's two layers, when the architecture has it.
+    crowd: Option<(nn::Linear, nn::Linear)>,
     film: nn::Linear,
     /// Channels of each residual block, in [`Film`] order.
     film_channels: Vec<i64>,
@@ -180,9 +192,17 @@ impl CondUnet1d {
         let gdim = cfg.goal_embed_dim as i64;
         let goal_fc0 = nn::linear(&goal / "fc0", GOAL_FEATURES, gdim, Default::default());
         let goal_fc1 = nn::linear(&goal / "fc1", gdim, gdim, Default::default());
+        let crowd = cfg.crowd.as_ref().map(|c| {
+            let w = c.width as i64;
+            let cp = p / "crowd";
+            (
+                nn::linear(&cp / "fc0", CROWD_PAIR_FEATURES, w, Default::default()),
+                nn::linear(&cp / "fc1", w, w, Default::default()),
+            )
+        });
 
         let unet = p / "unet";
-        let dims: Vec<i64> = std::iter::once(TRAJ_CHANNELS)
+        let dims: Vec<i64> = std::iter::once(cfg.unet_in_channels() as i64)
             .chain(cfg.down_dims.iter().map(|&d| d as i64))
             .collect();
         let mut film_channels = Vec::new();
@@ -212,6 +232,7 @@ impl CondUnet1d {
             bev_fc,
             goal_fc0,
             goal_fc1,
+            crowd,
             film,
             film_channels,
             down,
@@ -379,10 +400,51 @@ impl CondUnet1d {
         Film { per_block }
     }
 
+    /// The crowd pathway's features `[B, width, T]` of trajectory features `x` (`[B, 5, T]`)
+    /// and crowd points `points` (`[B or 1, N, 5]`, [`crate::model::crowd_points`]); `None`
+    /// without the pathway.
+    pub fn crowd_features(&self, x: &Tensor, points: &Tensor) -> Option<Tensor> {
+        let (fc0, fc1) = self.crowd.as_ref()?;
+        let step = self.cfg.crowd.as_ref().map_or(0.1, |c| c.step);
+        let a = self.cfg.activation;
+        let t_len = x.size()[2];
+        let opts = (x.kind(), x.device());
+        // Waypoint times (i + 1)·step, [1, 1, T].
+        let tau = ((Tensor::arange(t_len, opts) + 1.0) * step).view([1, 1, -1]);
+        // Waypoints [B, 1, T]; points [Bp, N, 1].
+        let ch = |c: i64| x.select(1, c).unsqueeze(1);
+        let (px, py, cs, sn) = (ch(0), ch(1), ch(2), ch(3));
+        let pt = |c: i64| points.select(2, c).unsqueeze(2);
+        let (qx, qy, vx, vy, present) = (pt(0), pt(1), pt(2), pt(3), pt(4));
+        // The point at the waypoint's time, relative to the waypoint, in its frame: [B, N, T].
+        let dx = &qx + &vx * &tau - &px;
+        let dy = &qy + &vy * &tau - &py;
+        let bx = &cs * &dx + &sn * &dy;
+        let by = &cs * &dy - &sn * &dx;
+        let dist = (bx.square() + by.square() + 1e-6).sqrt();
+        let ux = &cs * &vx + &sn * &vy;
+        let uy = &cs * &vy - &sn * &vx;
+        let (b, n) = (bx.size()[0], bx.size()[1]);
+        let ux = ux.expand([b, n, t_len], false);
+        let uy = uy.expand([b, n, t_len], false);
+        let pair = Tensor::stack(&[bx, by, dist, ux, uy], 3);
+        let h = act(a, &fc1.forward(&act(a, &fc0.forward(&pair))));
+        // Max over the present points; rows without any point get zeros. [B, T, W].
+        let present = present.unsqueeze(3);
+        let masked = &h + (&present - 1.0) * 1e4;
+        let any = present.amax([1], false);
+        let pooled = masked.amax([1], false) * any;
+        Some(pooled.permute([0, 2, 1]))
+    }
+
     /// The standardised velocity `[B, 3, T]` for trajectory features `x` (`[B, 5, T]`) under
-    /// precomputed FiLM parameters.
-    pub fn forward_film(&self, x: &Tensor, film: &Film) -> Tensor {
-        let mut h = x.shallow_clone();
+    /// precomputed FiLM parameters; `points` feeds the crowd pathway when the architecture has
+    /// one (ignored otherwise).
+    pub fn forward_film(&self, x: &Tensor, film: &Film, points: &Tensor) -> Tensor {
+        let mut h = match self.crowd_features(x, points) {
+            Some(c) => Tensor::cat(&[x, &c], 1),
+            None => x.shallow_clone(),
+        };
         let mut skips = Vec::with_capacity(self.down.len());
         for lvl in &self.down {
             for b in &lvl.blocks {
@@ -409,8 +471,8 @@ impl CondUnet1d {
     }
 
     /// [`Self::film`] followed by [`Self::forward_film`].
-    pub fn forward(&self, x: &Tensor, t: &Tensor, cond: &Tensor) -> Tensor {
-        self.forward_film(x, &self.film(t, cond))
+    pub fn forward(&self, x: &Tensor, t: &Tensor, cond: &Tensor, points: &Tensor) -> Tensor {
+        self.forward_film(x, &self.film(t, cond), points)
     }
 }
 
@@ -418,7 +480,7 @@ impl CondUnet1d {
 /// (convolutions and linear layers; normalisations and activations are not counted).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Complexity {
-    /// U-Net convolutions, per trajectory.
+    /// U-Net convolutions and the crowd pathway's MLP, per trajectory.
     pub unet_macs: u64,
     /// Time MLP and the fused FiLM layer, once per `(t, c)` (shared by the batch).
     pub film_macs: u64,
@@ -449,7 +511,7 @@ impl Complexity {
         let tdim = cfg.time_embed_dim as u64;
         let _ = cond;
         let mut unet = 0u64;
-        let dims: Vec<u64> = std::iter::once(TRAJ_CHANNELS as u64)
+        let dims: Vec<u64> = std::iter::once(cfg.unet_in_channels() as u64)
             .chain(cfg.down_dims.iter().map(|&d| d as u64))
             .collect();
         let levels = cfg.down_dims.len();
@@ -471,6 +533,10 @@ impl Complexity {
         }
         let d0 = dims[1];
         unet += conv1d(d0, d0, k, len) + conv1d(d0, OUT_CHANNELS as u64, 1, len);
+        if let Some(c) = &cfg.crowd {
+            let (n, w) = (c.points as u64, c.width as u64);
+            unet += n * cfg.horizon as u64 * (CROWD_PAIR_FEATURES as u64 * w + w * w);
+        }
 
         let mut condition = 0u64;
         let mut side = cfg.bev_cells as u64;
@@ -533,18 +599,69 @@ mod tests {
             let bev = Tensor::zeros([b, 3, 32, 32], (Kind::Float, Device::Cpu));
             let g = Tensor::ones([b, 4], (Kind::Float, Device::Cpu));
             let cond = net.encode_condition(&bev, &g);
+            let none = Tensor::zeros([1, 0, CROWD_FEATURES], (Kind::Float, Device::Cpu));
             assert_eq!(
                 cond.size(),
                 vec![b, (cfg.bev_embed_dim + cfg.goal_embed_dim) as i64]
             );
             // Per-sample time and condition.
             let t = Tensor::from_slice(&[0.1f32, 0.5, 0.9]);
-            assert_eq!(net.forward(&x, &t, &cond).size(), vec![b, 3, 32]);
+            assert_eq!(net.forward(&x, &t, &cond, &none).size(), vec![b, 3, 32]);
             // One time and one condition shared by the batch.
             let t1 = Tensor::from_slice(&[0.3f32]);
             let c1 = cond.narrow(0, 0, 1);
-            assert_eq!(net.forward(&x, &t1, &c1).size(), vec![b, 3, 32]);
+            assert_eq!(net.forward(&x, &t1, &c1, &none).size(), vec![b, 3, 32]);
         }
+    }
+
+    /// The crowd pathway: output shapes, rows without points get zero features, and a point
+    /// on the trajectory changes the velocity.
+    #[test]
+    fn crowd_pathway_reads_points_per_waypoint() {
+        tch::manual_seed(0);
+        let cfg = NetConfig {
+            crowd: Some(crate::config::CrowdConfig {
+                points: 4,
+                width: 8,
+                ..Default::default()
+            }),
+            ..NetConfig::default()
+        };
+        cfg.validate().unwrap();
+        let vs = nn::VarStore::new(Device::Cpu);
+        let net = CondUnet1d::new(&vs.root(), &cfg);
+        let f = (Kind::Float, Device::Cpu);
+        // A straight path along x at 1 m/s (normalised positions, heading 0).
+        let xs = Tensor::arange(32, f) * 0.1 + 0.1;
+        let x = Tensor::stack(
+            &[
+                xs.shallow_clone(),
+                xs.zeros_like(),
+                xs.ones_like(),
+                xs.zeros_like(),
+                (Tensor::arange(32, f) + 1.0) / 32.0,
+            ],
+            0,
+        )
+        .unsqueeze(0);
+        let absent = Tensor::zeros([1, 4, CROWD_FEATURES], f);
+        let feats = net.crowd_features(&x, &absent).unwrap();
+        assert_eq!(feats.size(), vec![1, 8, 32]);
+        assert_eq!(feats.abs().sum(Kind::Float).double_value(&[]), 0.0);
+        let one = |px: f32| {
+            let mut p = vec![0f32; 4 * 5];
+            p[..5].copy_from_slice(&[px, 0.0, 0.0, 0.0, 1.0]);
+            Tensor::from_slice(&p).view([1, 4, 5])
+        };
+        let bev = Tensor::zeros([1, 3, 32, 32], f);
+        let cond = net.encode_condition(&bev, &Tensor::ones([1, 4], f));
+        let t = Tensor::from_slice(&[0.5f32]);
+        let v0 = net.forward(&x, &t, &cond, &absent);
+        let near = (net.forward(&x, &t, &cond, &one(1.5)) - &v0)
+            .abs()
+            .sum(Kind::Float)
+            .double_value(&[]);
+        assert!(near > 0.0, "a point on the path changes nothing");
     }
 
     #[test]

@@ -10,8 +10,11 @@ use crate::cfm::{TimeDistribution, TimeSampler, geodesic_point, target_velocity}
 use crate::config::{NetConfig, Normalisation};
 use crate::error::CfmError;
 use crate::model::{
-    CfmModel, normalise_condition, read_safetensors, trajectory_features, write_safetensors,
+    CfmModel, crowd_points, normalise_condition, read_safetensors, trajectory_features,
+    write_safetensors,
 };
+use crate::net::CROWD_FEATURES;
+use human2nav_core::bev::{BevAgent, BevSpec, rasterize_agents};
 use human2nav_core::fileset::{self, SetError};
 use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use human2nav_core::se2::{Pose2, Twist2};
@@ -229,6 +232,131 @@ pub struct TrainOptions {
     /// ([`Normalisation::goal_conditioned`]): from a walker's velocity and the scene alone it
     /// generates where the walker goes, a multimodal predictor of people. Default true.
     pub goal: bool,
+    /// Counterfactual walkers ([`Counterfactual`]); absent (the default): none, and batches
+    /// are exactly those of earlier versions.
+    pub counterfactual: Option<Counterfactual>,
+}
+
+/// Counterfactual walkers: an augmentation that puts into a window's raster a person the
+/// recorded walker's future avoided.
+///
+/// In a window where the walker did not go on at its velocity, a person is placed where the
+/// straight continuation would have been at some waypoint, standing or walking at a random
+/// velocity, but only where the walker's recorded future keeps `clearance` from that person's
+/// constant-velocity path at every waypoint. The recorded future is untouched: the person is
+/// one the human's own swerve or slowing would have avoided. The model sees more windows in
+/// which the crowd, not the walker's velocity, tells where the walker goes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Counterfactual {
+    /// Probability that a window gets a person, when one can be placed. Default 0.5.
+    pub probability: f64,
+    /// Least distance (m) between the recorded future and the placed person at every
+    /// waypoint. Default 0.6 (two pedestrian discs of 0.3 m).
+    pub clearance: f64,
+    /// The person's disc radius (m). Default 0.3.
+    pub radius: f64,
+    /// Fastest the person walks (m/s); half of them stand. Default 1.3.
+    pub max_speed: f64,
+    /// Edge of a raster cell (m): the cache's resolution. Default 0.3.
+    pub cell: f64,
+    /// Seconds between waypoints. Default 0.1.
+    pub step: f64,
+}
+
+impl Default for Counterfactual {
+    fn default() -> Self {
+        Self {
+            probability: 0.5,
+            clearance: 0.6,
+            radius: 0.3,
+            max_speed: 1.3,
+            cell: 0.3,
+            step: 0.1,
+        }
+    }
+}
+
+impl Counterfactual {
+    fn validate(&self) -> Result<(), CfmError> {
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        if !(0.0..=1.0).contains(&self.probability) {
+            return Err(CfmError::option(
+                "train.counterfactual.probability",
+                "must lie in [0, 1]",
+            ));
+        }
+        for (field, v) in [
+            ("train.counterfactual.clearance", self.clearance),
+            ("train.counterfactual.radius", self.radius),
+            ("train.counterfactual.cell", self.cell),
+            ("train.counterfactual.step", self.step),
+        ] {
+            if !positive(v) {
+                return Err(CfmError::option(field, "must be finite and > 0"));
+            }
+        }
+        if !(self.max_speed.is_finite() && self.max_speed >= 0.0) {
+            return Err(CfmError::option(
+                "train.counterfactual.max_speed",
+                "must be finite and ≥ 0",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The person to place in a window whose walker has velocity `velocity` and recorded
+    /// future `future` (metres, ego frame), from four uniform draws `u`; `None` when the
+    /// draw says no or no place keeps the clearance.
+    pub fn person(&self, future: &[Pose2], velocity: [f64; 2], u: [f64; 4]) -> Option<BevAgent> {
+        if u[0] >= self.probability || velocity[0].hypot(velocity[1]) < 0.3 {
+            return None;
+        }
+        let walking = u[2] >= 0.5;
+        let speed = if walking {
+            self.max_speed * (2.0 * u[2] - 1.0)
+        } else {
+            0.0
+        };
+        let heading = std::f64::consts::TAU * u[3];
+        let w = [speed * heading.cos(), speed * heading.sin()];
+        let tau = |i: usize| (i + 1) as f64 * self.step;
+        let clear = |j: usize| {
+            let at = [velocity[0] * tau(j), velocity[1] * tau(j)];
+            let start = [at[0] - w[0] * tau(j), at[1] - w[1] * tau(j)];
+            let keeps = future.iter().enumerate().all(|(i, p)| {
+                let q = [start[0] + w[0] * tau(i), start[1] + w[1] * tau(i)];
+                (p.x - q[0]).hypot(p.y - q[1]) >= self.clearance
+            });
+            (keeps && start[0].hypot(start[1]) >= self.clearance).then_some(start)
+        };
+        // Waypoints from a quarter of the horizon on, where the walker has had time to react.
+        let places: Vec<[f64; 2]> = (future.len() / 4..future.len()).filter_map(clear).collect();
+        let pick =
+            places.get(((u[1] * places.len() as f64) as usize).min(places.len().max(1) - 1))?;
+        Some(BevAgent {
+            position: *pick,
+            velocity: w,
+            radius: self.radius,
+        })
+    }
+}
+
+/// Draws `[K, 4]` uniforms for the counterfactual walkers from a generator of their own, so
+/// that the other draws of a batch are the same with or without them.
+struct CounterfactualNoise<'a> {
+    opts: &'a Counterfactual,
+    rng: ChaCha8Rng,
+}
+
+impl<'a> CounterfactualNoise<'a> {
+    fn new(opts: Option<&'a Counterfactual>, seed: u64, stream: u64) -> Option<Self> {
+        opts.map(|opts| {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_c0f7_ac7a_0001);
+            rng.set_stream(stream);
+            Self { opts, rng }
+        })
+    }
 }
 
 impl Default for TrainOptions {
@@ -250,6 +378,7 @@ impl Default for TrainOptions {
             mirror: false,
             path_sigma: 0.0,
             goal: true,
+            counterfactual: None,
         }
     }
 }
@@ -292,6 +421,9 @@ impl TrainOptions {
                 "train.path_sigma",
                 format!("{} must lie in [0, 1] (normalised units)", self.path_sigma),
             ));
+        }
+        if let Some(c) = &self.counterfactual {
+            c.validate()?;
         }
         self.time.validate()
     }
@@ -374,6 +506,8 @@ pub struct Batch {
     pub bev: Tensor,
     /// `[B, 4]` normalised goal and ego velocity.
     pub goal_vel: Tensor,
+    /// `[B, N, 5]` crowd points of the (mirrored) rasters (`N = 0` without the crowd pathway).
+    pub points: Tensor,
     /// `[B, 3, T]` standardised target velocities `ξ/σ`.
     pub target: Tensor,
 }
@@ -408,6 +542,9 @@ pub struct BatchDraws {
     pub source: Vec<Twist2>,
     /// Per row and waypoint: the path noise twist, scaled by `σ`; empty without path noise.
     pub path: Vec<Twist2>,
+    /// Per row: the four uniforms of [`Counterfactual::person`]; empty without
+    /// counterfactual walkers.
+    pub counterfactual: Vec<[f64; 4]>,
 }
 
 /// The draws of a batch of `rows` rows from `rng` (and the path noise's own generator), in
@@ -419,6 +556,7 @@ fn draw_batch<R: Rng + ?Sized>(
     time: &TimeSampler,
     mirror: bool,
     path: Option<&mut PathNoise>,
+    counterfactual: Option<&mut CounterfactualNoise<'_>>,
     rng: &mut R,
 ) -> BatchDraws {
     let mut path = path.filter(|p| p.sigma > 0.0);
@@ -433,6 +571,11 @@ fn draw_batch<R: Rng + ?Sized>(
             }
         }
     }
+    if let Some(c) = counterfactual {
+        d.counterfactual = (0..rows)
+            .map(|_| std::array::from_fn(|_| c.rng.random::<f64>()))
+            .collect();
+    }
     d
 }
 
@@ -446,23 +589,34 @@ fn build_batch<S: TrainingSample, R: Rng + ?Sized>(
     time: &TimeSampler,
     mirror: bool,
     path: Option<&mut PathNoise>,
+    counterfactual: Option<&mut CounterfactualNoise<'_>>,
     rng: &mut R,
     device: Device,
 ) -> Batch {
-    let draws = draw_batch(idx.len(), net.horizon, time, mirror, path, rng);
-    batch_from_draws(data, idx, net, norm, &draws, device)
+    let opts = counterfactual.as_ref().map(|c| c.opts);
+    let draws = draw_batch(
+        idx.len(),
+        net.horizon,
+        time,
+        mirror,
+        path,
+        counterfactual,
+        rng,
+    );
+    batch_from_draws(data, idx, net, norm, &draws, opts, device)
 }
 
 /// The batch of examples `idx` given its random part: the recipe of the trainer's batches
 /// (the SE(2) geodesic point and target of Eq. 3, trajectory features, mirrored and
-/// normalised conditions), public so that a reference implementation can be checked against
-/// it on the same draws.
+/// normalised conditions, counterfactual walkers when `counterfactual` is given), public so
+/// that a reference implementation can be checked against it on the same draws.
 pub fn batch_from_draws<S: TrainingSample>(
     data: &[S],
     idx: &[usize],
     net: &NetConfig,
     norm: &Normalisation,
     draws: &BatchDraws,
+    counterfactual: Option<&Counterfactual>,
     device: Device,
 ) -> Batch {
     let b = idx.len();
@@ -474,8 +628,11 @@ pub fn batch_from_draws<S: TrainingSample>(
     let mut ts = vec![0f32; b];
     let mut bev = vec![0f32; b * bev_len];
     let mut gv = vec![0f32; b * 4];
+    let crowd_len = net.crowd_len();
+    let mut points = vec![0f32; b * crowd_len];
     let mut poses = vec![0f64; t_len * 3];
     let mut flipped = vec![0f32; bev_len];
+    let (mut stamped, mut disc) = (vec![0f32; bev_len], vec![0f32; bev_len]);
     let s = norm.position_scale;
     for (row, &i) in idx.iter().enumerate() {
         let ex = &data[i];
@@ -521,6 +678,37 @@ pub fn batch_from_draws<S: TrainingSample>(
         } else {
             ex.bev()
         };
+        let person = counterfactual
+            .zip(draws.counterfactual.get(row))
+            .and_then(|(c, &u)| {
+                let future: Vec<Pose2> = (0..t_len)
+                    .map(|j| {
+                        let p = ex.future_pose(j);
+                        if flip {
+                            Pose2::new(p.x, -p.y, -p.theta)
+                        } else {
+                            p
+                        }
+                    })
+                    .collect();
+                c.person(&future, vel, u).map(|a| (c.cell, a))
+            });
+        let src: &[f32] = match person {
+            Some((cell, a)) => {
+                stamped.copy_from_slice(src);
+                stamp(
+                    BevSpec {
+                        cells,
+                        resolution: cell,
+                    },
+                    a,
+                    &mut stamped,
+                    &mut disc,
+                );
+                &stamped
+            }
+            None => src,
+        };
         normalise_condition(
             norm,
             src,
@@ -529,6 +717,10 @@ pub fn batch_from_draws<S: TrainingSample>(
             &mut bev[row * bev_len..(row + 1) * bev_len],
             &mut gv[row * 4..row * 4 + 4],
         );
+        if let Some(c) = &net.crowd {
+            let out = &mut points[row * crowd_len..(row + 1) * crowd_len];
+            crowd_points(c, norm, cells, src, out);
+        }
     }
     let (bi, ti, ci) = (b as i64, t_len as i64, cells as i64);
     Batch {
@@ -538,16 +730,33 @@ pub fn batch_from_draws<S: TrainingSample>(
             .view([bi, 3, ci, ci])
             .to_device(device),
         goal_vel: Tensor::from_slice(&gv).view([bi, 4]).to_device(device),
+        points: Tensor::from_slice(&points)
+            .view([bi, -1, CROWD_FEATURES])
+            .to_device(device),
         target: Tensor::from_slice(&target)
             .view([bi, 3, ti])
             .to_device(device),
     }
 }
 
+/// Draws `agent` (ego frame) over `raster`: where its disc lies, its occupancy and velocity
+/// replace what was there. `disc` is scratch of the raster's size.
+pub fn stamp(spec: BevSpec, agent: BevAgent, raster: &mut [f32], disc: &mut [f32]) {
+    rasterize_agents(spec, Pose2::IDENTITY, [agent], disc);
+    let plane = spec.cells * spec.cells;
+    for k in 0..plane {
+        if disc[k] > 0.5 {
+            for c in 0..3 {
+                raster[c * plane + k] = disc[c * plane + k];
+            }
+        }
+    }
+}
+
 /// CFM loss (Eq. 3) of `model` on a batch: mean squared error of the standardised velocity.
 fn batch_loss(model: &CfmModel, b: &Batch) -> Tensor {
     let cond = model.net().encode_condition(&b.bev, &b.goal_vel);
-    let pred = model.net().forward(&b.x, &b.t, &cond);
+    let pred = model.net().forward(&b.x, &b.t, &cond, &b.points);
     pred.mse_loss(&b.target, tch::Reduction::Mean)
 }
 
@@ -843,6 +1052,8 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
             &self.time,
             self.opts.mirror,
             PathNoise::new(self.opts.path_sigma, self.opts.seed, step).as_mut(),
+            CounterfactualNoise::new(self.opts.counterfactual.as_ref(), self.opts.seed, step)
+                .as_mut(),
             &mut rng,
             self.model.device(),
         );
@@ -936,6 +1147,7 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
                 &self.time,
                 false,
                 path.as_mut(),
+                None,
                 &mut rng,
                 self.ema.device(),
             );
@@ -1003,6 +1215,7 @@ pub fn evaluate_loss<S: TrainingSample>(
             &card.normalisation,
             &sampler,
             false,
+            None,
             None,
             &mut rng,
             model.device(),
@@ -1141,6 +1354,7 @@ mod tests {
                 &time,
                 false,
                 path.as_mut(),
+                None,
                 &mut rng,
                 Device::Cpu,
             )
@@ -1286,6 +1500,77 @@ mod tests {
             Err(CfmError::Option { field: "train", .. })
         ));
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A walker going straight at its velocity gets no counterfactual person (its future
+    /// would meet them); one that stopped gets a person where it would have been, clear of
+    /// its recorded future at every waypoint; the person appears in the batch's raster.
+    #[test]
+    fn counterfactual_people_are_clear_of_the_recorded_future() {
+        let c = Counterfactual::default();
+        let straight: Vec<Pose2> = (1..=32)
+            .map(|i| Pose2::new(0.12 * i as f64, 0.0, 0.0))
+            .collect();
+        for u1 in [0.0, 0.5, 0.99] {
+            assert_eq!(c.person(&straight, [1.2, 0.0], [0.1, u1, 0.2, 0.0]), None);
+        }
+        // It stopped after 1 m.
+        let stopped: Vec<Pose2> = (1..=32)
+            .map(|i| Pose2::new((0.12 * i as f64).min(1.0), 0.0, 0.0))
+            .collect();
+        assert_eq!(
+            c.person(&stopped, [1.2, 0.0], [0.9, 0.5, 0.2, 0.0]),
+            None,
+            "u0 ≥ p"
+        );
+        for u in [
+            [0.1, 0.0, 0.2, 0.0],
+            [0.1, 0.99, 0.2, 0.0],
+            [0.3, 0.5, 0.9, 0.6],
+        ] {
+            let a = c
+                .person(&stopped, [1.2, 0.0], u)
+                .expect("a place ahead of the stop");
+            for (i, p) in stopped.iter().enumerate() {
+                let t = (i + 1) as f64 * c.step;
+                let q = [
+                    a.position[0] + a.velocity[0] * t,
+                    a.position[1] + a.velocity[1] * t,
+                ];
+                assert!((p.x - q[0]).hypot(p.y - q[1]) >= c.clearance - 1e-12);
+            }
+        }
+        // In a batch: the row's raster gains the person's disc.
+        let ex = Example {
+            bev: vec![0.0; 3 * 16 * 16],
+            goal: [5.0, 0.0],
+            velocity: [1.2, 0.0],
+            future: stopped,
+        };
+        let net = NetConfig {
+            horizon: 32,
+            bev_cells: 16,
+            ..tiny_net()
+        };
+        let norm = Normalisation::default();
+        let draws = BatchDraws {
+            flip: vec![false],
+            t: vec![0.5],
+            source: vec![Twist2::new(0.0, 0.0, 0.0); 32],
+            path: Vec::new(),
+            counterfactual: vec![[0.1, 0.5, 0.2, 0.0]],
+        };
+        let data = [ex];
+        let occupied = |b: &Batch| b.bev.narrow(1, 0, 1).sum(Kind::Float).double_value(&[]);
+        let with = batch_from_draws(&data, &[0], &net, &norm, &draws, Some(&c), Device::Cpu);
+        let without = batch_from_draws(&data, &[0], &net, &norm, &draws, None, Device::Cpu);
+        assert_eq!(occupied(&without), 0.0);
+        assert!(occupied(&with) >= 1.0);
+        assert_eq!(
+            (with.target - without.target).abs().max().double_value(&[]),
+            0.0,
+            "the recorded future is the target either way"
+        );
     }
 
     #[test]

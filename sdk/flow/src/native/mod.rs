@@ -13,13 +13,15 @@
 //! normalisation and output scaling), so a planner can use either; the agreement tests compare
 //! the two. It runs on the CPU, one thread per model; a GPU runs [`CfmModel`].
 
+mod crowd;
 mod kernels;
 mod net;
 
 use crate::card::ModelCard;
 use crate::error::CfmError;
 use crate::io_map::{self, batch_of, check_len};
-use crate::model::{CARD_FILE, CfmModel, normalise_condition};
+use crate::model::{CARD_FILE, CfmModel, crowd_points, normalise_condition};
+use crowd::CrowdTape;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use human2nav_core::input::read_user_bytes;
 use net::{Net, Pool, Tape, WeightError, Weights};
@@ -42,6 +44,8 @@ struct Forward {
     x: Vec<f64>,
     batch: usize,
     tape: Tape,
+    /// The crowd pathway's part of the pass (empty without one).
+    crowd: CrowdTape,
     raw: Vec<f32>,
     /// Last use (for least-recently-used replacement).
     stamp: u64,
@@ -52,6 +56,8 @@ struct Forward {
 struct State {
     cond: Option<FlowCondition>,
     embedding: Vec<f32>,
+    /// The condition's crowd points ([`crowd_points`]; empty without the crowd pathway).
+    points: Vec<f32>,
     /// FiLM vectors per flow time (keyed by the bits of `t`).
     films: Vec<(u64, Vec<f32>)>,
     /// Recent forward passes under this condition.
@@ -176,6 +182,13 @@ impl NativeCfm {
                 &mut gv,
             );
             st.embedding = self.net.encode_condition(&bev, &gv);
+            let net = &self.card.net;
+            st.points.clear();
+            st.points.resize(net.crowd_len(), 0.0);
+            if let Some(c) = &net.crowd {
+                let norm = &self.card.normalisation;
+                crowd_points(c, norm, net.bev_cells, &cond.bev, &mut st.points);
+            }
             st.films.clear();
             st.forwards.iter_mut().for_each(|f| f.x.clear());
             st.cond = Some(cond.clone());
@@ -220,6 +233,9 @@ impl NativeCfm {
         };
         write_features(x, h, self.card.normalisation.position_scale, &mut st.feat);
         let f = &mut st.forwards[slot];
+        if let Some(c) = &self.net.crowd {
+            c.forward(&mut st.feat, (k, h), &st.points, &mut f.crowd);
+        }
         self.net.forward(
             &st.feat,
             k,
@@ -325,11 +341,13 @@ impl FlowModel for NativeCfm {
             dfeat,
             cot,
             pool,
+            points,
             ..
         } = &mut *st;
         let Forward {
             batch: k,
             tape,
+            crowd,
             raw,
             ..
         } = &mut forwards[slot];
@@ -341,6 +359,9 @@ impl FlowModel for NativeCfm {
             cot[(c * k + b) * h + j] = v as f32;
         });
         self.net.backward(cot, &films[fi].1, tape, pool, dfeat);
+        if let Some(c) = &self.net.crowd {
+            c.backward(dfeat, (k, h), points, crowd);
+        }
         let s = self.card.normalisation.position_scale;
         io_map::pull_back_features(
             x,

@@ -4,12 +4,13 @@
 //! [`Tape`]. Activations are `[C, B, L]` (channel-major), so the U-Net's channel concatenation
 //! is a plain append and a convolution is one matrix product over the whole batch.
 
+use super::crowd::Crowd;
 use super::kernels::{
     BlockNorm, Taps, activate_in_place, add_bias, add_to, gather, linear, norm_act,
     norm_act_backward, resize_for_overwrite, scatter_add, sgemm,
 };
 use crate::config::{Activation, NetConfig};
-use crate::net::{GOAL_FEATURES, OUT_CHANNELS, TRAJ_CHANNELS};
+use crate::net::{GOAL_FEATURES, OUT_CHANNELS};
 use std::collections::BTreeMap;
 
 /// Where a weight tensor is missing or has the wrong size.
@@ -25,7 +26,7 @@ pub(crate) type Weights = BTreeMap<String, Vec<f32>>;
 
 /// Removes the tensor `name` of `len` values from `w` (so that what is left afterwards is
 /// what the architecture does not use).
-fn take(w: &mut Weights, name: &str, len: usize) -> Result<Vec<f32>, WeightError> {
+pub(crate) fn take(w: &mut Weights, name: &str, len: usize) -> Result<Vec<f32>, WeightError> {
     match w.remove(name) {
         Some(v) if v.len() == len => Ok(v),
         other => Err(WeightError {
@@ -506,6 +507,8 @@ pub(crate) struct Net {
     goal0: Linear,
     goal1: Linear,
     film: Linear,
+    /// The crowd pathway, when the architecture has one.
+    pub(crate) crowd: Option<Crowd>,
     down: Vec<DownLevel>,
     mid: Vec<ResBlock>,
     up: Vec<UpLevel>,
@@ -552,8 +555,12 @@ impl Net {
     pub(crate) fn load(cfg: &NetConfig, w: &mut Weights) -> Result<Self, WeightError> {
         let tdim = cfg.time_embed_dim;
         let (bev, bev_out) = Self::load_bev(cfg, w)?;
-        // Channels per U-Net level, the trajectory's own first.
-        let dims: Vec<usize> = std::iter::once(TRAJ_CHANNELS as usize)
+        let crowd = match &cfg.crowd {
+            Some(c) => Some(Crowd::load(c, cfg.activation, w)?),
+            None => None,
+        };
+        // Channels per U-Net level, the input's own (trajectory and crowd pathway) first.
+        let dims: Vec<usize> = std::iter::once(cfg.unet_in_channels())
             .chain(cfg.down_dims.iter().copied())
             .collect();
         // Every residual block takes its FiLM slice from one shared projection, in this order.
@@ -585,6 +592,7 @@ impl Net {
             goal0: Linear::load(w, "goal.fc0", GOAL_FEATURES as usize, cfg.goal_embed_dim)?,
             goal1: Linear::load(w, "goal.fc1", cfg.goal_embed_dim, cfg.goal_embed_dim)?,
             film: Linear::load(w, "unet.film", cfg.cond_dim(), film_width)?,
+            crowd,
             down,
             mid,
             up,
@@ -748,7 +756,8 @@ impl Net {
         self.film.apply(&c)
     }
 
-    /// The network output `[3, batch, T]` for features `x` (`[5, batch, T]`), recording in
+    /// The network output `[3, batch, T]` for features `x` (`[5, batch, T]`, then the crowd
+    /// pathway's `[width, batch, T]` when the network has one), recording in
     /// `tape` what [`Self::backward`] needs.
     pub(crate) fn forward(
         &self,
@@ -822,7 +831,8 @@ impl Net {
         pool.acts = acts;
     }
 
-    /// `dx = ∂out/∂xᵀ·dout` of the forward pass recorded in `tape`, `dx` `[5, batch, T]`.
+    /// `dx = ∂out/∂xᵀ·dout` of the forward pass recorded in `tape`, `dx` shaped as the
+    /// forward pass's `x`.
     pub(crate) fn backward(
         &self,
         dout: &[f32],

@@ -1,6 +1,7 @@
 //! Agreement of the native network with the libtorch one: forward values and vector-Jacobian
-//! products to 1e-5 relative error (`‖a − b‖∞ / ‖b‖∞`) on random inputs, for the shipped
-//! architecture and for a small one with more blocks per level and Mish.
+//! products to 1e-5 relative error (`‖a − b‖∞ / ‖b‖∞`) on random inputs, for the default
+//! architecture, a small one with more blocks per level and Mish, and both with the crowd
+//! pathway.
 
 use super::*;
 use crate::config::{Activation, NetConfig, Normalisation};
@@ -30,6 +31,7 @@ fn small() -> NetConfig {
         blocks_per_level: 2,
         mid_blocks: 2,
         activation: Activation::Mish,
+        crowd: None,
     }
 }
 
@@ -128,6 +130,32 @@ fn agrees_with_torch_on_the_shipped_architecture() {
 #[test]
 fn agrees_with_torch_on_deeper_levels_more_blocks_and_mish() {
     check_agreement(&small(), 8);
+}
+
+#[test]
+fn agrees_with_torch_with_the_crowd_pathway() {
+    let crowd = |points, width| {
+        Some(crate::config::CrowdConfig {
+            points,
+            width,
+            ..Default::default()
+        })
+    };
+    check_agreement(
+        &NetConfig {
+            crowd: crowd(40, 32),
+            ..NetConfig::default()
+        },
+        9,
+    );
+    // Fewer points than occupied cells, and Mish.
+    check_agreement(
+        &NetConfig {
+            crowd: crowd(6, 8),
+            ..small()
+        },
+        10,
+    );
 }
 
 #[test]

@@ -458,8 +458,16 @@ fn edit(text: &str, from: &str, to: &str) -> String {
 }
 
 fn planner_edit(from: &'static str, to: &'static str) -> impl Fn(&Path) -> Result<(), String> {
+    planner_edits(vec![(from, to)])
+}
+
+/// The shipped planner file with several edits, each as [`edit`].
+fn planner_edits(edits: Vec<(&'static str, &'static str)>) -> impl Fn(&Path) -> Result<(), String> {
     move |dir| {
-        let p = write(dir, "planner.toml", edit(PLANNER, from, to));
+        let text = edits
+            .iter()
+            .fold(PLANNER.to_string(), |t, (from, to)| edit(&t, from, to));
+        let p = write(dir, "planner.toml", text);
         fail(PlannerConfig::load(&p))
     }
 }
@@ -539,10 +547,23 @@ fn config_cases() -> Vec<Case> {
         ),
         err(
             a,
-            "planner.toml `samples = 0`",
+            "planner.toml `samples = 0` with `motions = 0` (nothing to plan from)",
             NR,
             &["samples"],
-            planner_edit("\nsamples = 4 ", "\nsamples = 0 "),
+            planner_edits(vec![
+                ("\nsamples = 4 ", "\nsamples = 0 "),
+                ("\nmotions = 500 ", "\nmotions = 0 "),
+            ]),
+        ),
+        err(
+            a,
+            "planner.toml `samples = 0` with `motions_recovery = true`",
+            NR,
+            &["motions_recovery"],
+            planner_edits(vec![
+                ("\nsamples = 4 ", "\nsamples = 0 "),
+                ("\nmotions_recovery = false", "\nmotions_recovery = true"),
+            ]),
         ),
         err(
             a,

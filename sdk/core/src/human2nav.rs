@@ -225,9 +225,11 @@ pub const MAX_BUDGET_MS: f64 = 60_000.0;
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Human2NavSettings {
-    /// Number of sampled candidates `K` (1 to [`MAX_SAMPLES`]). Default 4, as `planner.toml`
+    /// Number of sampled candidates `K` (0 to [`MAX_SAMPLES`]). Default 4, as `planner.toml`
     /// ships (16 until December 2026; on the validation suites 4 succeed as often, and the
-    /// network's work per call is a quarter).
+    /// network's work per call is a quarter). 0: the model is not called, and the robot's own
+    /// motions ([`Self::motions`], which must then be offered) and the extra candidates are
+    /// all there is: the arm that measures what the model adds.
     pub samples: usize,
     /// Time between plan poses (s); must match the model's training data. Default 0.1.
     pub dt: f64,
@@ -269,6 +271,11 @@ pub struct Human2NavSettings {
     /// people and near its goal are narrow: default 2401, every pair of its 7 × 7 grid
     /// (`planner.toml` says which validation run chose it).
     pub car_motions: usize,
+    /// Offer the robot's own motions only as a recovery: when none of the model's candidates
+    /// (its samples and their slowed copies) keeps out of contact with the people and
+    /// obstacles as forecast ([`Clearance::contact_free`]), like a controller's recovery
+    /// behaviour. Default false: the motions are always offered.
+    pub motions_recovery: bool,
     /// Time budget of one [`Planner::plan`] call in milliseconds (0: none). The call then
     /// returns the best plan found within it (module docs, "Planning under a deadline").
     /// [`Planner::plan_within`] takes a deadline per call instead. Default 0.
@@ -301,6 +308,7 @@ impl Default for Human2NavSettings {
             goal_approach: 1.0,
             motions: 500,
             car_motions: 2401,
+            motions_recovery: false,
             budget_ms: 0.0,
             // Algorithm 1 is off in the shipped planner: on the validation suite the correction
             // alone succeeded more often (ARCHITECTURE.md, "The guidance ablation"). Switched
@@ -323,8 +331,17 @@ impl Human2NavSettings {
                 "human2nav.{field}: {why}"
             )))
         };
-        if self.samples == 0 {
-            return bad("samples", "must be at least 1");
+        if self.samples == 0 && self.motions == 0 {
+            return bad(
+                "samples",
+                "0 (no model samples) needs the robot's own motions (motions > 0)",
+            );
+        }
+        if self.samples == 0 && self.motions_recovery {
+            return bad(
+                "motions_recovery",
+                "with samples = 0 there are no model candidates to recover from",
+            );
         }
         if self.samples > MAX_SAMPLES {
             return bad(
@@ -486,12 +503,7 @@ impl<M: FlowModel> Human2Nav<M> {
         }
         let mut robot = robot;
         let sel = &settings.selection;
-        let clearance = Clearance {
-            margin: sel.margin,
-            collision: sel.collision,
-            hold: steps(sel.hold, settings.dt),
-            arrival: (sel.progress != Progress::End).then_some(sel.arrival),
-        };
+        let clearance = selection_clearance(&settings);
         clearance
             .validate()
             .and_then(|()| robot.phi.push(sel.clearance, Box::new(clearance)))
@@ -640,16 +652,21 @@ impl<M: FlowModel> Human2Nav<M> {
         };
 
         // Stage 1: the K samples of the flow model, without guidance (Φ for diagnostics).
-        let first = self.sample_stage(
-            obs,
-            &cond,
-            &x0,
-            &agents,
-            &forecast,
-            deadline,
-            &mut stages,
-            &mut notes,
-        )?;
+        let first = if k == 0 {
+            stages.sampling.planned = 0;
+            None
+        } else {
+            self.sample_stage(
+                obs,
+                &cond,
+                &x0,
+                &agents,
+                &forecast,
+                deadline,
+                &mut stages,
+                &mut notes,
+            )?
+        };
         let unguided: Vec<Vec<Pose2>> = first
             .as_ref()
             .map(|f| (0..k).map(|i| f.unguided_poses(i)).collect())
@@ -718,8 +735,27 @@ impl<M: FlowModel> Human2Nav<M> {
             );
         }
         // The robot's own motions are within its limits as they are: no correction. Not
-        // after the deadline: scoring them takes milliseconds.
-        if stages.cut_short.is_none() && !deadline.passed() {
+        // after the deadline: scoring them takes milliseconds. As a recovery, only when no
+        // model candidate the selection may choose is free of predicted contact.
+        let recover = || -> Result<bool, Failure> {
+            if !self.settings.motions_recovery {
+                return Ok(true);
+            }
+            let any_corrected = corrected.contains(&true);
+            let model: Vec<Vec<Pose2>> = candidates
+                .iter()
+                .zip(&origin)
+                .enumerate()
+                .filter(|(i, (_, o))| {
+                    o.sample().is_some() && (!any_corrected || corrected.get(*i) == Some(&true))
+                })
+                .map(|(_, (c, _))| c.clone())
+                .collect();
+            let ctx = self.phi_context(obs, &agents, &forecast, goal);
+            let free = self.contact_free(&self.scored(&model), &ctx)?;
+            Ok(!free.contains(&true))
+        };
+        if stages.cut_short.is_none() && !deadline.passed() && recover()? {
             self.push_motions(obs.ego_velocity, horizon, &mut candidates, &mut origin);
         }
         if !corrected.is_empty() {
@@ -1132,6 +1168,28 @@ impl<M: FlowModel> Human2Nav<M> {
         phi_context(self.settings.dt, &self.robot.limits, obs, agents, scene)
     }
 
+    /// The selection's clearance term (the one in Φ).
+    fn clearance(&self) -> Clearance {
+        selection_clearance(&self.settings)
+    }
+
+    /// Whether each ego-frame candidate keeps out of contact with the people and obstacles as
+    /// forecast, by the selection's clearance term ([`Clearance::contact_free`]).
+    fn contact_free(
+        &self,
+        candidates: &[Vec<Pose2>],
+        ctx: &ConstraintContext<'_>,
+    ) -> Result<Vec<bool>, Failure> {
+        let Some((data, poses)) = pose_batch(candidates)? else {
+            return Ok(Vec::new());
+        };
+        let batch = TrajBatch::new(&data, candidates.len(), poses)
+            .map_err(|e| Failure::from(e.to_string()))?;
+        self.clearance()
+            .contact_free(batch, ctx)
+            .map_err(|e| Failure::from(e.to_string()))
+    }
+
     /// Φ of every ego-frame candidate (each with the robot's pose, the identity, prepended as
     /// pose 0), without gradients. A term that fails or answers a non-finite cost is an error
     /// naming it: the selection never scores without a term.
@@ -1140,22 +1198,9 @@ impl<M: FlowModel> Human2Nav<M> {
         candidates: &[Vec<Pose2>],
         ctx: &ConstraintContext<'_>,
     ) -> Result<Vec<f64>, Failure> {
-        let Some(first) = candidates.first() else {
+        let Some((data, poses)) = pose_batch(candidates)? else {
             return Ok(Vec::new());
         };
-        let poses = first.len() + 1;
-        let mut data = Vec::with_capacity(candidates.len() * poses * 3);
-        for c in candidates {
-            if c.len() + 1 != poses {
-                return Err(Failure::from(format!(
-                    "candidates of {} and {} poses cannot be scored together",
-                    first.len(),
-                    c.len()
-                )));
-            }
-            data.extend_from_slice(&[0.0; 3]);
-            data.extend(c.iter().flat_map(|p| p.to_array()));
-        }
         let batch = TrajBatch::new(&data, candidates.len(), poses)
             .map_err(|e| Failure::from(e.to_string()))?;
         let mut cost = vec![0.0; candidates.len()];
@@ -1500,6 +1545,40 @@ impl<M: FlowModel + Send> Planner for Human2Nav<M> {
 /// Φ's context at a planning instant: the plan step, the robot's limits, its velocity, the
 /// nearby pedestrians and the scene (a free function so that it borrows fields, not the whole
 /// planner).
+/// Ego-frame candidates as one flat batch of poses, each with the robot's pose (the identity)
+/// prepended as pose 0, and the poses per trajectory; `None` without candidates. Candidates
+/// of different lengths cannot be scored together (an error).
+fn pose_batch(candidates: &[Vec<Pose2>]) -> Result<Option<(Vec<f64>, usize)>, Failure> {
+    let Some(first) = candidates.first() else {
+        return Ok(None);
+    };
+    let poses = first.len() + 1;
+    let mut data = Vec::with_capacity(candidates.len() * poses * 3);
+    for c in candidates {
+        if c.len() + 1 != poses {
+            return Err(Failure::from(format!(
+                "candidates of {} and {} poses cannot be scored together",
+                first.len(),
+                c.len()
+            )));
+        }
+        data.extend_from_slice(&[0.0; 3]);
+        data.extend(c.iter().flat_map(|p| p.to_array()));
+    }
+    Ok(Some((data, poses)))
+}
+
+/// The clearance term the selection weights (`selection.clearance`) from its settings.
+fn selection_clearance(settings: &Human2NavSettings) -> Clearance {
+    let sel = &settings.selection;
+    Clearance {
+        margin: sel.margin,
+        collision: sel.collision,
+        hold: steps(sel.hold, settings.dt),
+        arrival: (sel.progress != Progress::End).then_some(sel.arrival),
+    }
+}
+
 fn phi_context<'a>(
     dt: f64,
     limits: &'a Limits,

@@ -320,7 +320,7 @@ fn a_broken_model_gives_the_stop_in_place_fallback() {
 #[test]
 fn invalid_settings_name_the_field() {
     let settings = Human2NavSettings {
-        samples: 0,
+        samples: human2nav_core::human2nav::MAX_SAMPLES + 1,
         ..Human2NavSettings::default()
     };
     let err = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings).unwrap_err();
@@ -927,22 +927,8 @@ fn a_wall_or_an_occupied_grid_column_across_the_way_stops_the_plan_short_of_it()
 
 #[test]
 fn the_robots_own_motions_steer_round_what_the_samples_run_into() {
-    // Somebody stands 2 m straight ahead, where every sample of the model goes.
     let ego = Pose2::new(0.0, 0.0, 0.0);
-    let obs = Observation {
-        time: 0.0,
-        ego,
-        ego_velocity: Twist2::new(0.5, 0.0, 0.0),
-        goal: [6.0, 0.0],
-        agents: vec![AgentState {
-            id: 1,
-            position: [2.0, 0.0],
-            velocity: [0.0, 0.0],
-            radius: 0.3,
-            history: vec![],
-        }],
-        ..Default::default()
-    };
+    let obs = someone_ahead();
     let plan_with = |motions: usize| {
         let settings = Human2NavSettings {
             motions,
@@ -1115,5 +1101,100 @@ fn crowd_guidance_is_checked_and_leaves_a_model_blind_to_its_raster_unchanged() 
     for bad in [-1.0, f64::NAN, f64::INFINITY, 101.0] {
         let err = with(bad).validate().unwrap_err().to_string();
         assert!(err.contains("crowd_weight"), "{err}");
+    }
+}
+
+/// Somebody stands 2 m straight ahead of the robot (at the origin, 0.5 m/s), where every
+/// sample of the model goes.
+fn someone_ahead() -> Observation {
+    Observation {
+        time: 0.0,
+        ego: Pose2::IDENTITY,
+        ego_velocity: Twist2::new(0.5, 0.0, 0.0),
+        goal: [6.0, 0.0],
+        agents: vec![AgentState {
+            id: 1,
+            position: [2.0, 0.0],
+            velocity: [0.0, 0.0],
+            radius: 0.3,
+            history: vec![],
+        }],
+        ..Default::default()
+    }
+}
+
+/// With `motions_recovery` the robot's own motions come in only when every model candidate
+/// runs into someone: on an open floor the plan is the one without motions; with somebody
+/// standing where every sample goes, a motion takes the robot round.
+#[test]
+fn motions_as_a_recovery_come_in_only_when_every_model_candidate_meets_someone() {
+    let plan = |obs: &Observation, motions: usize, motions_recovery: bool| {
+        let settings = Human2NavSettings {
+            motions,
+            motions_recovery,
+            ..Human2NavSettings::default()
+        };
+        Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings)
+            .unwrap()
+            .plan(obs)
+            .unwrap()
+    };
+    let free = open_floor();
+    assert_eq!(plan(&free, 500, true).poses, plan(&free, 0, false).poses);
+    let ahead = someone_ahead();
+    let recovered = plan(&ahead, 500, true);
+    assert!(
+        recovered
+            .info
+            .notes
+            .iter()
+            .any(|n| n == "one of the robot's own motions"),
+        "{:?}",
+        recovered.info.notes
+    );
+    assert_eq!(recovered.poses, plan(&ahead, 500, false).poses);
+}
+
+/// `samples = 0` plans from the robot's own motions and the extra candidates alone (the arm
+/// that measures what the model adds); without motions, or as a recovery from nothing, it is
+/// an error naming the field.
+#[test]
+fn zero_samples_plan_from_the_motions_alone() {
+    let settings = Human2NavSettings {
+        samples: 0,
+        ..Human2NavSettings::default()
+    };
+    let mut planner =
+        Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings).unwrap();
+    let plan = planner.plan(&open_floor()).unwrap();
+    assert!(!plan.info.fallback, "{:?}", plan.info.notes);
+    assert!(
+        plan.poses.last().unwrap().x > 1.0,
+        "it drives towards the goal"
+    );
+    assert!(plan.info.candidates.is_empty());
+    for (bad, field) in [
+        (
+            Human2NavSettings {
+                samples: 0,
+                motions: 0,
+                ..Human2NavSettings::default()
+            },
+            "human2nav.samples",
+        ),
+        (
+            Human2NavSettings {
+                samples: 0,
+                motions_recovery: true,
+                ..Human2NavSettings::default()
+            },
+            "human2nav.motions_recovery",
+        ),
+    ] {
+        let err = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), bad)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(err.contains(field), "{err}");
     }
 }

@@ -820,7 +820,8 @@ mod tests {
             let err = PlannerConfig::from_toml_str(bad, path).unwrap_err();
             assert!(matches!(err, PlannerError::Setting { ref field, .. } if field == "threads"));
         }
-        let err = PlannerConfig::from_toml_str("[human2nav]\nsamples = 0\n", path).unwrap_err();
+        let err = PlannerConfig::from_toml_str("[human2nav]\nsamples = 0\nmotions = 0\n", path)
+            .unwrap_err();
         assert!(err.to_string().contains("samples"), "{err}");
         assert_eq!(
             cfg.model_dir(Path::new("/ws")),

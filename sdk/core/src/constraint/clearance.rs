@@ -85,6 +85,25 @@ impl Clearance {
         Ok(())
     }
 
+    /// Whether each trajectory of `batch` keeps out of contact (a gap above zero) with every
+    /// agent and obstacle over the waypoints this term scores, in every forecast scene with a
+    /// weight: the cost of the same term with the smallest margin and a unit collision
+    /// weight is zero exactly then.
+    pub fn contact_free(
+        &self,
+        batch: TrajBatch<'_>,
+        ctx: &ConstraintContext<'_>,
+    ) -> Result<Vec<bool>, ConstraintError> {
+        let probe = Clearance {
+            margin: f64::MIN_POSITIVE,
+            collision: 1.0,
+            ..*self
+        };
+        let mut cost = vec![0.0; batch.batch];
+        probe.run(batch, ctx, &mut cost, None)?;
+        Ok(cost.iter().map(|&c| c == 0.0).collect())
+    }
+
     /// How many of `traj`'s waypoints are scored, and whether it arrives at `goal`.
     pub(crate) fn checked(&self, traj: &[Pose2], goal: Option<[f64; 2]>) -> (usize, bool) {
         let Some(goal) = goal else {

@@ -304,9 +304,41 @@ fn foresight_settings(
     Ok(Some(settings))
 }
 
+/// `base` with the keys of the table `over` in place of its own (tables merged key by key,
+/// so `{ selection = { margin = 0.3 } }` changes one weight), validated as a whole.
+fn override_settings(
+    base: &Human2NavSettings,
+    over: &toml::Value,
+) -> anyhow::Result<Human2NavSettings> {
+    fn merge(into: &mut toml::Value, over: &toml::Value) {
+        match (into, over) {
+            (toml::Value::Table(a), toml::Value::Table(b)) => {
+                for (k, v) in b {
+                    match a.get_mut(k) {
+                        Some(slot) => merge(slot, v),
+                        None => {
+                            a.insert(k.clone(), v.clone());
+                        }
+                    }
+                }
+            }
+            (slot, v) => *slot = v.clone(),
+        }
+    }
+    if !over.is_table() {
+        bail!("must be a table of planner settings, as in the planner file's [human2nav]");
+    }
+    let mut value = toml::Value::try_from(base)?;
+    merge(&mut value, over);
+    let settings: Human2NavSettings = value.try_into()?;
+    settings.validate()?;
+    Ok(settings)
+}
+
 /// A `human2nav` method: the reference planner with the model and settings of a planner
 /// configuration. Its `config` table takes `planner` (the planner TOML, relative to the
-/// workspace root; default `sdk/configs/planner.toml`) and either `algorithm1` (bool: Algorithm 1
+/// workspace root; default `sdk/configs/planner.toml`), `model` (another model folder),
+/// `human2nav` (a table of planner settings merged over the file's `[human2nav]`) and either `algorithm1` (bool: Algorithm 1
 /// on or off, nothing else; the shipped planner runs none) or `arm` (one of the guidance
 /// ablation's arms, `raw`, `alg1`, `qp` or `alg1+qp`, see [`human2nav_core::ablation::Arm`]),
 /// and `foresight` (0 to 1, a
@@ -321,8 +353,10 @@ fn foresight_settings(
 /// thread per planner (the episodes already run in parallel).
 pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<MethodSpec> {
     let field = |key: &str| format!("methods[{}].config.{key}", m.name);
-    const KEYS: [&str; 7] = [
+    const KEYS: [&str; 9] = [
         "planner",
+        "model",
+        "human2nav",
         "algorithm1",
         "arm",
         "foresight",
@@ -372,6 +406,16 @@ pub fn human2nav_method(m: &MethodConfig, cfg: &BenchConfig) -> anyhow::Result<M
         None => cfg.resolve(Path::new("sdk/configs/planner.toml")),
     };
     let mut planner_cfg = PlannerConfig::load(&planner_toml)?;
+    if let Some(v) = m.config.get("model") {
+        planner_cfg.model = PathBuf::from(
+            v.as_str()
+                .ok_or_else(|| anyhow!("{}: must be a path", field("model")))?,
+        );
+    }
+    if let Some(v) = m.config.get("human2nav") {
+        planner_cfg.human2nav = override_settings(&planner_cfg.human2nav, v)
+            .with_context(|| format!("{} (over {})", field("human2nav"), planner_toml.display()))?;
+    }
     if let Some(v) = m.config.get("algorithm1") {
         planner_cfg.human2nav.guidance.enabled = v
             .as_bool()

@@ -5,6 +5,8 @@
 
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] functions unwrap too
 
+mod common;
+
 use human2nav_core::bev::BevSpec;
 use human2nav_core::constraint::{
     ConstraintContext, ConstraintError, ConstraintTerm, Phi, TrajBatch, sigmoid, softplus,
@@ -12,9 +14,7 @@ use human2nav_core::constraint::{
 use human2nav_core::guidance::analytic::FixedWalk;
 use human2nav_core::human2nav::{Human2Nav, Human2NavSettings, RobotModel};
 use human2nav_core::robot::footprint::FootprintShape;
-use human2nav_core::{
-    AgentState, GuidanceWeights, Limits, Observation, Plan, Planner, Pose2, Twist2,
-};
+use human2nav_core::{GuidanceWeights, Limits, Observation, Plan, Planner, Twist2};
 
 fn limits() -> Limits {
     Limits {
@@ -47,20 +47,7 @@ fn robot(weights: &GuidanceWeights, extra: Vec<(f64, Box<dyn ConstraintTerm>)>) 
 
 /// Someone standing 2 m ahead on the way to the goal: the robot passes on one side.
 fn blocked() -> Observation {
-    Observation {
-        time: 0.0,
-        ego: Pose2::IDENTITY,
-        ego_velocity: Twist2::new(0.5, 0.0, 0.0),
-        goal: [8.0, 0.0],
-        agents: vec![AgentState {
-            id: 1,
-            position: [2.0, 0.0],
-            velocity: [0.0, 0.0],
-            radius: 0.3,
-            history: vec![],
-        }],
-        ..Default::default()
-    }
+    common::someone_ahead(8.0)
 }
 
 fn plan(robot: RobotModel, obs: &Observation) -> Plan {

@@ -3,6 +3,8 @@
 
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] functions unwrap too
 
+mod common;
+
 use approx::assert_relative_eq;
 use human2nav_core::ablation::Arm;
 use human2nav_core::bev::BevSpec;
@@ -1104,23 +1106,8 @@ fn crowd_guidance_is_checked_and_leaves_a_model_blind_to_its_raster_unchanged() 
     }
 }
 
-/// Somebody stands 2 m straight ahead of the robot (at the origin, 0.5 m/s), where every
-/// sample of the model goes.
 fn someone_ahead() -> Observation {
-    Observation {
-        time: 0.0,
-        ego: Pose2::IDENTITY,
-        ego_velocity: Twist2::new(0.5, 0.0, 0.0),
-        goal: [6.0, 0.0],
-        agents: vec![AgentState {
-            id: 1,
-            position: [2.0, 0.0],
-            velocity: [0.0, 0.0],
-            radius: 0.3,
-            history: vec![],
-        }],
-        ..Default::default()
-    }
+    common::someone_ahead(6.0)
 }
 
 /// With `motions_recovery` the robot's own motions come in only when every model candidate

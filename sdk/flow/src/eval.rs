@@ -352,12 +352,7 @@ pub fn crowd_probe<M: FlowModel + ?Sized>(
             probe.hidden_recorded += count(comes_close(h, &win.others, contact));
             probe.observed_cv += count(meets(o, &win.others_cv, contact));
             probe.hidden_cv += count(meets(h, &win.others_cv, contact));
-            probe.displacement += o
-                .chunks_exact(3)
-                .zip(h.chunks_exact(3))
-                .map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1]))
-                .sum::<f64>()
-                / t as f64;
+            probe.displacement += mean_distance(o, h);
         }
         let truth: Vec<f64> = win.future.iter().flat_map(|p| p.to_array()).collect();
         probe.human_recorded += count(comes_close(&truth, &win.others, contact));
@@ -443,12 +438,7 @@ pub fn counterfactual_probe<M: FlowModel + ?Sized>(
         for (o, h) in observed.chunks_exact(3 * t).zip(hidden.chunks_exact(3 * t)) {
             probe.observed += f64::from(u8::from(meets(o)));
             probe.hidden += f64::from(u8::from(meets(h)));
-            probe.displacement += o
-                .chunks_exact(3)
-                .zip(h.chunks_exact(3))
-                .map(|(p, q)| (p[0] - q[0]).hypot(p[1] - q[1]))
-                .sum::<f64>()
-                / t as f64;
+            probe.displacement += mean_distance(o, h);
             samples += 1;
         }
         probe.windows += 1;
@@ -460,6 +450,16 @@ pub fn counterfactual_probe<M: FlowModel + ?Sized>(
         probe.displacement /= n;
     }
     Ok(probe)
+}
+
+/// The mean distance (m) between the waypoints of two paths (flat `[T, 3]`).
+fn mean_distance(a: &[f64], b: &[f64]) -> f64 {
+    let t = (a.len() / 3).max(1);
+    a.chunks_exact(3)
+        .zip(b.chunks_exact(3))
+        .map(|(p, q)| (p[0] - q[0]).hypot(p[1] - q[1]))
+        .sum::<f64>()
+        / t as f64
 }
 
 /// Keeps a seeded random subset of at most `n` items (order shuffled).

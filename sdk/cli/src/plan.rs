@@ -452,7 +452,7 @@ fn eval(
                 .map(|(arm, p)| (*arm, &mut p.planner as &mut dyn Planner))
                 .collect();
             steps.extend(
-                ablation_step(&mut arms, obs, &limits)
+                ablation_step(&mut arms, obs, &limits, &profile.footprint_shapes)
                     .with_context(|| format!("planning window {id} for {}", profile.name))?,
             );
             pb.inc(1);
@@ -462,18 +462,21 @@ fn eval(
     }
     println!();
     println!(
-        "| robot | arm | windows | TFS | all-feasible | Φ before | Φ after | displacement vs raw (m) | displacement vs sample (m) | iterations | ms p50 | fallbacks |"
+        "| robot | arm | windows | TFS | all-feasible | Φ before | Φ after | samples in contact before | after Algorithm 1 | plan in contact | displacement vs raw (m) | displacement vs sample (m) | iterations | ms p50 | fallbacks |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for (name, s) in &rows {
         println!(
-            "| {name} | {} | {} | {:.3} | {:.2} | {} | {} | {:.3} | {} | {} | {:.1} | {} |",
+            "| {name} | {} | {} | {:.3} | {:.2} | {} | {} | {} | {} | {:.3} | {:.3} | {} | {} | {:.1} | {} |",
             s.arm.label(),
             s.windows,
             s.tfs,
             s.all_feasible,
             fmt_nan(s.phi_before, 3),
             fmt_nan(s.phi_after, 3),
+            fmt_nan(s.contact_samples, 3),
+            fmt_nan(s.contact_guided, 3),
+            s.plan_contact,
             s.displacement,
             fmt_nan(s.sample_displacement, 3),
             fmt_nan(s.iterations, 1),
@@ -494,7 +497,9 @@ fn eval(
          QP only (the correction of the same candidates), Algorithm 1 + QP (the configured planner); every arm \
          draws the same source samples. TFS: mean plan TFS (pose 0 = the robot at rest/--speed); \
          all-feasible: share of windows with TFS = 1; Φ before/after: the kept sample before and \
-         after Algorithm 1; displacement vs raw: mean distance to the raw arm's plan at equal \
+         after Algorithm 1; samples in contact before / after Algorithm 1: share of the model's \
+         samples whose footprint touches someone walking on at constant velocity, before and \
+         after guidance; plan in contact: share of windows whose plan does; displacement vs raw: mean distance to the raw arm's plan at equal \
          times; vs sample: to the kept sample before guidance and correction; iterations: \
          Algorithm 1 iterations run (mean); ms p50: wall time of a planning call. Second table: \
          share of waypoints violating each limit."

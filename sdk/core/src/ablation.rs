@@ -24,6 +24,7 @@ use crate::guidance::GuidanceSettings;
 use crate::human2nav::Human2NavSettings;
 use crate::limits::Limits;
 use crate::planner::{Observation, Plan, PlanError, Planner};
+use crate::robot::footprint::{self, FootprintShape};
 use crate::se2::Pose2;
 use crate::tfs::{self, Violations};
 use std::time::Instant;
@@ -154,6 +155,51 @@ pub struct ArmStep {
     pub millis: f64,
     /// The planner fell back to stopping in place.
     pub fallback: bool,
+    /// Share of the model's samples before guidance that touch someone walking on at constant
+    /// velocity ([`meets_someone`]; `None` without samples).
+    pub contact_samples: Option<f64>,
+    /// The same share after Algorithm 1 (`None` when it did not run).
+    pub contact_guided: Option<f64>,
+    /// The plan touches someone walking on at constant velocity.
+    pub plan_contact: bool,
+}
+
+/// Whether the robot's footprint `footprint`, following `poses` (world frame; pose `j` at
+/// `(j + first)·dt` after the observation), overlaps the disc of an agent of `obs` walking on
+/// at its observed velocity.
+pub fn meets_someone(
+    poses: &[Pose2],
+    first: usize,
+    dt: f64,
+    obs: &Observation,
+    footprint: &[FootprintShape],
+) -> bool {
+    poses.iter().enumerate().any(|(j, p)| {
+        let t = (j + first) as f64 * dt;
+        obs.agents.iter().any(|a| {
+            let q = [
+                a.position[0] + a.velocity[0] * t,
+                a.position[1] + a.velocity[1] * t,
+            ];
+            footprint::clearance_at(footprint, *p, q, a.radius) < 0.0
+        })
+    })
+}
+
+/// Share of `paths` (each pose `j` at `(j + 1)·dt`) that [`meets_someone`]; `None` when empty.
+fn contact_share(
+    paths: &[Vec<Pose2>],
+    dt: f64,
+    obs: &Observation,
+    footprint: &[FootprintShape],
+) -> Option<f64> {
+    (!paths.is_empty()).then(|| {
+        let met = paths
+            .iter()
+            .filter(|p| meets_someone(p, 1, dt, obs, footprint))
+            .count();
+        met as f64 / paths.len() as f64
+    })
 }
 
 /// Mean distance (m) between the positions of two pose sequences, over the poses both have.
@@ -176,10 +222,12 @@ pub fn plan_tfs(plan: &Plan, limits: &Limits, obs: &Observation) -> f64 {
 
 /// Plans `obs` with each `(arm, planner)` (reset first) and measures each plan; the raw arm's
 /// plan, when present, is the reference of [`ArmStep::displacement`] (else the first arm's).
+/// Contacts are judged with the robot's `footprint`.
 pub fn ablation_step<P: Planner + ?Sized>(
     planners: &mut [(Arm, &mut P)],
     obs: &Observation,
     limits: &Limits,
+    footprint: &[FootprintShape],
 ) -> Result<Vec<ArmStep>, PlanError> {
     let mut plans = Vec::with_capacity(planners.len());
     for (arm, planner) in planners.iter_mut() {
@@ -219,6 +267,9 @@ pub fn ablation_step<P: Planner + ?Sized>(
                 iterations: plan.info.guidance_iterations,
                 millis,
                 fallback: plan.info.fallback,
+                contact_samples: contact_share(&plan.info.candidates, plan.dt, obs, footprint),
+                contact_guided: contact_share(&plan.info.guided, plan.dt, obs, footprint),
+                plan_contact: meets_someone(&plan.poses, 0, plan.dt, obs, footprint),
             }
         })
         .collect())
@@ -253,6 +304,12 @@ pub struct ArmSummary {
     pub millis_p50: f64,
     /// Number of steps that fell back to stopping in place.
     pub fallbacks: usize,
+    /// Mean share of the samples touching someone before guidance ([`ArmStep::contact_samples`]).
+    pub contact_samples: f64,
+    /// The same after Algorithm 1, over the steps where it ran.
+    pub contact_guided: f64,
+    /// Share of steps whose plan touches someone.
+    pub plan_contact: f64,
 }
 
 impl ArmSummary {
@@ -289,6 +346,9 @@ impl ArmSummary {
             iterations: mean(&mut steps.iter().filter_map(|s| s.iterations.map(|i| i as f64))),
             millis_p50: millis.get(n / 2).copied().unwrap_or(f64::NAN),
             fallbacks: steps.iter().filter(|s| s.fallback).count(),
+            contact_samples: mean(&mut steps.iter().filter_map(|s| s.contact_samples)),
+            contact_guided: mean(&mut steps.iter().filter_map(|s| s.contact_guided)),
+            plan_contact: mean(&mut steps.iter().map(|s| f64::from(u8::from(s.plan_contact)))),
         }
     }
 }
@@ -404,10 +464,27 @@ mod tests {
             speed: 2.0 * limits.v_max,
             resets: 0,
         };
-        let obs = observation();
+        // Somebody standing 1 m ahead: the slow plan stops short of touching them (its last
+        // pose 0.4 m ahead, the discs of 0.3 m just touching), the fast one runs into them.
+        let obs = Observation {
+            agents: vec![AgentState {
+                id: 1,
+                position: [1.0, 0.0],
+                velocity: [0.0, 0.0],
+                radius: 0.3,
+                history: vec![],
+            }],
+            ..observation()
+        };
+        let disc = [FootprintShape::Disc {
+            center: [0.0, 0.0],
+            radius: 0.3,
+        }];
         let mut arms: [(Arm, &mut dyn Planner); 2] =
             [(Arm::Raw, &mut slow), (Arm::Alg1, &mut fast)];
-        let steps = ablation_step(&mut arms, &obs, &limits).unwrap();
+        let steps = ablation_step(&mut arms, &obs, &limits, &disc).unwrap();
+        assert!(!steps[0].plan_contact && steps[1].plan_contact);
+        assert_eq!(steps[0].contact_samples, None, "no samples, no share");
         assert_eq!(slow.resets, 1);
         assert_eq!(fast.resets, 1);
         assert_eq!(steps[0].tfs, 1.0);
@@ -434,7 +511,10 @@ mod tests {
         assert_eq!(share("speed", summary.violations), 1.0);
         assert_eq!(summary.iterations, 3.0);
         assert!(summary.phi_before.is_nan());
+        assert_eq!(summary.plan_contact, 1.0);
+        assert!(summary.contact_samples.is_nan());
         let raw = ArmSummary::of(Arm::Raw, &steps);
+        assert_eq!(raw.plan_contact, 0.0);
         assert_eq!(raw.all_feasible, 1.0);
         assert_eq!(ArmSummary::of(Arm::Qp, &steps).windows, 0);
     }

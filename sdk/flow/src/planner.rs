@@ -949,11 +949,13 @@ mod tests {
         let g = guided.planner.plan(&obs).unwrap();
         let u = unguided.planner.plan(&obs).unwrap();
         assert_eq!(g.info.candidates, u.info.candidates);
+        let footprint = guided.profile.footprint_shapes.clone();
         let mut arms: [(Arm, &mut dyn Planner); 2] = [
             (Arm::Raw, &mut unguided.planner),
             (Arm::Both, &mut guided.planner),
         ];
-        let steps = ablation_step(&mut arms, &obs, &limits).unwrap();
+        let steps = ablation_step(&mut arms, &obs, &limits, &footprint).unwrap();
+        assert!(steps[0].contact_samples.is_some());
         assert_eq!(steps[0].displacement, 0.0);
         assert_eq!(steps[0].iterations, None);
         assert!((0.0..=1.0).contains(&steps[1].tfs));

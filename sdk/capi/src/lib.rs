@@ -31,17 +31,16 @@
 #![allow(non_camel_case_types)]
 
 use human2nav_core::embodiment::{Embodiment, RobotState};
-use human2nav_core::human2nav::pose_at;
+use human2nav_core::human2nav::{budget_deadline, pose_at};
 use human2nav_core::obstacle::{MAX_POLYGON_VERTICES, Obstacle};
 use human2nav_core::robot::RobotProfile;
-use human2nav_core::{AgentState, Deadline, Observation, Plan, PlanError, Pose2, Stage, Twist2};
+use human2nav_core::{AgentState, Observation, Plan, PlanError, Pose2, Stage, Twist2};
 use human2nav_flow::planner::{Backend, PlannerConfig, PlannerError, RobotPlanner, load_model};
 use human2nav_plugin::PluginHost;
 use std::cell::RefCell;
 use std::ffi::{CStr, CString, c_char};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
 /// Largest number of pedestrians one observation may carry.
 pub const H2N_MAX_AGENTS: usize = 10_000;
@@ -735,17 +734,13 @@ pub unsafe extern "C" fn h2n_planner_plan(
                 required_out(out, "out")?,
             )
         };
-        if !(budget_ms.is_finite() && budget_ms >= 0.0) {
-            return Err(Failure::invalid(format!(
-                "budget_ms {budget_ms} must be finite and ≥ 0 (0: the configuration's)"
-            )));
-        }
+        // 0: the configuration's budget; otherwise the same bounds as every front end.
+        let deadline = budget_deadline(budget_ms).map_err(Failure::invalid)?;
         // SAFETY: the caller's contract on `agents`.
         let observation = unsafe { observation(obs) }?;
         let planner = &mut p.robot.planner;
         p.busy = true;
         let result = if budget_ms > 0.0 {
-            let deadline = Deadline::after(Duration::from_secs_f64(budget_ms / 1e3));
             human2nav_core::Planner::plan_within(planner, &observation, &deadline)
         } else {
             human2nav_core::Planner::plan(planner, &observation)

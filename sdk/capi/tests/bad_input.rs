@@ -188,7 +188,7 @@ fn planning_refuses_bad_observations_and_budgets() {
             h2n_status::InvalidArgument,
             "out is NULL",
         );
-        for budget in [-1.0, f64::NAN, f64::INFINITY] {
+        for budget in [-1.0, f64::NAN, f64::INFINITY, 1e22, 6e4 + 1.0] {
             refused(
                 h2n_planner_plan(p, &obs, budget, &mut plan),
                 h2n_status::InvalidArgument,

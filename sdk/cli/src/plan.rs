@@ -119,6 +119,16 @@ pub struct PlanArgs {
 
 /// Runs `human2nav plan`.
 pub fn run(args: PlanArgs) -> anyhow::Result<ExitCode> {
+    // A summary over nothing is a table of NaN, not a result.
+    if args.eval && args.windows == 0 {
+        bail!("--windows 0: `plan --eval` needs at least one window per robot");
+    }
+    if args.bench == Some(0) {
+        bail!("--bench 0: `plan --bench` needs at least one timed call");
+    }
+    if args.human == Some(0) {
+        bail!("--human 0: give at least one recorded window, or leave --human out");
+    }
     let cwd = std::env::current_dir().context("reading the current directory")?;
     let workspace = find_workspace_root(&cwd).unwrap_or(cwd);
     let mut cfg = match &args.config {

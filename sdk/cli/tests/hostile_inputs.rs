@@ -2062,7 +2062,23 @@ fn results_file(dir: &Path, name: &str, lines: &[&str]) -> Result<String, String
 /// The cases of `human2nav compare`, run through the binary.
 fn compare_cases() -> Vec<Case> {
     let a = "compare";
+    let summaries = "summary commands";
+    let robot = "robots/diablo/robot.toml";
     vec![
+        err(
+            summaries,
+            "`plan --eval --windows 0`",
+            "a table of NaN, exit 0",
+            &["--windows 0", "at least one window"],
+            move |_| cli(&["plan", "--eval", "--windows", "0", "--robot", robot]),
+        ),
+        err(
+            summaries,
+            "`plan --bench 0`",
+            "a table of NaN, exit 0",
+            &["--bench 0", "at least one timed call"],
+            move |_| cli(&["plan", "--bench", "0", "--robot", robot]),
+        ),
         err(
             a,
             "a `success` that is not 0 or 1",

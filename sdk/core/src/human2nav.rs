@@ -221,6 +221,23 @@ pub const MAX_CROWD_WEIGHT: f64 = 100.0;
 /// Largest [`Human2NavSettings::budget_ms`]: a minute is no planning budget but a typo.
 pub const MAX_BUDGET_MS: f64 = 60_000.0;
 
+/// The deadline of a planning call with a budget of `budget_ms` milliseconds from now (0: no
+/// deadline). Every front end (the settings, the C API, Python) goes through this one check,
+/// so a budget one refuses, all refuse, with the same message: it must be finite and lie in
+/// 0 to [`MAX_BUDGET_MS`].
+pub fn budget_deadline(budget_ms: f64) -> Result<Deadline, String> {
+    if !(budget_ms.is_finite() && (0.0..=MAX_BUDGET_MS).contains(&budget_ms)) {
+        return Err(format!(
+            "budget_ms {budget_ms} must lie in 0 (no budget) to {MAX_BUDGET_MS}"
+        ));
+    }
+    Ok(if budget_ms > 0.0 {
+        Deadline::after(std::time::Duration::from_secs_f64(budget_ms / 1e3))
+    } else {
+        Deadline::never()
+    })
+}
+
 /// Settings of the Human2Nav planner (TOML table; every field optional).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -392,11 +409,8 @@ impl Human2NavSettings {
                 &format!("must be at most {MAX_MOTIONS}, got {}", self.car_motions),
             );
         }
-        if !(self.budget_ms.is_finite() && (0.0..=MAX_BUDGET_MS).contains(&self.budget_ms)) {
-            return bad(
-                "budget_ms",
-                &format!("must lie in 0 (no budget) to {MAX_BUDGET_MS}"),
-            );
+        if let Err(why) = budget_deadline(self.budget_ms) {
+            return bad("budget_ms", &why);
         }
         let s = &self.selection;
         for (name, v) in [
@@ -1508,13 +1522,9 @@ impl<M: FlowModel + Send> Planner for Human2Nav<M> {
     }
 
     fn plan(&mut self, obs: &Observation) -> Result<Plan, PlanError> {
-        let deadline = if self.settings.budget_ms > 0.0 {
-            Deadline::after(std::time::Duration::from_secs_f64(
-                self.settings.budget_ms / 1e3,
-            ))
-        } else {
-            Deadline::never()
-        };
+        // Validated with the settings, so never refused here.
+        let deadline =
+            budget_deadline(self.settings.budget_ms).unwrap_or_else(|_| Deadline::never());
         self.plan_within(obs, &deadline)
     }
 

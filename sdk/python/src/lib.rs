@@ -8,9 +8,10 @@
 //! the SDK reports is `human2nav.Human2NavError`.
 
 use human2nav_core::embodiment::Embodiment;
+use human2nav_core::human2nav::budget_deadline;
 use human2nav_core::obstacle::{Obstacle, OccupancyGrid};
 use human2nav_core::robot::{ProfileError, RobotProfile};
-use human2nav_core::{AgentState, Deadline, Observation, Plan, PlanError, Planner, Pose2, Twist2};
+use human2nav_core::{AgentState, Observation, Plan, PlanError, Planner, Pose2, Twist2};
 use human2nav_flow::planner::{Backend, PlannerConfig, PlannerError, RobotPlanner, load_model};
 use human2nav_orca_core::planner::{OrcaConfig, OrcaPlanner};
 use human2nav_plugin::PluginHost;
@@ -26,7 +27,6 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
 
 create_exception!(
     _human2nav,
@@ -343,11 +343,7 @@ impl PyPlanner {
                 .map_err(|e| value_error(format!("obstacles or occupancy: {e}")))?,
             None => Scene::default(),
         };
-        if !(budget_ms.is_finite() && budget_ms >= 0.0) {
-            return Err(value_error(format!(
-                "budget_ms {budget_ms} must be finite and ≥ 0 (0: no budget)"
-            )));
-        }
+        let deadline = budget_deadline(budget_ms).map_err(value_error)?;
         let obs = Observation {
             time,
             ego: Pose2::new(ego.0, ego.1, ego.2),
@@ -370,7 +366,6 @@ impl PyPlanner {
         let result = py.detach(|| {
             let mut planner = self.lock()?;
             let plan = if budget_ms > 0.0 {
-                let deadline = Deadline::after(Duration::from_secs_f64(budget_ms / 1e3));
                 planner.plan_within(&obs, &deadline)
             } else {
                 planner.plan(&obs)

@@ -127,8 +127,9 @@ def test_bad_input_is_a_clear_error(robot, planner, tmp_path):
         planner.plan(ego=(0, 0), goal=(5, 0))
     with pytest.raises(ValueError, match="agent 1"):
         planner.plan(ego=(0, 0, 0), goal=(5, 0), agents=[[1, 1, 0, 0, -0.3]], agent_ids=[1])
-    with pytest.raises(ValueError, match="budget_ms"):
-        planner.plan(ego=(0, 0, 0), goal=(5, 0), budget_ms=-1)
+    for budget in (-1, 1e22, float("nan")):
+        with pytest.raises(ValueError, match="budget_ms"):
+            planner.plan(ego=(0, 0, 0), goal=(5, 0), budget_ms=budget)
     bad = tmp_path / "planner.toml"
     bad.write_text("[human2nav]\nsamplez = 4\n")
     with pytest.raises(ValueError, match="samplez"):

@@ -206,8 +206,16 @@ fn planning_refuses_bad_observations_and_budgets() {
             vertex_count: 0,
         };
         let bad_circle: *const h2n_obstacle = &circle;
-        let cases: [(&str, Spoil); 8] = [
+        let cases: [(&str, Spoil); 10] = [
             ("observation.time", Box::new(|o| o.time = f64::NAN)),
+            (
+                "ego pose is more than 1000000 m",
+                Box::new(|o| o.ego.x = 1e300),
+            ),
+            (
+                "ego velocity is faster than 30 m/s",
+                Box::new(|o| o.ego_velocity.vx = 100.0),
+            ),
             ("observation.ego", Box::new(|o| o.ego.theta = f64::INFINITY)),
             (
                 "observation.ego_velocity",

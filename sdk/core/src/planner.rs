@@ -328,21 +328,46 @@ pub trait Planner: Send {
     }
 }
 
+/// Largest `|coordinate|` (m) of a position in an observation: the bound on datasets,
+/// episodes and obstacles ([`crate::obstacle::MAX_OBSTACLE_COORDINATE`]).
+pub const MAX_COORDINATE: f64 = crate::obstacle::MAX_OBSTACLE_COORDINATE;
+
+/// Largest speed (m/s) of the robot or of an agent in an observation: several times anything
+/// that moves in a crowd; a faster one is a unit error, not a scene.
+pub const MAX_SPEED: f64 = 30.0;
+
 impl Observation {
-    /// Checks every number is finite; names the first offending field.
+    /// Checks every number is finite, positions within [`MAX_COORDINATE`] and speeds within
+    /// [`MAX_SPEED`]; names the first offending field. Every front end (the CLI, the C API,
+    /// Python) plans through this check.
     pub fn validate(&self) -> Result<(), PlanError> {
         let bad = |what: String| Err(PlanError::InvalidObservation(what));
+        let far = |p: [f64; 2]| p.iter().any(|v| v.abs() > MAX_COORDINATE);
+        let fast = |v: [f64; 2]| v[0].hypot(v[1]) > MAX_SPEED;
         if !self.time.is_finite() {
             return bad("time is not finite".into());
         }
         if !self.ego.is_finite() {
             return bad("ego pose is not finite".into());
         }
+        if far([self.ego.x, self.ego.y]) {
+            return bad(format!(
+                "ego pose is more than {MAX_COORDINATE} m from the origin"
+            ));
+        }
         if !self.ego_velocity.is_finite() {
             return bad("ego velocity is not finite".into());
         }
+        if fast([self.ego_velocity.vx, self.ego_velocity.vy]) {
+            return bad(format!("ego velocity is faster than {MAX_SPEED} m/s"));
+        }
         if !self.goal.iter().all(|v| v.is_finite()) {
             return bad("goal is not finite".into());
+        }
+        if far(self.goal) {
+            return bad(format!(
+                "goal is more than {MAX_COORDINATE} m from the origin"
+            ));
         }
         for a in &self.agents {
             let finite = a.position.iter().chain(&a.velocity).all(|v| v.is_finite())
@@ -350,6 +375,13 @@ impl Observation {
                 && a.radius >= 0.0;
             if !finite {
                 return bad(format!("agent {} has a non-finite or negative field", a.id));
+            }
+            if far(a.position) || fast(a.velocity) {
+                return bad(format!(
+                    "agent {} is more than {MAX_COORDINATE} m from the origin or faster than \
+                     {MAX_SPEED} m/s",
+                    a.id
+                ));
             }
         }
         for (i, o) in self.obstacles.iter().enumerate() {

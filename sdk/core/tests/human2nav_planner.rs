@@ -271,6 +271,27 @@ fn non_finite_observation_is_an_error() {
     assert!(err.to_string().contains("goal"), "{err}");
 }
 
+/// A pose 1e300 m away or a speed of 100 m/s is a unit error, refused by name for every front
+/// end (they all plan through `Observation::validate`).
+#[test]
+fn an_observation_beyond_the_bounds_is_an_error_naming_the_field() {
+    type Spoil = fn(&mut Observation);
+    let cases: [(&str, Spoil); 4] = [
+        ("ego pose", |o| o.ego = Pose2::new(1e300, 0.0, 0.0)),
+        ("ego velocity", |o| {
+            o.ego_velocity = Twist2::new(100.0, 0.0, 0.0)
+        }),
+        ("goal", |o| o.goal = [0.0, -2e6]),
+        ("agent 7", |o| o.agents[0].velocity = [0.0, 100.0]),
+    ];
+    for (field, spoil) in cases {
+        let mut obs = observation();
+        spoil(&mut obs);
+        let err = planner(true).plan(&obs).unwrap_err();
+        assert!(err.to_string().contains(field), "{field}: {err}");
+    }
+}
+
 /// A model whose output is NaN: the planner must stop in place, never pass the NaN on.
 struct Broken;
 

@@ -127,6 +127,8 @@ def test_bad_input_is_a_clear_error(robot, planner, tmp_path):
         planner.plan(ego=(0, 0), goal=(5, 0))
     with pytest.raises(ValueError, match="agent 1"):
         planner.plan(ego=(0, 0, 0), goal=(5, 0), agents=[[1, 1, 0, 0, -0.3]], agent_ids=[1])
+    with pytest.raises(ValueError, match="ego pose is more than"):
+        planner.plan(ego=(1e300, 0, 0), goal=(5, 0))
     for budget in (-1, 1e22, float("nan")):
         with pytest.raises(ValueError, match="budget_ms"):
             planner.plan(ego=(0, 0, 0), goal=(5, 0), budget_ms=budget)

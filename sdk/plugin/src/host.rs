@@ -571,8 +571,15 @@ impl PluginLibrary {
 
 /// The text of a host buffer the plugin wrote `len` bytes (full length) into.
 fn buffer_text(buf: &[u8], len: usize) -> String {
+    // The claimed length is not trusted past the first NUL (a C string ends there), and
+    // control characters are not passed on to a terminal or a report.
     let shown = &buf[..len.min(buf.len())];
-    let mut s = one_line(&String::from_utf8_lossy(shown));
+    let shown = shown.split(|&b| b == 0).next().unwrap_or_default();
+    let text: String = String::from_utf8_lossy(shown)
+        .chars()
+        .map(|c| if c.is_control() { ' ' } else { c })
+        .collect();
+    let mut s = one_line(&text);
     if len > buf.len() {
         s.push_str(" …");
     }
@@ -2330,6 +2337,18 @@ mod tests {
     //! `dlopen` (the tables are statics of this test binary instead of a library's).
 
     use super::*;
+
+    /// A plugin that claims a longer message than it wrote shows what it wrote, not the NUL
+    /// bytes after it; control characters become spaces.
+    #[test]
+    fn a_claimed_error_length_is_not_trusted_past_the_text() {
+        let mut buf = vec![0u8; 1009];
+        buf[..4].copy_from_slice(b"oops");
+        assert_eq!(buffer_text(&buf, 1009), "oops");
+        let bell = b"bad\x07value\x1b[2J";
+        assert_eq!(buffer_text(bell, bell.len()), "bad value [2J");
+        assert_eq!(buffer_text(b"longer", 4096), "longer \u{2026}");
+    }
 
     unsafe extern "C" fn create_nothing(
         _: *const H2nCreateArgs,

@@ -247,6 +247,22 @@ where
     }
 }
 
+/// Draws `agent` (ego frame) over an existing raster `out`: where its disc lies, its occupancy
+/// and velocity replace what was there; elsewhere `out` is unchanged. `scratch` is resized to
+/// the raster's length and overwritten.
+pub fn overlay_agent(spec: BevSpec, agent: BevAgent, out: &mut [f32], scratch: &mut Vec<f32>) {
+    scratch.resize(spec.len(), 0.0);
+    rasterize_agents(spec, Pose2::IDENTITY, [agent], scratch);
+    let plane = spec.cells * spec.cells;
+    for k in 0..plane {
+        if scratch[k] > 0.5 {
+            for c in 0..CHANNELS {
+                out[c * plane + k] = scratch[c * plane + k];
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

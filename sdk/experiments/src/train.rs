@@ -354,13 +354,7 @@ pub fn train(
             .iter()
             .filter(|t| {
                 let future: Vec<_> = (0..t.future_len()).map(|j| t.future_pose(j)).collect();
-                let always = Counterfactual {
-                    probability: 1.0,
-                    ..c.clone()
-                };
-                always
-                    .person(&future, t.velocity(), [0.0, 0.5, 0.0, 0.0])
-                    .is_some()
+                c.place(&future, t.velocity(), [0.5, 0.0, 0.0]).is_some()
             })
             .count();
         eprintln!(
@@ -813,7 +807,6 @@ pub fn run_evaluation(
     }
     if cfg.eval.counterfactual_probe {
         let person = Counterfactual {
-            cell: cache.manifest().bev.resolution,
             step: cache.manifest().dt,
             ..cfg.train.counterfactual.clone().unwrap_or_default()
         };
@@ -821,7 +814,8 @@ pub fn run_evaluation(
         bar.set_style(ProgressStyle::with_template(
             "probing a counterfactual person [{wide_bar}] {pos}/{len} windows  ETA {eta}",
         )?);
-        let p = counterfactual_probe(model, &windows, &opts, &person, cfg.eval.contact, |i| {
+        let placing = (&person, cache.manifest().bev);
+        let p = counterfactual_probe(model, &windows, &opts, placing, cfg.eval.contact, |i| {
             bar.set_position(i as u64)
         })?;
         bar.finish_and_clear();

@@ -393,51 +393,38 @@ pub struct CounterfactualProbe {
 
 /// Does the model avoid a person it sees on its way, whom the recorded human's future
 /// avoided? On each window a standing person is placed as the counterfactual augmentation
-/// would place one (`person`, drawn with probability 1), and the same source samples are
-/// integrated with and without that person in the raster (cell edge `cell`).
+/// would place one ([`crate::train::Counterfactual::place`]), and the same source samples are
+/// integrated with and without that person in the window's raster (`spec`).
 pub fn counterfactual_probe<M: FlowModel + ?Sized>(
     model: &M,
     windows: &[EvalWindow],
     opts: &EvalOptions,
-    person: &crate::train::Counterfactual,
+    (person, spec): (&crate::train::Counterfactual, BevSpec),
     contact: f64,
     mut progress: impl FnMut(usize),
 ) -> Result<CounterfactualProbe, FlowError> {
     use rand::Rng;
     let t = model.horizon();
-    let always = crate::train::Counterfactual {
-        probability: 1.0,
-        ..person.clone()
-    };
     let mut rng = ChaCha8Rng::seed_from_u64(opts.seed ^ 0x00c0_ffee);
     let mut probe = CounterfactualProbe::default();
     let (mut disc, mut samples) = (Vec::new(), 0usize);
     for (w, win) in windows.iter().enumerate() {
         progress(w + 1);
-        let u1: f64 = rng.random();
-        let Some(a) = always.person(&win.future, win.cond.velocity, [0.0, u1, 0.0, 0.0]) else {
+        let u: f64 = rng.random();
+        let Some(a) = person.place(&win.future, win.cond.velocity, [u, 0.0, 0.0]) else {
             continue;
         };
-        let cells = ((win.cond.bev.len() / 3) as f64).sqrt().round() as usize;
-        let spec = BevSpec {
-            cells,
-            resolution: always.cell,
-        };
         let mut seen = win.cond.clone();
-        disc.resize(seen.bev.len(), 0.0);
-        crate::train::stamp(spec, a, &mut seen.bev, &mut disc);
+        human2nav_core::bev::overlay_agent(spec, a, &mut seen.bev, &mut disc);
         let x0 = sample_source(opts.samples, t, model.source_std(), &mut rng);
         let mut observed = x0.clone();
         integrate(model, &mut observed, &seen, opts.steps)?;
         let mut hidden = x0;
         integrate(model, &mut hidden, &win.cond, opts.steps)?;
-        let meets = |s: &[f64]| {
-            s.chunks_exact(3)
-                .any(|p| (p[0] - a.position[0]).hypot(p[1] - a.position[1]) < contact)
-        };
+        let standing = [vec![a.position; t]];
         for (o, h) in observed.chunks_exact(3 * t).zip(hidden.chunks_exact(3 * t)) {
-            probe.observed += f64::from(u8::from(meets(o)));
-            probe.hidden += f64::from(u8::from(meets(h)));
+            probe.observed += f64::from(u8::from(meets(o, &standing, contact)));
+            probe.hidden += f64::from(u8::from(meets(h, &standing, contact)));
             probe.displacement += mean_distance(o, h);
             samples += 1;
         }

@@ -75,25 +75,28 @@ pub fn crowd_points(
         resolution: crowd.cell,
     };
     let plane = cells * cells;
-    let mut occupied: Vec<(f64, usize)> = bev[..plane]
+    // (distance from the ego, cell index, cell centre), nearest first, ties by cell order.
+    let mut occupied: Vec<(f64, usize, [f64; 2])> = bev[..plane]
         .iter()
         .enumerate()
         .filter(|(_, o)| **o > 0.5)
         .map(|(i, _)| {
-            let [x, y] = spec.cell_center(i / cells, i % cells);
-            (x.hypot(y), i)
+            let c = spec.cell_center(i / cells, i % cells);
+            (c[0].hypot(c[1]), i, c)
         })
         .collect();
+    let order = |a: &(f64, usize, [f64; 2]), b: &(f64, usize, [f64; 2])| {
+        a.0.total_cmp(&b.0).then(a.1.cmp(&b.1))
+    };
     let n = crowd.points.min(occupied.len());
     if n < occupied.len() {
-        occupied.select_nth_unstable_by(n, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        occupied.select_nth_unstable_by(n, order);
         occupied.truncate(n);
     }
-    occupied.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    occupied.sort_unstable_by(order);
     out.fill(0.0);
     let inv = 1.0 / norm.position_scale;
-    for (row, &(_, i)) in out.chunks_exact_mut(5).zip(&occupied) {
-        let [x, y] = spec.cell_center(i / cells, i % cells);
+    for (row, &(_, i, [x, y])) in out.chunks_exact_mut(5).zip(&occupied) {
         row[0] = (x * inv) as f32;
         row[1] = (y * inv) as f32;
         row[2] = (f64::from(bev[plane + i]) * inv) as f32;

@@ -158,8 +158,8 @@ pub struct CondUnet1d {
     bev_fc: nn::Linear,
     goal_fc0: nn::Linear,
     goal_fc1: nn::Linear,
-    /// The crowd pathway's two layers, when the architecture has it.
-    crowd: Option<(nn::Linear, nn::Linear)>,
+    /// The crowd pathway's two layers and its waypoint step (s), when the architecture has it.
+    crowd: Option<(nn::Linear, nn::Linear, f64)>,
     film: nn::Linear,
     /// Channels of each residual block, in [`Film`] order.
     film_channels: Vec<i64>,
@@ -198,6 +198,7 @@ impl CondUnet1d {
             (
                 nn::linear(&cp / "fc0", CROWD_PAIR_FEATURES, w, Default::default()),
                 nn::linear(&cp / "fc1", w, w, Default::default()),
+                c.step,
             )
         });
 
@@ -404,13 +405,12 @@ impl CondUnet1d {
     /// and crowd points `points` (`[B or 1, N, 5]`, [`crate::model::crowd_points`]); `None`
     /// without the pathway.
     pub fn crowd_features(&self, x: &Tensor, points: &Tensor) -> Option<Tensor> {
-        let (fc0, fc1) = self.crowd.as_ref()?;
-        let step = self.cfg.crowd.as_ref().map_or(0.1, |c| c.step);
+        let (fc0, fc1, step) = self.crowd.as_ref()?;
         let a = self.cfg.activation;
         let t_len = x.size()[2];
         let opts = (x.kind(), x.device());
         // Waypoint times (i + 1)·step, [1, 1, T].
-        let tau = ((Tensor::arange(t_len, opts) + 1.0) * step).view([1, 1, -1]);
+        let tau = ((Tensor::arange(t_len, opts) + 1.0) * *step).view([1, 1, -1]);
         // Waypoints [B, 1, T]; points [Bp, N, 1].
         let ch = |c: i64| x.select(1, c).unsqueeze(1);
         let (px, py, cs, sn) = (ch(0), ch(1), ch(2), ch(3));

@@ -14,7 +14,7 @@ use crate::model::{
     write_safetensors,
 };
 use crate::net::CROWD_FEATURES;
-use human2nav_core::bev::{BevAgent, BevSpec, rasterize_agents};
+use human2nav_core::bev::{BevAgent, BevSpec, overlay_agent};
 use human2nav_core::fileset::{self, SetError};
 use human2nav_core::input::{MAX_CONFIG_BYTES, read_user_file};
 use human2nav_core::se2::{Pose2, Twist2};
@@ -237,6 +237,9 @@ pub struct TrainOptions {
     pub counterfactual: Option<Counterfactual>,
 }
 
+/// Slowest walker (m/s) a counterfactual person is placed for.
+pub const MIN_WALKER_SPEED: f64 = 0.3;
+
 /// Counterfactual walkers: an augmentation that puts into a window's raster a person the
 /// recorded walker's future avoided.
 ///
@@ -306,19 +309,30 @@ impl Counterfactual {
     }
 
     /// The person to place in a window whose walker has velocity `velocity` and recorded
-    /// future `future` (metres, ego frame), from four uniform draws `u`; `None` when the
-    /// draw says no or no place keeps the clearance.
+    /// future `future` (metres, ego frame), from four uniform draws `u`: `u[0]` against
+    /// [`Self::probability`], the rest as in [`Self::place`]; `None` when the draw says no or
+    /// no place keeps the clearance.
     pub fn person(&self, future: &[Pose2], velocity: [f64; 2], u: [f64; 4]) -> Option<BevAgent> {
-        if u[0] >= self.probability || velocity[0].hypot(velocity[1]) < 0.3 {
+        if u[0] >= self.probability {
             return None;
         }
-        let walking = u[2] >= 0.5;
-        let speed = if walking {
-            self.max_speed * (2.0 * u[2] - 1.0)
+        self.place(future, velocity, [u[1], u[2], u[3]])
+    }
+
+    /// Where a person fits whatever the probability: from the places that keep the clearance
+    /// the one `u[0]` picks, standing when `u[1] < 0.5` (else walking at
+    /// `max_speed·(2·u[1] − 1)`), heading `2π·u[2]`. `None` when no place fits, or when the
+    /// walker is slower than [`MIN_WALKER_SPEED`] (it has no straight line to block).
+    pub fn place(&self, future: &[Pose2], velocity: [f64; 2], u: [f64; 3]) -> Option<BevAgent> {
+        if velocity[0].hypot(velocity[1]) < MIN_WALKER_SPEED {
+            return None;
+        }
+        let speed = if u[1] >= 0.5 {
+            self.max_speed * (2.0 * u[1] - 1.0)
         } else {
             0.0
         };
-        let heading = std::f64::consts::TAU * u[3];
+        let heading = std::f64::consts::TAU * u[2];
         let w = [speed * heading.cos(), speed * heading.sin()];
         let tau = |i: usize| (i + 1) as f64 * self.step;
         let clear = |j: usize| {
@@ -332,10 +346,10 @@ impl Counterfactual {
         };
         // Waypoints from a quarter of the horizon on, where the walker has had time to react.
         let places: Vec<[f64; 2]> = (future.len() / 4..future.len()).filter_map(clear).collect();
-        let pick =
-            places.get(((u[1] * places.len() as f64) as usize).min(places.len().max(1) - 1))?;
+        let last = places.len().checked_sub(1)?;
+        let pick = places[((u[0] * places.len() as f64) as usize).min(last)];
         Some(BevAgent {
-            position: *pick,
+            position: pick,
             velocity: w,
             radius: self.radius,
         })
@@ -696,15 +710,11 @@ pub fn batch_from_draws<S: TrainingSample>(
         let src: &[f32] = match person {
             Some((cell, a)) => {
                 stamped.copy_from_slice(src);
-                stamp(
-                    BevSpec {
-                        cells,
-                        resolution: cell,
-                    },
-                    a,
-                    &mut stamped,
-                    &mut disc,
-                );
+                let spec = BevSpec {
+                    cells,
+                    resolution: cell,
+                };
+                overlay_agent(spec, a, &mut stamped, &mut disc);
                 &stamped
             }
             None => src,
@@ -736,20 +746,6 @@ pub fn batch_from_draws<S: TrainingSample>(
         target: Tensor::from_slice(&target)
             .view([bi, 3, ti])
             .to_device(device),
-    }
-}
-
-/// Draws `agent` (ego frame) over `raster`: where its disc lies, its occupancy and velocity
-/// replace what was there. `disc` is scratch of the raster's size.
-pub fn stamp(spec: BevSpec, agent: BevAgent, raster: &mut [f32], disc: &mut [f32]) {
-    rasterize_agents(spec, Pose2::IDENTITY, [agent], disc);
-    let plane = spec.cells * spec.cells;
-    for k in 0..plane {
-        if disc[k] > 0.5 {
-            for c in 0..3 {
-                raster[c * plane + k] = disc[c * plane + k];
-            }
-        }
     }
 }
 

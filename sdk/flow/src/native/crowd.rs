@@ -223,14 +223,20 @@ impl Waypoint {
         }
     }
 
-    /// The point carried on to `tau`, relative to the waypoint in its frame: offset, distance,
-    /// and the point's velocity in that frame.
-    fn pair(&self, p: &[f32], tau: f32) -> [f32; PAIR] {
+    /// The point `p` carried on to `tau`: its offset from the waypoint in the world
+    /// `(dx, dy)` and in the waypoint's frame `(bx, by)`, and the (smoothed) distance.
+    fn offset(&self, p: &[f32], tau: f32) -> ([f32; 2], [f32; 2], f32) {
         let dx = p[0] + p[2] * tau - self.px;
         let dy = p[1] + p[3] * tau - self.py;
         let bx = self.cs * dx + self.sn * dy;
         let by = self.cs * dy - self.sn * dx;
-        let dist = (bx * bx + by * by + 1e-6).sqrt();
+        ([dx, dy], [bx, by], (bx * bx + by * by + 1e-6).sqrt())
+    }
+
+    /// The point carried on to `tau`, relative to the waypoint in its frame: offset, distance,
+    /// and the point's velocity in that frame.
+    fn pair(&self, p: &[f32], tau: f32) -> [f32; PAIR] {
+        let (_, [bx, by], dist) = self.offset(p, tau);
         let ux = self.cs * p[2] + self.sn * p[3];
         let uy = self.cs * p[3] - self.sn * p[2];
         [bx, by, dist, ux, uy]
@@ -239,11 +245,7 @@ impl Waypoint {
     /// Adds to `g` (`px, py, cos θ, sin θ`) the pull-back of the gradient `df` of
     /// [`Self::pair`].
     fn pull_back(&self, p: &[f32], tau: f32, df: [f32; PAIR], g: &mut [f32; 4]) {
-        let dx = p[0] + p[2] * tau - self.px;
-        let dy = p[1] + p[3] * tau - self.py;
-        let bx = self.cs * dx + self.sn * dy;
-        let by = self.cs * dy - self.sn * dx;
-        let dist = (bx * bx + by * by + 1e-6).sqrt();
+        let ([dx, dy], [bx, by], dist) = self.offset(p, tau);
         let gbx = df[0] + df[2] * bx / dist;
         let gby = df[1] + df[2] * by / dist;
         let (gux, guy) = (df[3], df[4]);

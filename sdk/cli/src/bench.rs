@@ -4,6 +4,9 @@
 
 use clap::Args;
 use human2nav_experiments::bench::{Bench, BenchRequest};
+use human2nav_sim::driver::BenchOutcome;
+use human2nav_sim::report::PlannerFailures;
+use human2nav_sim::shard::ShardSpec;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -13,9 +16,9 @@ use std::process::ExitCode;
 #[derive(Debug, Args)]
 pub struct BenchArgs {
     /// Benchmark configuration (TOML); relative paths inside it resolve against the workspace
-    /// root.
-    #[arg(long, default_value = "sdk/configs/bench.toml")]
-    pub config: PathBuf,
+    /// root [default: sdk/configs/bench.toml; with --merge, the one the shards name].
+    #[arg(long)]
+    pub config: Option<PathBuf>,
     /// Output directory for results.csv, report.md and the figures [default: out/bench, or
     /// out/bench-quick with --quick, under the workspace root].
     #[arg(long)]
@@ -47,13 +50,38 @@ pub struct BenchArgs {
     /// still takes its episodes from the configuration's first other suite.
     #[arg(long, value_delimiter = ',')]
     pub suites: Vec<String>,
+    /// Run only the K-th of N slices of the runs (K from 1 to N; run i, counted from 0 in the
+    /// order suite, robot, method, episode, belongs to slice i mod N + 1) and write them with
+    /// what `--merge` needs (results.csv, results-exact.csv, shard.json) to the output folder
+    /// [default: out/bench/shard-K-of-N, or under out/bench-quick with --quick]. No report or
+    /// figures: `--merge` writes them.
+    #[arg(long, value_name = "K/N", value_parser = parse_shard)]
+    pub shard: Option<ShardSpec>,
+    /// Join the folders of all N shards into the results.csv, report.md and figures one run
+    /// writes (results.csv byte for byte; the figures re-run the runs they draw). The options
+    /// come from the shards; `--out`, `--threads` and `--config` (when the configuration has
+    /// moved; it must be the same) may be given.
+    #[arg(
+        long,
+        value_name = "DIR",
+        num_args = 1..,
+        conflicts_with_all = ["quick", "seed", "methods", "robots", "suites", "failures", "shard", "data_config"]
+    )]
+    pub merge: Vec<PathBuf>,
+}
+
+/// `--shard`'s parser: [`ShardSpec`]'s own, which says what is wrong.
+fn parse_shard(s: &str) -> Result<ShardSpec, String> {
+    s.parse()
 }
 
 impl BenchArgs {
     /// The library's request of these options.
     fn request(self) -> BenchRequest {
         BenchRequest {
-            config: self.config,
+            config: self
+                .config
+                .unwrap_or_else(|| PathBuf::from("sdk/configs/bench.toml")),
             out: self.out,
             quick: self.quick,
             seed: self.seed,
@@ -63,6 +91,7 @@ impl BenchArgs {
             methods: self.methods,
             robots: self.robots,
             suites: self.suites,
+            shard: self.shard,
         }
     }
 }
@@ -70,6 +99,10 @@ impl BenchArgs {
 /// Runs the benchmark; fails when a method misses SR = 1 on an empty-world suite or a planner
 /// call failed.
 pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
+    if !args.merge.is_empty() {
+        return merge(args);
+    }
+    let shard = args.shard;
     let bench = Bench::prepare(&args.request(), &|m| eprintln!("{m}"))?;
     for s in bench.suites() {
         eprintln!("suite `{}`: {} episodes", s.name, s.episodes.len());
@@ -81,13 +114,10 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
             None => {}
         }
     }
-    let bar = ProgressBar::new(0).with_style(
-        ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:40}] {pos}/{len} episode runs, ETA {eta}",
-        )
-        .unwrap_or_else(|_| ProgressStyle::default_bar())
-        .progress_chars("=> "),
-    );
+    let bar = progress_bar();
+    if shard.is_some() {
+        return run_shard(&bench, &bar);
+    }
     let done = std::sync::atomic::AtomicBool::new(false);
     let outcome = std::thread::scope(|scope| {
         if !std::io::stderr().is_terminal() {
@@ -97,10 +127,73 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
         done.store(true, std::sync::atomic::Ordering::Relaxed);
         outcome
     })?;
-
     for f in bench.plugin_failures() {
         eprintln!("warning: a plugin instance failed: {f:?}");
     }
+    print_outcome(&outcome)
+}
+
+/// The progress bar of the episode runs.
+fn progress_bar() -> ProgressBar {
+    ProgressBar::new(0).with_style(
+        ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:40}] {pos}/{len} episode runs, ETA {eta}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    )
+}
+
+/// `--shard K/N`: runs the slice and writes the shard folder.
+fn run_shard(bench: &Bench, bar: &ProgressBar) -> anyhow::Result<ExitCode> {
+    let done = std::sync::atomic::AtomicBool::new(false);
+    let outcome = std::thread::scope(|scope| {
+        if !std::io::stderr().is_terminal() {
+            scope.spawn(|| log_progress(bar, &done));
+        }
+        let outcome = bench.run_shard(bar);
+        done.store(true, std::sync::atomic::Ordering::Relaxed);
+        outcome
+    })?;
+    for f in bench.plugin_failures() {
+        eprintln!("warning: a plugin instance failed: {f:?}");
+    }
+    println!(
+        "shard {}: {} of {} episode runs in {:.1} s",
+        outcome.spec,
+        outcome.rows.len(),
+        outcome.total_runs,
+        outcome.wall_time
+    );
+    for f in &outcome.files {
+        println!("wrote:   {}", f.display());
+    }
+    println!(
+        "when all {} shards are done: human2nav bench --merge <their folders> [--out DIR]",
+        outcome.spec.count
+    );
+    print_failures(&outcome.planner_failures, &outcome.empty_world_failures);
+    Ok(if outcome.passed() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    })
+}
+
+/// `--merge DIR...`: joins the shards into one run's output.
+fn merge(args: BenchArgs) -> anyhow::Result<ExitCode> {
+    let outcome = Bench::merge(
+        &args.merge,
+        args.config.as_deref(),
+        args.out,
+        args.threads,
+        &|m| eprintln!("{m}"),
+    )?;
+    print_outcome(&outcome)
+}
+
+/// Prints where a run's output went and what failed; the exit code says whether it passed.
+fn print_outcome(outcome: &BenchOutcome) -> anyhow::Result<ExitCode> {
     println!(
         "{} episode runs in {:.1} s",
         outcome.rows.len(),
@@ -119,23 +212,28 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
     for f in &outcome.figures {
         println!("figure:  {}", f.display());
     }
-    for f in &outcome.planner_failures {
+    print_failures(&outcome.planner_failures, &outcome.empty_world_failures);
+    if outcome.passed() {
+        Ok(ExitCode::SUCCESS)
+    } else {
+        Ok(ExitCode::FAILURE)
+    }
+}
+
+/// The failed planner calls and the empty-world misses, on stderr.
+fn print_failures(planner: &[PlannerFailures], empty_world: &[(String, String, f64)]) {
+    for f in planner {
         eprintln!(
             "planner calls FAILED: method `{}` on robot `{}`: {} of {} calls in {} runs ({} runs \
              where every call failed)",
             f.method, f.robot, f.failed, f.calls, f.runs, f.runs_all_failed
         );
     }
-    for (m, r, sr) in &outcome.empty_world_failures {
+    for (m, r, sr) in empty_world {
         eprintln!(
             "empty-world sanity FAILED: method `{m}` on robot `{r}`: SR = {:.1} %",
             100.0 * sr
         );
-    }
-    if outcome.passed() {
-        Ok(ExitCode::SUCCESS)
-    } else {
-        Ok(ExitCode::FAILURE)
     }
 }
 

@@ -28,11 +28,15 @@ use human2nav_sim::config::{
 };
 use human2nav_sim::driver::{self, BenchOutcome, BenchPlan};
 use human2nav_sim::foresight::ForesightSettings;
+use human2nav_sim::shard::ShardSpec;
 use human2nav_sim::{MethodSpec, RobotSetup, Suite};
 use indicatif::ProgressBar;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+
+mod shard;
+pub use shard::ShardOutcome;
 
 /// The options of one benchmark run (those of `human2nav bench`).
 #[derive(Clone, Debug, Default)]
@@ -61,11 +65,15 @@ pub struct BenchRequest {
     pub robots: Vec<String>,
     /// Run only these suites of the configuration (all when empty).
     pub suites: Vec<String>,
+    /// Run only this slice of the runs and keep it for `--merge` ([`human2nav_sim::shard`]);
+    /// `None`: every run, with the report and figures.
+    pub shard: Option<ShardSpec>,
 }
 
 impl BenchRequest {
     /// The command line written into the report: the options that shape its numbers
-    /// (`out` and `threads` do not).
+    /// (`out` and `threads` do not; nor does `shard`: merged shards write the report of the
+    /// whole run).
     pub fn command(&self) -> String {
         let list = |flag: &str, names: &[String]| {
             if names.is_empty() {
@@ -116,13 +124,19 @@ impl Bench {
         if let Some(seed) = request.seed {
             cfg.seed = seed;
         }
-        let out = match &request.out {
-            Some(p) => p.clone(),
-            None => cfg.base_dir.join(if request.quick {
-                "out/bench-quick"
-            } else {
-                "out/bench"
-            }),
+        let out = match (&request.out, request.shard) {
+            (Some(p), _) => p.clone(),
+            (None, shard) => {
+                let dir = cfg.base_dir.join(if request.quick {
+                    "out/bench-quick"
+                } else {
+                    "out/bench"
+                });
+                match shard {
+                    Some(s) => dir.join(format!("shard-{}-of-{}", s.index, s.count)),
+                    None => dir,
+                }
+            }
         };
         let lock = DirLock::acquire(&out, "human2nav bench")
             .with_context(|| format!("locking the output folder {}", out.display()))?;
@@ -173,7 +187,12 @@ impl Bench {
     /// Runs every episode (advancing `progress`, whose length it sets) and writes the results,
     /// the report and the figures into the output folder.
     pub fn run(&self, progress: &ProgressBar) -> anyhow::Result<BenchOutcome> {
-        let plan = BenchPlan {
+        Ok(driver::run(&self.plan(), &self.out, progress)?)
+    }
+
+    /// What the simulator's driver runs.
+    fn plan(&self) -> BenchPlan<'_> {
+        BenchPlan {
             suites: &self.suites,
             robots: &self.robots,
             methods: &self.methods,
@@ -187,8 +206,7 @@ impl Bench {
                 .request
                 .failures
                 .unwrap_or(if self.request.quick { 1 } else { 4 }),
-        };
-        Ok(driver::run(&plan, &self.out, progress)?)
+        }
     }
 
     /// The plugin instances that failed so far (a panic or a refused call inside a plugin).

@@ -16,6 +16,7 @@ use crate::error::SimError;
 use crate::metrics::EpisodeMetrics;
 use crate::oracle::{OracleConfig, OraclePlanner};
 use crate::runner::{EpisodeRun, RobotSetup, SimConfig, run_episode_with};
+use crate::shard::ShardSpec;
 use crate::straight::{StraightConfig, StraightPlanner};
 use human2nav_core::Planner;
 use indicatif::ProgressBar;
@@ -321,6 +322,72 @@ pub fn run_bench_timed(
     seed: u64,
     progress: &ProgressBar,
 ) -> Result<(Vec<ResultRow>, MethodTimes), SimError> {
+    run_bench_shard(suites, robots, methods, sim, seed, None, progress)
+}
+
+/// One run of a benchmark, as [`run_ids`] lists them.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct RunId {
+    /// The suite's name.
+    pub suite: String,
+    /// The robot's name.
+    pub robot: String,
+    /// The method's name.
+    pub method: String,
+    /// The episode's id.
+    pub episode: String,
+}
+
+impl RunId {
+    /// The run a result row is of.
+    pub fn of(row: &ResultRow) -> Self {
+        Self {
+            suite: row.suite.clone(),
+            robot: row.robot.clone(),
+            method: row.method.clone(),
+            episode: row.episode.clone(),
+        }
+    }
+}
+
+impl std::fmt::Display for RunId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "suite `{}`, robot `{}`, method `{}`, episode `{}`",
+            self.suite, self.robot, self.method, self.episode
+        )
+    }
+}
+
+/// Every run of a benchmark in job order, the order of its rows: suite, then robot, then
+/// method (a suite only with the methods it names), then episode. Run `i` of this list is
+/// the one [`crate::shard::ShardSpec::holds`] assigns.
+pub fn run_ids(suites: &[Suite], robots: &[RobotSetup], methods: &[MethodSpec]) -> Vec<RunId> {
+    jobs(suites, robots, methods)
+        .into_iter()
+        .map(|(s, r, _, m, e)| RunId {
+            suite: s.name.clone(),
+            robot: r.name.clone(),
+            method: m.name.clone(),
+            episode: e.id.clone(),
+        })
+        .collect()
+}
+
+type Job<'a> = (
+    &'a Suite,
+    &'a RobotSetup,
+    usize,
+    &'a MethodSpec,
+    &'a Episode,
+);
+
+fn jobs<'a>(
+    suites: &'a [Suite],
+    robots: &'a [RobotSetup],
+    methods: &'a [MethodSpec],
+) -> Vec<Job<'a>> {
     let mut jobs = Vec::new();
     for s in suites {
         for r in robots {
@@ -331,10 +398,33 @@ pub fn run_bench_timed(
             }
         }
     }
+    jobs
+}
+
+/// [`run_bench_timed`] of the runs of `shard` only (every run when `None`): rows in job order.
+/// An empty benchmark is an error; an empty shard (more shards than runs) is not.
+pub fn run_bench_shard(
+    suites: &[Suite],
+    robots: &[RobotSetup],
+    methods: &[MethodSpec],
+    sim: &SimConfig,
+    seed: u64,
+    shard: Option<ShardSpec>,
+    progress: &ProgressBar,
+) -> Result<(Vec<ResultRow>, MethodTimes), SimError> {
+    let mut jobs = jobs(suites, robots, methods);
     if jobs.is_empty() {
         return Err(SimError::Empty(
             "no suite, robot, method or episode selected".into(),
         ));
+    }
+    if let Some(shard) = shard {
+        jobs = jobs
+            .into_iter()
+            .enumerate()
+            .filter(|(i, _)| shard.holds(*i))
+            .map(|(_, job)| job)
+            .collect();
     }
     progress.set_length(jobs.len() as u64);
     // Run the jobs in a fixed pseudo-random order: in job order the cheap baselines and the

@@ -2,13 +2,14 @@
 //! the figures and `report.md` in the output directory.
 
 use crate::bench::{
-    MethodSpec, MethodTimes, ResultRow, Suite, SuiteKind, run_bench_timed, run_one,
+    MethodSpec, MethodTimes, ResultRow, Suite, SuiteKind, run_bench_shard, run_one,
 };
 use crate::episode::{Episode, ScenarioClass, ScenarioTitle};
 use crate::error::SimError;
 use crate::figures::{self, Snapshot};
 use crate::report::{self, PlannerFailures, ReportContext, summarize};
 use crate::runner::{RobotSetup, SimConfig};
+use crate::shard::ShardSpec;
 use crate::stats::SuiteComposition;
 use human2nav_core::bev::BevSpec;
 use indicatif::ProgressBar;
@@ -75,17 +76,60 @@ pub fn run(
     out_dir: &Path,
     progress: &ProgressBar,
 ) -> Result<BenchOutcome, SimError> {
-    if let Some(n) = plan.threads.filter(|&n| n > MAX_THREADS) {
-        return Err(SimError::setting(
+    check_threads(plan)?;
+    std::fs::create_dir_all(out_dir).map_err(|e| SimError::io(out_dir, e))?;
+    let started = Instant::now();
+    let (rows, times) = run_episodes(plan, None, progress)?;
+    write_outputs(plan, rows, times, Merged::default(), out_dir, started)
+}
+
+/// Refuses more worker threads than [`MAX_THREADS`].
+fn check_threads(plan: &BenchPlan<'_>) -> Result<(), SimError> {
+    match plan.threads.filter(|&n| n > MAX_THREADS) {
+        Some(n) => Err(SimError::setting(
             "bench",
             "threads",
             format!("{n} is more than the limit of {MAX_THREADS}"),
-        ));
+        )),
+        None => Ok(()),
     }
-    std::fs::create_dir_all(out_dir).map_err(|e| SimError::io(out_dir, e))?;
-    let started = Instant::now();
-    let (rows, times) = run_episodes(plan, progress)?;
+}
 
+/// The runs of one shard of the plan ([`crate::shard`]): its rows in job order and the thread
+/// time per method. Writes nothing.
+pub fn run_shard(
+    plan: &BenchPlan<'_>,
+    shard: ShardSpec,
+    progress: &ProgressBar,
+) -> Result<(Vec<ResultRow>, MethodTimes), SimError> {
+    check_threads(plan)?;
+    run_episodes(plan, Some(shard), progress)
+}
+
+/// What the shards a merge joins add to its report: their number and the wall time they took
+/// together.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Merged {
+    /// Shards merged (0: one run).
+    pub shards: usize,
+    /// The shards' wall times summed (s).
+    pub wall_time: f64,
+}
+
+/// Writes `results.csv`, the figures (re-running the episodes they draw) and `report.md` of
+/// every run of the plan, given as `rows` in job order, into `out_dir` (created when missing).
+/// `started` is when the run began (the report's wall time counts from it); `merged` says what
+/// shards the rows came from ([`Merged::default`] for one run).
+pub fn write_outputs(
+    plan: &BenchPlan<'_>,
+    rows: Vec<ResultRow>,
+    times: MethodTimes,
+    merged: Merged,
+    out_dir: &Path,
+    started: Instant,
+) -> Result<BenchOutcome, SimError> {
+    check_threads(plan)?;
+    std::fs::create_dir_all(out_dir).map_err(|e| SimError::io(out_dir, e))?;
     let results_csv = out_dir.join("results.csv");
     std::fs::write(&results_csv, report::results_csv(&rows))
         .map_err(|e| SimError::io(&results_csv, e))?;
@@ -98,7 +142,7 @@ pub fn run(
         .map(|(file, _)| out_dir.join(file))
         .collect();
 
-    let wall_time = started.elapsed().as_secs_f64();
+    let wall_time = started.elapsed().as_secs_f64() + merged.wall_time;
     let ctx = ReportContext {
         command: plan.command.clone(),
         seed: plan.seed,
@@ -121,6 +165,7 @@ pub fn run(
             .iter()
             .map(|s| SuiteComposition::of(&s.name, &s.episodes))
             .collect(),
+        shards: merged.shards,
     };
     let report_md = out_dir.join("report.md");
     std::fs::write(&report_md, report::report_markdown(&rows, &ctx))
@@ -140,29 +185,38 @@ pub fn run(
     })
 }
 
-/// Every episode run of the plan, on `plan.threads` workers (rayon's default pool when
-/// `None`), with the thread time per method.
+/// Every episode run of the plan (of `shard` only, when given), on `plan.threads` workers
+/// (rayon's default pool when `None`), with the thread time per method.
 fn run_episodes(
     plan: &BenchPlan<'_>,
+    shard: Option<ShardSpec>,
     progress: &ProgressBar,
 ) -> Result<(Vec<ResultRow>, MethodTimes), SimError> {
-    let bench = || {
-        run_bench_timed(
+    in_pool(plan, || {
+        run_bench_shard(
             plan.suites,
             plan.robots,
             plan.methods,
             plan.sim,
             plan.seed,
+            shard,
             progress,
         )
-    };
+    })
+}
+
+/// `work` on `plan.threads` workers (rayon's default pool when `None`).
+fn in_pool<T: Send>(
+    plan: &BenchPlan<'_>,
+    work: impl FnOnce() -> Result<T, SimError> + Send,
+) -> Result<T, SimError> {
     match plan.threads {
-        None => bench(),
+        None => work(),
         Some(n) => rayon::ThreadPoolBuilder::new()
             .num_threads(n.max(1))
             .build()
             .map_err(|e| SimError::setting("bench", "threads", e.to_string()))?
-            .install(bench),
+            .install(work),
     }
 }
 
@@ -250,7 +304,7 @@ fn robot_line(r: &RobotSetup) -> String {
 }
 
 /// `(method, robot, SR)` of every pair that missed SR = 1 on an empty-world suite.
-fn empty_world_failures(
+pub fn empty_world_failures(
     plan: &BenchPlan<'_>,
     rows: &[ResultRow],
     method_names: &[String],

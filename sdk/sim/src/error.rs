@@ -70,6 +70,10 @@ pub enum SimError {
         /// The drawing backend's error.
         message: String,
     },
+    /// Shards of `human2nav bench --shard` that cannot be merged; the message names the
+    /// folders and what is wrong.
+    #[error("cannot merge the shards: {0}")]
+    Shards(String),
     /// The benchmark has nothing to run; the message says why.
     #[error("nothing to run: {0}")]
     Empty(String),

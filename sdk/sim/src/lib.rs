@@ -19,6 +19,7 @@
 //!   tests, intervals and density bins the report uses.
 //! * [`plan_figure`]: one planning step from an episode, drawn like the paper's Fig. 4.
 //! * [`compare`]: a method of one run against a method of another, paired run by run.
+//! * [`shard`]: a benchmark spread over machines (`bench --shard K/N`, `bench --merge`).
 
 #![warn(missing_docs)]
 
@@ -37,6 +38,7 @@ pub mod plan_figure;
 pub mod replay;
 pub mod report;
 pub mod runner;
+pub mod shard;
 pub mod stats;
 pub mod straight;
 

@@ -6,9 +6,11 @@
 
 use crate::bench::{ResultRow, SuiteKind};
 use crate::episode::{ScenarioClass, ScenarioTitle};
+use crate::error::SimError;
 use crate::metrics::{EpisodeMetrics, LimitCounts};
-use crate::runner::Contact;
+use crate::runner::{Contact, Outcome};
 use crate::stats::{self, BOOTSTRAP_RESAMPLES, DENSITY_BINS, PairedComparison, SuiteComposition};
+use std::collections::HashMap;
 use std::fmt::Write as _;
 
 /// The header of `results.csv`.
@@ -19,6 +21,7 @@ contact_pedestrian_closing,contact_pedestrian_age,contact_pedestrian_speed,comma
 exec_over_acceleration,exec_over_yaw_rate,exec_over_curvature,exec_over_lateral,exec_over_coupled,\
 end_goal_distance,end_goal_crowd";
 
+/// A number of `results.csv`: six decimals, empty when not finite.
 fn num(v: f64) -> String {
     if v.is_finite() {
         format!("{v:.6}")
@@ -27,12 +30,21 @@ fn num(v: f64) -> String {
     }
 }
 
+/// An optional number of `results.csv`: empty when `None`.
+#[cfg(test)]
 fn opt(v: Option<f64>) -> String {
     v.map(num).unwrap_or_default()
 }
 
-/// The fields of one `results.csv` line, in [`CSV_HEADER`]'s order.
-fn csv_record(r: &ResultRow) -> Vec<String> {
+/// A number written so that reading it back gives the same `f64` (the shortest such form;
+/// `NaN`, `inf` and `-inf` for the others): [`results_csv_exact`].
+fn exact(v: f64) -> String {
+    format!("{v:?}")
+}
+
+/// The fields of one `results.csv` line, in [`CSV_HEADER`]'s order, numbers written by `num`.
+fn csv_record(r: &ResultRow, num: fn(f64) -> String) -> Vec<String> {
+    let opt = |v: Option<f64>| v.map(num).unwrap_or_default();
     let m = &r.metrics;
     [
         r.suite.clone(),
@@ -84,6 +96,19 @@ fn csv_record(r: &ResultRow) -> Vec<String> {
 /// quoted only when it contains `,`, `"`, `\r` or `\n`, with its quotes doubled (the `csv`
 /// crate's default writer).
 pub fn results_csv(rows: &[ResultRow]) -> String {
+    write_csv(rows, num)
+}
+
+/// `results.csv` with every number written exactly (the shortest decimal form that reads back
+/// as the same `f64`, `NaN` and `inf` included) instead of with six decimals: what a shard of
+/// `human2nav bench --shard` keeps besides its `results.csv`, so that the merged report is
+/// computed from the very numbers one run would have had. [`parse_results_csv`] reads it back
+/// into the same rows, except for what `results.csv` has no column for (see there).
+pub fn results_csv_exact(rows: &[ResultRow]) -> String {
+    write_csv(rows, exact)
+}
+
+fn write_csv(rows: &[ResultRow], num: fn(f64) -> String) -> String {
     let mut w = csv::Writer::from_writer(Vec::with_capacity(256 * (rows.len() + 1)));
     // Only an I/O error (there is none: the writer is a Vec) or a record whose length differs
     // from the header's (there is none: `csv_record` has one field per header column, as the
@@ -91,10 +116,238 @@ pub fn results_csv(rows: &[ResultRow]) -> String {
     const INFALLIBLE: &str = "results.csv records match the header and are written to memory";
     w.write_record(CSV_HEADER.split(',')).expect(INFALLIBLE);
     for r in rows {
-        w.write_record(csv_record(r)).expect(INFALLIBLE);
+        w.write_record(csv_record(r, num)).expect(INFALLIBLE);
     }
     let bytes = w.into_inner().expect(INFALLIBLE);
     String::from_utf8(bytes).expect("CSV made of UTF-8 fields is UTF-8")
+}
+
+/// Reads the rows of a `results.csv` ([`results_csv`] or [`results_csv_exact`]) back; `source`
+/// names the file in errors. Columns are found by name, in any order; every column of
+/// [`CSV_HEADER`] must be there and no other. An error names the line and the column: a
+/// missing or unknown column, a field that is not a number, a count or a flag (0 or 1), an
+/// unknown suite kind, scenario class or outcome, a line with too few or too many fields.
+///
+/// What reads back: `parse_results_csv(results_csv_exact(rows)) == rows` for every row;
+/// `parse_results_csv(results_csv(rows)) == rows` when every number has at most six decimals
+/// and is finite (an empty number field reads as `NaN`, an empty optional one as `None`).
+/// Two things `results.csv` has no column for read back as their defaults: the id of the
+/// pedestrian a collision was with (`contact.pedestrian`, 0) and the obstacle hit
+/// (`obstacle_hit`, `None`); nothing in the report or the figures uses them. A collision's
+/// contact is `Some` when any of its four `contact_*` fields is set.
+pub fn parse_results_csv(text: &str, source: &str) -> Result<Vec<ResultRow>, SimError> {
+    let error = |message: String| SimError::Parse {
+        path: source.into(),
+        message,
+    };
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .flexible(true)
+        .from_reader(text.as_bytes());
+    let header = reader
+        .headers()
+        .map_err(|e| error(format!("its header: {e}")))?
+        .clone();
+    let known: Vec<&str> = CSV_HEADER.split(',').collect();
+    let mut at: HashMap<&str, usize> = HashMap::new();
+    for (i, name) in header.iter().enumerate() {
+        if !known.contains(&name) {
+            return Err(error(format!(
+                "line 1: unknown column `{name}` (results.csv of this version has {})",
+                known.len()
+            )));
+        }
+        if at.insert(name, i).is_some() {
+            return Err(error(format!("line 1: column `{name}` appears twice")));
+        }
+    }
+    if let Some(missing) = known.iter().find(|k| !at.contains_key(*k)) {
+        return Err(error(format!("line 1: no `{missing}` column")));
+    }
+    let mut rows = Vec::new();
+    for record in reader.records() {
+        let record = record.map_err(|e| error(e.to_string()))?;
+        let line = record.position().map_or(0, |p| p.line());
+        if record.len() != header.len() {
+            return Err(error(format!(
+                "line {line}: {} fields, the header has {}",
+                record.len(),
+                header.len()
+            )));
+        }
+        let fields = Fields {
+            record: &record,
+            at: &at,
+            line,
+        };
+        rows.push(fields.row().map_err(error)?);
+    }
+    Ok(rows)
+}
+
+/// One line of a `results.csv` being read: its fields by column name.
+struct Fields<'a> {
+    record: &'a csv::StringRecord,
+    at: &'a HashMap<&'a str, usize>,
+    line: u64,
+}
+
+impl Fields<'_> {
+    fn text(&self, column: &str) -> &str {
+        // Every column of CSV_HEADER is in `at` (checked on the header) and every record has
+        // the header's length (checked per line); a name outside CSV_HEADER is a bug here.
+        self.at
+            .get(column)
+            .and_then(|&i| self.record.get(i))
+            .unwrap_or_else(|| panic!("results.csv reader asks for `{column}`, not a column"))
+    }
+
+    fn bad(&self, column: &str, what: &str) -> String {
+        format!(
+            "line {}, column `{column}`: `{}` is not {what}",
+            self.line,
+            self.text(column)
+        )
+    }
+
+    fn string(&self, column: &str) -> String {
+        self.text(column).to_string()
+    }
+
+    fn number(&self, column: &str) -> Result<f64, String> {
+        match self.text(column) {
+            "" => Ok(f64::NAN),
+            t => t.parse().map_err(|_| self.bad(column, "a number")),
+        }
+    }
+
+    fn optional(&self, column: &str) -> Result<Option<f64>, String> {
+        match self.text(column) {
+            "" => Ok(None),
+            _ => self.number(column).map(Some),
+        }
+    }
+
+    fn count<T: std::str::FromStr>(&self, column: &str) -> Result<T, String> {
+        self.text(column)
+            .parse()
+            .map_err(|_| self.bad(column, "a whole number"))
+    }
+
+    fn flag(&self, column: &str) -> Result<bool, String> {
+        match self.text(column) {
+            "0" => Ok(false),
+            "1" => Ok(true),
+            _ => Err(self.bad(column, "0 or 1")),
+        }
+    }
+
+    fn named<T: Copy>(
+        &self,
+        column: &str,
+        all: &[T],
+        name: impl Fn(T) -> &'static str,
+    ) -> Result<T, String> {
+        let t = self.text(column);
+        all.iter().copied().find(|&v| name(v) == t).ok_or_else(|| {
+            let names: Vec<&str> = all.iter().map(|&v| name(v)).collect();
+            self.bad(column, &format!("one of {}", names.join(", ")))
+        })
+    }
+
+    /// The row of this line: one field per column of [`CSV_HEADER`], as [`csv_record`]
+    /// writes them.
+    fn row(&self) -> Result<ResultRow, String> {
+        let contact = [
+            "contact_robot_closing",
+            "contact_pedestrian_closing",
+            "contact_pedestrian_age",
+            "contact_pedestrian_speed",
+        ];
+        let contact = if contact.iter().all(|c| self.text(c).is_empty()) {
+            None
+        } else {
+            Some(Contact {
+                pedestrian: 0,
+                robot_closing: self.number(contact[0])?,
+                pedestrian_closing: self.number(contact[1])?,
+                pedestrian_age: self.number(contact[2])?,
+                pedestrian_speed: self.number(contact[3])?,
+            })
+        };
+        let [
+            speed,
+            reverse,
+            acceleration,
+            yaw_rate,
+            curvature,
+            lateral,
+            coupled,
+        ] = [
+            "exec_over_speed",
+            "exec_over_reverse",
+            "exec_over_acceleration",
+            "exec_over_yaw_rate",
+            "exec_over_curvature",
+            "exec_over_lateral",
+            "exec_over_coupled",
+        ]
+        .map(|c| self.count::<usize>(c));
+        let executed_violations = LimitCounts {
+            commands: self.count("commands")?,
+            speed: speed?,
+            reverse: reverse?,
+            acceleration: acceleration?,
+            yaw_rate: yaw_rate?,
+            curvature: curvature?,
+            lateral: lateral?,
+            coupled: coupled?,
+        };
+        let outcomes = [Outcome::Success, Outcome::Collision, Outcome::Timeout];
+        let kinds = [
+            SuiteKind::Real,
+            SuiteKind::Synthetic,
+            SuiteKind::Empty,
+            SuiteKind::Corridor,
+        ];
+        Ok(ResultRow {
+            suite: self.string("suite"),
+            suite_kind: self.named("suite_kind", &kinds, SuiteKind::as_str)?,
+            scenario: self.named("scenario", &ScenarioClass::ALL, ScenarioClass::name)?,
+            episode: self.string("episode"),
+            scene: self.string("scene"),
+            robot: self.string("robot"),
+            method: self.string("method"),
+            seed: self.count("seed")?,
+            agents: self.count("agents")?,
+            density: self.count("density")?,
+            metrics: EpisodeMetrics {
+                outcome: self.named("outcome", &outcomes, Outcome::as_str)?,
+                success: self.flag("success")?,
+                collision: self.flag("collision")?,
+                timeout: self.flag("timeout")?,
+                tfs: self.number("tfs")?,
+                tfs_plan: self.number("tfs_plan")?,
+                tfs_executed: self.number("tfs_executed")?,
+                path_length: self.number("path_length")?,
+                time_to_goal: self.optional("time_to_goal")?,
+                duration: self.number("duration")?,
+                budget: self.number("budget")?,
+                min_clearance: self.optional("min_clearance")?,
+                time_within_intimate: self.number("time_within_0_45")?,
+                time_within_personal: self.number("time_within_1_2")?,
+                mean_jerk: self.number("mean_jerk")?,
+                plans: self.count("plans")?,
+                fallbacks: self.count("fallbacks")?,
+                planner_errors: self.count("planner_errors")?,
+                contact,
+                obstacle_hit: None,
+                executed_violations,
+                end_goal_distance: self.number("end_goal_distance")?,
+                end_goal_crowd: self.optional("end_goal_crowd")?,
+            },
+        })
+    }
 }
 
 /// Aggregates over a group of rows.
@@ -291,6 +544,9 @@ pub struct ReportContext {
     pub wall_time: Option<f64>,
     /// `(method, runs, thread-seconds)`, if measured.
     pub method_times: Vec<(String, usize, f64)>,
+    /// How many shards of `human2nav bench --shard` the rows were merged from (0 or 1: one
+    /// run); the wall time is then their sum.
+    pub shards: usize,
     /// The method every other is compared with in the paired tables (see
     /// [`ReportContext::reference`]); `None`: `human2nav` when it ran, else the first method.
     pub reference_method: Option<String>,
@@ -376,6 +632,9 @@ fn report_header(md: &mut String, rows: &[ResultRow], ctx: &ReportContext) {
     planner_failure_warning(md, rows);
     if let Some(w) = ctx.wall_time {
         let _ = write!(md, "Wall time: {w:.1} s for {} episode runs", rows.len());
+        if ctx.shards > 1 {
+            let _ = write!(md, ", summed over {} shards", ctx.shards);
+        }
         let per: Vec<String> = ctx
             .method_times
             .iter()
@@ -1238,6 +1497,143 @@ mod tests {
         assert_eq!(
             results_csv(&rows[..1]),
             hand_written_results_csv(&rows[..1])
+        );
+    }
+
+    /// Rows as the reader gives them back: what `results.csv` has no column for at its
+    /// default (the contact's pedestrian id, the obstacle hit).
+    fn as_read(mut rows: Vec<ResultRow>) -> Vec<ResultRow> {
+        for r in &mut rows {
+            if let Some(c) = &mut r.metrics.contact {
+                c.pedestrian = 0;
+            }
+            r.metrics.obstacle_hit = None;
+        }
+        rows
+    }
+
+    fn sample_rows() -> Vec<ResultRow> {
+        let outcomes = [Outcome::Success, Outcome::Collision, Outcome::Timeout];
+        (0..12)
+            .map(|k| row(&format!("ep \"{k}\"\n"), outcomes[k as usize % 3], k))
+            .collect()
+    }
+
+    #[test]
+    fn the_exact_csv_reads_back_into_the_same_rows() {
+        let rows = as_read(sample_rows());
+        let text = results_csv_exact(&rows);
+        let back = parse_results_csv(&text, "test").unwrap();
+        // NaN is not equal to itself: compare the exact text (one spelling per f64, -0.0 and
+        // NaN included), then the rows without NaN directly.
+        assert_eq!(results_csv_exact(&back), text);
+        assert_eq!(back.len(), rows.len());
+        let finite = |r: &&ResultRow| {
+            let m = &r.metrics;
+            [m.tfs_plan, m.tfs_executed, m.end_goal_distance]
+                .iter()
+                .all(|v| !v.is_nan())
+                && m.contact.is_none_or(|c| !c.pedestrian_age.is_nan())
+        };
+        let compared: Vec<_> = rows.iter().zip(&back).filter(|(r, _)| finite(r)).collect();
+        assert!(compared.len() >= 3, "some rows without NaN are compared");
+        for (r, b) in compared {
+            assert_eq!(r, b);
+        }
+        // 0.1 + 0.2 and -1e300 are not six-decimal numbers: they came back exactly.
+        assert_eq!(back[2].metrics.tfs_executed, 0.1 + 0.2);
+        assert_eq!(back[3].metrics.tfs_executed, -1e300);
+        assert!(back[2].metrics.tfs_plan.is_sign_negative());
+    }
+
+    #[test]
+    fn six_decimal_rows_read_back_equal_and_any_rows_write_back_the_same_bytes() {
+        // Rows whose numbers have six decimals at most and are finite read back equal.
+        let rows: Vec<ResultRow> = as_read(sample_rows())
+            .into_iter()
+            .map(|mut r| {
+                let m = &mut r.metrics;
+                let six = |v: &mut f64| {
+                    *v = if v.is_finite() {
+                        (*v * 1e6).round() / 1e6
+                    } else {
+                        0.5
+                    }
+                };
+                for v in [
+                    &mut m.tfs,
+                    &mut m.tfs_plan,
+                    &mut m.tfs_executed,
+                    &mut m.path_length,
+                    &mut m.duration,
+                    &mut m.budget,
+                    &mut m.time_within_intimate,
+                    &mut m.time_within_personal,
+                    &mut m.mean_jerk,
+                    &mut m.end_goal_distance,
+                ] {
+                    six(v);
+                }
+                for v in [
+                    &mut m.time_to_goal,
+                    &mut m.min_clearance,
+                    &mut m.end_goal_crowd,
+                ] {
+                    v.iter_mut().for_each(six);
+                }
+                if let Some(c) = &mut m.contact {
+                    for v in [
+                        &mut c.robot_closing,
+                        &mut c.pedestrian_closing,
+                        &mut c.pedestrian_age,
+                        &mut c.pedestrian_speed,
+                    ] {
+                        six(v);
+                    }
+                }
+                r
+            })
+            .collect();
+        let text = results_csv(&rows);
+        assert_eq!(parse_results_csv(&text, "test").unwrap(), rows);
+        // Any rows: what is read back from results.csv writes the same bytes again (what
+        // `bench --merge` relies on when it is given plain results.csv files).
+        let text = results_csv(&sample_rows());
+        let back = parse_results_csv(&text, "test").unwrap();
+        assert_eq!(results_csv(&back), text);
+    }
+
+    #[test]
+    fn a_bad_results_csv_is_refused_naming_the_line_and_the_column() {
+        let outcomes = [Outcome::Success, Outcome::Collision, Outcome::Timeout];
+        let rows: Vec<ResultRow> = (0..3).map(|k| row("e", outcomes[k as usize], k)).collect();
+        let text = results_csv(&rows);
+        let err = |text: &str| {
+            parse_results_csv(text, "shard/results.csv")
+                .unwrap_err()
+                .to_string()
+        };
+        let e = err(&text.replacen(",12.345679,", ",12.3x,", 1));
+        assert!(
+            e.contains("shard/results.csv")
+                && e.contains("line 3")
+                && e.contains("`path_length`")
+                && e.contains("`12.3x` is not a number"),
+            "{e}"
+        );
+        let e = err(&text.replacen(",success,", ",outcome2,", 1));
+        assert!(e.contains("unknown column `outcome2`"), "{e}");
+        let e = err(&text.replacen(",collision,0,1,0,", ",collision,0,1,", 1));
+        let fewer = format!("{} fields", CSV_HEADER.split(',').count() - 1);
+        assert!(e.contains("line 3") && e.contains(&fewer), "{e}");
+        let header_only = format!("{}\n", CSV_HEADER.replacen(",mean_jerk", "", 1));
+        assert!(err(&header_only).contains("no `mean_jerk` column"));
+        let e = err(&text.replacen(",collision,0,1,0,", ",collision,2,1,0,", 1));
+        assert!(e.contains("`success`") && e.contains("not 0 or 1"), "{e}");
+        let e = err(&text.replacen(",timeout,0,0,1,", ",stuck,0,0,1,", 1));
+        assert!(
+            e.contains("`outcome`") && e.contains("one of success"),
+            "{e}"
         );
     }
 }

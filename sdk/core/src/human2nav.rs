@@ -304,6 +304,8 @@ pub struct Human2NavSettings {
     /// correction), `slowdown`, `stop_candidate` and `goal_approach` (the extra candidates),
     /// `motions` (the robot's own motions); [`crate::ablation::Arm`] names the combinations.
     pub guidance: GuidanceSettings,
+    /// Which terms of Φ Algorithm 1 descends ([`GuidanceTerms`]). Default `all`, as the paper.
+    pub guidance_terms: GuidanceTerms,
     /// The exact last-step correction applied after Algorithm 1 ([`crate::projection`]).
     pub projection: ProjectionSettings,
     /// The weights of the selection rule (module docs, "Selection rule").
@@ -334,10 +336,30 @@ impl Default for Human2NavSettings {
                 enabled: false,
                 ..GuidanceSettings::default()
             },
+            guidance_terms: GuidanceTerms::All,
             projection: ProjectionSettings::default(),
             selection: SelectionWeights::default(),
         }
     }
+}
+
+/// Which terms of Φ Algorithm 1 descends ([`Human2NavSettings::guidance_terms`]). The
+/// selection scores every candidate with the whole Φ either way.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GuidanceTerms {
+    /// Every term: the robot's limit terms, its plugin terms and the clearance term (the
+    /// paper's Φ).
+    #[default]
+    All,
+    /// Every term but the robot's built-in limit terms ([`Phi::without_limits`]): the clearance
+    /// term and the plugin terms, the ones that read the scene. The last-step correction
+    /// (`projection.enabled`) then enforces the limits exactly; without it nothing does (the
+    /// guidance ablation's "Algorithm 1 only" arm measures that). The limit terms'
+    /// gradients are far larger than the clearance term's, so with `all` the iterations go
+    /// to the limits and leave the samples' contacts as they were (experiment log,
+    /// 2026-12-06, "Algorithm 1 on the scene's terms").
+    Scene,
 }
 
 impl Human2NavSettings {
@@ -465,6 +487,8 @@ pub struct Human2Nav<M> {
     name: String,
     model: M,
     robot: RobotModel,
+    /// What Algorithm 1 descends: `robot.phi`, or its scene terms ([`GuidanceTerms`]).
+    guidance_phi: Option<Phi>,
     bev: BevSpec,
     settings: Human2NavSettings,
     rng: ChaCha8Rng,
@@ -530,6 +554,10 @@ impl<M: FlowModel> Human2Nav<M> {
             motion_grid: MotionGrid::new(robot.limits, GridLevels::default()),
             reach: footprint::reach(&robot.footprint),
             model,
+            guidance_phi: match settings.guidance_terms {
+                GuidanceTerms::All => None,
+                GuidanceTerms::Scene => Some(robot.phi.without_limits()),
+            },
             robot,
             bev,
             settings,
@@ -901,7 +929,7 @@ impl<M: FlowModel> Human2Nav<M> {
             },
             cond,
             shortlist,
-            &self.robot.phi,
+            self.guidance_phi.as_ref().unwrap_or(&self.robot.phi),
             &ctx,
             &guidance,
             &mut self.workspace,

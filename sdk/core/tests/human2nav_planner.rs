@@ -14,7 +14,7 @@ use human2nav_core::forecast::{CrowdPredictor, Forecast, constant_velocity_path}
 use human2nav_core::guidance::analytic::FixedWalk;
 use human2nav_core::guidance::{GuidanceVariant, PaperSettings};
 use human2nav_core::human2nav::{
-    Human2Nav, Human2NavSettings, RobotModel, SelectionWeights, pose_at,
+    GuidanceTerms, Human2Nav, Human2NavSettings, RobotModel, SelectionWeights, pose_at,
 };
 use human2nav_core::obstacle::{Obstacle, OccupancyGrid, footprint_clearance};
 use human2nav_core::robot::footprint::FootprintShape;
@@ -1205,4 +1205,76 @@ fn zero_samples_plan_from_the_motions_alone() {
             .to_string();
         assert!(err.contains(field), "{err}");
     }
+}
+
+/// Someone standing 1.6 m ahead, 0.15 m left of the line the model's samples walk.
+fn standing_ahead() -> Observation {
+    Observation {
+        agents: vec![AgentState {
+            id: 1,
+            position: [1.6, 0.15],
+            velocity: [0.0, 0.0],
+            radius: 0.3,
+            history: vec![],
+        }],
+        ..blocked()
+    }
+}
+
+/// The samples of one call before and after Algorithm 1 descending `terms` (200 last-step
+/// iterations; no correction after it, so that what it did shows).
+fn guided_samples(terms: GuidanceTerms) -> (Vec<Vec<Pose2>>, Vec<Vec<Pose2>>) {
+    let mut settings = Human2NavSettings {
+        guidance_terms: terms,
+        ..Human2NavSettings::default()
+    };
+    settings.projection.enabled = false;
+    settings.guidance.enabled = true;
+    settings.guidance.last_step_iterations = 200;
+    let mut planner = Human2Nav::new(fast_straight(), robot(), BevSpec::default(), settings)
+        .expect("valid settings");
+    let plan = planner.plan(&standing_ahead()).expect("a plan");
+    (plan.info.candidates, plan.info.guided)
+}
+
+#[test]
+fn algorithm_1_on_the_scene_terms_steers_the_samples_out_of_contact() {
+    let obs = standing_ahead();
+    let gap = |samples: &[Vec<Pose2>]| {
+        samples
+            .iter()
+            .map(|s| predicted_gap(s, &obs))
+            .fold(f64::INFINITY, f64::min)
+    };
+    let (raw, scene) = guided_samples(GuidanceTerms::Scene);
+    let (_, all) = guided_samples(GuidanceTerms::All);
+    assert_eq!(scene.len(), raw.len());
+    assert!(gap(&raw) < 0.0, "the samples walk into the person");
+    // The limit terms of this over-speed walk dwarf the clearance term: with every term the
+    // iterations go to the limits, with the scene's terms to the person.
+    assert!(
+        gap(&scene) > 0.0,
+        "scene terms: smallest gap {:.3} m (raw {:.3}, all terms {:.3})",
+        gap(&scene),
+        gap(&raw),
+        gap(&all)
+    );
+    assert!(
+        gap(&all) < 0.0,
+        "all terms: smallest gap {:.3} m",
+        gap(&all)
+    );
+}
+
+#[test]
+fn guidance_terms_parse_from_the_planner_table() {
+    let settings: Human2NavSettings = toml::from_str("guidance_terms = \"scene\"").expect("parses");
+    assert_eq!(settings.guidance_terms, GuidanceTerms::Scene);
+    assert_eq!(
+        Human2NavSettings::default().guidance_terms,
+        GuidanceTerms::All
+    );
+    let err = toml::from_str::<Human2NavSettings>("guidance_terms = \"limits\"")
+        .expect_err("an unknown choice");
+    assert!(err.to_string().contains("guidance_terms"), "{err}");
 }

@@ -3,15 +3,25 @@
 use super::builtin::{BuiltinKind, BuiltinTerm, SoftMargin, check_buffers};
 use super::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
 use crate::limits::{GuidanceWeights, Limits};
+use std::sync::Arc;
 
 /// The feasibility cost `Φ(x) = Σ_j w_j·C_j(x)` (Eq. 9, extended by the lateral-speed and
 /// reverse-speed terms and by any plugin terms).
 ///
 /// Built with [`Phi::from_weights`] for the robot's built-in terms and extended with
-/// [`Phi::push`]; a new constraint is one more `push`, nothing else changes.
+/// [`Phi::push`]; a new constraint is one more `push`, nothing else changes. The terms are
+/// shared, so [`Phi::without_limits`] is a second view of the same terms, not a copy.
 #[derive(Default)]
 pub struct Phi {
-    terms: Vec<(f64, Box<dyn ConstraintTerm>)>,
+    terms: Vec<Weighted>,
+}
+
+/// One term of Φ with its weight; `limit`: one of the robot's built-in limit terms
+/// ([`Phi::from_weights`]) rather than a pushed one.
+struct Weighted {
+    weight: f64,
+    term: Arc<dyn ConstraintTerm>,
+    limit: bool,
 }
 
 /// Scratch buffers of [`Phi::evaluate`]; they grow to the largest batch seen and are reused, so
@@ -25,7 +35,7 @@ pub struct PhiScratch {
 impl std::fmt::Debug for Phi {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_list()
-            .entries(self.terms.iter().map(|(w, t)| (t.name(), *w)))
+            .entries(self.terms.iter().map(|t| (t.term.name(), t.weight)))
             .finish()
     }
 }
@@ -59,8 +69,11 @@ impl Phi {
                 BuiltinKind::Coupled => weights.lambda_coupled,
             };
             if w != 0.0 {
-                phi.terms
-                    .push((w, Box::new(BuiltinTerm::new(kind, margin))));
+                phi.terms.push(Weighted {
+                    weight: w,
+                    term: Arc::new(BuiltinTerm::new(kind, margin)),
+                    limit: true,
+                });
             }
         }
         phi
@@ -78,8 +91,30 @@ impl Phi {
                 message: format!("weight {weight} must be finite and non-negative"),
             });
         }
-        self.terms.push((weight, term));
+        self.terms.push(Weighted {
+            weight,
+            term: Arc::from(term),
+            limit: false,
+        });
         Ok(())
+    }
+
+    /// The terms pushed onto Φ (plugin terms, the planner's clearance term) without the
+    /// robot's built-in limit terms of [`Phi::from_weights`]: what Algorithm 1 descends when
+    /// the last-step correction enforces the limits exactly. Shares the terms with `self`.
+    pub fn without_limits(&self) -> Phi {
+        Phi {
+            terms: self
+                .terms
+                .iter()
+                .filter(|t| !t.limit)
+                .map(|t| Weighted {
+                    weight: t.weight,
+                    term: Arc::clone(&t.term),
+                    limit: false,
+                })
+                .collect(),
+        }
     }
 
     /// Number of terms.
@@ -94,7 +129,7 @@ impl Phi {
 
     /// `(weight, name)` of every term, in evaluation order.
     pub fn terms(&self) -> impl Iterator<Item = (f64, &str)> + '_ {
-        self.terms.iter().map(|(w, t)| (*w, t.name()))
+        self.terms.iter().map(|t| (t.weight, t.term.name()))
     }
 
     /// Writes `Φ` of every trajectory into `cost` (length `B`) and `∇Φ` with respect to every
@@ -112,7 +147,10 @@ impl Phi {
         grad.fill(0.0);
         scratch.cost.resize(cost.len(), 0.0);
         scratch.grad.resize(grad.len(), 0.0);
-        for (w, term) in &self.terms {
+        for Weighted {
+            weight: w, term, ..
+        } in &self.terms
+        {
             if *w == 0.0 {
                 continue;
             }
@@ -150,7 +188,10 @@ impl Phi {
         }
         cost.fill(0.0);
         scratch.cost.resize(cost.len(), 0.0);
-        for (w, term) in &self.terms {
+        for Weighted {
+            weight: w, term, ..
+        } in &self.terms
+        {
             if *w == 0.0 {
                 continue;
             }
@@ -183,7 +224,7 @@ impl Phi {
         }
         scratch.grad.resize(batch.data.len(), 0.0);
         out.fill(0.0);
-        for (j, (_, term)) in self.terms.iter().enumerate() {
+        for (j, Weighted { term, .. }) in self.terms.iter().enumerate() {
             let slot = &mut out[j * batch.batch..(j + 1) * batch.batch];
             term.evaluate(batch, ctx, slot, &mut scratch.grad)?;
         }

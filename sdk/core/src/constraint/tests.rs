@@ -389,6 +389,45 @@ fn pushed_terms_are_weighted_and_checked() {
 }
 
 #[test]
+fn without_limits_keeps_the_pushed_terms_and_drops_the_builtin_ones() {
+    let l = limits(Some(1.0));
+    let c = ctx(&l);
+    let mut phi = Phi::from_weights(&weights(), &l);
+    let builtin = phi.len();
+    assert!(builtin > 0);
+    phi.push(0.25, Box::new(CenterLine)).unwrap();
+    let scene = phi.without_limits();
+    assert_eq!(scene.len(), 1);
+    assert_eq!(
+        scene.terms().collect::<Vec<_>>(),
+        vec![(0.25, "center_line")]
+    );
+    assert_eq!(phi.len(), builtin + 1, "the original keeps every term");
+    // The scene view scores what the pushed term alone scores.
+    let data = demo_batch(2, 4, 0.1);
+    let batch = TrajBatch::new(&data, 2, 4).unwrap();
+    let (mut all, mut only) = ([0.0; 2], [0.0; 2]);
+    let (mut g_all, mut g_only) = (vec![0.0; data.len()], vec![0.0; data.len()]);
+    let mut scratch = PhiScratch::default();
+    phi.evaluate(batch, &c, &mut all, &mut g_all, &mut scratch)
+        .unwrap();
+    scene
+        .evaluate(batch, &c, &mut only, &mut g_only, &mut scratch)
+        .unwrap();
+    let mut line = Phi::new();
+    line.push(0.25, Box::new(CenterLine)).unwrap();
+    let (mut expected, mut g_expected) = ([0.0; 2], vec![0.0; data.len()]);
+    line.evaluate(batch, &c, &mut expected, &mut g_expected, &mut scratch)
+        .unwrap();
+    assert_eq!(only, expected);
+    assert_eq!(g_only, g_expected);
+    assert!(
+        all[0] > only[0] || all[1] > only[1],
+        "the limit terms cost something here"
+    );
+}
+
+#[test]
 fn bad_buffers_and_limits_are_errors() {
     let l = limits(None);
     let c = ctx(&l);

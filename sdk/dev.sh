@@ -39,11 +39,12 @@ ensure_torch() {
 
 ensure_python_tools() {
     # The Python package's build backend, its runtime dependency and its test runner, in the
-    # same virtualenv as torch (the package links that torch's libtorch).
-    if ! "$venv/bin/python3" -c "import maturin, numpy, pytest" 2>/dev/null; then
-        log "installing maturin, numpy and pytest into $venv"
+    # same virtualenv as torch (the package links that torch's libtorch); and the readers and
+    # writers of MCAP files and ROS 2 bags the tests check the recordings and replays with.
+    if ! "$venv/bin/python3" -c "import maturin, numpy, pytest, mcap, rosbags" 2>/dev/null; then
+        log "installing maturin, numpy, pytest, mcap and rosbags into $venv"
         "$venv/bin/python3" -m pip install --quiet --disable-pip-version-check \
-            "maturin>=1.7,<2" "numpy>=1.22" "pytest>=7"
+            "maturin>=1.7,<2" "numpy>=1.22" "pytest>=7" "mcap>=1.1,<2" "rosbags>=0.10,<0.12"
     fi
 }
 

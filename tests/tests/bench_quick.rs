@@ -51,6 +51,7 @@ impl Quick {
             command: format!("quick test of {}", self.config),
             threads: None,
             failures: 1,
+            record: None,
         };
         let res = driver::run(&plan, out, &ProgressBar::hidden()).unwrap();
         let expected: usize = self

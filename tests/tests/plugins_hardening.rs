@@ -692,6 +692,7 @@ fn a_planner_that_fails_every_call_is_reported_loudly_and_fails_the_bench() {
         command: "failing planner test".into(),
         threads: Some(2),
         failures: 0,
+        record: None,
     };
     let out = driver::run(&plan, &dir.join("out"), &ProgressBar::hidden()).expect("runs");
     assert!(!out.passed());

@@ -50,6 +50,12 @@ pub struct BenchArgs {
     /// still takes its episodes from the configuration's first other suite.
     #[arg(long, value_delimiter = ',')]
     pub suites: Vec<String>,
+    /// Also write every run as an MCAP file that Foxglove opens (robot, footprint, people,
+    /// obstacles, goal, each plan and its candidates, the outcome) under <out>/record/, as
+    /// <suite>/<robot>/<method>/<episode>.mcap (zstd chunks, about 0.1 MB per run: narrow with
+    /// --quick, --suites, --methods and --robots).
+    #[arg(long)]
+    pub record: bool,
     /// Run only the K-th of N slices of the runs (K from 1 to N; run i, counted from 0 in the
     /// order suite, robot, method, episode, belongs to slice i mod N + 1) and write them with
     /// what `--merge` needs (results.csv, results-exact.csv, shard.json) to the output folder
@@ -65,7 +71,7 @@ pub struct BenchArgs {
         long,
         value_name = "DIR",
         num_args = 1..,
-        conflicts_with_all = ["quick", "seed", "methods", "robots", "suites", "failures", "shard", "data_config"]
+        conflicts_with_all = ["quick", "seed", "methods", "robots", "suites", "failures", "shard", "data_config", "record"]
     )]
     pub merge: Vec<PathBuf>,
 }
@@ -92,6 +98,7 @@ impl BenchArgs {
             robots: self.robots,
             suites: self.suites,
             shard: self.shard,
+            record: self.record,
         }
     }
 }

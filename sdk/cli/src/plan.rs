@@ -88,6 +88,11 @@ pub struct PlanArgs {
     /// Output PNG [default: out/plan/<robot>-<episode index>.png under the workspace root].
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Also write the planning call as an MCAP file that Foxglove opens: the robot and its
+    /// footprint, the people with their recent positions, obstacles, goal, the plan and the
+    /// candidates (`human2nav_sim::record`).
+    #[arg(long, value_name = "MCAP", conflicts_with_all = ["bench", "eval"])]
+    pub record: Option<PathBuf>,
     /// Measure planning latency: this many timed calls of the configured planner and of the
     /// guidance-ablation arms raw, qp and alg1+qp, over the first windows of the episode file
     /// (p50/p95 and where the time goes).
@@ -353,6 +358,16 @@ fn plan_one(
         );
     }
     println!("figure: {}", out.display());
+    if let Some(path) = &args.record {
+        human2nav_sim::record::record_plan(
+            path,
+            &obs,
+            &plan,
+            &rp.profile.footprint_shapes,
+            &rp.profile.name,
+        )?;
+        println!("recording: {}", path.display());
+    }
     Ok(ExitCode::SUCCESS)
 }
 

@@ -65,6 +65,9 @@ pub struct BenchRequest {
     pub robots: Vec<String>,
     /// Run only these suites of the configuration (all when empty).
     pub suites: Vec<String>,
+    /// Also write every run as an MCAP file for Foxglove under `<out>/record/`
+    /// (`<suite>/<robot>/<method>/<episode>.mcap`, [`human2nav_sim::record`]).
+    pub record: bool,
     /// Run only this slice of the runs and keep it for `--merge` ([`human2nav_sim::shard`]);
     /// `None`: every run, with the report and figures.
     pub shard: Option<ShardSpec>,
@@ -206,6 +209,7 @@ impl Bench {
                 .request
                 .failures
                 .unwrap_or(if self.request.quick { 1 } else { 4 }),
+            record: self.request.record.then(|| self.out.join("record")),
         }
     }
 

@@ -322,7 +322,7 @@ pub fn run_bench_timed(
     seed: u64,
     progress: &ProgressBar,
 ) -> Result<(Vec<ResultRow>, MethodTimes), SimError> {
-    run_bench_shard(suites, robots, methods, sim, seed, None, progress)
+    run_bench_shard(suites, robots, methods, sim, seed, None, None, progress)
 }
 
 /// One run of a benchmark, as [`run_ids`] lists them.
@@ -402,7 +402,9 @@ fn jobs<'a>(
 }
 
 /// [`run_bench_timed`] of the runs of `shard` only (every run when `None`): rows in job order.
-/// An empty benchmark is an error; an empty shard (more shards than runs) is not.
+/// An empty benchmark is an error; an empty shard (more shards than runs) is not. With
+/// `record`, each run is also written as an MCAP file under that folder
+/// ([`crate::record::record_run`], at [`crate::record::run_file`]).
 pub fn run_bench_shard(
     suites: &[Suite],
     robots: &[RobotSetup],
@@ -410,6 +412,7 @@ pub fn run_bench_shard(
     sim: &SimConfig,
     seed: u64,
     shard: Option<ShardSpec>,
+    record: Option<&std::path::Path>,
     progress: &ProgressBar,
 ) -> Result<(Vec<ResultRow>, MethodTimes), SimError> {
     let mut jobs = jobs(suites, robots, methods);
@@ -437,8 +440,19 @@ pub fn run_bench_shard(
         .map(|&i| {
             let (s, r, k, m, e) = jobs[i];
             let started = std::time::Instant::now();
-            let out = run_one(s, e, r, m, sim, seed)
-                .map(|(_, row)| (i, row, k, started.elapsed().as_secs_f64()));
+            let out = run_one(s, e, r, m, sim, seed).and_then(|(run, row)| {
+                let secs = started.elapsed().as_secs_f64();
+                if let Some(dir) = record {
+                    crate::record::record_run(
+                        &dir.join(crate::record::run_file(&row)),
+                        e,
+                        &run,
+                        r,
+                        &row,
+                    )?;
+                }
+                Ok((i, row, k, secs))
+            });
             progress.inc(1);
             out
         })

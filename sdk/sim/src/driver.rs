@@ -41,6 +41,8 @@ pub struct BenchPlan<'a> {
     pub threads: Option<usize>,
     /// Failed runs drawn per method (see [`failure_figures`]; 0: none).
     pub failures: usize,
+    /// Write every run as an MCAP file under this folder ([`crate::record`]; `None`: none).
+    pub record: Option<PathBuf>,
 }
 
 /// Largest number of worker threads of a run (`--threads`). Each thread has its own stack and
@@ -200,6 +202,7 @@ fn run_episodes(
             plan.sim,
             plan.seed,
             shard,
+            plan.record.as_deref(),
             progress,
         )
     })

@@ -70,6 +70,14 @@ pub enum SimError {
         /// The drawing backend's error.
         message: String,
     },
+    /// An MCAP recording could not be written.
+    #[error("cannot write the recording `{path}`: {message}")]
+    Record {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
     /// Shards of `human2nav bench --shard` that cannot be merged; the message names the
     /// folders and what is wrong.
     #[error("cannot merge the shards: {0}")]

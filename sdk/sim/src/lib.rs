@@ -19,6 +19,7 @@
 //!   tests, intervals and density bins the report uses.
 //! * [`plan_figure`]: one planning step from an episode, drawn like the paper's Fig. 4.
 //! * [`compare`]: a method of one run against a method of another, paired run by run.
+//! * [`record`]: runs and planning calls as MCAP logs for Foxglove.
 //! * [`shard`]: a benchmark spread over machines (`bench --shard K/N`, `bench --merge`).
 
 #![warn(missing_docs)]
@@ -36,6 +37,7 @@ pub mod metrics;
 pub mod oracle;
 pub mod plan_figure;
 pub mod replay;
+pub mod record;
 pub mod report;
 pub mod runner;
 pub mod shard;

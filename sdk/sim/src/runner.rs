@@ -358,6 +358,9 @@ pub struct PlanSample {
     pub initial_velocity: Twist2,
     /// True when the plan is the simulator's or the planner's stop-in-place fallback.
     pub fallback: bool,
+    /// The trajectories the planner chose among, world frame (after guidance when it ran;
+    /// empty for planners that report none): what a recording draws.
+    pub candidates: Vec<Vec<Pose2>>,
 }
 
 /// Everything recorded while running one episode.
@@ -654,6 +657,11 @@ fn replan(
         poses: new_plan.poses.clone(),
         initial_velocity: state.velocity,
         fallback: new_plan.info.fallback,
+        candidates: if new_plan.info.guided.is_empty() {
+            new_plan.info.candidates.clone()
+        } else {
+            new_plan.info.guided.clone()
+        },
     });
     new_plan
 }

@@ -77,6 +77,7 @@ fn threads_are_bounded_before_any_is_spawned() {
         command: String::new(),
         threads: Some(100_000),
         failures: 0,
+        record: None,
     };
     let out = scratch("threads").join("out");
     let e = run(&plan, &out, &ProgressBar::hidden()).unwrap_err();

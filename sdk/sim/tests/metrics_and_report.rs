@@ -81,6 +81,7 @@ fn tfs_pools_plan_waypoints_and_takes_the_minimum() {
             poses: a,
             initial_velocity: Twist2::ZERO,
             fallback: false,
+            candidates: Vec::new(),
         },
         PlanSample {
             t0: 0.1,
@@ -88,6 +89,7 @@ fn tfs_pools_plan_waypoints_and_takes_the_minimum() {
             poses: b,
             initial_velocity: Twist2::ZERO,
             fallback: true,
+            candidates: Vec::new(),
         },
     ];
     // Commands: one beyond v_max out of four, accelerations small.
@@ -269,6 +271,7 @@ fn driver_writes_csv_report_and_figures() {
         command: "test".into(),
         threads: Some(2),
         failures: 2,
+        record: None,
     };
     // HUMAN2NAV_FIGURE_DIR keeps the outputs there for inspection.
     let keep = std::env::var_os("HUMAN2NAV_FIGURE_DIR")

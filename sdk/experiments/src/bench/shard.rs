@@ -225,6 +225,7 @@ impl Bench {
             robots: serde_json::from_value(json("robots")).with_context(|| field("robots"))?,
             suites: serde_json::from_value(json("suites")).with_context(|| field("suites"))?,
             shard: None,
+            record: false,
         };
         let bench = Bench::prepare(&request, log)?;
         if let Some(diff) = settings_difference(settings, &bench.shard_settings()?) {

@@ -39,6 +39,7 @@ fn turning_walker() -> (Episode, Observation) {
         }],
         density: 1,
         obstacles: Vec::new(),
+        human_path: Vec::new(),
     };
     let obs = Observation {
         time: 1.0,

@@ -252,6 +252,7 @@ pub fn episodes(class: ScenarioClass, n: usize, seed: u64) -> Vec<Episode> {
                 density: agents.len(),
                 agents,
                 obstacles: layout.obstacles(),
+                human_path: Vec::new(),
             }
         })
         .collect()

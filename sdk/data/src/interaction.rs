@@ -581,6 +581,7 @@ pub fn try_interaction(
         ),
         density,
         obstacles: Vec::new(),
+        human_path: Vec::new(),
     };
     if !is_interactive(&episode, opts) {
         return Err(InteractionReject::NotInteractive(class));

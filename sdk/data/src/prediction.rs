@@ -644,6 +644,7 @@ mod tests {
                 .collect(),
             density: 1,
             obstacles: Vec::new(),
+            human_path: Vec::new(),
         }
     }
 

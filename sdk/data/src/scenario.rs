@@ -244,6 +244,12 @@ pub struct Episode {
     /// Static obstacles, world frame (walls, pillars; none in the mined real episodes).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub obstacles: Vec<human2nav_core::obstacle::Obstacle>,
+    /// Where the pedestrian whose start and goal the robot takes walked, one position every
+    /// `dt` from the start until they reached the goal (world frame, m): the recorded human
+    /// the benchmark compares the robot's path with. Empty when the episode has none (the
+    /// interaction suites put a pedestrian's walk into another moment's crowd).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub human_path: Vec<[f64; 2]>,
 }
 
 /// Largest time budget of an episode (s): an hour. The mined ones are 5–20 s; the simulator
@@ -299,6 +305,16 @@ impl Episode {
         for (i, o) in self.obstacles.iter().enumerate() {
             o.validate()
                 .or_else(|why| field(&format!("obstacles[{i}]"), why))?;
+        }
+        if let Some(k) = self
+            .human_path
+            .iter()
+            .position(|p| !p.iter().all(|&v| in_range(v)))
+        {
+            return field(
+                &format!("human_path[{k}]"),
+                format!("{range}, got {:?}", self.human_path[k]),
+            );
         }
         for (i, a) in self.agents.iter().enumerate() {
             if !(a.radius.is_finite() && a.radius >= 0.0) {
@@ -770,6 +786,7 @@ pub fn try_episode(
         agents,
         density,
         obstacles: Vec::new(),
+        human_path: t.positions[i0..=ig].to_vec(),
     };
     Ok((episode, ig))
 }
@@ -1058,6 +1075,7 @@ mod tests {
             agents: Vec::new(),
             density,
             obstacles: Vec::new(),
+            human_path: Vec::new(),
         };
         // Scene a: 40 candidates at density 1 and 2 at density 9; scene b: 4 at density 1.
         let mut all: Vec<Episode> = (0..40).map(|k| ep("a", k, 1)).collect();

@@ -43,6 +43,7 @@ fn episode() -> Episode {
         agents,
         density: 12,
         obstacles: Vec::new(),
+        human_path: Vec::new(),
     }
 }
 

@@ -275,7 +275,7 @@ pub fn run_one(
         message: e.to_string(),
     })?;
     let run = run_episode_with(episode, robot, planner.as_mut(), sim, &suite.crowd);
-    let metrics = EpisodeMetrics::compute(&run, &robot.limits);
+    let metrics = EpisodeMetrics::compute(&run, &robot.limits).against_human(&run, episode);
     let row = ResultRow {
         suite: suite.name.clone(),
         suite_kind: suite.kind,

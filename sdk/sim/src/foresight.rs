@@ -173,6 +173,7 @@ mod tests {
             }],
             density: 1,
             obstacles: Vec::new(),
+            human_path: Vec::new(),
         };
         let walker = |id, x| AgentState {
             id,

@@ -33,6 +33,7 @@ pub mod episode;
 pub mod error;
 pub mod figures;
 pub mod foresight;
+mod human_likeness;
 pub mod metrics;
 pub mod oracle;
 pub mod plan_figure;

@@ -18,7 +18,13 @@
 //!   positions, `‖a_{n+1} − a_n‖ / dt` with `a_n = (v_{n+1} − v_n)/dt`,
 //!   `v_n = (p_{n+1} − p_n)/dt` and `v_{−1} = 0` (the robot starts at rest); 0 when the episode
 //!   is too short for one value.
+//! * **how human** (episodes with a recorded human, [`Episode::human_path`]: the pedestrian
+//!   whose start and goal the robot took): the mean over time of the distance between the
+//!   robot and that pedestrian at the same time since the start, each held at its last
+//!   position once its path ends, over the longer of the two; and the ratio of the robot's
+//!   path length to the pedestrian's ([`HumanComparison`]).
 
+use crate::episode::Episode;
 use crate::runner::{Contact, EpisodeRun, Outcome};
 use human2nav_core::Limits;
 use human2nav_core::tfs;
@@ -83,6 +89,69 @@ pub struct EpisodeMetrics {
     /// the goal lies inside it; `None` with nobody present).
     #[serde(default)]
     pub end_goal_crowd: Option<f64>,
+    /// The run against the recorded human of the episode (`None` without one).
+    #[serde(default)]
+    pub human: Option<HumanComparison>,
+}
+
+/// How a run's path compares with the recorded human's (module docs, "how human").
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HumanComparison {
+    /// Mean distance between the robot and the human at equal times (m).
+    pub distance: f64,
+    /// The robot's path length over the human's.
+    pub length_ratio: f64,
+}
+
+impl HumanComparison {
+    /// `run` against `episode`'s recorded human; `None` when the episode has no human path
+    /// of two or more positions (or one of zero length), or the run no state.
+    pub fn of(run: &EpisodeRun, episode: &Episode) -> Option<Self> {
+        let human = &episode.human_path;
+        let human_length = path_length(human);
+        if human.len() < 2 || human_length <= 0.0 || run.states.is_empty() {
+            return None;
+        }
+        let robot: Vec<[f64; 2]> = run.states.iter().map(|s| [s.pose.x, s.pose.y]).collect();
+        // Both sampled at the run's step, each held at its end.
+        let human_end = (human.len() - 1) as f64 * episode.dt;
+        let steps = (robot.len() - 1).max((human_end / run.dt - 1e-9).ceil() as usize);
+        let distance = (0..=steps)
+            .map(|n| {
+                let r = robot[n.min(robot.len() - 1)];
+                let h = position_at(human, episode.dt, n as f64 * run.dt);
+                (r[0] - h[0]).hypot(r[1] - h[1])
+            })
+            .sum::<f64>()
+            / (steps + 1) as f64;
+        Some(Self {
+            distance,
+            length_ratio: path_length(&robot) / human_length,
+        })
+    }
+}
+
+/// `Σ ‖p_{n+1} − p_n‖`.
+fn path_length(positions: &[[f64; 2]]) -> f64 {
+    positions
+        .windows(2)
+        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+        .sum()
+}
+
+/// The position of a path sampled every `dt` at time `t`, linearly interpolated and held at
+/// its ends (`path` not empty).
+fn position_at(path: &[[f64; 2]], dt: f64, t: f64) -> [f64; 2] {
+    let u = (t / dt).max(0.0);
+    let i = (u.floor() as usize).min(path.len() - 1);
+    let Some(next) = path.get(i + 1) else {
+        return path[i];
+    };
+    let f = u - i as f64;
+    [
+        path[i][0] + f * (next[0] - path[i][0]),
+        path[i][1] + f * (next[1] - path[i][1]),
+    ]
 }
 
 /// How many commands broke each limit (a command can break several), out of `commands`.
@@ -149,13 +218,11 @@ impl LimitCounts {
 }
 
 impl EpisodeMetrics {
-    /// Computes every metric of `run` for a robot with `limits`.
+    /// Computes every metric of `run` for a robot with `limits`; the comparison with the
+    /// recorded human needs the episode ([`Self::against_human`]).
     pub fn compute(run: &EpisodeRun, limits: &Limits) -> Self {
         let positions: Vec<[f64; 2]> = run.states.iter().map(|s| [s.pose.x, s.pose.y]).collect();
-        let path_length = positions
-            .windows(2)
-            .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
-            .sum();
+        let path_length = path_length(&positions);
         let steps = run.clearance.len().saturating_sub(1);
         let within =
             |thr: f64| run.clearance[..steps].iter().filter(|&&c| c < thr).count() as f64 * run.dt;
@@ -189,6 +256,15 @@ impl EpisodeMetrics {
             )),
             end_goal_distance: run.end_goal_distance,
             end_goal_crowd: run.end_goal_crowd,
+            human: None,
+        }
+    }
+
+    /// These metrics with the comparison of `run` with `episode`'s recorded human.
+    pub fn against_human(self, run: &EpisodeRun, episode: &Episode) -> Self {
+        Self {
+            human: HumanComparison::of(run, episode),
+            ..self
         }
     }
 }

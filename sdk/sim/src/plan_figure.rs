@@ -907,6 +907,7 @@ mod tests {
             ],
             density: 1,
             obstacles: Vec::new(),
+            human_path: Vec::new(),
         }
     }
 

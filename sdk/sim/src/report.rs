@@ -7,7 +7,7 @@
 use crate::bench::{ResultRow, SuiteKind};
 use crate::episode::{ScenarioClass, ScenarioTitle};
 use crate::error::SimError;
-use crate::metrics::{EpisodeMetrics, LimitCounts};
+use crate::metrics::{EpisodeMetrics, HumanComparison, LimitCounts};
 use crate::runner::{Contact, Outcome};
 use crate::stats::{self, BOOTSTRAP_RESAMPLES, DENSITY_BINS, PairedComparison, SuiteComposition};
 use std::collections::HashMap;
@@ -19,7 +19,7 @@ success,collision,timeout,tfs,tfs_plan,tfs_executed,path_length,time_to_goal,dur
 time_within_0_45,time_within_1_2,mean_jerk,plans,fallbacks,planner_errors,contact_robot_closing,\
 contact_pedestrian_closing,contact_pedestrian_age,contact_pedestrian_speed,commands,exec_over_speed,exec_over_reverse,\
 exec_over_acceleration,exec_over_yaw_rate,exec_over_curvature,exec_over_lateral,exec_over_coupled,\
-end_goal_distance,end_goal_crowd";
+end_goal_distance,end_goal_crowd,human_distance,human_length_ratio";
 
 /// A number of `results.csv`: six decimals, empty when not finite.
 fn num(v: f64) -> String {
@@ -88,7 +88,12 @@ fn csv_record(r: &ResultRow, num: fn(f64) -> String) -> Vec<String> {
             .iter()
             .map(|c| c.to_string()),
     )
-    .chain([num(m.end_goal_distance), opt(m.end_goal_crowd)])
+    .chain([
+        num(m.end_goal_distance),
+        opt(m.end_goal_crowd),
+        opt(m.human.map(|h| h.distance)),
+        opt(m.human.map(|h| h.length_ratio)),
+    ])
     .collect()
 }
 
@@ -345,6 +350,23 @@ impl Fields<'_> {
                 executed_violations,
                 end_goal_distance: self.number("end_goal_distance")?,
                 end_goal_crowd: self.optional("end_goal_crowd")?,
+                human: match (
+                    self.optional("human_distance")?,
+                    self.optional("human_length_ratio")?,
+                ) {
+                    (None, None) => None,
+                    (Some(distance), Some(length_ratio)) => Some(HumanComparison {
+                        distance,
+                        length_ratio,
+                    }),
+                    _ => {
+                        return Err(format!(
+                            "line {}: `human_distance` and `human_length_ratio` are both \
+                             set or both empty",
+                            self.line
+                        ));
+                    }
+                },
             },
         })
     }
@@ -695,6 +717,7 @@ fn suite_section(
     paired_section(md, in_suite, ctx, &methods);
     density_section(md, in_suite, &methods);
     other_metrics_table(md, in_suite, &methods);
+    crate::human_likeness::human_likeness_table(md, in_suite, &ctx.robot_names, &methods);
     failure_table(md, in_suite, &ctx.robot_names, &methods);
     violation_table(md, in_suite, &ctx.robot_names, &methods);
     let _ = writeln!(md);
@@ -1336,7 +1359,12 @@ mod tests {
                     .iter()
                     .map(|c| c.to_string()),
             )
-            .chain([num(m.end_goal_distance), opt(m.end_goal_crowd)])
+            .chain([
+                num(m.end_goal_distance),
+                opt(m.end_goal_crowd),
+                opt(m.human.map(|h| h.distance)),
+                opt(m.human.map(|h| h.length_ratio)),
+            ])
             .collect::<Vec<String>>();
             out.push_str(&fields.join(","));
             out.push('\n');
@@ -1400,6 +1428,10 @@ mod tests {
                 },
                 end_goal_distance: [0.25, f64::NAN, 3.5][k as usize % 3],
                 end_goal_crowd: (k % 2 == 0).then_some(-0.125 * x),
+                human: (k % 3 == 1).then_some(HumanComparison {
+                    distance: 0.375 * x,
+                    length_ratio: 1.0 + 0.0625 * x,
+                }),
             },
         }
     }

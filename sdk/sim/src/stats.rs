@@ -508,6 +508,7 @@ mod tests {
             agents: Vec::new(),
             density,
             obstacles: Vec::new(),
+            human_path: Vec::new(),
         }
     }
 

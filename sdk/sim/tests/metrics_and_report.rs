@@ -137,6 +137,69 @@ fn clearance_times_and_path_length() {
     assert_relative_eq!(m.time_to_goal.unwrap(), 0.2, epsilon = 1e-12);
 }
 
+#[test]
+fn the_robot_is_compared_with_the_recorded_human_at_equal_times() {
+    let l = robot("go2").limits;
+    // The human walks 1 m/s along x for 2 s (positions every 0.1 s).
+    let mut ep = episode("human", ScenarioClass::CoFlow, 0.0, vec![]);
+    ep.dt = 0.1;
+    ep.human_path = (0..=20).map(|k| [0.1 * k as f64, 0.0]).collect();
+    let states = |positions: &[[f64; 2]]| -> Vec<RobotState> {
+        positions
+            .iter()
+            .map(|p| RobotState {
+                pose: Pose2::new(p[0], p[1], 0.0),
+                velocity: Twist2::ZERO,
+            })
+            .collect()
+    };
+    let compare = |positions: Vec<[f64; 2]>| {
+        let n = positions.len();
+        let run = run_with(
+            states(&positions),
+            vec![Twist2::ZERO; n - 1],
+            vec![],
+            vec![],
+        );
+        EpisodeMetrics::compute(&run, &l)
+            .against_human(&run, &ep)
+            .human
+            .expect("the episode has a human")
+    };
+    // Walking with them every 0.05 s: no distance, the same length.
+    let same = compare((0..=40).map(|k| [0.05 * k as f64, 0.0]).collect());
+    assert_relative_eq!(same.distance, 0.0, epsilon = 1e-12);
+    assert_relative_eq!(same.length_ratio, 1.0, epsilon = 1e-12);
+    // Half a metre to the side and twice as fast: at the end after 1 s, then held there while
+    // the human catches up at 2 s. The mean of hypot(0.5, how far ahead) over the 41 instants.
+    let fast: Vec<[f64; 2]> = (0..=20).map(|k| [(0.1 * k as f64).min(2.0), 0.5]).collect();
+    let ahead = |t: f64| (2.0 * t).min(2.0) - t;
+    let expected = (0..=40)
+        .map(|n| {
+            let t = 0.05 * n as f64;
+            ahead(t).hypot(0.5)
+        })
+        .sum::<f64>()
+        / 41.0;
+    let fast = compare(fast);
+    assert_relative_eq!(fast.distance, expected, epsilon = 1e-9);
+    assert_relative_eq!(fast.length_ratio, 1.0, epsilon = 1e-12);
+    // No recorded human: nothing to compare.
+    ep.human_path.clear();
+    let run = run_with(
+        states(&[[0.0, 0.0], [0.1, 0.0]]),
+        vec![Twist2::ZERO],
+        vec![],
+        vec![],
+    );
+    assert!(
+        EpisodeMetrics::compute(&run, &l)
+            .against_human(&run, &ep)
+            .human
+            .is_none()
+    );
+}
+
 fn small_suite() -> Suite {
     let mut episodes = Vec::new();
     for (i, c) in ScenarioClass::ALL.into_iter().enumerate() {

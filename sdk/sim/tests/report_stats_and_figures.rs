@@ -11,7 +11,7 @@ use human2nav_sim::episode::AgentTrack;
 use human2nav_sim::episode::{Episode, ScenarioClass};
 use human2nav_sim::figures::{self, sr_interval, tfs_interval};
 use human2nav_sim::figures::{Snapshot, pedestrians_at};
-use human2nav_sim::metrics::{EpisodeMetrics, LimitCounts};
+use human2nav_sim::metrics::{EpisodeMetrics, HumanComparison, LimitCounts};
 use human2nav_sim::report::{ReportContext, report_markdown};
 use human2nav_sim::stats::{SuiteComposition, success_pairs};
 use human2nav_sim::straight::{StraightConfig, StraightPlanner};
@@ -71,6 +71,7 @@ fn metrics(outcome: Outcome, tfs: f64) -> EpisodeMetrics {
             3.0
         },
         end_goal_crowd: Some(1.0),
+        human: None,
     }
 }
 
@@ -87,6 +88,7 @@ fn episode(id: String, scenario: ScenarioClass, density: usize, distance: f64) -
         agents: Vec::new(),
         density,
         obstacles: Vec::new(),
+        human_path: Vec::new(),
     }
 }
 
@@ -270,6 +272,57 @@ fn report_has_paired_density_and_composition_tables() {
     }
     if !keep {
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
+
+#[test]
+fn the_how_human_table_compares_methods_on_the_runs_all_succeeded_on() {
+    let real = episodes("real", 2);
+    let methods = ["human2nav", "orca"];
+    let mut all = rows("real", SuiteKind::Real, &real, &methods);
+    let ctx = ReportContext {
+        command: "synthetic".into(),
+        methods: methods.iter().map(|m| m.to_string()).collect(),
+        robot_names: ROBOTS.iter().map(|r| r.to_string()).collect(),
+        suites: vec![("real".into(), SuiteKind::Real, real.len(), None)],
+        ..ReportContext::default()
+    };
+    // No recorded human in the rows: no table.
+    let title = "### How human, per robot";
+    assert!(!report_markdown(&all, &ctx).contains(title));
+    // `human2nav` 0.5 m from the human and 1.1 times their length, `orca` 1.5 m and 1.3; a run
+    // `orca` failed leaves the episode out for both.
+    for r in &mut all {
+        let (distance, length_ratio) = if r.method == "human2nav" {
+            (0.5, 1.1)
+        } else {
+            (1.5, 1.3)
+        };
+        r.metrics.human = Some(HumanComparison {
+            distance,
+            length_ratio,
+        });
+    }
+    let common = |robot: &str| {
+        real.iter()
+            .filter(|e| {
+                methods.iter().all(|m| {
+                    all.iter().any(|r| {
+                        r.robot == robot && r.episode == e.id && &r.method == m && r.metrics.success
+                    })
+                })
+            })
+            .count()
+    };
+    let md = report_markdown(&all, &ctx);
+    let section = &md[md.find(title).expect("the table")..];
+    for robot in ROBOTS {
+        let n = common(robot);
+        assert!(n > 0 && n < real.len(), "{robot}: {n} common successes");
+        for (method, cells) in [("human2nav", "0.50 | 1.10"), ("orca", "1.50 | 1.30")] {
+            let row = format!("| {robot} | {method} | {n} | {cells} | 0.10 | 2.00 |");
+            assert!(section.contains(&row), "no `{row}` in\n{section}");
+        }
     }
 }
 

@@ -36,6 +36,7 @@ pub fn episode(id: &str, scenario: ScenarioClass, theta: f64, agents: Vec<AgentT
         density: agents.len(),
         agents,
         obstacles: Vec::new(),
+        human_path: Vec::new(),
     }
 }
 

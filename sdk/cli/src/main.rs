@@ -6,6 +6,7 @@ mod compare;
 mod data;
 mod plan;
 mod plugin;
+mod replay;
 mod robot;
 mod scaling;
 mod train;
@@ -51,6 +52,9 @@ enum Command {
     /// Compare a method of one benchmark run with a method of another, paired run by run
     /// (exact McNemar test per suite and robot).
     Compare(compare::CompareArgs),
+    /// Plan on a ROS 2 bag (MCAP): odometry, goal, tracked people and a map in; a bag with the
+    /// plans (nav_msgs/Path) and commands (geometry_msgs/Twist) and a Foxglove scene out.
+    Replay(replay::ReplayArgs),
 }
 
 fn main() -> ExitCode {
@@ -65,6 +69,7 @@ fn main() -> ExitCode {
         Command::Baseline(cmd) => baseline::run(cmd),
         Command::Scaling(args) => scaling::run(args),
         Command::Compare(args) => compare::run(args),
+        Command::Replay(args) => replay::run(args),
     };
     match result {
         Ok(code) => code,

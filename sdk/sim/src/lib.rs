@@ -20,6 +20,8 @@
 //! * [`plan_figure`]: one planning step from an episode, drawn like the paper's Fig. 4.
 //! * [`compare`]: a method of one run against a method of another, paired run by run.
 //! * [`record`]: runs and planning calls as MCAP logs for Foxglove.
+//! * [`rosbag`]: ROS 2 bags in MCAP storage, read (CDR decoded with the bag's definitions) and
+//!   written (`human2nav replay`).
 //! * [`shard`]: a benchmark spread over machines (`bench --shard K/N`, `bench --merge`).
 
 #![warn(missing_docs)]
@@ -37,9 +39,10 @@ mod human_likeness;
 pub mod metrics;
 pub mod oracle;
 pub mod plan_figure;
-pub mod replay;
 pub mod record;
+pub mod replay;
 pub mod report;
+pub mod rosbag;
 pub mod runner;
 pub mod shard;
 pub mod stats;

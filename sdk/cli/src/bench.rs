@@ -52,7 +52,7 @@ pub struct BenchArgs {
     pub suites: Vec<String>,
     /// Also write every run as an MCAP file that Foxglove opens (robot, footprint, people,
     /// obstacles, goal, each plan and its candidates, the outcome) under <out>/record/, as
-    /// <suite>/<robot>/<method>/<episode>.mcap (zstd chunks, about 0.1 MB per run: narrow with
+    /// <suite>/<robot>/<method>/<episode>.mcap (zstd chunks, 0.1 to 0.3 MB per run: narrow with
     /// --quick, --suites, --methods and --robots).
     #[arg(long)]
     pub record: bool,

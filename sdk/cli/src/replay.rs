@@ -386,7 +386,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
 
     let (mut failed, mut last_goal) = (0usize, None);
     for k in 0..calls {
-        let t = start + i128::from(k as u32) * step;
+        let t = start + i128::from(k) * step;
         let (Some(o), Some(g)) = (latest(Some(odom), t), latest(Some(goal), t)) else {
             continue;
         };

@@ -2043,7 +2043,158 @@ fn catalogue() -> Vec<Case> {
     all.extend(plugin_cases());
     all.extend(resume_cases());
     all.extend(compare_cases());
+    all.extend(shard_and_bag_cases());
     all
+}
+
+/// The cases of `bench --shard`/`--merge` and of ROS 2 bags (`human2nav replay`).
+fn shard_and_bag_cases() -> Vec<Case> {
+    let s = "bench shards";
+    let b = "ROS 2 bags";
+    let robot = "robots/diablo/robot.toml";
+    let shards = "sdk/cli/tests/bench_shards.rs::two_shards_merged_write_what_one_run_writes";
+    vec![
+        err(
+            s,
+            "`bench --shard 3/2`",
+            NR,
+            &["`3/2`", "K is larger than N"],
+            |_| cli(&["bench", "--shard", "3/2"]),
+        ),
+        err(
+            s,
+            "`bench --shard 0/0`",
+            NR,
+            &["`0/0`", "N must be at least 1"],
+            |_| cli(&["bench", "--shard", "0/0"]),
+        ),
+        err(
+            s,
+            "`bench --shard x/4`",
+            NR,
+            &["`x` is not a whole number"],
+            |_| cli(&["bench", "--shard", "x/4"]),
+        ),
+        err(
+            s,
+            "`bench --merge` of a folder that is no shard",
+            NR,
+            &["has no shard.json"],
+            |dir| cli(&["bench", "--merge", &dir.to_string_lossy()]),
+        ),
+        covered(
+            s,
+            "a shard missing from the merge",
+            NR,
+            "refused naming it (`missing shard 2/2`)",
+            shards,
+        ),
+        covered(
+            s,
+            "a shard given twice",
+            NR,
+            "refused naming both folders",
+            shards,
+        ),
+        covered(
+            s,
+            "shards of different splits (`1/2` with `2/3`)",
+            NR,
+            "refused naming both",
+            shards,
+        ),
+        covered(
+            s,
+            "shards of different seeds or configurations",
+            NR,
+            "refused naming the first differing key (`config.sim.dt`: 0.05 against 0.1)",
+            shards,
+        ),
+        covered(
+            s,
+            "the configuration changed between the shards and the merge",
+            NR,
+            "refused naming the key that changed",
+            shards,
+        ),
+        covered(
+            s,
+            "a shard cut short (a row missing)",
+            NR,
+            "refused: rows against shard.json's count",
+            shards,
+        ),
+        covered(
+            s,
+            "a malformed results.csv line (a number, a flag, a column)",
+            NR,
+            "refused naming the line and the column",
+            "sdk/sim/src/report.rs::a_bad_results_csv_is_refused_naming_the_line_and_the_column",
+        ),
+        err(
+            b,
+            "`replay` of a file that is not MCAP",
+            NR,
+            &["x.mcap", "is not an MCAP file"],
+            move |dir| {
+                let bag = dir.join("x.mcap");
+                std::fs::write(&bag, "not a bag").map_err(|e| e.to_string())?;
+                cli(&["replay", &bag.to_string_lossy(), "--robot", robot])
+            },
+        ),
+        err(
+            b,
+            "`replay` of a folder without an .mcap file",
+            NR,
+            &["holds no .mcap file"],
+            move |dir| cli(&["replay", &dir.to_string_lossy(), "--robot", robot]),
+        ),
+        err(b, "`replay --rate 0`", NR, &["--rate 0"], move |dir| {
+            cli(&[
+                "replay",
+                &dir.to_string_lossy(),
+                "--robot",
+                robot,
+                "--rate",
+                "0",
+            ])
+        }),
+        covered(
+            b,
+            "a bag without the odometry or goal topic",
+            NR,
+            "refused naming the topic",
+            "sdk/python/tests/test_replay.py::test_a_bag_without_the_goal_topic_is_refused_naming_it",
+        ),
+        covered(
+            b,
+            "a definition without a needed field, or with another type for it",
+            NR,
+            "refused naming the topic and the field (definition mismatch)",
+            "sdk/python/tests/test_replay.py::test_a_definition_that_does_not_match_is_refused_naming_the_topic",
+        ),
+        covered(
+            b,
+            "header stamps going backwards; a truncated message; a file cut short",
+            NR,
+            "refused naming the topic and the message's index (the last read for a cut file)",
+            "sdk/python/tests/test_replay.py::test_timestamps_going_backwards_and_truncated_messages_name_the_topic_and_index",
+        ),
+        covered(
+            b,
+            "a message shorter than its definition",
+            NR,
+            "refused naming the field and the byte where it stopped",
+            "sdk/sim/src/rosbag/cdr.rs::a_written_message_decodes_with_alignment_and_a_truncated_one_says_where",
+        ),
+        covered(
+            b,
+            "a topic carrying another message type",
+            NR,
+            "refused naming the topic, its type and the expected one",
+            "sdk/sim/src/rosbag.rs::written_paths_and_twists_read_back_with_their_definitions",
+        ),
+    ]
 }
 
 /// A `results.csv` of `lines` (after the columns `human2nav compare` reads) in `dir`, named
@@ -2264,7 +2415,8 @@ fn pinned_cases_name_tests_that_exist() {
         let found = if name == "tests" {
             text.contains("mod tests")
         } else {
-            text.contains(&format!("fn {name}("))
+            // A Rust test, or a Python one (pytest).
+            text.contains(&format!("fn {name}(")) || text.contains(&format!("def {name}("))
         };
         assert!(found, "{test}: no such test");
     }

@@ -111,10 +111,17 @@ pub fn read_topics(path: &Path, specs: &[TopicSpec]) -> Result<BTreeMap<String, 
     let mut out: BTreeMap<String, Topic> = BTreeMap::new();
     for (seen, item) in stream.enumerate() {
         let m = item.map_err(|e| {
-            err(format!(
-                "`{file}` is truncated or malformed after {seen} messages{}: {e}",
-                last_read(&out)
-            ))
+            if seen == 0 {
+                err(format!(
+                    "`{file}` is not an MCAP file, or is truncated or malformed before its \
+                     first message: {e}"
+                ))
+            } else {
+                err(format!(
+                    "`{file}` is truncated or malformed after {seen} messages{}: {e}",
+                    last_read(&out)
+                ))
+            }
         })?;
         let id = m.channel.id;
         if let std::collections::btree_map::Entry::Vacant(slot) = channels.entry(id) {

@@ -32,13 +32,14 @@ pub const EXACT_CSV_FILE: &str = "results-exact.csv";
 /// The version of [`ShardManifest`]'s layout.
 pub const MANIFEST_FORMAT: u32 = 1;
 
-/// A short fingerprint of `text` for [`ShardManifest::settings`]: its length and its 64-bit
+/// A short fingerprint of `data` (text or a file's bytes) for [`ShardManifest::settings`]: its length and its 64-bit
 /// FNV-1a hash (stable across platforms and releases), as `"<len> bytes, <hex>"`.
-pub fn fingerprint(text: &str) -> String {
-    let hash = text.bytes().fold(0xCBF2_9CE4_8422_2325_u64, |h, b| {
+pub fn fingerprint(data: impl AsRef<[u8]>) -> String {
+    let data = data.as_ref();
+    let hash = data.iter().fold(0xCBF2_9CE4_8422_2325_u64, |h, &b| {
         (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01B3)
     });
-    format!("{} bytes, {hash:016x}", text.len())
+    format!("{} bytes, {hash:016x}", data.len())
 }
 
 /// `K/N`: the K-th (from 1) of N slices of a benchmark's runs.

@@ -47,6 +47,71 @@ impl ShardOutcome {
     }
 }
 
+/// A fingerprint of the files a method reads, so that shards run with a different planner
+/// file or model are not merged: every string of its `config` table (and of a TOML file it
+/// names, one level down) that names a file or folder under `base` (a folder: the files in it,
+/// two levels deep). Names that are no file are skipped (the configuration itself is compared
+/// as well). A plugin's library is left out: each machine of a cluster may build its own.
+fn method_files(method: &human2nav_sim::config::MethodConfig, base: &Path) -> String {
+    fn strings(value: &toml::Value, out: &mut Vec<String>) {
+        match value {
+            toml::Value::String(s) => out.push(s.clone()),
+            toml::Value::Array(a) => a.iter().for_each(|v| strings(v, out)),
+            toml::Value::Table(t) => t.values().for_each(|v| strings(v, out)),
+            _ => {}
+        }
+    }
+    fn add(path: &Path, depth: usize, seen: &mut BTreeMap<PathBuf, String>) {
+        if seen.contains_key(path) {
+            return;
+        }
+        if path.is_dir() && depth < 2 {
+            let Ok(entries) = std::fs::read_dir(path) else {
+                return;
+            };
+            let mut children: Vec<PathBuf> = entries.flatten().map(|e| e.path()).collect();
+            children.sort();
+            for c in children {
+                add(&c, depth + 1, seen);
+            }
+        } else if let Ok(bytes) = std::fs::read(path) {
+            seen.insert(path.to_path_buf(), fingerprint(&bytes));
+        }
+    }
+    let mut seen = BTreeMap::new();
+    let mut names = Vec::new();
+    strings(&toml::Value::Table(method.config.clone()), &mut names);
+    for name in names {
+        let path = base.join(&name);
+        if path.extension().is_some_and(|e| e == "toml") {
+            let nested = std::fs::read_to_string(&path)
+                .ok()
+                .and_then(|t| t.parse::<toml::Table>().ok());
+            if let Some(table) = nested {
+                let mut inner = Vec::new();
+                strings(&toml::Value::Table(table), &mut inner);
+                for n in inner {
+                    let p = base.join(n);
+                    if p.exists() {
+                        add(&p, 0, &mut seen);
+                    }
+                }
+            }
+        }
+        if path.exists() {
+            add(&path, 0, &mut seen);
+        }
+    }
+    let listing: Vec<String> = seen
+        .iter()
+        .map(|(p, f)| {
+            let shown = p.strip_prefix(base).unwrap_or(p);
+            format!("{}: {f}", shown.display())
+        })
+        .collect();
+    fingerprint(listing.join("\n"))
+}
+
 /// A JSON value that has been through its text form, as a value read from `shard.json` has:
 /// compared with one read back, a value made in memory could differ in a float's last bit.
 fn as_read_back(v: Value) -> Value {
@@ -93,6 +158,17 @@ impl Bench {
                 )
             })
             .collect();
+        let method_files = self
+            .cfg
+            .methods
+            .iter()
+            .map(|m| {
+                (
+                    m.name.clone(),
+                    Value::from(method_files(m, &self.cfg.base_dir)),
+                )
+            })
+            .collect();
         let settings = [
             ("version", Value::from(env!("CARGO_PKG_VERSION"))),
             ("config", serde_json::to_value(&self.cfg)?),
@@ -104,12 +180,13 @@ impl Bench {
             ("failures", serde_json::to_value(r.failures)?),
             ("episodes", Value::Object(episodes)),
             ("robot_setups", Value::Object(robots)),
+            ("method_files", Value::Object(method_files)),
             (
                 "runs",
                 Value::from(format!(
                     "{} runs, {}",
                     runs.len(),
-                    fingerprint(&runs.join("\n"))
+                    fingerprint(runs.join("\n"))
                 )),
             ),
         ];
@@ -270,5 +347,43 @@ impl Bench {
             &bench.out,
             Instant::now(),
         )?)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::method_files;
+    use human2nav_sim::config::MethodConfig;
+
+    #[test]
+    fn the_files_a_method_names_are_fingerprinted_one_level_down() {
+        let dir = std::env::temp_dir().join(format!("h2n-method-files-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(dir.join("models/m")).expect("a temporary folder");
+        let write = |path: &str, text: &str| std::fs::write(dir.join(path), text).expect("written");
+        write(
+            "planner.toml",
+            "model = \"models/m\"\n[human2nav]\nsamples = 4\n",
+        );
+        write("models/m/model.toml", "horizon = 32\n");
+        write("models/m/weights.bin", "0123");
+        let method: MethodConfig = toml::from_str(
+            "name = \"h\"\nkind = \"human2nav\"\n\
+             config = { planner = \"planner.toml\", note = \"not a file\" }\n",
+        )
+        .expect("a method");
+        let before = method_files(&method, &dir);
+        assert_eq!(before, method_files(&method, &dir), "deterministic");
+        // The model's weights, named only inside the planner file, count.
+        write("models/m/weights.bin", "0124");
+        let weights = method_files(&method, &dir);
+        assert_ne!(weights, before);
+        // So does the planner file itself.
+        write(
+            "planner.toml",
+            "model = \"models/m\"\n[human2nav]\nsamples = 8\n",
+        );
+        assert_ne!(method_files(&method, &dir), weights);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

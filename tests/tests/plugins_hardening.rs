@@ -195,6 +195,50 @@ fn a_null_required_slot_is_an_error_naming_file_table_and_slot() {
     );
 }
 
+/// An embodiment that answers well, then NaN: every answer is checked, not the first only, and
+/// a bad one halts the robot and names the call and the field instead of reaching a result.
+#[test]
+fn an_embodiment_that_goes_bad_later_is_halted_and_named() {
+    use human2nav_core::embodiment::{Embodiment, RobotState};
+    let host = PluginHost::new();
+    let robot = human2nav_plugin::RobotContext {
+        limits: limits(),
+        gains: Default::default(),
+        footprint_radius: 0.3,
+    };
+    let e = host
+        .embodiment(&lib("human2nav_fixture_bad_tables"), "late_nan", "", &robot)
+        .expect("a valid table");
+    let cmd = Twist2::new(0.5, 0.0, 0.1);
+    let mut state = RobotState::default();
+    let mut halted_at = None;
+    for k in 0..100 {
+        let next = e.step(&state, e.saturate(&state, cmd, 0.05), 0.05);
+        assert!(
+            [next.pose.x, next.pose.y, next.pose.theta]
+                .iter()
+                .all(|v| v.is_finite()),
+            "step {k}: {next:?}"
+        );
+        if next.velocity == Twist2::ZERO && next.pose == state.pose {
+            halted_at.get_or_insert(k);
+        }
+        state = next;
+    }
+    assert_eq!(halted_at, Some(40), "halted at the first bad answer");
+    assert_eq!(e.saturate(&state, cmd, 0.05), Twist2::ZERO);
+    let failure = e.failure().expect("the embodiment is marked failed");
+    assert!(
+        failure.contains("embodiment `late_nan`: step answered x = NaN"),
+        "{failure}"
+    );
+    assert!(
+        host.failures().iter().any(|f| f.message == failure),
+        "{:?}",
+        host.failures()
+    );
+}
+
 #[test]
 fn a_wrong_table_size_is_an_error() {
     let err = PluginHost::new()

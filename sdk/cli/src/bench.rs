@@ -134,10 +134,32 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
         done.store(true, std::sync::atomic::Ordering::Relaxed);
         outcome
     })?;
+    let embodiment_failed = report_plugin_failures(&bench);
+    let code = print_outcome(&outcome)?;
+    Ok(if embodiment_failed {
+        ExitCode::FAILURE
+    } else {
+        code
+    })
+}
+
+/// Prints the plugin instances that failed; true when one was a robot's embodiment, whose
+/// failure halts that robot and leaves its runs meaningless (a planner plugin's failures are
+/// counted per call instead, and judged with the outcome).
+fn report_plugin_failures(bench: &Bench) -> bool {
+    let mut embodiment = false;
     for f in bench.plugin_failures() {
-        eprintln!("warning: a plugin instance failed: {f:?}");
+        if f.instance.starts_with("embodiment ") {
+            embodiment = true;
+            eprintln!(
+                "error: {} failed, so the runs of its robot are not valid: {}",
+                f.instance, f.message
+            );
+        } else {
+            eprintln!("warning: a plugin instance failed: {f:?}");
+        }
     }
-    print_outcome(&outcome)
+    embodiment
 }
 
 /// The progress bar of the episode runs.
@@ -162,9 +184,7 @@ fn run_shard(bench: &Bench, bar: &ProgressBar) -> anyhow::Result<ExitCode> {
         done.store(true, std::sync::atomic::Ordering::Relaxed);
         outcome
     })?;
-    for f in bench.plugin_failures() {
-        eprintln!("warning: a plugin instance failed: {f:?}");
-    }
+    let embodiment_failed = report_plugin_failures(bench);
     println!(
         "shard {}: {} of {} episode runs in {:.1} s",
         outcome.spec,
@@ -180,7 +200,7 @@ fn run_shard(bench: &Bench, bar: &ProgressBar) -> anyhow::Result<ExitCode> {
         outcome.spec.count
     );
     print_failures(&outcome.planner_failures, &outcome.empty_world_failures);
-    Ok(if outcome.passed() {
+    Ok(if outcome.passed() && !embodiment_failed {
         ExitCode::SUCCESS
     } else {
         ExitCode::FAILURE

@@ -1691,6 +1691,13 @@ fn plugin_cases() -> Vec<Case> {
         ),
         covered(
             a,
+            "embodiment plugin answering NaN after 40 good steps",
+            "passed `robot check`; the bench exited 0 with NaN in report.md",
+            "every answer checked: the robot halts and the failure names the call and the field",
+            "tests/tests/plugins_hardening.rs::an_embodiment_that_goes_bad_later_is_halted_and_named",
+        ),
+        covered(
+            a,
             "truncated `.so`",
             "SIGBUS inside dlopen killed the host",
             "refused before dlopen, naming the file",

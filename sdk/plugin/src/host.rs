@@ -1727,6 +1727,10 @@ unsafe fn call_coupled_limit(
         .map_err(|(field, message)| Ok(format!("coupled_limit: {field} = {message}")))
 }
 
+/// Largest yaw rate an embodiment plugin may answer (rad/s): 16 turns a second, far past any
+/// robot, so that only a broken value is refused.
+pub const MAX_EMBODIMENT_YAW_RATE: f64 = 100.0;
+
 /// An embodiment living in a plugin library.
 ///
 /// The [`Embodiment`] methods cannot return errors; when the plugin fails or panics the proxy
@@ -1756,6 +1760,45 @@ impl PluginEmbodiment {
             .health
             .poisoned()
             .then(|| self.handle.health.message())
+    }
+
+    /// Checks what a `saturate`, `step` or `track` call answered, every call: a pose within
+    /// [`MAX_COORDINATE`](human2nav_core::planner::MAX_COORDINATE) m of the origin with a finite
+    /// heading, speeds within [`MAX_SPEED`](human2nav_core::planner::MAX_SPEED) m/s and a yaw
+    /// rate within [`MAX_EMBODIMENT_YAW_RATE`]. A value outside poisons the embodiment with a
+    /// message naming the call and the field (the caller then halts the robot); `None`.
+    fn checked(
+        &self,
+        call: &str,
+        pose: Option<H2nPose>,
+        twist: H2nTwist,
+    ) -> Option<(Option<H2nPose>, Twist2)> {
+        use human2nav_core::planner::{MAX_COORDINATE, MAX_SPEED};
+        let within = |v: f64, bound: f64| v.is_finite() && v.abs() <= bound;
+        let mut fields = vec![
+            ("vx", twist.vx, MAX_SPEED, "m/s"),
+            ("vy", twist.vy, MAX_SPEED, "m/s"),
+            ("omega", twist.omega, MAX_EMBODIMENT_YAW_RATE, "rad/s"),
+        ];
+        if let Some(p) = pose {
+            fields.extend([
+                ("x", p.x, MAX_COORDINATE, "m"),
+                ("y", p.y, MAX_COORDINATE, "m"),
+                ("theta", p.theta, f64::MAX, "rad"),
+            ]);
+        }
+        if let Some((field, value, bound, unit)) =
+            fields.into_iter().find(|(_, v, b, _)| !within(*v, *b))
+        {
+            let message = format!(
+                "embodiment `{}`: {call} answered {field} = {value}, outside ±{bound:e} {unit} \
+                 (or not finite); the robot is halted",
+                self.name
+            );
+            self.handle.health.poison(&message);
+            return None;
+        }
+        Some((pose, twist.into()))
     }
 
     /// Records a failed call. Any failure makes the embodiment unusable: one that cannot
@@ -1805,7 +1848,8 @@ impl Embodiment for PluginEmbodiment {
             self.failed(status);
             return Twist2::ZERO;
         }
-        out.into()
+        self.checked("saturate", None, out)
+            .map_or(Twist2::ZERO, |(_, t)| t)
     }
 
     fn step(&self, state: &RobotState, cmd: Twist2, dt: f64) -> RobotState {
@@ -1825,7 +1869,13 @@ impl Embodiment for PluginEmbodiment {
             self.failed(status);
             return halted;
         }
-        (&out).into()
+        match self.checked("step", Some(out.pose), out.velocity) {
+            Some((Some(pose), velocity)) => RobotState {
+                pose: pose.into(),
+                velocity,
+            },
+            _ => halted,
+        }
     }
 
     fn track(&self, state: &RobotState, plan: &Plan, t: f64) -> Twist2 {
@@ -1847,7 +1897,8 @@ impl Embodiment for PluginEmbodiment {
             self.failed(status);
             return Twist2::ZERO;
         }
-        out.into()
+        self.checked("track", None, out)
+            .map_or(Twist2::ZERO, |(_, t)| t)
     }
 }
 

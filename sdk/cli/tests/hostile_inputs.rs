@@ -169,6 +169,13 @@ fn robot_cases() -> Vec<Case> {
     vec![
         err(
             a,
+            "robot `name = \"../../x\"`",
+            "`plan` without `--out` wrote outside `out/`",
+            &["name", "file names"],
+            robot_edit("name = \"diablo\"", "name = \"../../x\""),
+        ),
+        err(
+            a,
             "`v_max = -1.0`",
             NR,
             &["v_max"],
@@ -689,6 +696,20 @@ fn config_cases() -> Vec<Case> {
                 );
                 fail(PlannerConfig::load(&p))
             },
+        ),
+        err(
+            a,
+            "bench.toml method named with a terminal escape (`or\\u001b[2Kca`)",
+            "went raw into stdout, report.md and results.csv",
+            &["methods[0]", "name", "control character"],
+            bench_edit("name = \"orca\"", "name = \"or\\u001b[2Kca\""),
+        ),
+        err(
+            a,
+            "bench.toml suite named `../x`",
+            NR,
+            &["suites[0]", "name", "file names"],
+            bench_edit("name = \"real\"", "name = \"../x\""),
         ),
         err(
             a,

@@ -31,6 +31,35 @@ pub const MAX_URDF_BYTES: u64 = 16 << 20;
 /// shipped ones are under 11 KB).
 pub const MAX_CONFIG_BYTES: u64 = 4 << 20;
 
+/// Longest name of a robot, a benchmark method or a suite (characters).
+pub const MAX_NAME_CHARS: usize = 64;
+
+/// Checks a name the SDK writes into file names, `results.csv`, reports and the terminal (a
+/// robot's, a benchmark method's or suite's): not blank, at most [`MAX_NAME_CHARS`]
+/// characters, no control characters, no `/` or `\\`, and not `.` or `..`, so that it can
+/// neither leave an output folder nor rewrite a terminal line. The error says what is wrong
+/// (the caller adds the file and field).
+pub fn check_name(name: &str) -> Result<(), String> {
+    let shown = name.escape_debug();
+    if name.trim().is_empty() {
+        return Err("must not be blank".into());
+    }
+    if name.chars().count() > MAX_NAME_CHARS {
+        return Err(format!(
+            "`{shown}` is longer than {MAX_NAME_CHARS} characters"
+        ));
+    }
+    if name.chars().any(char::is_control) {
+        return Err(format!("`{shown}` holds a control character"));
+    }
+    if name.contains(['/', '\\']) || name == "." || name == ".." {
+        return Err(format!(
+            "`{shown}` is used in file names: no `/`, `\\`, `.` or `..`"
+        ));
+    }
+    Ok(())
+}
+
 /// FNV-1a, 64 bit, of `bytes`: the checksum model cards and checkpoint manifests record of
 /// their files. It detects a truncated, swapped or altered file, not deliberate tampering.
 pub fn fnv1a64(bytes: &[u8]) -> u64 {
@@ -138,6 +167,29 @@ fn file_kind(t: &std::fs::FileType) -> &'static str {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn names_that_could_leave_a_folder_or_rewrite_a_terminal_are_refused() {
+        for good in ["diablo", "go2", "human2nav-alg1+qp", "Über robot 2", "a.b"] {
+            assert_eq!(check_name(good), Ok(()), "{good}");
+        }
+        for (bad, why) in [
+            ("", "blank"),
+            ("  ", "blank"),
+            ("../x", "file names"),
+            ("a/b", "file names"),
+            ("a\\b", "file names"),
+            ("..", "file names"),
+            (".", "file names"),
+            ("or\u{1b}[2Kca", "control character"),
+            ("line\nbreak", "control character"),
+        ] {
+            let e = check_name(bad).expect_err(bad);
+            assert!(e.contains(why), "{bad:?}: {e}");
+        }
+        assert!(check_name(&"x".repeat(MAX_NAME_CHARS)).is_ok());
+        assert!(check_name(&"x".repeat(MAX_NAME_CHARS + 1)).is_err());
+    }
     use std::path::PathBuf;
 
     fn temp(name: &str) -> PathBuf {

@@ -298,11 +298,13 @@ impl BenchConfig {
     /// Checks `methods[i]`: a unique name, its replanning rate, and the keys only a plugin
     /// method takes.
     fn validate_method(&self, i: usize, m: &MethodConfig) -> Result<(), SimError> {
-        if m.name.is_empty() || self.methods[..i].iter().any(|o| o.name == m.name) {
+        human2nav_core::input::check_name(&m.name)
+            .map_err(|why| SimError::setting(format!("methods[{i}]"), "name", why))?;
+        if self.methods[..i].iter().any(|o| o.name == m.name) {
             return Err(SimError::setting(
                 format!("methods[{i}]"),
                 "name",
-                format!("`{}` is empty or repeated", m.name),
+                format!("`{}` is repeated", m.name),
             ));
         }
         self.sim
@@ -345,11 +347,13 @@ impl BenchConfig {
     /// counts, the social-force parameters and the methods it names.
     fn validate_suite(&self, i: usize, s: &SuiteConfig) -> Result<(), SimError> {
         let section = format!("suites[{i}]");
-        if s.name.is_empty() || self.suites[..i].iter().any(|o| o.name == s.name) {
+        human2nav_core::input::check_name(&s.name)
+            .map_err(|why| SimError::setting(section.clone(), "name", why))?;
+        if self.suites[..i].iter().any(|o| o.name == s.name) {
             return Err(SimError::setting(
                 section,
                 "name",
-                format!("`{}` is empty or repeated", s.name),
+                format!("`{}` is repeated", s.name),
             ));
         }
         if s.kind == SuiteKind::Real && s.episodes.is_none() {

@@ -131,7 +131,7 @@ pub(super) struct Checked {
 /// Checks the scalars of robot.toml (`name`, `urdf`, `[limits]`, `[footprint] radius`,
 /// `[controller]`, `[cost]`), in that order, before anything else is looked at.
 pub(super) fn check_values(raw: &RawProfile, ck: &Checker<'_>) -> Result<Checked, ProfileError> {
-    ck.non_empty("name", &raw.name)?;
+    crate::input::check_name(&raw.name).map_err(|why| ck.invalid("name", why))?;
     ck.non_empty("urdf", &raw.urdf)?;
     let l = &raw.limits;
     let limits = RawLimits {

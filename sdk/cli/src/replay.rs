@@ -19,7 +19,6 @@ use human2nav_core::{AgentState, Observation, Planner, Pose2, Twist2};
 use human2nav_data::paths::find_workspace_root;
 use human2nav_flow::planner::{PlannerConfig, PredictionModel, RobotPlanner};
 use human2nav_sim::record::Recorder;
-use human2nav_sim::replay::PedestrianSample;
 use human2nav_sim::rosbag::cdr::Value;
 use human2nav_sim::rosbag::{
     self, BagWriter, Message, PATH_DEFINITION, TWIST_DEFINITION, Topic, TopicSpec,
@@ -449,18 +448,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             last_goal = Some(g.index);
         }
         scene.robot(time, ego)?;
-        let samples: Vec<PedestrianSample> = obs
-            .agents
-            .iter()
-            .map(|a| PedestrianSample {
-                id: a.id,
-                position: a.position,
-                velocity: a.velocity,
-                radius: a.radius,
-            })
-            .collect();
-        let histories: Vec<Vec<[f64; 2]>> = obs.agents.iter().map(|a| a.history.clone()).collect();
-        scene.pedestrians(time, &samples, &histories)?;
+        scene.observed_people(time, &obs.agents)?;
         match rp.planner.plan(&obs) {
             Ok(plan) if plan.poses.len() > 1 && plan.dt > 0.0 => {
                 let poses: Vec<[f64; 3]> = plan.poses.iter().map(|p| [p.x, p.y, p.theta]).collect();

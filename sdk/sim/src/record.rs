@@ -23,7 +23,7 @@ use crate::replay::{CrowdReplay, PedestrianSample};
 use crate::runner::{EpisodeRun, Outcome, RobotSetup};
 use human2nav_core::obstacle::Obstacle;
 use human2nav_core::robot::footprint::FootprintShape;
-use human2nav_core::{Observation, Plan, Pose2};
+use human2nav_core::{AgentState, Observation, Plan, Pose2};
 use serde_json::{Map, Value, json};
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -277,6 +277,25 @@ impl Recorder {
         self.write(3, t, &update)
     }
 
+    /// The people of an observation at `t` ([`Self::pedestrians`]), each with its recent
+    /// positions up to where it is now.
+    pub fn observed_people(&mut self, t: f64, agents: &[AgentState]) -> Result<(), SimError> {
+        let people: Vec<PedestrianSample> = agents
+            .iter()
+            .map(|a| PedestrianSample {
+                id: a.id,
+                position: a.position,
+                velocity: a.velocity,
+                radius: a.radius,
+            })
+            .collect();
+        let histories: Vec<Vec<[f64; 2]>> = agents
+            .iter()
+            .map(|a| a.history.iter().copied().chain([a.position]).collect())
+            .collect();
+        self.pedestrians(t, &people, &histories)
+    }
+
     /// The people at `t` as cylinders, with their recent positions as faint lines when given
     /// (`histories[i]` for `people[i]`), on `/scene`.
     pub fn pedestrians(
@@ -498,22 +517,7 @@ pub fn record_plan(
     let t = obs.time;
     rec.static_scene(t, footprint, obs.goal, &obs.obstacles)?;
     rec.robot(t, obs.ego)?;
-    let people: Vec<PedestrianSample> = obs
-        .agents
-        .iter()
-        .map(|a| PedestrianSample {
-            id: a.id,
-            position: a.position,
-            velocity: a.velocity,
-            radius: a.radius,
-        })
-        .collect();
-    let histories: Vec<Vec<[f64; 2]>> = obs
-        .agents
-        .iter()
-        .map(|a| a.history.iter().copied().chain([a.position]).collect())
-        .collect();
-    rec.pedestrians(t, &people, &histories)?;
+    rec.observed_people(t, &obs.agents)?;
     let candidates = if plan.info.guided.is_empty() {
         &plan.info.candidates
     } else {

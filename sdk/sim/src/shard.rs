@@ -36,9 +36,7 @@ pub const MANIFEST_FORMAT: u32 = 1;
 /// FNV-1a hash (stable across platforms and releases), as `"<len> bytes, <hex>"`.
 pub fn fingerprint(data: impl AsRef<[u8]>) -> String {
     let data = data.as_ref();
-    let hash = data.iter().fold(0xCBF2_9CE4_8422_2325_u64, |h, &b| {
-        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01B3)
-    });
+    let hash = human2nav_core::input::fnv1a64(data);
     format!("{} bytes, {hash:016x}", data.len())
 }
 

@@ -802,6 +802,31 @@ fn config_cases() -> Vec<Case> {
         ),
         err(
             a,
+            "bench.toml listing the same robot twice",
+            "every run of that robot counted twice, exit 0",
+            &["robots[1]", "is already robots[0]"],
+            |d| {
+                let diablo = root().join("robots/diablo/robot.toml");
+                let p = write(
+                    d,
+                    "bench.toml",
+                    edit(
+                        BENCH,
+                        "    \"robots/go2/robot.toml\",",
+                        &format!("    {:?},", diablo.display().to_string()),
+                    )
+                    .replace(
+                        "    \"robots/diablo/robot.toml\",",
+                        &format!("    {:?},", diablo.display().to_string()),
+                    )
+                    .replace("    \"robots/ackermann/robot.toml\",", ""),
+                );
+                let cfg = human2nav_sim::config::BenchConfig::load(&p).map_err(|e| chain(&e))?;
+                fail(human2nav_sim::config::load_robots(&cfg))
+            },
+        ),
+        err(
+            a,
             "bench.toml `base` naming a missing file",
             NR,
             &["missing_base.toml"],

@@ -708,11 +708,30 @@ pub fn load_robots(cfg: &BenchConfig) -> Result<Vec<RobotSetup>, SimError> {
 /// The robots of the configuration, in order, built-in or plugin embodiments (created through
 /// `host`, which then lists a plugin embodiment that fails during the runs); every plugin a
 /// profile declares is resolved first ([`RobotSetup::load_with`]).
+/// Two profiles of one name are refused: the results are keyed by the robot's name, so every
+/// run would count twice (the same profile listed twice) or two robots would mix.
 pub fn load_robots_with(cfg: &BenchConfig, host: &PluginHost) -> Result<Vec<RobotSetup>, SimError> {
-    cfg.robots
+    let robots: Vec<RobotSetup> = cfg
+        .robots
         .iter()
         .map(|p| RobotSetup::load_with(&cfg.resolve(p), host))
-        .collect()
+        .collect::<Result<_, _>>()?;
+    for (i, r) in robots.iter().enumerate() {
+        if let Some(j) = robots[..i].iter().position(|o| o.name == r.name) {
+            return Err(SimError::setting(
+                "bench",
+                format!("robots[{i}]"),
+                format!(
+                    "robot `{}` is already robots[{j}] ({} and {}); each robot once, by a \
+                     name of its own",
+                    r.name,
+                    cfg.robots[j].display(),
+                    cfg.robots[i].display()
+                ),
+            ));
+        }
+    }
+    Ok(robots)
 }
 
 /// Builds the methods whose kind the simulator knows without libtorch:

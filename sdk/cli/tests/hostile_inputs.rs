@@ -1545,6 +1545,24 @@ fn model_cases() -> Vec<Case> {
                 toml::Value::Array(vec![f64::NAN.into(), 1.0.into(), 1.0.into()]),
             ),
         ),
+        err(
+            a,
+            "card `[source] std` with a NaN",
+            "loaded silently",
+            &["[source]", "std[1]"],
+            card_set(
+                "source",
+                "std",
+                toml::Value::Array(vec![1.0.into(), f64::NAN.into(), 1.0.into()]),
+            ),
+        ),
+        err(
+            a,
+            "card `[source] steps = 0`",
+            "loaded silently",
+            &["[source]", "steps"],
+            card_set("source", "steps", toml::Value::Integer(0)),
+        ),
         err(a, "card missing", NR, &["model.toml"], |d| {
             std::fs::create_dir_all(d.join("model")).map_err(|e| e.to_string())?;
             fail(load_model(&d.join("model"), Backend::Native))

@@ -62,6 +62,21 @@ pub struct SourceInfo {
     pub steps: usize,
 }
 
+impl SourceInfo {
+    /// Every `std` finite and > 0, `steps` in 1 to
+    /// [`MAX_STEPS_N`](human2nav_core::guidance::MAX_STEPS_N); the error names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        if let Some(k) = self.std.iter().position(|s| !(s.is_finite() && *s > 0.0)) {
+            return Err(format!("std[{k}] = {} must be finite and > 0", self.std[k]));
+        }
+        let most = human2nav_core::guidance::MAX_STEPS_N;
+        if !(1..=most).contains(&self.steps) {
+            return Err(format!("steps = {} must lie in 1 to {most}", self.steps));
+        }
+        Ok(())
+    }
+}
+
 /// Parameter count and cost of one forward pass.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -261,6 +276,10 @@ impl ModelCard {
         }
         card.net.validate()?;
         card.normalisation.validate()?;
+        card.source.validate().map_err(|message| CfmError::Toml {
+            path: path.to_path_buf(),
+            message: format!("[source]: {message}"),
+        })?;
         if let Some(bev) = &card.bev {
             bev.validate().map_err(|e| CfmError::Toml {
                 path: path.to_path_buf(),

@@ -182,6 +182,12 @@ impl LimitCounts {
 
     /// Counts the violations of each limit.
     pub fn of(violations: &[tfs::Violations]) -> Self {
+        Self::from_per_limit(violations.len(), tfs::Violations::count(violations))
+    }
+
+    /// The counts of `commands` commands, one per limit in [`Self::NAMES`]' order (the
+    /// inverse of [`Self::per_limit`]).
+    pub fn from_per_limit(commands: usize, per_limit: [usize; tfs::LIMIT_COUNT]) -> Self {
         let [
             speed,
             reverse,
@@ -190,9 +196,9 @@ impl LimitCounts {
             curvature,
             lateral,
             coupled,
-        ] = tfs::Violations::count(violations);
+        ] = per_limit;
         Self {
-            commands: violations.len(),
+            commands,
             speed,
             reverse,
             acceleration,

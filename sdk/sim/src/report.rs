@@ -280,34 +280,11 @@ impl Fields<'_> {
                 pedestrian_speed: self.number(contact[3])?,
             })
         };
-        let [
-            speed,
-            reverse,
-            acceleration,
-            yaw_rate,
-            curvature,
-            lateral,
-            coupled,
-        ] = [
-            "exec_over_speed",
-            "exec_over_reverse",
-            "exec_over_acceleration",
-            "exec_over_yaw_rate",
-            "exec_over_curvature",
-            "exec_over_lateral",
-            "exec_over_coupled",
-        ]
-        .map(|c| self.count::<usize>(c));
-        let executed_violations = LimitCounts {
-            commands: self.count("commands")?,
-            speed: speed?,
-            reverse: reverse?,
-            acceleration: acceleration?,
-            yaw_rate: yaw_rate?,
-            curvature: curvature?,
-            lateral: lateral?,
-            coupled: coupled?,
-        };
+        let mut per_limit = [0usize; LimitCounts::NAMES.len()];
+        for (slot, name) in per_limit.iter_mut().zip(LimitCounts::NAMES) {
+            *slot = self.count(&format!("exec_over_{name}"))?;
+        }
+        let executed_violations = LimitCounts::from_per_limit(self.count("commands")?, per_limit);
         let outcomes = [Outcome::Success, Outcome::Collision, Outcome::Timeout];
         let kinds = [
             SuiteKind::Real,

@@ -176,13 +176,9 @@ pub fn meets_someone(
 ) -> bool {
     poses.iter().enumerate().any(|(j, p)| {
         let t = (j + first) as f64 * dt;
-        obs.agents.iter().any(|a| {
-            let q = [
-                a.position[0] + a.velocity[0] * t,
-                a.position[1] + a.velocity[1] * t,
-            ];
-            footprint::clearance_at(footprint, *p, q, a.radius) < 0.0
-        })
+        obs.agents
+            .iter()
+            .any(|a| footprint::clearance_at(footprint, *p, a.walked_on(t), a.radius) < 0.0)
     })
 }
 

@@ -226,13 +226,7 @@ fn one_path_per_agent(
 /// `horizon` positions of `agent` moving on at its velocity, `dt` apart from `dt` on.
 pub fn constant_velocity_path(agent: &AgentState, horizon: usize, dt: f64) -> Vec<[f64; 2]> {
     (1..=horizon)
-        .map(|j| {
-            let t = j as f64 * dt;
-            [
-                agent.position[0] + agent.velocity[0] * t,
-                agent.position[1] + agent.velocity[1] * t,
-            ]
-        })
+        .map(|j| agent.walked_on(j as f64 * dt))
         .collect()
 }
 

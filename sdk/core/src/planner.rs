@@ -26,6 +26,16 @@ pub struct AgentState {
     pub history: Vec<[f64; 2]>,
 }
 
+impl AgentState {
+    /// Where the agent is `t` seconds on, walking on at its velocity (constant velocity).
+    pub fn walked_on(&self, t: f64) -> [f64; 2] {
+        [
+            self.position[0] + self.velocity[0] * t,
+            self.position[1] + self.velocity[1] * t,
+        ]
+    }
+}
+
 /// The frame an observation is in when it does not say: `"world"`.
 pub const DEFAULT_FRAME: &str = "world";
 

@@ -1775,20 +1775,23 @@ impl PluginEmbodiment {
     ) -> Option<(Option<H2nPose>, Twist2)> {
         use human2nav_core::planner::{MAX_COORDINATE, MAX_SPEED};
         let within = |v: f64, bound: f64| v.is_finite() && v.abs() <= bound;
-        let mut fields = vec![
+        // Arrays, not a Vec: this runs at every simulator step.
+        let twist_fields = [
             ("vx", twist.vx, MAX_SPEED, "m/s"),
             ("vy", twist.vy, MAX_SPEED, "m/s"),
             ("omega", twist.omega, MAX_EMBODIMENT_YAW_RATE, "rad/s"),
         ];
-        if let Some(p) = pose {
-            fields.extend([
+        let pose_fields = pose.map(|p| {
+            [
                 ("x", p.x, MAX_COORDINATE, "m"),
                 ("y", p.y, MAX_COORDINATE, "m"),
                 ("theta", p.theta, f64::MAX, "rad"),
-            ]);
-        }
-        if let Some((field, value, bound, unit)) =
-            fields.into_iter().find(|(_, v, b, _)| !within(*v, *b))
+            ]
+        });
+        if let Some((field, value, bound, unit)) = twist_fields
+            .into_iter()
+            .chain(pose_fields.into_iter().flatten())
+            .find(|(_, v, b, _)| !within(*v, *b))
         {
             let message = format!(
                 "embodiment `{}`: {call} answered {field} = {value}, outside ±{bound:e} {unit} \

@@ -1209,16 +1209,9 @@ fn zero_samples_plan_from_the_motions_alone() {
 
 /// Someone standing 1.6 m ahead, 0.15 m left of the line the model's samples walk.
 fn standing_ahead() -> Observation {
-    Observation {
-        agents: vec![AgentState {
-            id: 1,
-            position: [1.6, 0.15],
-            velocity: [0.0, 0.0],
-            radius: 0.3,
-            history: vec![],
-        }],
-        ..blocked()
-    }
+    let mut obs = blocked();
+    obs.agents[0].position = [1.6, 0.15];
+    obs
 }
 
 /// The samples of one call before and after Algorithm 1 descending `terms` (200 last-step

@@ -149,7 +149,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
 fn report_plugin_failures(bench: &Bench) -> bool {
     let mut embodiment = false;
     for f in bench.plugin_failures() {
-        if f.instance.starts_with("embodiment ") {
+        if f.kind == human2nav_plugin::PluginKind::Embodiment {
             embodiment = true;
             eprintln!(
                 "error: {} failed, so the runs of its robot are not valid: {}",

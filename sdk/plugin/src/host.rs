@@ -846,14 +846,16 @@ pub(crate) fn probe_factory(
 /// Health of one plugin instance, shared by its proxy and the host that created it.
 #[derive(Debug)]
 struct Health {
+    kind: PluginKind,
     label: String,
     poisoned: AtomicBool,
     message: Mutex<Option<String>>,
 }
 
 impl Health {
-    fn new(label: String) -> Arc<Self> {
+    fn new(kind: PluginKind, label: String) -> Arc<Self> {
         Arc::new(Self {
+            kind,
             label,
             poisoned: AtomicBool::new(false),
             message: Mutex::new(None),
@@ -904,6 +906,8 @@ impl Health {
 /// A plugin instance that became unusable.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct PluginFailure {
+    /// What the instance was.
+    pub kind: PluginKind,
     /// `<kind> <name> from <library>`.
     pub instance: String,
     /// The panic, last error or missed deadline that made it unusable.
@@ -1043,10 +1047,13 @@ impl PluginHost {
             robot,
             deadline,
         )?;
-        let health = Health::new(format!(
-            "{kind} `{name}` from {} (in its own process)",
-            library.display()
-        ));
+        let health = Health::new(
+            kind,
+            format!(
+                "{kind} `{name}` from {} (in its own process)",
+                library.display()
+            ),
+        );
         self.register(Arc::clone(&health));
         Ok((client, name, health))
     }
@@ -1070,7 +1077,7 @@ impl PluginHost {
         // unloaded. On failure the instance is leaked (see `checked_vtable`).
         let (vtable, _) = unsafe { checked_vtable::<T>(&lib, name, obj.vtable) }?;
         let label = format!("{} `{name}` from {}", T::KIND, lib.path.display());
-        let health = Health::new(label.clone());
+        let health = Health::new(T::KIND, label.clone());
         let handle = Handle {
             // SAFETY: `create` checked it is non-null.
             instance: unsafe { NonNull::new_unchecked(obj.instance) },
@@ -1346,6 +1353,7 @@ impl PluginHost {
             .iter()
             .filter(|h| h.poisoned())
             .map(|h| PluginFailure {
+                kind: h.kind,
                 instance: h.label.clone(),
                 message: h.message(),
             })

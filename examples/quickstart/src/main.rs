@@ -1,7 +1,6 @@
 //! Quickstart: plan one step for a robot in a synthetic crowd, print the plan, draw it.
 //!
 //! ```sh
-//! eval "$(sdk/dev.sh env)"
 //! cargo run --release -p human2nav-quickstart                               # diablo, guided
 //! cargo run --release -p human2nav-quickstart -- robots/ackermann/robot.toml
 //! cargo run --release -p human2nav-quickstart -- robots/go2/robot.toml --no-guidance
@@ -12,7 +11,6 @@
 use anyhow::{Context, bail};
 use clap::Parser;
 use human2nav::core::ablation::Arm;
-use human2nav::flow::tch;
 use human2nav::prelude::*;
 use std::path::PathBuf;
 
@@ -46,7 +44,6 @@ fn main() -> anyhow::Result<()> {
     if raw {
         config.human2nav = Arm::Raw.settings(&config.human2nav);
     }
-    tch::set_num_threads(1);
     let model_dir = config.model_dir(&root);
     if !model_dir.join("model.toml").is_file() {
         bail!(

@@ -26,6 +26,16 @@
 //!   frame, times in seconds on the caller's clock.
 //! * **Ownership.** `h2n_planner_create*` and `h2n_planner_plan` hand out objects the caller
 //!   frees with `h2n_planner_free` and `h2n_plan_free`; freeing NULL does nothing.
+//!
+//! # Building and installing
+//!
+//! `sdk/capi/install.sh --prefix DIR` builds this package alone (`cargo build --release -p
+//! human2nav-capi`) and installs the library, the header, a pkg-config file (`human2nav`) and a
+//! CMake package (`find_package(human2nav)`, target `human2nav::human2nav`) with the shipped
+//! robots, planner settings and model under `DIR/share/human2nav`. Built this way the library
+//! plans on the native backend and links no libtorch; the `torch` feature (`install.sh
+//! --torch`) adds the `torch` backend and with it libtorch. `examples/cmake` builds the C and
+//! C++ examples against an installed copy.
 
 #![warn(missing_docs)]
 #![allow(non_camel_case_types)]
@@ -35,7 +45,7 @@ use human2nav_core::human2nav::{budget_deadline, pose_at};
 use human2nav_core::obstacle::{MAX_POLYGON_VERTICES, Obstacle};
 use human2nav_core::robot::RobotProfile;
 use human2nav_core::{AgentState, Observation, Plan, PlanError, Pose2, Stage, Twist2};
-use human2nav_flow::planner::{Backend, PlannerConfig, PlannerError, RobotPlanner, load_model};
+use human2nav_flow::planner::{PlannerConfig, PlannerError, RobotPlanner, load_model};
 use human2nav_plugin::PluginHost;
 use std::cell::RefCell;
 use std::ffi::{CStr, CString, c_char};
@@ -430,7 +440,8 @@ fn build(
     let embodiment = PluginHost::new()
         .robot_embodiment(&mut profile)
         .map_err(|e| Failure::new(h2n_status::Plugin, e.to_string()))?;
-    if config.backend == Backend::Torch {
+    #[cfg(feature = "torch")]
+    if config.backend == human2nav_flow::planner::Backend::Torch {
         human2nav_flow::tch::set_num_threads(i32::try_from(config.threads).unwrap_or(1));
     }
     let model = load_model(Path::new(model_dir), config.backend)?;

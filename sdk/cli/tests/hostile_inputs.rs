@@ -2045,7 +2045,7 @@ fn resume_cases() -> Vec<Case> {
             "flow trainer: every partial set in turn",
             NR,
             "resume from the complete set or an error naming the file",
-            "sdk/flow/src/train.rs::tests",
+            "sdk/flow/src/train/trainer.rs::tests",
         ),
         covered(
             a,

@@ -106,6 +106,7 @@ pub enum CfmError {
     },
 
     /// A libtorch call failed.
+    #[cfg(feature = "torch")]
     #[error("libtorch: {0}")]
     Torch(#[from] tch::TchError),
 

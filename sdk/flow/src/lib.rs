@@ -41,7 +41,9 @@ pub mod train;
 pub use card::ModelCard;
 pub use config::{Activation, NetConfig, Normalisation};
 pub use error::CfmError;
+#[cfg(feature = "torch")]
 pub use model::CfmModel;
 pub use native::NativeCfm;
-/// The libtorch bindings this crate is built on (for thread count and device selection).
+/// The libtorch bindings the `torch` feature builds on (for thread count and device selection).
+#[cfg(feature = "torch")]
 pub use tch;

@@ -1,12 +1,14 @@
 //! Latency of a model's trait calls on this machine (what the planner pays per step).
 
-use crate::card::PerformanceInfo;
-use crate::cfm::sample_source;
-use crate::model::CfmModel;
-use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
+use human2nav_core::flow::{FlowCondition, FlowError};
 use std::time::Instant;
+#[cfg(feature = "torch")]
+use {
+    crate::{card::PerformanceInfo, cfm::sample_source, model::CfmModel},
+    human2nav_core::flow::FlowModel,
+    rand::SeedableRng,
+    rand_chacha::ChaCha8Rng,
+};
 
 /// Median wall time of `f` over `n` runs after `warm` warm-up runs, milliseconds.
 pub fn median_ms(
@@ -45,6 +47,7 @@ pub fn bench_condition(cells: usize) -> FlowCondition {
     }
 }
 
+#[cfg(feature = "torch")]
 /// Median latency of `velocity` and `velocity_vjp` at batch 1 and 16 (condition cached, as in
 /// a planning call) and of one condition encoding, with the current torch thread count
 /// (`threads` is recorded, not set).

@@ -19,6 +19,7 @@
 
 use crate::card::ModelCard;
 use crate::error::CfmError;
+#[cfg(feature = "torch")]
 use crate::model::CfmModel;
 use crate::native::NativeCfm;
 use human2nav_core::bev::BevSpec;
@@ -34,7 +35,6 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
-use tch::Device;
 
 /// The shipped model's folder, relative to the workspace root.
 pub const DEFAULT_MODEL_DIR: &str = "models/human2nav-cfm";
@@ -149,6 +149,7 @@ impl PlannerConfig {
                 message: "must name a model folder".into(),
             });
         }
+        self.backend.check_available()?;
         self.human2nav.validate()?;
         // Checked with or without a model: a bad value is an error before it is used.
         self.prediction.flow.validate().map_err(|e| {
@@ -235,6 +236,7 @@ impl PredictionModel {
         Ok(Some(Self {
             native: match model {
                 PlannerModel::Native(m) => Some(m),
+                #[cfg(feature = "torch")]
                 PlannerModel::Torch(_) => None,
             },
             dir,
@@ -267,9 +269,23 @@ pub enum Backend {
     /// [`NativeCfm`]: Rust kernels on the CPU, no per-operator dispatch.
     #[default]
     Native,
-    /// [`CfmModel`]: libtorch, the reference implementation (CPU or GPU).
+    /// `CfmModel`: libtorch, the reference implementation (CPU or GPU). Only in builds with
+    /// the `torch` feature ([`Backend::check_available`]).
     Torch,
 }
+
+fn torch_missing() -> PlannerError {
+    PlannerError::Setting {
+        field: "backend".into(),
+        message: TORCH_MISSING.into(),
+    }
+}
+
+/// Why a build without libtorch cannot run the `torch` backend, and how to get one that can.
+pub const TORCH_MISSING: &str = "this build of human2nav has no libtorch: the torch backend \
+    needs the `torch` cargo feature (Rust: human2nav-flow/torch or human2nav/torch; C library: \
+    sdk/capi/install.sh --torch; Python: sdk/dev.sh python, or pip install with \
+    MATURIN_PEP517_ARGS=\"--features torch\"). The native backend runs the same weights without it";
 
 /// The network behind a planner: the same trained weights run natively or by libtorch.
 #[derive(Debug)]
@@ -277,6 +293,7 @@ pub enum PlannerModel {
     /// Rust kernels.
     Native(Box<NativeCfm>),
     /// libtorch.
+    #[cfg(feature = "torch")]
     Torch(Box<CfmModel>),
 }
 
@@ -287,6 +304,16 @@ impl Backend {
             Self::Native => "native",
             Self::Torch => "torch",
         }
+    }
+
+    /// Whether this build can run the backend: the `torch` backend needs the `torch` feature;
+    /// without it, an error on the `backend` setting that says how to get it
+    /// ([`TORCH_MISSING`]).
+    pub fn check_available(self) -> Result<(), PlannerError> {
+        if self == Self::Torch && !cfg!(feature = "torch") {
+            return Err(torch_missing());
+        }
+        Ok(())
     }
 }
 
@@ -313,6 +340,7 @@ impl PlannerModel {
     pub fn try_share(&self) -> Option<Self> {
         match self {
             Self::Native(m) => Some(Self::Native(m.clone())),
+            #[cfg(feature = "torch")]
             Self::Torch(_) => None,
         }
     }
@@ -321,6 +349,7 @@ impl PlannerModel {
     pub fn card(&self) -> &ModelCard {
         match self {
             Self::Native(m) => m.card(),
+            #[cfg(feature = "torch")]
             Self::Torch(m) => m.card(),
         }
     }
@@ -329,11 +358,13 @@ impl PlannerModel {
     fn flow(&self) -> &dyn FlowModel {
         match self {
             Self::Native(m) => m.as_ref(),
+            #[cfg(feature = "torch")]
             Self::Torch(m) => m.as_ref(),
         }
     }
 }
 
+#[cfg(feature = "torch")]
 impl From<CfmModel> for PlannerModel {
     fn from(m: CfmModel) -> Self {
         Self::Torch(Box::new(m))
@@ -464,11 +495,16 @@ pub fn load_profile(path: &Path) -> Result<RobotProfile, PlannerError> {
     Ok(profile)
 }
 
-/// Loads a model folder for `backend` (libtorch on the CPU), naming the folder in the error.
+/// Loads a model folder for `backend` (libtorch on the CPU), naming the folder in the error;
+/// the `torch` backend in a build without libtorch is an error on `backend`
+/// ([`Backend::check_available`]).
 pub fn load_model(dir: &Path, backend: Backend) -> Result<PlannerModel, PlannerError> {
     let model = match backend {
         Backend::Native => NativeCfm::load(dir).map(PlannerModel::from),
-        Backend::Torch => CfmModel::load(dir, Device::Cpu).map(PlannerModel::from),
+        #[cfg(feature = "torch")]
+        Backend::Torch => CfmModel::load(dir, tch::Device::Cpu).map(PlannerModel::from),
+        #[cfg(not(feature = "torch"))]
+        Backend::Torch => return Err(torch_missing()),
     };
     model.map_err(|source| PlannerError::Model {
         path: dir.to_path_buf(),
@@ -765,7 +801,9 @@ mod tests {
     use super::*;
     use crate::card::TrainingInfo;
     use approx::assert_relative_eq;
+    #[cfg(feature = "torch")]
     use human2nav_core::Pose2;
+    #[cfg(feature = "torch")]
     use human2nav_core::ablation::{Arm, ablation_step};
 
     #[test]
@@ -849,11 +887,13 @@ mod tests {
     }
 
     /// A small freshly initialised model saved to a temporary folder.
+    #[cfg(feature = "torch")]
     fn small_model_dir(tag: &str) -> PathBuf {
         small_model_dir_with(tag, true)
     }
 
     /// A small untrained model folder; `goal_conditioned: false` makes it a predictor's.
+    #[cfg(feature = "torch")]
     fn small_model_dir_with(tag: &str, goal_conditioned: bool) -> PathBuf {
         use crate::config::{NetConfig, Normalisation};
         tch::manual_seed(11);
@@ -877,13 +917,14 @@ mod tests {
         };
         let dir = std::env::temp_dir().join(format!("h2n-planner-{tag}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        CfmModel::new(&net, &norm, Device::Cpu)
+        CfmModel::new(&net, &norm, tch::Device::Cpu)
             .unwrap()
             .save(&dir)
             .unwrap();
         dir
     }
 
+    #[cfg(feature = "torch")]
     fn observation() -> Observation {
         Observation {
             time: 1.5,
@@ -904,6 +945,7 @@ mod tests {
     /// Profile + model folder → planner; guidance never raises Φ of the kept sample, the plan
     /// starts at the robot, and guided and unguided planners with one seed share their samples.
     #[test]
+    #[cfg(feature = "torch")]
     fn planner_from_profile_and_model_folder() {
         let dir = small_model_dir("e2e");
         let robot = workspace().join("robots/diablo/robot.toml");
@@ -985,6 +1027,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg(feature = "torch")]
     fn a_prediction_model_is_goal_free_and_predicts_for_the_planner() {
         let ws = Path::new("/ws");
         let with_model = |dir: &Path| PlannerConfig {
@@ -1048,11 +1091,34 @@ mod tests {
 
     #[test]
     fn missing_model_and_profile_are_named() {
-        for backend in [Backend::Native, Backend::Torch] {
+        let backends: &[Backend] = if cfg!(feature = "torch") {
+            &[Backend::Native, Backend::Torch]
+        } else {
+            &[Backend::Native]
+        };
+        for &backend in backends {
             let err = load_model(Path::new("no/such/model"), backend).unwrap_err();
             assert!(err.to_string().contains("no/such/model"), "{err}");
         }
         let err = load_profile(Path::new("no/such/robot.toml")).unwrap_err();
         assert!(matches!(err, PlannerError::Profile { .. }), "{err}");
+    }
+
+    /// Without the `torch` feature, asking for the torch backend (in the file or when loading)
+    /// is an error on `backend` that says how to get a build with it.
+    #[test]
+    #[cfg(not(feature = "torch"))]
+    fn the_torch_backend_without_libtorch_says_how_to_get_it() {
+        let err =
+            PlannerConfig::from_toml_str("backend = \"torch\"\n", Path::new("p.toml")).unwrap_err();
+        assert!(
+            matches!(err, PlannerError::Setting { ref field, ref message }
+                if field == "backend" && message.contains("--features torch")),
+            "{err}"
+        );
+        let err =
+            load_model(&workspace().join("models/human2nav-cfm"), Backend::Torch).unwrap_err();
+        assert!(err.to_string().contains("`torch` cargo feature"), "{err}");
+        assert!(load_model(&workspace().join("models/human2nav-cfm"), Backend::Native).is_ok());
     }
 }

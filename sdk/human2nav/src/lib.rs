@@ -7,15 +7,19 @@
 //! | [`core`] | `human2nav-core` | SE(2), robot profiles and limits, constraint terms, guidance, the `Planner` trait, the reference planner |
 //! | [`data`] | `human2nav-data` | dataset loaders, training tuples, benchmark episodes, the synthetic crowd |
 //! | [`plugin`] | `human2nav-plugin` | the plugin C ABI, [`plugin::export_plugin!`] for authors, the host that loads libraries |
-//! | [`flow`] | `human2nav-flow` | the flow-matching model and a planner built from a robot profile and a model folder (feature `flow`, libtorch) |
+//! | [`flow`] | `human2nav-flow` | the flow-matching model and a planner built from a robot profile and a model folder (feature `flow`; training and the libtorch backend with feature `torch`) |
 //! | [`sim`] | `human2nav-sim` | the closed-loop simulator, the benchmark, its report and figures (feature `sim`) |
 //!
-//! Both features are on by default. A plugin library needs neither: depend on this crate with
-//! `default-features = false` and it pulls in no libtorch.
+//! `flow` and `sim` are on by default and need no libtorch: the planner runs its network on
+//! the SDK's own kernels. The `torch` feature adds libtorch (training, the reference network,
+//! the `torch` planner backend). A plugin library needs none of them: depend on this crate with
+//! `default-features = false`.
 //!
 //! # libtorch at run time
 //!
-//! With the `flow` feature, programs link libtorch. This crate's build script passes
+//! With the `torch` feature (or when another package of the same build turns on
+//! `human2nav-flow/torch`, as the workspace's CLI does), programs link libtorch. This crate's
+//! build script passes
 //! libtorch's directory to the build scripts of its direct dependents as
 //! `DEP_HUMAN2NAV_LIBTORCH_LIB`; a program bakes it in as an rpath with a three-line
 //! `build.rs` (as `examples/quickstart` does):

@@ -280,6 +280,7 @@ impl PyPlanner {
             cfg.backend = b.parse::<Backend>().map_err(value_error)?;
         }
         cfg.validate().map_err(planner_error)?;
+        #[cfg(feature = "torch")]
         if cfg.backend == Backend::Torch {
             human2nav_flow::tch::set_num_threads(i32::try_from(cfg.threads).unwrap_or(1));
         }

@@ -7,116 +7,18 @@
 //! once. The cache compares the whole condition for equality (a 3·32·32 raster compares in a
 //! few microseconds), so there are no false hits.
 
+use super::{CARD_FILE, MAX_WEIGHTS_BYTES, WEIGHTS_FILE, crowd_points, normalise_condition};
 use crate::card::{FORMAT_VERSION, ModelCard, SourceInfo};
-use crate::config::{CrowdConfig, NetConfig, Normalisation};
+use crate::config::{NetConfig, Normalisation};
 use crate::error::CfmError;
 use crate::io_map::{self, check_len};
 use crate::net::{CondUnet1d, Film, store_kind};
-use human2nav_core::bev::BevSpec;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use human2nav_core::input::read_user_bytes;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use tch::{Device, Kind, Tensor, nn};
-
-/// The model card's file name inside a model folder (TOML, [`crate::card::ModelCard`]).
-pub const CARD_FILE: &str = "model.toml";
-/// The weights' file name inside a model folder (safetensors).
-pub const WEIGHTS_FILE: &str = "model.safetensors";
-
-/// Writes the normalised condition of one example: the raster with its velocity channels
-/// divided by the speed scale into `bev_out` (`3·H·W`), and
-/// `[g_x/goal_scale, g_y/goal_scale, v_x/speed_scale, v_y/speed_scale]` into `goal_out` (the
-/// goal zero for a model that is not [`Normalisation::goal_conditioned`]).
-///
-/// Training and inference both go through this function, so the network sees the same inputs.
-pub fn normalise_condition(
-    norm: &Normalisation,
-    bev: &[f32],
-    goal: [f64; 2],
-    velocity: [f64; 2],
-    bev_out: &mut [f32],
-    goal_out: &mut [f32],
-) {
-    let plane = bev.len() / 3;
-    let inv_speed = (1.0 / norm.speed_scale) as f32;
-    bev_out[..plane].copy_from_slice(&bev[..plane]);
-    for (o, &b) in bev_out[plane..].iter_mut().zip(&bev[plane..]) {
-        *o = b * inv_speed;
-    }
-    let goal = if norm.goal_conditioned {
-        goal
-    } else {
-        [0.0; 2]
-    };
-    goal_out[0] = (goal[0] / norm.goal_scale) as f32;
-    goal_out[1] = (goal[1] / norm.goal_scale) as f32;
-    goal_out[2] = (velocity[0] / norm.speed_scale) as f32;
-    goal_out[3] = (velocity[1] / norm.speed_scale) as f32;
-}
-
-/// Writes the crowd points of one raster (`[3, H, W]`, velocities in m/s as rasterized) into
-/// `out` (`crowd.points × 5`): the occupied cells nearest the ego (ties by cell order), each
-/// as `[x/s, y/s, v_x/s, v_y/s, 1]` with `(x, y)` the cell's centre in the ego frame and
-/// `(v_x, v_y)` its velocity, so that `position + velocity·τ` is the cell carried on for `τ`
-/// seconds in the network's units; unused rows are zero (`present = 0`).
-///
-/// Training and inference both go through this function.
-pub fn crowd_points(
-    crowd: &CrowdConfig,
-    norm: &Normalisation,
-    cells: usize,
-    bev: &[f32],
-    out: &mut [f32],
-) {
-    let spec = BevSpec {
-        cells,
-        resolution: crowd.cell,
-    };
-    let plane = cells * cells;
-    // (distance from the ego, cell index, cell centre), nearest first, ties by cell order.
-    let mut occupied: Vec<(f64, usize, [f64; 2])> = bev[..plane]
-        .iter()
-        .enumerate()
-        .filter(|(_, o)| **o > 0.5)
-        .map(|(i, _)| {
-            let c = spec.cell_center(i / cells, i % cells);
-            (c[0].hypot(c[1]), i, c)
-        })
-        .collect();
-    let order = |a: &(f64, usize, [f64; 2]), b: &(f64, usize, [f64; 2])| {
-        a.0.total_cmp(&b.0).then(a.1.cmp(&b.1))
-    };
-    let n = crowd.points.min(occupied.len());
-    if n < occupied.len() {
-        occupied.select_nth_unstable_by(n, order);
-        occupied.truncate(n);
-    }
-    occupied.sort_unstable_by(order);
-    out.fill(0.0);
-    let inv = 1.0 / norm.position_scale;
-    for (row, &(_, i, [x, y])) in out.chunks_exact_mut(5).zip(&occupied) {
-        row[0] = (x * inv) as f32;
-        row[1] = (y * inv) as f32;
-        row[2] = (f64::from(bev[plane + i]) * inv) as f32;
-        row[3] = (f64::from(bev[2 * plane + i]) * inv) as f32;
-        row[4] = 1.0;
-    }
-}
-
-/// Trajectory features of normalised poses (flat `[T, 3]`, translations already divided by
-/// `s`), written channel-major `[5, T]` into `out`: `x, y, cos θ, sin θ, (i + 1)/T`.
-pub fn trajectory_features(poses: &[f64], out: &mut [f32]) {
-    let t = poses.len() / 3;
-    for (i, p) in poses.chunks_exact(3).enumerate() {
-        out[i] = p[0] as f32;
-        out[t + i] = p[1] as f32;
-        out[2 * t + i] = p[2].cos() as f32;
-        out[3 * t + i] = p[2].sin() as f32;
-        out[4 * t + i] = (i + 1) as f32 / t as f32;
-    }
-}
 
 /// At most this many flow times keep their FiLM parameters cached per condition.
 const FILM_CACHE: usize = 64;
@@ -581,9 +483,6 @@ impl FlowModel for CfmModel {
 }
 
 /// Reads every tensor of a safetensors file, mapping failures to [`CfmError`].
-/// Largest weights file read (1 GiB; the shipped model's is 1.5 MB).
-pub const MAX_WEIGHTS_BYTES: u64 = 1 << 30;
-
 pub(crate) fn read_safetensors(path: &Path) -> Result<BTreeMap<String, Tensor>, CfmError> {
     // libtorch reads the file itself: check first that it is a regular file of sane size (a
     // FIFO would block, a device would never end).
@@ -640,6 +539,8 @@ fn record_metadata(path: &Path, settings: &[(&'static str, String)]) -> Result<(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::CrowdConfig;
+    use crate::model::trajectory_features;
     use approx::assert_relative_eq;
 
     fn small() -> NetConfig {

@@ -9,9 +9,9 @@
 //! reused from call to call. It computes the forward pass and the gradient of its input (the
 //! vector-Jacobian product guidance needs); weight gradients, and so training, stay with tch.
 //!
-//! [`NativeCfm`] implements core's [`FlowModel`] exactly as [`CfmModel`] does (same features,
+//! [`NativeCfm`] implements core's [`FlowModel`] exactly as `CfmModel` does (same features,
 //! normalisation and output scaling), so a planner can use either; the agreement tests compare
-//! the two. It runs on the CPU, one thread per model; a GPU runs [`CfmModel`].
+//! the two. It runs on the CPU, one thread per model; a GPU runs `CfmModel`.
 
 mod crowd;
 mod kernels;
@@ -20,7 +20,9 @@ mod net;
 use crate::card::ModelCard;
 use crate::error::CfmError;
 use crate::io_map::{self, batch_of, check_len};
-use crate::model::{CARD_FILE, CfmModel, crowd_points, normalise_condition};
+#[cfg(feature = "torch")]
+use crate::model::CfmModel;
+use crate::model::{CARD_FILE, crowd_points, normalise_condition};
 use crowd::CrowdTape;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use human2nav_core::input::read_user_bytes;
@@ -112,6 +114,7 @@ impl NativeCfm {
     }
 
     /// The same network as a loaded (or trained) libtorch model, with its weights copied.
+    #[cfg(feature = "torch")]
     pub fn from_model(model: &CfmModel) -> Result<Self, CfmError> {
         let mut weights = Weights::new();
         for (name, t) in model.named_tensors("") {
@@ -319,7 +322,7 @@ impl FlowModel for NativeCfm {
 
     /// The backward pass of the network input runs on the activations of the forward pass at
     /// `(x, t)`, reused when [`FlowModel::velocity`] was just called there; the pull-back
-    /// through the features and the output scaling are the closed forms [`CfmModel`] uses.
+    /// through the features and the output scaling are the closed forms `CfmModel` uses.
     fn velocity_vjp(
         &self,
         x: &[f64],
@@ -429,5 +432,5 @@ fn read_weights(path: &Path, card: &ModelCard) -> Result<Weights, CfmError> {
     Ok(out)
 }
 
-#[cfg(test)]
+#[cfg(all(test, feature = "torch"))]
 mod tests;

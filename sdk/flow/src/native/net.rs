@@ -547,7 +547,7 @@ pub(crate) struct Pool {
 }
 
 /// Sinusoidal time frequency multiplier of [`crate::net`].
-const TIME_SCALE: f32 = 100.0;
+const TIME_SCALE: f32 = crate::net::TIME_SCALE as f32;
 
 impl Net {
     /// Builds the network for `cfg` from named weights, taking every tensor the architecture

@@ -39,21 +39,25 @@ ensure_torch() {
 
 ensure_python_tools() {
     # The Python package's build backend, its runtime dependency and its test runner, in the
-    # same virtualenv as torch (the package links that torch's libtorch); and the readers and
-    # writers of MCAP files and ROS 2 bags the tests check the recordings and replays with.
-    if ! "$venv/bin/python3" -c "import maturin, numpy, pytest, mcap, rosbags" 2>/dev/null; then
-        log "installing maturin, numpy, pytest, mcap and rosbags into $venv"
+    # same virtualenv as torch (the package links that torch's libtorch); the readers and
+    # writers of MCAP files and ROS 2 bags the tests check the recordings and replays with;
+    # and CMake, which the test of the installed C library builds the examples with.
+    if ! "$venv/bin/python3" -c "import maturin, numpy, pytest, mcap, rosbags, cmake" 2>/dev/null; then
+        log "installing maturin, numpy, pytest, mcap, rosbags and cmake into $venv"
         "$venv/bin/python3" -m pip install --quiet --disable-pip-version-check \
-            "maturin>=1.7,<2" "numpy>=1.22" "pytest>=7" "mcap>=1.1,<2" "rosbags>=0.10,<0.12"
+            "maturin>=1.7,<2" "numpy>=1.22" "pytest>=7" "mcap>=1.1,<2" "rosbags>=0.10,<0.12" \
+            "cmake>=3.16,<5"
     fi
 }
 
-# Builds and installs sdk/python into the virtualenv. No build isolation: torch-sys finds
-# libtorch through the virtualenv's torch (LIBTORCH_USE_PYTORCH=1).
+# Builds and installs sdk/python into the virtualenv, with the torch backend (the `torch`
+# feature; a plain `pip install sdk/python` or `pip wheel sdk/python` needs no torch). No build
+# isolation: torch-sys finds libtorch through the virtualenv's torch (LIBTORCH_USE_PYTORCH=1).
 install_python_package() {
     ensure_python_tools
-    "$venv/bin/python3" -m pip install --quiet --disable-pip-version-check --no-build-isolation \
-        --force-reinstall --no-deps "$root/sdk/python"
+    MATURIN_PEP517_ARGS="${MATURIN_PEP517_ARGS:-} --features torch" \
+        "$venv/bin/python3" -m pip install --quiet --disable-pip-version-check \
+        --no-build-isolation --force-reinstall --no-deps "$root/sdk/python"
 }
 
 ensure_fonts() {
@@ -99,6 +103,14 @@ case "${1:-}" in
         # the dependency graph twice. The plugin libraries the tests load are built here too.
         cargo build --workspace --all-targets
         cargo test --workspace
+        # Planning without libtorch: the flow crate's own tests without its `torch` feature,
+        # the C library installed to a prefix and used from C and C++ (pkg-config, CMake), and
+        # the Python wheel in a virtualenv without torch.
+        cargo test -p human2nav-flow --lib
+        ensure_python_tools
+        sdk/capi/tests/installed_copy.sh
+        MATURIN_PEP517_ARGS="--profile dev" PYTHON="$venv/bin/python3" \
+            sdk/python/tests/wheel_without_torch.sh
         # The Python package, built with the test build's profile (sharing its artifacts).
         MATURIN_PEP517_ARGS="--profile dev" install_python_package
         exec "$venv/bin/python3" -m pytest -q "$root/sdk/python/tests"

@@ -1,11 +1,11 @@
 """The Python package in a few lines: load a robot, plan one step past two pedestrians in a
 corridor, compare with ORCA, then run one closed-loop benchmark episode and summarise it.
 
-Install the package once with `sdk/dev.sh python`, then, from the repository root:
+Install the package once, then run this from the repository root with that environment's
+python3: either into any virtualenv, without torch (`pip install numpy sdk/python`), or with
+`sdk/dev.sh python` into the torch virtualenv the SDK's tests use:
 
     ~/.cache/human2nav/torch-2.13.0/bin/python3 examples/python/plan_and_run.py
-
-(or with the python3 of any environment you installed it into).
 """
 
 import sys

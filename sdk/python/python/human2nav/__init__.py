@@ -19,8 +19,12 @@ Units are SI. Poses, goals and pedestrians are in one world-fixed frame; the rob
 in its body frame (forward, leftward, yaw rate). Bad arguments raise ``ValueError`` (a missing
 file ``FileNotFoundError``); other failures of the SDK raise :class:`Human2NavError`.
 
-The package links the libtorch of the torch 2.13 installation it was built against, so it
-works in the same process as ``import torch``, before or after it.
+A plain build (``pip install sdk/python`` or ``pip wheel sdk/python``) needs no torch: the
+planner runs its network on the SDK's own kernels. Built with the ``torch`` feature
+(``sdk/dev.sh python``), the package also offers ``backend="torch"`` and links the libtorch of
+the torch 2.13 installation it was built against, so it works in the same process as
+``import torch``, before or after it. Asking a plain build for the torch backend raises
+``ValueError`` saying how to get it.
 """
 
 from __future__ import annotations
@@ -277,8 +281,8 @@ class Human2NavPlanner(Planner):
     ``sdk/configs/planner.toml``; a ``[prediction]`` model it names is loaded, a relative path
     from the current directory). ``guidance=True`` runs Algorithm 1 (the shipped
     planner does not) and switches nothing else;
-    ``seed``, ``samples`` and ``backend`` (``"native"`` or ``"torch"``) override the
-    configuration.
+    ``seed``, ``samples`` and ``backend`` (``"native"``, or ``"torch"`` in a build with the
+    ``torch`` feature) override the configuration.
     """
 
     def __init__(

@@ -709,3 +709,137 @@ fn a_profile_and_urdf_given_as_text_load_like_the_files() {
         "{text}"
     );
 }
+
+#[test]
+fn limits_gains_and_weights_outside_their_ranges_are_refused() {
+    for (key, line, field) in [
+        ("v_max", "v_max = 1e-300", "limits.v_max"),
+        ("v_max", "v_max = 1e300", "limits.v_max"),
+        ("a_max", "a_max = 1e-300", "limits.a_max"),
+        ("omega_max", "omega_max = 1e300", "limits.omega_max"),
+        (
+            "min_turning_radius",
+            "min_turning_radius = 1e-300",
+            "limits.min_turning_radius",
+        ),
+        ("k_x", "k_x = 1e300", "controller.k_x"),
+        ("k_theta", "k_theta = 1e-300", "controller.k_theta"),
+        ("lookahead", "lookahead = 1e300", "controller.lookahead"),
+        ("lambda_v", "lambda_v = 1e300", "cost.lambda_v"),
+        ("gamma", "gamma = 1e-300", "cost.gamma"),
+    ] {
+        let (toml, result) = load_edited("diablo", |t| set_line(t, key, line));
+        expect_invalid(result, &toml, field, "in [");
+    }
+    // 0 stays allowed where it switches a term off.
+    let (_, result) = load_edited("diablo", |t| set_line(t, "k_d", "k_d = 0.0"));
+    assert_eq!(result.unwrap().controller.k_d, 0.0);
+}
+
+/// Diablo's URDF with `from` replaced by `to` (which must occur), loaded with its robot.toml
+/// edited by `toml`.
+fn diablo_urdf_edit(
+    from: &str,
+    to: &str,
+    toml: impl Fn(&str) -> String,
+) -> (PathBuf, Result<RobotProfile, ProfileError>) {
+    let dir = scratch_copy("diablo");
+    let urdf = dir.join("diablo.urdf");
+    let text = fs::read_to_string(&urdf).unwrap();
+    assert!(text.contains(from), "diablo.urdf has no `{from}`");
+    fs::write(&urdf, text.replacen(from, to, 1)).unwrap();
+    let path = dir.join("robot.toml");
+    let t = fs::read_to_string(&path).unwrap();
+    fs::write(&path, toml(&t)).unwrap();
+    (urdf, RobotProfile::load(&path))
+}
+
+fn expect_urdf_content(result: Result<RobotProfile, ProfileError>, element: &str, needle: &str) {
+    match result {
+        Err(e @ ProfileError::UrdfContent { .. }) => {
+            assert_eq!(e.field(), element, "{e}");
+            assert!(e.to_string().contains(needle), "`{e}` lacks `{needle}`");
+        }
+        other => panic!("expected a URDF content error on {element}, got {other:?}"),
+    }
+}
+
+#[test]
+fn wheel_joints_listed_twice_or_in_one_place_are_refused() {
+    let (toml, result) = load_edited("diablo", |t| {
+        t.replace(
+            "\"right_wheel_joint\"",
+            "\"left_wheel_joint\", \"right_wheel_joint\"",
+        )
+    });
+    expect_invalid(
+        result,
+        &toml,
+        "embodiment.wheel_joints[1]",
+        "already embodiment.wheel_joints[0]",
+    );
+    // The right wheel moved onto the left one.
+    let (_, result) = diablo_urdf_edit("xyz=\"0 -0.24 0.09\"", "xyz=\"0 0.24 0.09\"", |t| {
+        t.to_string()
+    });
+    match result {
+        Err(e) => {
+            assert_eq!(e.field(), "embodiment.wheel_joints[1]", "{e}");
+            assert!(e.to_string().contains("sits where wheel_joints[0]"), "{e}");
+        }
+        Ok(_) => panic!("two wheels in one place were accepted"),
+    }
+}
+
+#[test]
+fn a_urdf_that_is_not_a_tree_is_refused() {
+    // A second link of the same name.
+    let (_, r) = diablo_urdf_edit("</robot>", "<link name=\"left_wheel\"/></robot>", |t| {
+        t.to_string()
+    });
+    expect_urdf_content(r, "link `left_wheel`", "defined twice");
+    // A joint making the base link a child of its own wheel: a cycle.
+    let (_, r) = diablo_urdf_edit(
+        "</robot>",
+        "<joint name=\"loop\" type=\"fixed\"><parent link=\"left_wheel\"/>\
+         <child link=\"base_link\"/></joint></robot>",
+        |t| t.to_string(),
+    );
+    expect_urdf_content(r, "link `base_link`", "cycle");
+    // A link with two parents.
+    let (_, r) = diablo_urdf_edit(
+        "</robot>",
+        "<joint name=\"again\" type=\"fixed\"><parent link=\"base_link\"/>\
+         <child link=\"left_wheel\"/></joint></robot>",
+        |t| t.to_string(),
+    );
+    expect_urdf_content(
+        r,
+        "joint `again`",
+        "already the child of joint `left_wheel_joint`",
+    );
+    // A joint naming a link that does not exist.
+    let (_, r) = diablo_urdf_edit(
+        "</robot>",
+        "<joint name=\"dangling\" type=\"fixed\"><parent link=\"base_link\"/>\
+         <child link=\"ghost\"/></joint></robot>",
+        |t| t.to_string(),
+    );
+    expect_urdf_content(r, "joint `dangling`", "`ghost` is not defined");
+}
+
+#[test]
+fn wheel_speeds_that_are_nan_or_negative_are_refused() {
+    for bad in ["nan", "-22.0", "inf"] {
+        let (_, r) = diablo_urdf_edit("velocity=\"22.0\"", &format!("velocity=\"{bad}\""), |t| {
+            t.to_string()
+        });
+        expect_urdf_content(r, "joint `left_wheel_joint`", "<limit velocity=");
+    }
+    // A limit so low that the cap leaves no speed.
+    let (_, r) = diablo_urdf_edit("velocity=\"22.0\"", "velocity=\"1e-9\"", |t| t.to_string());
+    match r {
+        Err(e) => assert!(e.to_string().contains("caps it at"), "{e}"),
+        Ok(_) => panic!("a wheel cap of 1e-10 m/s was accepted"),
+    }
+}

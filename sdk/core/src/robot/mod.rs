@@ -75,6 +75,10 @@ mod resolve;
 mod urdf;
 
 pub use crate::embodiment::EmbodimentKind;
+pub use resolve::{
+    ACCEL_RANGE, GAIN_RANGE, GAMMA_RANGE, LENGTH_RANGE, LOOKAHEAD_RANGE, SPEED_RANGE, WEIGHT_RANGE,
+    YAW_RATE_RANGE,
+};
 pub use urdf::{MAX_URDF_DEPTH, SteeringJoint, WheelJoint};
 
 use crate::embodiment::{BuiltinEmbodiment, Embodiment};

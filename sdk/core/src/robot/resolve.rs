@@ -19,6 +19,28 @@ use super::{
 use crate::limits::{ControllerGains, GuidanceWeights, Limits};
 use std::path::{Path, PathBuf};
 
+// The range of every number of a profile. A limit is a positive SI value a robot among people
+// can have (speeds up to the planner's `MAX_SPEED`); a gain or weight is 0 (off) or within six
+// orders of magnitude either side of the shipped values. Outside, `1/limit`, `gain·error` or
+// Φ's softplus overflow: 1e-300 and 1e300 both gave infinite costs.
+
+/// `v_max`, `v_reverse_max`, `lateral_speed_max` (m/s).
+pub const SPEED_RANGE: (f64, f64) = (1e-3, crate::planner::MAX_SPEED);
+/// `a_max` (m/s²).
+pub const ACCEL_RANGE: (f64, f64) = (1e-3, 100.0);
+/// `omega_max` (rad/s).
+pub const YAW_RATE_RANGE: (f64, f64) = (1e-3, 100.0);
+/// `min_turning_radius` (or 0), `[footprint] radius`, a URDF wheel's radius and track (m).
+pub const LENGTH_RANGE: (f64, f64) = (1e-3, 1000.0);
+/// `[controller]` `k_x`, `k_y`, `k_theta`, `k_d` (or 0).
+pub const GAIN_RANGE: (f64, f64) = (1e-6, 1e3);
+/// `[controller] lookahead` (s).
+pub const LOOKAHEAD_RANGE: (f64, f64) = (1e-3, 10.0);
+/// `[cost]` `lambda_*` and a `[[constraint]]` `weight` (or 0).
+pub const WEIGHT_RANGE: (f64, f64) = (1e-6, 1e6);
+/// `[cost] gamma`.
+pub const GAMMA_RANGE: (f64, f64) = (1e-3, 1e3);
+
 /// Builds errors naming one profile file.
 pub(super) struct Checker<'a> {
     /// The robot.toml being loaded.
@@ -45,6 +67,32 @@ impl Checker<'_> {
         }
     }
 
+    /// Finite, in `[lo, hi]` (or exactly 0 where `zero` allows it; `lo > 0`).
+    fn within(
+        &self,
+        field: &str,
+        v: f64,
+        (lo, hi): (f64, f64),
+        zero: bool,
+    ) -> Result<f64, ProfileError> {
+        let v = if zero {
+            self.non_negative(field, v)?
+        } else {
+            self.positive(field, v)?
+        };
+        if zero && v == 0.0 {
+            return Ok(v);
+        }
+        if v < lo || v > hi {
+            let zero = if zero { "0 or " } else { "" };
+            return Err(self.invalid(
+                field,
+                format!("must be {zero}in [{lo:e}, {hi:e}], got {v:e}"),
+            ));
+        }
+        Ok(v)
+    }
+
     /// Finite and `>= 0`.
     fn non_negative(&self, field: &str, v: f64) -> Result<f64, ProfileError> {
         if !v.is_finite() {
@@ -65,23 +113,31 @@ impl Checker<'_> {
     }
 
     fn controller(&self, g: &ControllerGains) -> Result<(), ProfileError> {
-        self.non_negative("controller.k_x", g.k_x)?;
-        self.non_negative("controller.k_y", g.k_y)?;
-        self.non_negative("controller.k_theta", g.k_theta)?;
-        self.non_negative("controller.k_d", g.k_d)?;
-        self.positive("controller.lookahead", g.lookahead)?;
+        for (field, v) in [
+            ("controller.k_x", g.k_x),
+            ("controller.k_y", g.k_y),
+            ("controller.k_theta", g.k_theta),
+            ("controller.k_d", g.k_d),
+        ] {
+            self.within(field, v, GAIN_RANGE, true)?;
+        }
+        self.within("controller.lookahead", g.lookahead, LOOKAHEAD_RANGE, false)?;
         Ok(())
     }
 
     fn guidance(&self, w: &GuidanceWeights) -> Result<(), ProfileError> {
-        self.non_negative("cost.lambda_v", w.lambda_v)?;
-        self.non_negative("cost.lambda_a", w.lambda_a)?;
-        self.non_negative("cost.lambda_omega", w.lambda_omega)?;
-        self.non_negative("cost.lambda_kappa", w.lambda_kappa)?;
-        self.non_negative("cost.lambda_lateral", w.lambda_lateral)?;
-        self.non_negative("cost.lambda_reverse", w.lambda_reverse)?;
-        self.non_negative("cost.lambda_coupled", w.lambda_coupled)?;
-        self.positive("cost.gamma", w.gamma)?;
+        for (field, v) in [
+            ("cost.lambda_v", w.lambda_v),
+            ("cost.lambda_a", w.lambda_a),
+            ("cost.lambda_omega", w.lambda_omega),
+            ("cost.lambda_kappa", w.lambda_kappa),
+            ("cost.lambda_lateral", w.lambda_lateral),
+            ("cost.lambda_reverse", w.lambda_reverse),
+            ("cost.lambda_coupled", w.lambda_coupled),
+        ] {
+            self.within(field, v, WEIGHT_RANGE, true)?;
+        }
+        self.within("cost.gamma", w.gamma, GAMMA_RANGE, false)?;
         self.non_negative("cost.delta", w.delta)?;
         if w.delta >= 1.0 {
             return Err(self.invalid("cost.delta", format!("must be < 1, got {}", w.delta)));
@@ -135,17 +191,27 @@ pub(super) fn check_values(raw: &RawProfile, ck: &Checker<'_>) -> Result<Checked
     ck.non_empty("urdf", &raw.urdf)?;
     let l = &raw.limits;
     let limits = RawLimits {
-        v_max: ck.positive("limits.v_max", l.v_max)?,
-        v_reverse_max: ck.positive("limits.v_reverse_max", l.v_reverse_max)?,
-        a_max: ck.positive("limits.a_max", l.a_max)?,
-        omega_max: ck.positive("limits.omega_max", l.omega_max)?,
-        min_turning_radius: ck.non_negative("limits.min_turning_radius", l.min_turning_radius)?,
-        lateral_speed_max: ck.positive("limits.lateral_speed_max", l.lateral_speed_max)?,
+        v_max: ck.within("limits.v_max", l.v_max, SPEED_RANGE, false)?,
+        v_reverse_max: ck.within("limits.v_reverse_max", l.v_reverse_max, SPEED_RANGE, false)?,
+        a_max: ck.within("limits.a_max", l.a_max, ACCEL_RANGE, false)?,
+        omega_max: ck.within("limits.omega_max", l.omega_max, YAW_RATE_RANGE, false)?,
+        min_turning_radius: ck.within(
+            "limits.min_turning_radius",
+            l.min_turning_radius,
+            LENGTH_RANGE,
+            true,
+        )?,
+        lateral_speed_max: ck.within(
+            "limits.lateral_speed_max",
+            l.lateral_speed_max,
+            SPEED_RANGE,
+            false,
+        )?,
     };
     let footprint_override = raw
         .footprint
         .radius
-        .map(|r| ck.positive("footprint.radius", r))
+        .map(|r| ck.within("footprint.radius", r, LENGTH_RANGE, false))
         .transpose()?;
     let controller_source = if raw.controller.is_some() {
         Origin::Profile
@@ -270,7 +336,12 @@ pub(super) fn constraints(
         ck.non_empty(&format!("constraint[{i}].library"), &c.library)?;
         ck.non_empty(&format!("constraint[{i}].plugin"), &c.plugin)?;
         let weight = ck
-            .non_negative(&format!("constraint[{i}].weight"), c.weight)
+            .within(
+                &format!("constraint[{i}].weight"),
+                c.weight,
+                WEIGHT_RANGE,
+                true,
+            )
             .map_err(|e| match e {
                 // Which term it is about: the plugin's name in the message.
                 ProfileError::Invalid {
@@ -361,7 +432,8 @@ pub(super) fn urdf(
         footprint(&model, &base_link, footprint_override)?;
 
     let e = &raw.embodiment;
-    let mut wheel_joints = Vec::with_capacity(e.wheel_joints.len());
+    distinct_joints(e, ck)?;
+    let mut wheel_joints: Vec<WheelJoint> = Vec::with_capacity(e.wheel_joints.len());
     for (i, name) in e.wheel_joints.iter().enumerate() {
         if !model.robot.joints.iter().any(|j| &j.name == name) {
             return Err(ck.invalid(
@@ -369,7 +441,22 @@ pub(super) fn urdf(
                 format!("no joint `{name}` in {urdf_name}"),
             ));
         }
-        wheel_joints.push(model.wheel_joint(&base_link, name)?);
+        let wheel = model.wheel_joint(&base_link, name)?;
+        // Two wheels in one place: a copied joint, whose track or wheelbase would be 0.
+        if let Some(k) = wheel_joints.iter().position(|w| {
+            let d = (0..3).map(|a| w.position[a] - wheel.position[a]);
+            d.map(|x| x * x).sum::<f64>().sqrt() < SAME_PLACE
+        }) {
+            return Err(ck.invalid(
+                format!("embodiment.wheel_joints[{i}]"),
+                format!(
+                    "joint `{name}` sits where wheel_joints[{k}] (`{}`) does, at {:?} m in the \
+                     base-link frame of {urdf_name}",
+                    wheel_joints[k].name, wheel.position
+                ),
+            ));
+        }
+        wheel_joints.push(wheel);
     }
     let mut steering_joints = Vec::with_capacity(e.steering_joints.len());
     for (i, name) in e.steering_joints.iter().enumerate() {
@@ -399,6 +486,35 @@ pub(super) fn urdf(
         steering_joints,
         track_width,
     })
+}
+
+/// Closer than this (m), two wheel joints are in one place.
+const SAME_PLACE: f64 = 1e-6;
+
+/// Each joint listed once in `wheel_joints` and `steering_joints` together: a joint listed
+/// twice would count its wheel twice in the track, the wheelbase and the caps.
+fn distinct_joints(e: &RawEmbodiment, ck: &Checker<'_>) -> Result<(), ProfileError> {
+    let listed: Vec<(String, &String)> = e
+        .wheel_joints
+        .iter()
+        .enumerate()
+        .map(|(i, n)| (format!("embodiment.wheel_joints[{i}]"), n))
+        .chain(
+            e.steering_joints
+                .iter()
+                .enumerate()
+                .map(|(i, n)| (format!("embodiment.steering_joints[{i}]"), n)),
+        )
+        .collect();
+    for (k, (field, name)) in listed.iter().enumerate() {
+        if let Some((first, _)) = listed[..k].iter().find(|(_, n)| n == name) {
+            return Err(ck.invalid(
+                field,
+                format!("joint `{name}` is already {first}; list each joint once"),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The footprint radius (m) with its provenance, and the footprint shapes: measured from the
@@ -471,6 +587,21 @@ pub(super) fn limits(
     let (v_max, v_max_src) = cap_speed("v_max", given.v_max, wheel_cap);
     let (v_reverse_max, v_reverse_src) = cap_speed("v_reverse_max", given.v_reverse_max, wheel_cap);
     let (omega_max, omega_src) = cap_omega(given.omega_max, kind, wheel_cap, urdf.track_width);
+    for (field, v, src) in [
+        ("limits.v_max", v_max, &v_max_src),
+        ("limits.v_reverse_max", v_reverse_max, &v_reverse_src),
+        ("limits.omega_max", omega_max, &omega_src),
+    ] {
+        if !(v.is_finite() && v >= SPEED_RANGE.0) {
+            return Err(ck.invalid(
+                field,
+                format!(
+                    "the URDF caps it at {v:e}, below {:e}: {src}",
+                    SPEED_RANGE.0
+                ),
+            ));
+        }
+    }
     let (r_min, kappa_src, wheelbase) = turning_radius(
         given.min_turning_radius,
         kind,

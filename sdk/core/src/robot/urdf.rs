@@ -8,7 +8,7 @@ use super::ProfileError;
 use super::footprint::FootprintShape;
 use crate::input::MAX_URDF_BYTES;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use urdf_rs::{Geometry, JointType};
 
@@ -85,6 +85,88 @@ fn element_too_deep(xml: &str, max: usize) -> Option<usize> {
         }
     }
     None
+}
+
+/// Checks that the links and joints of `robot` form a tree, as the URDF specification requires
+/// (the profile walks from a wheel up to the base link; a loop or a second parent would make
+/// the answer depend on the order of the file): every link and joint named once, every joint
+/// between two links of the file, no link the child of two joints, no cycle. Returns each
+/// child link's joint.
+fn check_tree(robot: &urdf_rs::Robot, path: &Path) -> Result<HashMap<String, usize>, ProfileError> {
+    let fail = |element: String, message: String| ProfileError::UrdfContent {
+        urdf: path.to_path_buf(),
+        element,
+        message,
+    };
+    let mut links: HashMap<&str, usize> = HashMap::with_capacity(robot.links.len());
+    for (i, l) in robot.links.iter().enumerate() {
+        if let Some(first) = links.insert(l.name.as_str(), i) {
+            return Err(fail(
+                format!("link `{}`", l.name),
+                format!("defined twice (links {first} and {i} of the file)"),
+            ));
+        }
+    }
+    let mut joints: HashMap<&str, usize> = HashMap::with_capacity(robot.joints.len());
+    let mut parent_joint: HashMap<String, usize> = HashMap::with_capacity(robot.joints.len());
+    for (i, j) in robot.joints.iter().enumerate() {
+        let element = format!("joint `{}`", j.name);
+        if let Some(first) = joints.insert(j.name.as_str(), i) {
+            return Err(fail(
+                element,
+                format!("defined twice (joints {first} and {i} of the file)"),
+            ));
+        }
+        for (end, link) in [("parent", &j.parent.link), ("child", &j.child.link)] {
+            if !links.contains_key(link.as_str()) {
+                return Err(fail(
+                    element,
+                    format!("its {end} link `{link}` is not defined"),
+                ));
+            }
+        }
+        if let Some(other) = parent_joint.insert(j.child.link.clone(), i) {
+            return Err(fail(
+                element,
+                format!(
+                    "link `{}` is already the child of joint `{}`; a link has one parent",
+                    j.child.link, robot.joints[other].name
+                ),
+            ));
+        }
+    }
+    // Each link has at most one parent: following parents from any link either reaches a
+    // root or comes back to a link already on the walk (a cycle). Links known to reach a root
+    // are not walked again, so this is linear in the links.
+    let mut reaches_root: HashSet<&str> = HashSet::new();
+    for l in &robot.links {
+        let mut walk: Vec<&str> = Vec::new();
+        let mut on_walk: HashSet<&str> = HashSet::new();
+        let mut current = l.name.as_str();
+        while !reaches_root.contains(current) {
+            if !on_walk.insert(current) {
+                let start = walk.iter().position(|w| *w == current).unwrap_or(0);
+                let cycle = &walk[start..];
+                let shown = cycle.len().min(8);
+                return Err(fail(
+                    format!("link `{current}`"),
+                    format!(
+                        "the joints form a cycle of {} links: {}{} → {current}",
+                        cycle.len(),
+                        cycle[..shown].join(" → "),
+                        if shown < cycle.len() { " → …" } else { "" }
+                    ),
+                ));
+            }
+            walk.push(current);
+            match parent_joint.get(current) {
+                Some(&j) => current = robot.joints[j].parent.link.as_str(),
+                None => break,
+            }
+        }
+        reaches_root.extend(walk);
+    }
+    Ok(parent_joint)
 }
 
 /// A parsed URDF with its links indexed for the questions the profile asks.
@@ -167,12 +249,7 @@ impl UrdfModel {
         if robot.links.is_empty() {
             return Err(fail("the URDF has no <link>".into()));
         }
-        let parent_joint = robot
-            .joints
-            .iter()
-            .enumerate()
-            .map(|(i, j)| (j.child.link.clone(), i))
-            .collect();
+        let parent_joint = check_tree(&robot, path)?;
         Ok(Self {
             path: path.to_path_buf(),
             robot,
@@ -429,8 +506,23 @@ impl UrdfModel {
                      with a positive radius",
                 )
             })?;
+        let (lo, hi) = super::resolve::LENGTH_RANGE;
+        if !(lo..=hi).contains(&radius) {
+            return Err(self.content_error(
+                format!("link `{child}`"),
+                format!("wheel radius {radius:e} m is not in [{lo:e}, {hi:e}] m"),
+            ));
+        }
+        // 0 is what a missing `velocity` attribute reads as: no limit. Anything else must be
+        // a positive finite speed, never silently dropped.
         let v = joint.limit.velocity;
-        let velocity_limit = (v.is_finite() && v > 0.0).then_some(v);
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(self.content_error(
+                &element,
+                format!("<limit velocity=\"{v}\"> must be a finite speed >= 0 rad/s (0: none)"),
+            ));
+        }
+        let velocity_limit = (v > 0.0).then_some(v);
         Ok(WheelJoint {
             name: name.to_string(),
             radius,

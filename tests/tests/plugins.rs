@@ -394,6 +394,124 @@ fn skid_steer_embodiment_through_the_boundary() {
     assert!(e.failure().is_none());
 }
 
+/// Static obstacles and an occupancy grid in the observation.
+fn with_obstacles(obs: &Observation) -> Observation {
+    use human2nav_core::obstacle::{Obstacle, OccupancyGrid};
+    Observation {
+        obstacles: vec![
+            Obstacle::Circle {
+                center: [2.0, 3.0],
+                radius: 0.4,
+            },
+            Obstacle::Polygon {
+                vertices: vec![[4.0, 0.0], [5.0, 0.0], [5.0, 1.0], [4.0, 1.0]],
+            },
+            Obstacle::Segment {
+                a: [0.0, 2.0],
+                b: [3.0, 2.0],
+            },
+        ],
+        occupancy: Some(OccupancyGrid {
+            origin: Pose2::new(-1.0, -1.0, 0.0),
+            resolution: 0.5,
+            width: 4,
+            height: 3,
+            data: vec![0; 12],
+            occupied_threshold: 65,
+        }),
+        ..obs.clone()
+    }
+}
+
+/// ABI version 2: a planner built with this SDK sees the observation's static obstacles and
+/// occupancy grid, in process and in a helper process alike.
+#[test]
+fn a_version_2_planner_sees_obstacles_and_the_grid() {
+    use human2nav_core::robot::PluginIsolation;
+    let obs = with_obstacles(&Observation {
+        goal: [1.0, 5.0],
+        agents: agents(),
+        ..Default::default()
+    });
+    let want = "call 1 agents 2 history 2 obstacles 3 vertices 4 grid cells 12";
+    for isolation in [PluginIsolation::InProcess, PluginIsolation::Process] {
+        let mut p = PluginHost::new()
+            .planner_with_options(
+                &lib("human2nav_fixture_test_plugin"),
+                "straight",
+                "",
+                None,
+                None,
+                isolation,
+            )
+            .unwrap();
+        assert_eq!(
+            p.plan(&obs).unwrap().info.notes,
+            vec![want.to_string()],
+            "{isolation:?}"
+        );
+    }
+}
+
+/// ORCA through the host sees a wall across its way (ABI version 2) and stops short of it
+/// instead of driving through, as it did when the ABI carried no obstacles.
+#[test]
+fn orca_through_the_host_respects_a_wall() {
+    use human2nav_core::obstacle::Obstacle;
+    let mut orca = PluginHost::new()
+        .planner(&lib("human2nav_orca"), "orca", "max_speed = 1.0", None)
+        .unwrap();
+    let open = Observation {
+        ego: Pose2::new(0.0, 0.0, std::f64::consts::FRAC_PI_2),
+        ego_velocity: Twist2::new(1.0, 0.0, 0.0),
+        goal: [0.0, 6.0],
+        ..Default::default()
+    };
+    let walled = Observation {
+        obstacles: vec![Obstacle::Segment {
+            a: [-5.0, 1.0],
+            b: [5.0, 1.0],
+        }],
+        ..open.clone()
+    };
+    let mut end = |obs: &Observation| *orca.plan(obs).unwrap().poses.last().unwrap();
+    assert!(end(&open).y > 3.0, "without the wall ORCA heads for the goal");
+    let stop = end(&walled);
+    assert!(stop.y < 1.0 - 0.3, "ORCA's plan ends at {stop:?}, through the wall");
+}
+
+/// A library built for ABI version 1 still loads and plans. It is given what version 1 knows,
+/// and its plans say which obstacles it was not given.
+#[test]
+fn a_version_1_planner_still_loads_and_its_plans_say_what_it_missed() {
+    let path = lib("human2nav_fixture_v1_planner");
+    let library = PluginLibrary::load(&path).unwrap();
+    assert_eq!(library.abi_version(), 1);
+    let mut p = PluginHost::new()
+        .planner(&path, "straight_v1", "", None)
+        .unwrap();
+    let obs = Observation {
+        time: 2.0,
+        goal: [3.0, 4.0],
+        agents: agents(),
+        ..Default::default()
+    };
+    let plan = p.plan(&obs).unwrap();
+    assert_eq!((plan.poses.len(), plan.t0), (10, 2.0));
+    assert_relative_eq!(plan.poses[9].x, 0.9 * 0.6, max_relative = 1e-12);
+    assert!(plan.info.notes.is_empty(), "{:?}", plan.info.notes);
+    let plan = p.plan(&with_obstacles(&obs)).unwrap();
+    assert_relative_eq!(plan.poses[9].y, 0.9 * 0.8, max_relative = 1e-12);
+    assert_eq!(
+        plan.info.notes,
+        vec![
+            "plugin ABI version 1: 3 static obstacle(s) and the occupancy grid not passed to \
+             the planner (version 2 carries them)"
+                .to_string()
+        ]
+    );
+}
+
 #[test]
 fn planner_plugin_round_trip() {
     let host = PluginHost::new();
@@ -485,7 +603,7 @@ fn abi_mismatch_is_refused_naming_both_versions() {
         msg.contains(&format!("version {}", ABI_VERSION + 1)),
         "{msg}"
     );
-    assert!(msg.contains(&format!("version {ABI_VERSION}")), "{msg}");
+    assert!(msg.contains(&format!("versions 1–{ABI_VERSION}")), "{msg}");
 }
 
 #[test]

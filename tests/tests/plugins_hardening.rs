@@ -300,7 +300,7 @@ fn inspect_reports_what_it_checked() {
         "plugin    personal_space 0.1.0",
         "ok    file: regular file of",
         "ELF 64-bit",
-        "ok    ABI version: 1",
+        "ok    ABI version: 2 (this host: 2)",
         "ok    entry table:",
         "ok    factory table: 1 factories (limit 256)",
         "ok    factory 0 (constraint `personal_space`): create set",

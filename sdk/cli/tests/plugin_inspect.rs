@@ -73,7 +73,7 @@ fn bad_libraries_give_one_clear_line() {
     assert_one_line_error(
         &inspect("human2nav_fixture_wrong_abi"),
         &format!(
-            "built for plugin ABI version {}, this host speaks version {abi}",
+            "built for plugin ABI version {}, this host loads versions 1–{abi}",
             abi + 1
         ),
     );

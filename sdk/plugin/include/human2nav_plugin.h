@@ -1,12 +1,14 @@
 /*
- * human2nav plugin ABI, version 1, for plugins written in C or C++.
+ * human2nav plugin ABI, version 2, for plugins written in C or C++.
  *
  * Kept by hand in sync with sdk/plugin/src/abi.rs (the Rust definition is the reference; the
  * integration tests compare the sizes and field offsets this header gives a C compiler with
  * the Rust ones). See abi.rs for the full contract; in short:
  *
  *  - export `const H2nPluginEntry *human2nav_plugin_entry(void)`; its table starts with
- *    `abi_version`, which the host checks before reading anything else;
+ *    `abi_version`, which the host checks before reading anything else (it loads versions 1
+ *    and 2; version 2 appended the static obstacles and the occupancy grid to H2nObservation,
+ *    which a version-1 planner never reads);
  *  - tables are append-only and carry their own size (the host refuses one smaller than the
  *    table's first version or larger than 4096 bytes; slots appended later, such as the
  *    embodiment's coupled_limit, are absent from a table that ends before them; the factories
@@ -34,7 +36,9 @@
 extern "C" {
 #endif
 
-#define H2N_ABI_VERSION 1u
+#define H2N_ABI_VERSION 2u
+/* The oldest version the host loads. */
+#define H2N_MIN_ABI_VERSION 1u
 #define H2N_ENTRY_SYMBOL "human2nav_plugin_entry"
 
 typedef int32_t H2nStatus;
@@ -214,6 +218,35 @@ typedef struct H2nEmbodimentVTable {
     H2nStatus (*coupled_limit)(void *instance, H2nCoupledLimit *out);
 } H2nEmbodimentVTable;
 
+/* H2nObstacle.kind (version 2). */
+#define H2N_OBSTACLE_CIRCLE 0u  /* centre (x0, y0), radius */
+#define H2N_OBSTACLE_SEGMENT 1u /* from (x0, y0) to (x1, y1) */
+#define H2N_OBSTACLE_POLYGON 2u /* vertex_count >= 3 vertices, x, y pairs at `vertices` */
+
+/* A static obstacle in the world frame; fields its kind does not use are zero (version 2). */
+typedef struct H2nObstacle {
+    uint32_t kind;
+    uint32_t reserved;
+    double x0;
+    double y0;
+    double x1;
+    double y1;
+    double radius;
+    const double *vertices;
+    size_t vertex_count;
+} H2nObstacle;
+
+/* An occupancy grid as nav_msgs/OccupancyGrid: row-major cells, -1 unknown, 0..100 (version 2). */
+typedef struct H2nOccupancyGrid {
+    H2nPose origin;
+    double resolution;
+    size_t width;
+    size_t height;
+    const int8_t *data;
+    int32_t occupied_threshold;
+    uint32_t reserved;
+} H2nOccupancyGrid;
+
 typedef struct H2nObservation {
     uint32_t struct_size;
     uint32_t reserved;
@@ -223,6 +256,10 @@ typedef struct H2nObservation {
     double goal[2];
     const H2nAgent *agents;
     size_t agent_count;
+    /* Version 2: a version-1 plugin reads the fields above only. */
+    const H2nObstacle *obstacles; /* NULL when obstacle_count == 0 */
+    size_t obstacle_count;
+    const H2nOccupancyGrid *occupancy; /* NULL when there is no grid */
 } H2nObservation;
 
 typedef struct H2nPlanOut {

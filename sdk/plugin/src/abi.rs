@@ -9,7 +9,12 @@
 //! * A plugin library exports one symbol, [`ENTRY_SYMBOL`], of type [`EntryFn`]. It returns a
 //!   pointer to a [`H2nPluginEntry`] that lives as long as the library. The first field of that
 //!   table, `abi_version`, is the only thing frozen forever: the host reads it before anything
-//!   else and refuses the library when it differs from [`ABI_VERSION`].
+//!   else and refuses the library when it is not between [`MIN_ABI_VERSION`] and
+//!   [`ABI_VERSION`].
+//! * Versions: 1 passed planners the pedestrians (with their recent history); 2 appends the
+//!   static obstacles and the occupancy grid to [`H2nObservation`]. A version-1 library loads
+//!   unchanged: the tables it reads are prefixes of version 2's, and it never sees the
+//!   appended fields (the host notes on each plan that it did not see obstacles).
 //! * Every table starts with a `struct_size` (or is versioned by the entry's): tables are
 //!   append-only, so a newer plugin may add fields at the end and an older host ignores them.
 //!   The host refuses a `struct_size` below the table's first version (its own size, except
@@ -42,9 +47,14 @@
 use human2nav_core::{ControllerGains, CoupledLimit, Limits, Pose2, Twist2};
 use std::ffi::c_void;
 
-/// The version of this ABI. Bumped on any incompatible change; appending a field to the end of a
-/// table (guarded by its `struct_size`) is compatible and does not bump it.
-pub const ABI_VERSION: u32 = 1;
+/// The version of this ABI, which plugins built with this crate declare. Bumped when what a
+/// plugin may rely on changes: appending fields to a table (guarded by its `struct_size`)
+/// keeps older plugins loading, but a plugin that reads the new fields needs a host that
+/// writes them, so it declares the new version.
+pub const ABI_VERSION: u32 = 2;
+
+/// The oldest ABI version this host loads: version-1 plugins (pedestrians only) still work.
+pub const MIN_ABI_VERSION: u32 = 1;
 
 /// Name of the symbol every plugin library exports.
 pub const ENTRY_SYMBOL: &str = "human2nav_plugin_entry";
@@ -545,7 +555,61 @@ pub struct H2nEmbodimentVTable {
     pub coupled_limit: Option<CoupledLimitFn>,
 }
 
-/// What a planner sees at one planning instant ([`human2nav_core::Observation`]).
+/// [`H2nObstacle::kind`]: a disc, centre `(x0, y0)`, `radius`.
+pub const H2N_OBSTACLE_CIRCLE: u32 = 0;
+/// [`H2nObstacle::kind`]: a line segment (a wall) from `(x0, y0)` to `(x1, y1)`.
+pub const H2N_OBSTACLE_SEGMENT: u32 = 1;
+/// [`H2nObstacle::kind`]: a simple polygon of `vertex_count ≥ 3` vertices.
+pub const H2N_OBSTACLE_POLYGON: u32 = 2;
+
+/// A static obstacle in the world frame ([`human2nav_core::Obstacle`]); the fields its kind
+/// does not use are zero (ABI version 2).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct H2nObstacle {
+    /// [`H2N_OBSTACLE_CIRCLE`], [`H2N_OBSTACLE_SEGMENT`] or [`H2N_OBSTACLE_POLYGON`].
+    pub kind: u32,
+    /// Padding, always 0.
+    pub reserved: u32,
+    /// Circle centre or segment start x (m).
+    pub x0: f64,
+    /// Circle centre or segment start y (m).
+    pub y0: f64,
+    /// Segment end x (m).
+    pub x1: f64,
+    /// Segment end y (m).
+    pub y1: f64,
+    /// Circle radius (m).
+    pub radius: f64,
+    /// Polygon vertices, `2·vertex_count` doubles `x, y, x, y, …` (null for other kinds).
+    pub vertices: *const f64,
+    /// Number of polygon vertices.
+    pub vertex_count: usize,
+}
+
+/// An occupancy grid in the layout of `nav_msgs/OccupancyGrid`
+/// ([`human2nav_core::OccupancyGrid`]; ABI version 2).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct H2nOccupancyGrid {
+    /// Pose of the corner of cell `(0, 0)` in the world frame.
+    pub origin: H2nPose,
+    /// Cell edge (m).
+    pub resolution: f64,
+    /// Cells per row.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// Row-major values, `width·height` of them: −1 unknown, 0 (free) to 100 (occupied).
+    pub data: *const i8,
+    /// Cells at or above this value are obstacles.
+    pub occupied_threshold: i32,
+    /// Padding, always 0.
+    pub reserved: u32,
+}
+
+/// What a planner sees at one planning instant ([`human2nav_core::Observation`]). The fields
+/// from `obstacles` on are version 2's: a version-1 plugin reads the prefix before them.
 #[repr(C)]
 #[derive(Debug)]
 pub struct H2nObservation {
@@ -565,7 +629,17 @@ pub struct H2nObservation {
     pub agents: *const H2nAgent,
     /// Number of agents at `agents`.
     pub agent_count: usize,
+    /// Static obstacles, `obstacle_count` of them (may be null when `obstacle_count == 0`).
+    /// Version 2.
+    pub obstacles: *const H2nObstacle,
+    /// Number of obstacles at `obstacles`. Version 2.
+    pub obstacle_count: usize,
+    /// The occupancy grid, or null when the observation has none. Version 2.
+    pub occupancy: *const H2nOccupancyGrid,
 }
+
+/// Size of a version-1 [`H2nObservation`]: everything before `obstacles`.
+pub const OBSERVATION_V1_SIZE: usize = std::mem::offset_of!(H2nObservation, obstacles);
 
 /// A host-owned plan buffer. The plugin writes `t0`, `dt`, `fallback`, up to `capacity` poses
 /// and sets `len` to the plan's length. When `len > capacity` the call returns
@@ -667,8 +741,11 @@ pub fn layout() -> Vec<StructLayout> {
         entry!(H2nCoupledLimit { v, lateral, omega, max }),
         entry!(H2nEmbodimentVTable { struct_size, reserved, destroy, last_error, name, holonomic,
             saturate, step, track, coupled_limit }),
+        entry!(H2nObstacle { kind, reserved, x0, y0, x1, y1, radius, vertices, vertex_count }),
+        entry!(H2nOccupancyGrid { origin, resolution, width, height, data, occupied_threshold,
+            reserved }),
         entry!(H2nObservation { struct_size, reserved, time, ego, ego_velocity, goal, agents,
-            agent_count }),
+            agent_count, obstacles, obstacle_count, occupancy }),
         entry!(H2nPlanOut { t0, dt, poses, capacity, len, fallback, reserved, note }),
         entry!(H2nPlannerVTable { struct_size, reserved, destroy, last_error, name, reset, plan,
             last_plan }),

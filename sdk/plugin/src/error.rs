@@ -88,14 +88,16 @@ pub enum PluginError {
     },
     /// The library was built against another ABI version.
     #[error(
-        "{path} was built for plugin ABI version {found}, this host speaks version {expected}; rebuild the plugin against this SDK"
+        "{path} was built for plugin ABI version {found}, this host loads versions {}–{expected}; rebuild the plugin against this SDK",
+        crate::abi::MIN_ABI_VERSION
     )]
     AbiMismatch {
         /// The library (as resolved, or as named when it was not found).
         path: PathBuf,
         /// The version the plugin was built for.
         found: u32,
-        /// The version this host speaks ([`crate::ABI_VERSION`]).
+        /// The newest version this host speaks ([`crate::ABI_VERSION`]; it loads down to
+        /// [`crate::abi::MIN_ABI_VERSION`]).
         expected: u32,
     },
     /// The entry table or a factory is malformed.

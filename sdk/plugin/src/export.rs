@@ -10,6 +10,7 @@ use crate::init::{InitError, PluginInit, RobotContext};
 use crate::validate::EvaluateBuffers;
 use human2nav_core::constraint::{ConstraintContext, ConstraintTerm, TrajBatch};
 use human2nav_core::embodiment::{Embodiment, RobotState};
+use human2nav_core::obstacle::{Obstacle, OccupancyGrid};
 use human2nav_core::{AgentState, Observation, Plan, PlanError, PlanInfo, Planner, Pose2};
 use std::ffi::c_void;
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -18,7 +19,7 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// A failure inside a shim: the status to return and the message for `last_error`.
-struct Fail {
+pub(crate) struct Fail {
     status: H2nStatus,
     message: String,
 }
@@ -154,6 +155,78 @@ unsafe fn agents_from_abi(ptr: *const H2nAgent, count: usize) -> Result<Vec<Agen
         });
     }
     Ok(out)
+}
+
+/// Rebuilds the host's static obstacles (ABI version 2).
+///
+/// # Safety
+/// `ptr` must point to `count` valid `H2nObstacle`s whose polygon `vertices` are valid.
+pub(crate) unsafe fn obstacles_from_abi(
+    ptr: *const H2nObstacle,
+    count: usize,
+) -> Result<Vec<Obstacle>, Fail> {
+    // SAFETY: forwarded contract.
+    let raw = unsafe { slice(ptr, count, "obstacles") }?;
+    let mut out = Vec::with_capacity(raw.len());
+    for (i, o) in raw.iter().enumerate() {
+        out.push(match o.kind {
+            H2N_OBSTACLE_CIRCLE => Obstacle::Circle {
+                center: [o.x0, o.y0],
+                radius: o.radius,
+            },
+            H2N_OBSTACLE_SEGMENT => Obstacle::Segment {
+                a: [o.x0, o.y0],
+                b: [o.x1, o.y1],
+            },
+            H2N_OBSTACLE_POLYGON => {
+                let n = o
+                    .vertex_count
+                    .checked_mul(2)
+                    .ok_or_else(|| Fail::invalid(format!("obstacles[{i}]: too many vertices")))?;
+                // SAFETY: forwarded contract: `vertices` holds `2·vertex_count` doubles.
+                let flat = unsafe { slice(o.vertices, n, "polygon vertices") }?;
+                Obstacle::Polygon {
+                    vertices: flat.chunks_exact(2).map(|p| [p[0], p[1]]).collect(),
+                }
+            }
+            k => return Err(Fail::invalid(format!("obstacles[{i}]: unknown kind {k}"))),
+        });
+    }
+    Ok(out)
+}
+
+/// Rebuilds the host's occupancy grid (ABI version 2), `None` for a null pointer.
+///
+/// # Safety
+/// When non-null, `ptr` must point to a valid grid whose `data` holds `width·height` cells.
+pub(crate) unsafe fn occupancy_from_abi(
+    ptr: *const H2nOccupancyGrid,
+) -> Result<Option<OccupancyGrid>, Fail> {
+    if ptr.is_null() {
+        return Ok(None);
+    }
+    // SAFETY: non-null: forwarded contract.
+    let g = unsafe { reference(ptr, "occupancy grid") }?;
+    let n = g
+        .width
+        .checked_mul(g.height)
+        .ok_or_else(|| Fail::invalid("occupancy grid: width·height overflows"))?;
+    // SAFETY: forwarded contract.
+    let cells = unsafe { slice(g.data, n, "occupancy grid cells") }?;
+    let occupied_threshold = i8::try_from(g.occupied_threshold).map_err(|_| {
+        Fail::invalid(format!(
+            "occupancy grid: occupied_threshold {} is not a cell value",
+            g.occupied_threshold
+        ))
+    })?;
+    Ok(Some(OccupancyGrid {
+        origin: g.origin.into(),
+        resolution: g.resolution,
+        width: g.width,
+        height: g.height,
+        data: cells.to_vec(),
+        occupied_threshold,
+    }))
 }
 
 /// What a plugin instance is on the plugin's side of the boundary.
@@ -663,6 +736,8 @@ unsafe extern "C" fn planner_plan<T: Planner + 'static>(
                 ego_velocity: raw.ego_velocity.into(),
                 goal: raw.goal,
                 agents: agents_from_abi(raw.agents, raw.agent_count)?,
+                obstacles: obstacles_from_abi(raw.obstacles, raw.obstacle_count)?,
+                occupancy: occupancy_from_abi(raw.occupancy)?,
                 ..Default::default()
             };
             let mut state = state
@@ -1201,6 +1276,9 @@ mod tests {
             goal: [1.0, 0.0],
             agents: std::ptr::null(),
             agent_count: 0,
+            obstacles: std::ptr::null(),
+            obstacle_count: 0,
+            occupancy: std::ptr::null(),
         };
         // SAFETY: live instance; the observation is valid, the output deliberately null.
         let status = unsafe { (vt.plan.expect("plan"))(obj.instance, &obs, std::ptr::null_mut()) };

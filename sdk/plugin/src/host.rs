@@ -30,6 +30,7 @@ use crate::validate::{
 };
 use human2nav_core::constraint::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
 use human2nav_core::embodiment::{Embodiment, RobotState};
+use human2nav_core::obstacle::Obstacle;
 use human2nav_core::robot::PluginIsolation;
 use human2nav_core::{
     AgentState, CoupledLimit, Observation, Plan, PlanError, PlanInfo, Planner, Pose2, Twist2,
@@ -241,7 +242,7 @@ impl PluginLibrary {
         // read is valid whatever version the plugin speaks. Nothing else is read before the
         // version is known to match.
         let found = unsafe { raw.cast::<u32>().read() };
-        if found != ABI_VERSION {
+        if !(MIN_ABI_VERSION..=ABI_VERSION).contains(&found) {
             let e = PluginError::AbiMismatch {
                 path: path.to_path_buf(),
                 found,
@@ -249,10 +250,7 @@ impl PluginLibrary {
             };
             return Err(failed(checks, "ABI version", e));
         }
-        checks.push(Check::pass(
-            "ABI version",
-            format!("{found} (this host: {ABI_VERSION})"),
-        ));
+        checks.push(Check::pass("ABI version", abi_version_text(found)));
         // SAFETY: a v1 entry table starts with two `u32`s (version, size).
         let size = unsafe { raw.cast::<u32>().add(1).read() };
         let min = std::mem::size_of::<H2nPluginEntry>();
@@ -474,7 +472,8 @@ impl PluginLibrary {
         &self.version
     }
 
-    /// The ABI version the library speaks (always [`ABI_VERSION`] once loaded).
+    /// The ABI version the library speaks (between [`MIN_ABI_VERSION`] and [`ABI_VERSION`]
+    /// once loaded).
     pub fn abi_version(&self) -> u32 {
         self.abi_version
     }
@@ -920,7 +919,7 @@ struct Handle {
     destroy: DestroyFn,
     last_error: Option<LastErrorFn>,
     health: Arc<Health>,
-    _library: Arc<PluginLibrary>,
+    library: Arc<PluginLibrary>,
 }
 
 // SAFETY: the ABI requires constraint and embodiment instances to accept concurrent calls from
@@ -1088,7 +1087,7 @@ impl PluginHost {
             })?,
             last_error: vtable.last_error_fn(),
             health: Arc::clone(&health),
-            _library: Arc::clone(&lib),
+            library: Arc::clone(&lib),
         };
         // SAFETY: a live instance of this vtable.
         let instance_name = unsafe { instance_name(vtable.name_fn(), handle.ptr(), name) }
@@ -1319,6 +1318,7 @@ impl PluginHost {
             slot,
         };
         let mut core = PlannerCore {
+            abi_version: c.handle.library.abi_version,
             reset: c.vtable.reset,
             plan: c.vtable.plan.ok_or_else(|| null("plan"))?,
             last_plan: c.vtable.last_plan.ok_or_else(|| null("last_plan"))?,
@@ -1390,6 +1390,96 @@ fn load_agents(src: &[AgentState], agents: &mut Vec<H2nAgent>, history: &mut Vec
             ..H2nAgent::borrow(a)
         });
         history.extend(a.history.iter().flatten());
+    }
+}
+
+/// Copies an observation's obstacles and occupancy grid into a job's ABI records (vertex and
+/// cell pointers left null; [`PlannerCore::plan`] links them on the thread that calls).
+fn load_obstacles(obs: &Observation, job: &mut PlanJob) {
+    job.obstacles.clear();
+    job.vertices.clear();
+    for o in &obs.obstacles {
+        let mut r = H2nObstacle {
+            kind: H2N_OBSTACLE_CIRCLE,
+            reserved: 0,
+            x0: 0.0,
+            y0: 0.0,
+            x1: 0.0,
+            y1: 0.0,
+            radius: 0.0,
+            vertices: std::ptr::null(),
+            vertex_count: 0,
+        };
+        match o {
+            Obstacle::Circle { center, radius } => {
+                [r.x0, r.y0] = *center;
+                r.radius = *radius;
+            }
+            Obstacle::Segment { a, b } => {
+                r.kind = H2N_OBSTACLE_SEGMENT;
+                [r.x0, r.y0] = *a;
+                [r.x1, r.y1] = *b;
+            }
+            Obstacle::Polygon { vertices } => {
+                r.kind = H2N_OBSTACLE_POLYGON;
+                r.vertex_count = vertices.len();
+                job.vertices.extend(vertices.iter().flatten());
+            }
+        }
+        job.obstacles.push(r);
+    }
+    job.cells.clear();
+    job.occupancy = obs.occupancy.as_ref().map(|g| {
+        job.cells.extend_from_slice(&g.data);
+        H2nOccupancyGrid {
+            origin: g.origin.into(),
+            resolution: g.resolution,
+            width: g.width,
+            height: g.height,
+            data: std::ptr::null(),
+            occupied_threshold: i32::from(g.occupied_threshold),
+            reserved: 0,
+        }
+    });
+}
+
+/// Points each polygon's `vertices` into `vertices` (filled by [`load_obstacles`]).
+fn link_vertices(obstacles: &mut [H2nObstacle], vertices: &[f64]) {
+    let mut at = 0;
+    for o in obstacles
+        .iter_mut()
+        .filter(|o| o.kind == H2N_OBSTACLE_POLYGON)
+    {
+        let n = 2 * o.vertex_count;
+        o.vertices = vertices
+            .get(at..at + n)
+            .map_or(std::ptr::null(), <[f64]>::as_ptr);
+        at += n;
+    }
+}
+
+/// The note on a version-1 plugin's plan when the observation had what it cannot see.
+fn unseen_by_v1(obstacles: usize, grid: bool) -> Option<String> {
+    let what = match (obstacles, grid) {
+        (0, false) => return None,
+        (0, true) => "the occupancy grid".to_string(),
+        (n, false) => format!("{n} static obstacle(s)"),
+        (n, true) => format!("{n} static obstacle(s) and the occupancy grid"),
+    };
+    Some(format!(
+        "plugin ABI version 1: {what} not passed to the planner (version 2 carries them)"
+    ))
+}
+
+/// How the checks and `plugin inspect` describe a library's ABI version.
+pub(crate) fn abi_version_text(found: u32) -> String {
+    if found < 2 {
+        format!(
+            "{found} (this host: {ABI_VERSION}; a version-{found} planner is given pedestrians, not \
+             static obstacles or the occupancy grid)"
+        )
+    } else {
+        format!("{found} (this host: {ABI_VERSION})")
     }
 }
 
@@ -1916,6 +2006,8 @@ impl Embodiment for PluginEmbodiment {
 /// The functions of a planner instance, with the instance.
 struct PlannerCore {
     handle: Handle,
+    /// The library's ABI version: from 2 on the observation carries obstacles.
+    abi_version: u32,
     reset: Option<ResetFn>,
     plan: PlanFn,
     last_plan: LastPlanFn,
@@ -1936,6 +2028,15 @@ struct PlanJob {
     goal: [f64; 2],
     agents: Vec<H2nAgent>,
     history: Vec<f64>,
+    /// Static obstacles (polygon vertex pointers left null, see [`link_vertices`]) and the
+    /// polygons' vertices.
+    obstacles: Vec<H2nObstacle>,
+    vertices: Vec<f64>,
+    /// The occupancy grid (its `data` pointer left null) and its cells.
+    occupancy: Option<H2nOccupancyGrid>,
+    cells: Vec<i8>,
+    /// Obstacles and grid a version-1 plugin was not given (a note on its plan).
+    unseen: Option<String>,
     /// Plan buffer (grows to the longest plan seen, at most [`MAX_PLAN_POSES`]).
     poses: Vec<H2nPose>,
     note: Vec<u8>,
@@ -1951,7 +2052,9 @@ struct PlanJob {
     note_len: usize,
 }
 
-// SAFETY: as for `ConstraintJob`: the pointers in `agents` point into the job's own `history`.
+// SAFETY: as for `ConstraintJob`: the pointers in `agents` point into the job's own `history`,
+// those in `obstacles` into its own `vertices` (the grid's `data`, into `cells`, is set only in
+// the local observation of the call).
 unsafe impl Send for PlanJob {}
 
 impl PlanJob {
@@ -1964,6 +2067,11 @@ impl PlanJob {
             goal: [0.0; 2],
             agents: Vec::new(),
             history: Vec::new(),
+            obstacles: Vec::new(),
+            vertices: Vec::new(),
+            occupancy: None,
+            cells: Vec::new(),
+            unseen: None,
             poses: Vec::new(),
             note: Vec::new(),
             status: H2N_OK,
@@ -2000,6 +2108,15 @@ impl PlannerCore {
 
     fn plan(&mut self, job: &mut PlanJob) {
         link_histories(&mut job.agents, &job.history);
+        link_vertices(&mut job.obstacles, &job.vertices);
+        let occupancy = job.occupancy.map(|mut g| {
+            g.data = job.cells.as_ptr();
+            g
+        });
+        // A version-1 plugin reads the prefix before `obstacles`; it is told nothing more.
+        job.unseen = (self.abi_version < 2)
+            .then(|| unseen_by_v1(job.obstacles.len(), occupancy.is_some()))
+            .flatten();
         let obs = H2nObservation {
             struct_size: std::mem::size_of::<H2nObservation>() as u32,
             reserved: 0,
@@ -2009,6 +2126,15 @@ impl PlannerCore {
             goal: job.goal,
             agents: job.agents.as_ptr(),
             agent_count: job.agents.len(),
+            obstacles: if job.obstacles.is_empty() {
+                std::ptr::null()
+            } else {
+                job.obstacles.as_ptr()
+            },
+            obstacle_count: job.obstacles.len(),
+            occupancy: occupancy
+                .as_ref()
+                .map_or(std::ptr::null(), std::ptr::from_ref),
         };
         if job.poses.len() < 64 {
             job.poses.resize(64, H2nPose::default());
@@ -2273,6 +2399,7 @@ impl Planner for PluginPlanner {
             job.ego_velocity = obs.ego_velocity.into();
             job.goal = obs.goal;
             load_agents(&obs.agents, &mut job.agents, &mut job.history);
+            load_obstacles(obs, job);
         }) {
             Ok(job) => job,
             Err(NoAnswer::TimedOut) => {
@@ -2298,17 +2425,17 @@ impl Planner for PluginPlanner {
         } else {
             let n = job.len.min(job.poses.len());
             let note = buffer_text(&job.note, job.note_len);
+            let notes = [Some(note).filter(|n| !n.is_empty()), job.unseen.clone()]
+                .into_iter()
+                .flatten()
+                .collect();
             let plan = Plan {
                 t0: job.t0,
                 dt: job.dt,
                 poses: job.poses[..n].iter().map(|&p| Pose2::from(p)).collect(),
                 info: PlanInfo {
                     fallback: job.fallback,
-                    notes: if note.is_empty() {
-                        Vec::new()
-                    } else {
-                        vec![note]
-                    },
+                    notes,
                     ..PlanInfo::default()
                 },
             };
@@ -2560,6 +2687,64 @@ mod tests {
     fn worker_thread_names_keep_only_safe_characters() {
         assert_eq!(thread_name("personal_space"), "h2n-personal_sp");
         assert_eq!(thread_name("a\0b c/é"), "h2n-abc");
+    }
+
+    /// What the host writes for a version-2 planner is what the plugin side reads back: every
+    /// obstacle kind and the occupancy grid; a version-1 planner is told what it missed.
+    #[test]
+    fn obstacles_and_the_grid_cross_the_boundary() {
+        use human2nav_core::obstacle::OccupancyGrid;
+        let obs = Observation {
+            obstacles: vec![
+                Obstacle::Circle {
+                    center: [1.0, 2.0],
+                    radius: 0.5,
+                },
+                Obstacle::Polygon {
+                    vertices: vec![[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]],
+                },
+                Obstacle::Segment {
+                    a: [-1.0, 3.0],
+                    b: [4.0, 3.0],
+                },
+                Obstacle::Polygon {
+                    vertices: vec![[5.0, 5.0], [6.0, 5.0], [6.0, 6.0], [5.0, 6.0]],
+                },
+            ],
+            occupancy: Some(OccupancyGrid {
+                origin: Pose2::new(-2.0, -1.0, 0.25),
+                resolution: 0.1,
+                width: 3,
+                height: 2,
+                data: vec![0, 100, -1, 50, 65, 0],
+                occupied_threshold: 60,
+            }),
+            ..Observation::default()
+        };
+        let mut job = PlanJob::new();
+        load_obstacles(&obs, &mut job);
+        link_vertices(&mut job.obstacles, &job.vertices);
+        let grid = job.occupancy.map(|mut g| {
+            g.data = job.cells.as_ptr();
+            g
+        });
+        // SAFETY: the records point into the job's buffers, alive for these calls.
+        let (obstacles, occupancy) = unsafe {
+            (
+                crate::export::obstacles_from_abi(job.obstacles.as_ptr(), job.obstacles.len()),
+                crate::export::occupancy_from_abi(grid.as_ref().map_or(std::ptr::null(), |g| g)),
+            )
+        };
+        assert_eq!(obstacles.ok(), Some(obs.obstacles.clone()));
+        assert_eq!(occupancy.ok().flatten(), obs.occupancy);
+        assert_eq!(
+            unseen_by_v1(4, true).as_deref(),
+            Some(
+                "plugin ABI version 1: 4 static obstacle(s) and the occupancy grid not passed to \
+                 the planner (version 2 carries them)"
+            )
+        );
+        assert_eq!(unseen_by_v1(0, false), None);
     }
 
     #[test]

@@ -7,7 +7,6 @@
 //! listed as checked later (its vtable is checked when a profile creates an instance).
 //! [`InspectReport::render`] is what the CLI prints.
 
-use crate::ABI_VERSION;
 use crate::error::PluginError;
 use crate::host::{PluginLibrary, probe_factory};
 use crate::validate::{Check, CheckStatus};
@@ -44,8 +43,8 @@ impl InspectReport {
                 let _ = writeln!(s, "plugin    {} {}", lib.name(), lib.version());
                 let _ = writeln!(
                     s,
-                    "ABI       version {} (this host: {ABI_VERSION})",
-                    lib.abi_version()
+                    "ABI       version {}",
+                    crate::host::abi_version_text(lib.abi_version())
                 );
                 let factories = lib.factories();
                 let plural = if factories.len() == 1 {

@@ -36,6 +36,7 @@
 use crate::error::{PluginError, PluginKind};
 use crate::init::RobotContext;
 use human2nav_core::constraint::{ConstraintContext, ConstraintError, TrajBatch};
+use human2nav_core::obstacle::{Obstacle, OccupancyGrid};
 use human2nav_core::{
     AgentState, ControllerGains, Limits, Observation, Plan, PlanError, PlanInfo, Pose2, Twist2,
 };
@@ -146,6 +147,40 @@ impl Enc {
                 self.f64(h[1]);
             }
         }
+    }
+    pub(crate) fn obstacles(&mut self, obstacles: &[Obstacle]) {
+        self.u64(obstacles.len() as u64);
+        for o in obstacles {
+            match o {
+                Obstacle::Circle { center, radius } => {
+                    self.u8(0);
+                    self.f64s(&[center[0], center[1], *radius]);
+                }
+                Obstacle::Segment { a, b } => {
+                    self.u8(1);
+                    self.f64s(&[a[0], a[1], b[0], b[1]]);
+                }
+                Obstacle::Polygon { vertices } => {
+                    self.u8(2);
+                    let flat: Vec<f64> = vertices.iter().flatten().copied().collect();
+                    self.f64s(&flat);
+                }
+            }
+        }
+    }
+    pub(crate) fn occupancy(&mut self, grid: Option<&OccupancyGrid>) {
+        let Some(g) = grid else {
+            self.u8(0);
+            return;
+        };
+        self.u8(1);
+        self.pose(g.origin);
+        self.f64(g.resolution);
+        self.u64(g.width as u64);
+        self.u64(g.height as u64);
+        self.u8(g.occupied_threshold.to_le_bytes()[0]);
+        self.u64(g.data.len() as u64);
+        self.0.extend(g.data.iter().map(|c| c.to_le_bytes()[0]));
     }
 }
 
@@ -258,6 +293,59 @@ impl<'a> Dec<'a> {
         }
         Ok(out)
     }
+    pub(crate) fn obstacles(&mut self) -> Result<Vec<Obstacle>, String> {
+        let n = self.count(9)?;
+        let mut out = Vec::with_capacity(n);
+        let mut v = Vec::new();
+        for i in 0..n {
+            let kind = self.u8()?;
+            self.f64s_into(&mut v)?;
+            out.push(match (kind, v.as_slice()) {
+                (0, &[x, y, radius]) => Obstacle::Circle {
+                    center: [x, y],
+                    radius,
+                },
+                (1, &[x0, y0, x1, y1]) => Obstacle::Segment {
+                    a: [x0, y0],
+                    b: [x1, y1],
+                },
+                (2, flat) if flat.len() % 2 == 0 => Obstacle::Polygon {
+                    vertices: flat.chunks_exact(2).map(|p| [p[0], p[1]]).collect(),
+                },
+                _ => {
+                    return Err(format!(
+                        "obstacle {i}: kind {kind} with {} numbers",
+                        v.len()
+                    ));
+                }
+            });
+        }
+        Ok(out)
+    }
+    pub(crate) fn occupancy(&mut self) -> Result<Option<OccupancyGrid>, String> {
+        if self.u8()? == 0 {
+            return Ok(None);
+        }
+        let origin = self.pose()?;
+        let resolution = self.f64()?;
+        let width = usize::try_from(self.u64()?).map_err(|e| format!("grid width: {e}"))?;
+        let height = usize::try_from(self.u64()?).map_err(|e| format!("grid height: {e}"))?;
+        let occupied_threshold = i8::from_le_bytes([self.u8()?]);
+        let n = self.count(1)?;
+        let data = self
+            .take(n)?
+            .iter()
+            .map(|&b| i8::from_le_bytes([b]))
+            .collect();
+        Ok(Some(OccupancyGrid {
+            origin,
+            resolution,
+            width,
+            height,
+            data,
+            occupied_threshold,
+        }))
+    }
 }
 
 /// Reads one message (without its length) into `buf`; `Ok(false)` at a clean end of input.
@@ -360,6 +448,8 @@ pub(crate) fn encode_observation(e: &mut Enc, obs: &Observation) {
     e.f64(obs.goal[0]);
     e.f64(obs.goal[1]);
     e.agents(&obs.agents);
+    e.obstacles(&obs.obstacles);
+    e.occupancy(obs.occupancy.as_ref());
 }
 
 pub(crate) fn decode_observation(d: &mut Dec<'_>) -> Result<Observation, String> {
@@ -369,6 +459,8 @@ pub(crate) fn decode_observation(d: &mut Dec<'_>) -> Result<Observation, String>
         ego_velocity: d.twist()?,
         goal: [d.f64()?, d.f64()?],
         agents: d.agents()?,
+        obstacles: d.obstacles()?,
+        occupancy: d.occupancy()?,
         ..Default::default()
     })
 }
@@ -1152,6 +1244,27 @@ mod tests {
                 radius: 0.3,
                 history: vec![[0.5, 0.25]; 3],
             }],
+            obstacles: vec![
+                Obstacle::Circle {
+                    center: [1.0, -2.0],
+                    radius: 0.4,
+                },
+                Obstacle::Segment {
+                    a: [0.0, 1.5],
+                    b: [9.0, 1.5],
+                },
+                Obstacle::Polygon {
+                    vertices: vec![[3.0, 0.0], [4.0, 0.0], [4.0, 1.0]],
+                },
+            ],
+            occupancy: Some(OccupancyGrid {
+                origin: Pose2::new(-5.0, -5.0, 0.0),
+                resolution: 0.05,
+                width: 2,
+                height: 2,
+                data: vec![-1, 0, 100, 64],
+                occupied_threshold: 65,
+            }),
             ..Default::default()
         };
         let mut e = Enc::default();

@@ -3,6 +3,8 @@
 //!
 //! * [`lp`]: RVO2's incremental 2-D linear programs, solved exactly.
 //! * [`orca`]: neighbour selection, ORCA half-planes and the new velocity of one agent.
+//! * [`obstacle`]: static obstacles as RVO2 obstacles and their ORCA lines (circles, segments
+//!   and polygons; the occupancy grid is not used).
 //! * [`kdtree`]: the k-d tree (and the brute-force scan) that find a crowd's neighbours.
 //! * [`sim`]: [`OrcaSim`], a crowd of ORCA agents stepped together (RVO2's `doStep`).
 //! * [`planner`]: [`OrcaPlanner`], the [`human2nav_core::Planner`] that turns the ORCA velocity
@@ -15,6 +17,7 @@
 
 pub mod kdtree;
 pub mod lp;
+pub mod obstacle;
 pub mod orca;
 pub mod planner;
 pub mod sim;

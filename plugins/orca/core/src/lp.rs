@@ -274,6 +274,17 @@ pub fn solve(lines: &[Line], max_speed: f64, opt: Vec2) -> Vec2 {
     solve_in(lines, max_speed, opt, &mut Vec::new())
 }
 
+/// [`solve`] when the first `num_fixed` lines are obstacles' (RVO2's `numObstLines`): if no
+/// velocity satisfies every line, the closest one that still satisfies those is chosen.
+pub fn solve_fixed(lines: &[Line], num_fixed: usize, max_speed: f64, opt: Vec2) -> Vec2 {
+    let (result, fail) = linear_program2(lines, max_speed, opt, false);
+    if fail < lines.len() {
+        linear_program3_in(lines, num_fixed, fail, max_speed, result, &mut Vec::new())
+    } else {
+        result
+    }
+}
+
 /// [`solve`] with a caller-owned scratch buffer (see [`linear_program3_in`]); the result is
 /// the same.
 pub fn solve_in(lines: &[Line], max_speed: f64, opt: Vec2, scratch: &mut Vec<Line>) -> Vec2 {

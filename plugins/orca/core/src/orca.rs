@@ -1,5 +1,5 @@
 //! One ORCA step for one agent, with the semantics of the RVO2 library (`Agent::computeNeighbors`
-//! and `Agent::computeNewVelocity`, agents only, no static obstacles).
+//! and `Agent::computeNewVelocity`; the static obstacles' lines are in [`crate::obstacle`]).
 //!
 //! For each neighbour `B` of agent `A` the velocity obstacle `VO^τ_{A|B}` is the truncated cone
 //! of relative velocities that lead to a collision within the time horizon `τ`. With
@@ -158,6 +158,33 @@ pub fn compute_new_velocity(
 ) -> Vec2 {
     let lines = orca_lines(position, velocity, others, params);
     lp::solve(&lines, params.max_speed, pref_velocity)
+}
+
+/// [`compute_new_velocity`] with static obstacles, as RVO2: the obstacles' lines
+/// (`time_horizon_obst`, full responsibility) come first and are never relaxed, then the
+/// neighbours' lines.
+pub fn compute_new_velocity_with_obstacles(
+    position: Vec2,
+    velocity: Vec2,
+    pref_velocity: Vec2,
+    others: &[Neighbor],
+    obstacles: &crate::obstacle::Obstacles,
+    time_horizon_obst: f64,
+    params: &OrcaParams,
+) -> Vec2 {
+    if obstacles.is_empty() {
+        return compute_new_velocity(position, velocity, pref_velocity, others, params);
+    }
+    let mut lines = obstacles.lines(
+        position,
+        velocity,
+        params.radius,
+        time_horizon_obst,
+        params.max_speed,
+    );
+    let fixed = lines.len();
+    lines.extend(orca_lines(position, velocity, others, params));
+    lp::solve_fixed(&lines, fixed, params.max_speed, pref_velocity)
 }
 
 /// The ORCA half-planes of the selected neighbours, closest neighbour first.

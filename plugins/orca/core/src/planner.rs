@@ -2,7 +2,8 @@
 //!
 //! * The robot's own velocity is its current world-frame velocity (the body twist of the
 //!   observation rotated by its heading); pedestrians contribute their observed position,
-//!   velocity and radius.
+//!   velocity and radius; the observation's static obstacles contribute RVO2 obstacle lines
+//!   ([`crate::obstacle`]; its occupancy grid is ignored).
 //! * The preferred velocity points at the goal with speed `min(pref_speed, d / arrival_time)`,
 //!   `d` the distance to the goal (RVO2's examples use the goal vector clipped to unit length,
 //!   which is this rule with `pref_speed = 1 m/s`, `arrival_time = 1 s`).
@@ -14,7 +15,8 @@
 //!   the current heading (no spinning on the spot to face a zero velocity).
 
 use crate::lp::Vec2;
-use crate::orca::{Neighbor, OrcaParams, compute_new_velocity};
+use crate::obstacle::Obstacles;
+use crate::orca::{Neighbor, OrcaParams, compute_new_velocity_with_obstacles};
 use human2nav_core::{Observation, Plan, PlanError, PlanInfo, Planner, Pose2};
 use human2nav_plugin::{InitError, PluginInit};
 use serde::{Deserialize, Serialize};
@@ -50,6 +52,9 @@ pub struct OrcaConfig {
     pub max_neighbors: usize,
     /// Time horizon `τ` of the velocity obstacles (s). Default 5.
     pub time_horizon: f64,
+    /// Time horizon of the static obstacles' velocity obstacles (s, RVO2's
+    /// `timeHorizonObst`). Default 5.
+    pub time_horizon_obst: f64,
     /// Time step for the overlap cut-off (s); the replanning period. Default 0.1.
     pub time_step: f64,
     /// Time constant of the approach: the preferred speed is `min(pref_speed, d / arrival_time)`
@@ -73,6 +78,7 @@ impl Default for OrcaConfig {
             neighbor_dist: 10.0,
             max_neighbors: 10,
             time_horizon: 5.0,
+            time_horizon_obst: 5.0,
             time_step: 0.1,
             arrival_time: 1.0,
             plan_dt: 0.1,
@@ -115,6 +121,7 @@ impl OrcaConfig {
         }
         positive("neighbor_dist", self.neighbor_dist)?;
         positive("time_horizon", self.time_horizon)?;
+        positive("time_horizon_obst", self.time_horizon_obst)?;
         positive("time_step", self.time_step)?;
         positive("arrival_time", self.arrival_time)?;
         positive("plan_dt", self.plan_dt)?;
@@ -194,7 +201,15 @@ impl OrcaPlanner {
                 radius: a.radius,
             })
             .collect();
-        compute_new_velocity(position, velocity, pref, &others, &self.config.params())
+        compute_new_velocity_with_obstacles(
+            position,
+            velocity,
+            pref,
+            &others,
+            &Obstacles::from_observation(&obs.obstacles),
+            self.config.time_horizon_obst,
+            &self.config.params(),
+        )
     }
 
     /// The constant-velocity rollout of `v` from the observation's pose (see the module docs).

@@ -636,6 +636,7 @@ fn timed_planner(
 ) -> anyhow::Result<(TimedPlanner, Arc<Mutex<FlowCallStats>>)> {
     let profile = load_profile(robot)?;
     let model = load_model(model_dir, backend)?;
+    human2nav_flow::planner::check_dt(model.card(), &settings)?;
     let (bev, _) = bev_spec(model.card());
     let timed = TimedModel::new(model);
     let stats = timed.stats();

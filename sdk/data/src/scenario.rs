@@ -268,8 +268,9 @@ impl Episode {
     /// `plan --episode`): `dt` in [[`MIN_EPISODE_DT`], [`MAX_EPISODE_DT`]], `time_budget` in
     /// (0, [`MAX_TIME_BUDGET`]], start, goal and agent positions finite and within
     /// [`MAX_COORDINATE`](crate::limits::MAX_COORDINATE) m of the origin, agent radii finite and
-    /// ≥ 0, and every agent track starting within [`MAX_TIME`](crate::limits::MAX_TIME) s. The
-    /// error names the field (`agents[3].positions[7]`) and what is wrong with it.
+    /// ≥ 0, every agent track starting within [`MAX_TIME`](crate::limits::MAX_TIME) s, holding
+    /// at least one position and an id no other track has. The error names the field
+    /// (`agents[3].positions[7]`) and what is wrong with it.
     pub fn validate(&self) -> Result<(), (String, String)> {
         use crate::limits::{MAX_COORDINATE, MAX_TIME};
         let field = |f: &str, m: String| Err((f.to_string(), m));
@@ -316,7 +317,23 @@ impl Episode {
                 format!("{range}, got {:?}", self.human_path[k]),
             );
         }
+        let mut ids: std::collections::HashMap<u64, usize> =
+            std::collections::HashMap::with_capacity(self.agents.len());
         for (i, a) in self.agents.iter().enumerate() {
+            // Two tracks of one id would be one person in two places (the replay, the BEV and
+            // the metrics key people by id); a track of no positions is nobody.
+            if let Some(first) = ids.insert(a.id, i) {
+                return field(
+                    &format!("agents[{i}].id"),
+                    format!("{} is already the id of agents[{first}]", a.id),
+                );
+            }
+            if a.positions.is_empty() {
+                return field(
+                    &format!("agents[{i}].positions"),
+                    format!("agent {} has no positions", a.id),
+                );
+            }
             if !(a.radius.is_finite() && a.radius >= 0.0) {
                 return field(
                     &format!("agents[{i}].radius"),
@@ -1059,6 +1076,39 @@ mod tests {
         let (ep, _) = try_episode(&scene, &scene.index(), 0, 0, &opts).unwrap();
         assert_eq!(ep.scenario, ScenarioClass::CrossFlow);
         assert_eq!(ep.agents.len(), 1);
+    }
+
+    #[test]
+    fn an_episode_with_one_id_twice_or_an_empty_track_is_refused() {
+        let track = |id: u64, positions: Vec<[f64; 2]>| AgentTrack {
+            id,
+            start_step: 0,
+            positions,
+            radius: 0.3,
+        };
+        let mut ep = Episode {
+            id: "e".into(),
+            scene: "s".into(),
+            source: "test".into(),
+            scenario: ScenarioClass::CoFlow,
+            dt: 0.1,
+            start: Pose2::new(0.0, 0.0, 0.0),
+            goal: [5.0, 0.0],
+            time_budget: 12.5,
+            agents: vec![track(3, vec![[1.0, 1.0]]), track(4, vec![[2.0, 1.0]])],
+            density: 2,
+            obstacles: Vec::new(),
+            human_path: Vec::new(),
+        };
+        assert_eq!(ep.validate(), Ok(()));
+        ep.agents[1].id = 3;
+        let (field, why) = ep.validate().unwrap_err();
+        assert_eq!(field, "agents[1].id");
+        assert!(why.contains("already the id of agents[0]"), "{why}");
+        ep.agents[1] = track(4, Vec::new());
+        let (field, why) = ep.validate().unwrap_err();
+        assert_eq!(field, "agents[1].positions");
+        assert!(why.contains("no positions"), "{why}");
     }
 
     #[test]

@@ -39,6 +39,15 @@ fn ucy_counts_are_bounded_before_anything_is_allocated() {
     let e = message(ucy::parse_vsp(&p).unwrap_err());
     assert!(e.contains("declares 3 splines but only 2"), "{e}");
 
+    // A frame that jumps back within a spline: the walker would go back in time.
+    std::fs::write(&p, "1 - splines\n3 - points\n1 2 10 0\n1 3 20 0\n1 4 5 0\n").unwrap();
+    let e = message(ucy::parse_vsp(&p).unwrap_err());
+    assert!(e.contains("huge_count.vsp:5"), "{e}");
+    assert!(
+        e.contains("frame 5 of spline 1 comes after frame 20"),
+        "{e}"
+    );
+
     // A count that is not a number at all.
     std::fs::write(&p, "99999999999999999999999 - splines\n").unwrap();
     let e = message(ucy::parse_vsp(&p).unwrap_err());

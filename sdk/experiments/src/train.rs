@@ -215,6 +215,7 @@ impl TrainConfig {
     pub fn validate(&self) -> anyhow::Result<()> {
         self.net.validate()?;
         self.train.validate()?;
+        self.train.check_batch_size(&self.net)?;
         if !(1..=MAX_INTERACTION_REPEAT).contains(&self.data.interaction_repeat) {
             bail!(
                 "data.interaction_repeat: {} is not in 1..={MAX_INTERACTION_REPEAT}",

@@ -446,9 +446,9 @@ pub fn bev_spec(card: &ModelCard) -> (BevSpec, BevOrigin) {
     }
 }
 
-/// The number after `cells of` in a training record, if it is a positive finite length.
-fn resolution_from_record(data: &str) -> Option<f64> {
-    let (_, rest) = data.split_once("cells of ")?;
+/// The number after `marker` in a training record, if it is a positive finite number.
+fn number_after(data: &str, marker: &str) -> Option<f64> {
+    let (_, rest) = data.split_once(marker)?;
     let number: String = rest
         .chars()
         .take_while(|c| c.is_ascii_digit() || *c == '.' || *c == 'e' || *c == '-')
@@ -457,6 +457,43 @@ fn resolution_from_record(data: &str) -> Option<f64> {
         .parse::<f64>()
         .ok()
         .filter(|r| r.is_finite() && *r > 0.0)
+}
+
+/// The number after `cells of` in a training record, if it is a positive finite length.
+fn resolution_from_record(data: &str) -> Option<f64> {
+    number_after(data, "cells of ")
+}
+
+/// Spacing (s) of the poses of every tuple the data pipeline writes: `data.toml` refuses any
+/// other `resample.dt`, so every model is trained at it.
+pub const TRAINING_DT: f64 = 0.1;
+
+/// The spacing (s) of the poses a model was trained on: the training record's "... poses at
+/// 0.1 s", else [`TRAINING_DT`].
+pub fn trained_dt(card: &ModelCard) -> f64 {
+    card.training
+        .as_ref()
+        .and_then(|t| number_after(&t.data, "poses at "))
+        .unwrap_or(TRAINING_DT)
+}
+
+/// Refuses a planner `dt` other than the one the model was trained on: the network's
+/// velocities are per training step, so poses spaced at another `dt` would replay the learnt
+/// motion faster or slower than the people it learnt from (`human2nav.dt = 0.4` made every
+/// sample four times as fast).
+pub fn check_dt(card: &ModelCard, settings: &Human2NavSettings) -> Result<(), PlannerError> {
+    let trained = trained_dt(card);
+    if (settings.dt - trained).abs() > 1e-9 {
+        return Err(PlannerError::Setting {
+            field: "human2nav.dt".into(),
+            message: format!(
+                "{} s, but the model `{}` was trained on poses {trained} s apart; set \
+                 human2nav.dt = {trained}",
+                settings.dt, card.name
+            ),
+        });
+    }
+    Ok(())
 }
 
 /// Φ of a robot: the profile's built-in soft-margin terms (Eq. 8-9, weighted by its
@@ -537,6 +574,7 @@ impl RobotPlanner {
         settings: Human2NavSettings,
     ) -> Result<Self, PlannerError> {
         let model = model.into();
+        check_dt(model.card(), &settings)?;
         let phi = robot_phi(&profile)?;
         let (bev, bev_origin) = bev_spec(model.card());
         let planner = Human2Nav::new(model, robot_model(&profile, phi), bev, settings)?;
@@ -805,6 +843,28 @@ mod tests {
     use human2nav_core::Pose2;
     #[cfg(feature = "torch")]
     use human2nav_core::ablation::{Arm, ablation_step};
+
+    #[test]
+    fn a_planner_dt_other_than_the_training_one_is_refused() {
+        let mut card = ModelCard::default();
+        let at = |dt| Human2NavSettings {
+            dt,
+            ..Human2NavSettings::default()
+        };
+        assert_relative_eq!(trained_dt(&card), TRAINING_DT);
+        assert!(check_dt(&card, &at(0.1)).is_ok());
+        let err = check_dt(&card, &at(0.4)).unwrap_err().to_string();
+        assert!(
+            err.contains("human2nav.dt") && err.contains("0.4 s") && err.contains("0.1 s apart"),
+            "{err}"
+        );
+        card.training = Some(TrainingInfo {
+            data: "tuple cache, BEV 32×32 cells of 0.3 m, 32 poses at 0.2 s".into(),
+            ..TrainingInfo::default()
+        });
+        assert_relative_eq!(trained_dt(&card), 0.2);
+        assert!(check_dt(&card, &at(0.2)).is_ok());
+    }
 
     #[test]
     fn bev_raster_comes_from_the_card_table_or_the_training_record() {

@@ -102,7 +102,7 @@ pub const MAX_VSP_COUNT: usize = 1_000_000;
 
 /// Parses the splines of an `annotation.vsp` file (file units, no homography). Counts are
 /// bounded by [`MAX_VSP_COUNT`] and by the lines left in the file, frames by
-/// [`crate::limits::MAX_TIME`].
+/// [`crate::limits::MAX_TIME`]; within a spline frames never decrease.
 pub fn parse_vsp(path: &Path) -> Result<Vec<Vec<ControlPoint>>, DataError> {
     let body = text::read(path)?;
     let lines: Vec<(usize, &str)> = body
@@ -167,6 +167,21 @@ pub fn parse_vsp(path: &Path) -> Result<Vec<Vec<ControlPoint>>, DataError> {
             }
             let frame = text::integer(toks[2], path, ln, "frame")?;
             limits::time(frame as f64 / FPS, path, ln)?;
+            // A spline is a path through time: a frame before the previous one would make the
+            // walker jump back (the real files never do; their frames only increase).
+            if let Some(prev) = pts.last().map(|p: &ControlPoint| p.frame)
+                && frame < prev
+            {
+                return Err(DataError::parse(
+                    path,
+                    ln,
+                    format!(
+                        "frame {frame} of spline {} comes after frame {prev}: a spline's frames \
+                         must not go backwards",
+                        s + 1
+                    ),
+                ));
+            }
             pts.push(ControlPoint {
                 x: text::number(toks[0], path, ln, "x")?,
                 y: text::number(toks[1], path, ln, "y")?,

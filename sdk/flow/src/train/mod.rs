@@ -377,7 +377,54 @@ impl Default for TrainOptions {
     }
 }
 
+/// Memory a training run may plan for one batch (bytes): 16 GiB, the most a machine that
+/// trains this model on its CPU can be expected to have free.
+pub const MAX_BATCH_BYTES: u64 = 16 << 30;
+
+/// A lower bound on the memory one example takes in a training step (bytes): its inputs (the
+/// raster, the crowd points, goal and velocity, the noisy and target trajectories) and the
+/// activations the backward pass keeps (one map per BEV encoder channel, the raster halving at
+/// each of its three levels; one per U-Net channel and waypoint, four per level), in f32,
+/// counted twice (values and gradients): about 346 KiB for the shipped network.
+pub fn bytes_per_example(net: &NetConfig) -> u64 {
+    let cells = net.bev_cells as u64;
+    let inputs = net.bev_len() as u64 + net.crowd_len() as u64 + 4 + 6 * net.horizon as u64;
+    let encoder: u64 = net
+        .bev_channels
+        .iter()
+        .enumerate()
+        .map(|(k, &c)| c as u64 * (cells >> k).pow(2))
+        .sum();
+    let unet = 4 * net.horizon as u64 * net.down_dims.iter().map(|&d| d as u64).sum::<u64>();
+    2 * 4 * (inputs + encoder + unet)
+}
+
+/// The largest `train.batch_size` for `net` ([`MAX_BATCH_BYTES`] over [`bytes_per_example`]).
+pub fn max_batch_size(net: &NetConfig) -> usize {
+    usize::try_from(MAX_BATCH_BYTES / bytes_per_example(net).max(1)).unwrap_or(usize::MAX)
+}
+
 impl TrainOptions {
+    /// Checks `batch_size` against [`max_batch_size`] of `net`: a batch of 10⁹ examples grew
+    /// to 12 GB of batch building before it was killed.
+    pub fn check_batch_size(&self, net: &NetConfig) -> Result<(), CfmError> {
+        let max = max_batch_size(net);
+        if self.batch_size > max {
+            return Err(CfmError::option(
+                "train.batch_size",
+                format!(
+                    "{} examples need at least {:.1} GiB ({} KiB each for this [net]); the \
+                     largest batch is {max} ({} GiB)",
+                    self.batch_size,
+                    self.batch_size as f64 * bytes_per_example(net) as f64 / (1u64 << 30) as f64,
+                    bytes_per_example(net) / 1024,
+                    MAX_BATCH_BYTES >> 30
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     /// Checks every option is in range.
     pub fn validate(&self) -> Result<(), CfmError> {
         if self.batch_size == 0 {
@@ -514,4 +561,31 @@ pub fn find_checkpoint(ckpt: &Path) -> Result<Option<PathBuf>, CfmError> {
         },
         other => other.into(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_batch_beyond_the_memory_bound_is_refused_naming_the_field() {
+        let net = NetConfig::default();
+        assert_eq!(bytes_per_example(&net), 353_824);
+        let max = max_batch_size(&net);
+        assert!(max > 10_000, "{max}");
+        let at = |batch_size| TrainOptions {
+            batch_size,
+            ..TrainOptions::default()
+        };
+        assert!(at(128).check_batch_size(&net).is_ok());
+        assert!(at(max).check_batch_size(&net).is_ok());
+        let err = at(1_000_000_000)
+            .check_batch_size(&net)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("train.batch_size") && err.contains(&format!("largest batch is {max}")),
+            "{err}"
+        );
+    }
 }

@@ -336,6 +336,7 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
     ) -> Result<Self, CfmError> {
         opts.validate()?;
         net.validate()?;
+        opts.check_batch_size(net)?;
         if train.is_empty() {
             return Err(CfmError::EmptyData { split: "train" });
         }

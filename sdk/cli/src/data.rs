@@ -130,8 +130,10 @@ impl Progress for Bars {
 
 fn load_config(path: &Path) -> anyhow::Result<(DataConfig, Locations)> {
     let cfg = DataConfig::load(path).with_context(|| format!("loading {}", path.display()))?;
-    let loc = Locations::resolve(&cfg, path);
-    if !loc.data_root.is_dir() && cfg.sources.synthetic_fallback {
+    // A dataset folder that was named and is missing is an error; only the default one may
+    // be missing, and then the synthetic fallback says so here.
+    let loc = Locations::resolve_checked(&cfg, path)?;
+    if !loc.datasets(&cfg) && cfg.sources.synthetic_fallback && !cfg.sources.synthetic_only {
         eprintln!(
             "warning: no datasets at {} (paths.data_root in {}, else ${}, else ../shared/data \
              beside the workspace); falling back to synthetic crowds",

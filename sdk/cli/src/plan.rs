@@ -246,7 +246,7 @@ fn plan_one(
         rp = rp.with_predictor(p.predictor()?);
     }
     let ep = select_episode(episodes, args.index, args.id.as_deref())?;
-    let obs = observation_at(ep, step)?;
+    let obs = observation_at(ep, step).with_context(|| format!("--time {}", step.time))?;
     let plan = rp.planner.plan(&obs)?;
     // The predictor's forecast for the figure: the same observation, so the same scenes the
     // selection scored against (a forecast depends on its observation only).
@@ -313,6 +313,9 @@ fn plan_one(
     );
     if plan.info.fallback {
         println!("FALLBACK (stop in place): {}", plan.info.notes.join("; "));
+    }
+    for w in &plan.info.warnings {
+        eprintln!("warning: {w}");
     }
     if let Some(stages) = &plan.info.stages {
         println!("stages: {}", describe_stages(stages));
@@ -413,7 +416,8 @@ fn windows(
         .into_iter()
         .map(|i| {
             let ep = &episodes[i];
-            Ok((ep.id.clone(), observation_at(ep, step)?))
+            let obs = observation_at(ep, step).with_context(|| format!("--time {}", step.time))?;
+            Ok((ep.id.clone(), obs))
         })
         .collect()
 }

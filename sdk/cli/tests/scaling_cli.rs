@@ -1,5 +1,5 @@
 //! `human2nav scaling` end to end on a tiny self-contained setup: a synthetic tuple cache (built
-//! with `human2nav data build` from a data config whose dataset folder does not exist), a tiny
+//! with `human2nav data build` from a data config with `synthetic_only = true`), a tiny
 //! network trained for a few steps on two fractions of the training scenes, one synthetic
 //! episode per scenario class (the suite's episode file is absent) and one robot. Checks the
 //! CSV, the report and the figure, then that a second run reuses the complete models and the
@@ -39,11 +39,10 @@ fn write_configs(dir: &Path) -> PathBuf {
     std::fs::write(
         dir.join("data.toml"),
         format!(
-            "[paths]\ndata_root = {}\ncache_dir = {}\nepisodes = {}\n\
-             [sources]\nsynthetic_scenes = 10\nseed = 3\n\
+            "[paths]\ncache_dir = {}\nepisodes = {}\n\
+             [sources]\nsynthetic_only = true\nsynthetic_scenes = 10\nseed = 3\n\
              [bev]\ncells = 16\n\
              [tuples]\nhorizon = 8\n",
-            lit(&dir.join("no-datasets")),
             lit(&cache),
             lit(&dir.join("episodes.json")),
         ),

@@ -175,16 +175,35 @@ pub fn commit<E: From<SetError>>(
 /// * `dir` with a manifest that matches its files: `dir`;
 /// * otherwise `<dir>.old` with a matching manifest (a commit was interrupted between its two
 ///   renames): that folder;
-/// * `dir` without a manifest but with every file (written before sets had manifests): `dir`,
-///   unverified;
 /// * no `dir` (or an empty one): `None`, nothing to resume;
+/// * `dir` that is a file, a link to nothing or a loop of links: [`SetError::Io`] naming it
+///   (never "nothing to resume", which would restart a run from step 0);
 /// * anything else (a file missing, a size or checksum that disagrees, files without a
-///   manifest): [`SetError::Incomplete`] naming the folder and the file.
+///   manifest, even all of them: nothing says they belong together): [`SetError::Incomplete`]
+///   naming the folder and the file.
 pub fn find_complete(dir: &Path, files: &[&str]) -> Result<Option<PathBuf>, SetError> {
     let complaint = |reason: String| SetError::Incomplete {
         path: dir.to_path_buf(),
         reason,
     };
+    let not_a_folder = |why: &str| {
+        SetError::io(
+            dir,
+            std::io::Error::new(std::io::ErrorKind::InvalidInput, why.to_string()),
+        )
+    };
+    match std::fs::metadata(dir) {
+        Ok(m) if m.is_dir() => {}
+        Ok(_) => return Err(not_a_folder("not a folder (a set is a folder of files)")),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            if std::fs::symlink_metadata(dir).is_ok() {
+                return Err(not_a_folder(
+                    "a symbolic link to a path that does not exist",
+                ));
+            }
+        }
+        Err(e) => return Err(SetError::io(dir, e)),
+    }
     let problem = if dir.join(MANIFEST_FILE).is_file() {
         match incomplete(dir, files)? {
             None => return Ok(Some(dir.to_path_buf())),
@@ -206,7 +225,11 @@ pub fn find_complete(dir: &Path, files: &[&str]) -> Result<Option<PathBuf>, SetE
         .filter(|n| dir.join(n).exists())
         .collect();
     if present.is_empty() {
-        let empty = std::fs::read_dir(dir).map_or(true, |mut d| d.next().is_none());
+        let empty = match std::fs::read_dir(dir) {
+            Ok(mut d) => d.next().is_none(),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => true,
+            Err(e) => return Err(SetError::io(dir, e)),
+        };
         return if empty {
             Ok(None)
         } else {
@@ -217,7 +240,11 @@ pub fn find_complete(dir: &Path, files: &[&str]) -> Result<Option<PathBuf>, SetE
         };
     }
     if present.len() == files.len() {
-        return Ok(Some(dir.to_path_buf()));
+        return Err(complaint(format!(
+            "{MANIFEST_FILE} is missing, so nothing says {} belong together (a save cut \
+             short, or files copied in by hand)",
+            files.join(", ")
+        )));
     }
     let missing: Vec<&str> = files
         .iter()
@@ -320,9 +347,10 @@ mod tests {
         std::fs::remove_dir_all(&old).unwrap();
         let err = find_complete(&ck, &FILES).unwrap_err().to_string();
         assert!(err.contains("a.bin is missing"), "{err}");
-        // Every file without a manifest: a set written before manifests, taken as it is.
+        // Every file without a manifest: nothing checks them, so they are not resumed from.
         write_both(&ck, "legacy").unwrap();
-        assert_eq!(find_complete(&ck, &FILES).unwrap(), Some(ck.clone()));
+        let err = find_complete(&ck, &FILES).unwrap_err().to_string();
+        assert!(err.contains("manifest.toml is missing"), "{err}");
         // A stray file only.
         let other = root.join("stray");
         std::fs::create_dir_all(&other).unwrap();
@@ -333,6 +361,34 @@ mod tests {
         std::fs::write(ck.join(MANIFEST_FILE), "step = \"x\"").unwrap();
         let err = find_complete(&ck, &FILES).unwrap_err().to_string();
         assert!(err.contains("not a set manifest"), "{err}");
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
+    #[test]
+    fn a_path_that_is_no_folder_is_an_error_not_a_fresh_start() {
+        let root = scratch("nofolder");
+        let file = root.join("checkpoint");
+        std::fs::write(&file, "x").unwrap();
+        let err = find_complete(&file, &FILES).unwrap_err().to_string();
+        assert!(
+            err.contains("checkpoint") && err.contains("not a folder"),
+            "{err}"
+        );
+        #[cfg(unix)]
+        {
+            let a = root.join("a");
+            let b = root.join("b");
+            std::os::unix::fs::symlink(&b, &a).unwrap();
+            std::os::unix::fs::symlink(&a, &b).unwrap();
+            let err = find_complete(&a, &FILES).unwrap_err().to_string();
+            assert!(err.contains(&a.display().to_string()), "{err}");
+            let dangling = root.join("dangling");
+            std::os::unix::fs::symlink(root.join("nowhere"), &dangling).unwrap();
+            let err = find_complete(&dangling, &FILES).unwrap_err().to_string();
+            assert!(err.contains("does not exist"), "{err}");
+        }
+        // A missing folder is still nothing to resume.
+        assert!(find_complete(&root.join("none"), &FILES).unwrap().is_none());
         let _ = std::fs::remove_dir_all(&root);
     }
 }

@@ -481,6 +481,10 @@ pub struct RobotModel {
     pub phi: Phi,
 }
 
+/// A starting velocity above this multiple of a limit is flagged in [`PlanInfo::warnings`]
+/// (below it, tracking overshoot is ordinary).
+pub const LIMIT_WARNING_FACTOR: f64 = 1.1;
+
 /// The reference planner. Generic over the flow model so it runs with the libtorch network or
 /// an analytic field alike.
 pub struct Human2Nav<M> {
@@ -1065,6 +1069,7 @@ impl<M: FlowModel> Human2Nav<M> {
             notes,
             error: None,
             stages: Some(stages),
+            warnings: Vec::new(),
         };
         Plan {
             t0: obs.time,
@@ -1072,6 +1077,48 @@ impl<M: FlowModel> Human2Nav<M> {
             poses: to_world(&candidates[chosen]),
             info,
         }
+    }
+
+    /// What is wrong with the robot's own state in `obs` ([`PlanInfo::warnings`]): its
+    /// footprint overlapping an obstacle or an occupied cell, or a velocity more than
+    /// [`LIMIT_WARNING_FACTOR`] times a limit.
+    fn start_warnings(&self, obs: &Observation) -> Vec<String> {
+        let mut warnings = Vec::new();
+        let shapes = &self.robot.footprint;
+        let here = [obs.ego.x, obs.ego.y];
+        for (i, o) in obs.obstacles.iter().enumerate() {
+            let c = crate::obstacle::footprint_clearance(shapes, obs.ego, o);
+            if c < 0.0 {
+                warnings.push(format!(
+                    "the robot starts inside obstacles[{i}] (overlapping by {:.3} m)",
+                    -c
+                ));
+            }
+        }
+        if let Some(grid) = &obs.occupancy {
+            let cells = grid.obstacles_near(here, self.reach);
+            if cells
+                .iter()
+                .any(|o| crate::obstacle::footprint_clearance(shapes, obs.ego, o) < 0.0)
+            {
+                warnings.push("the robot starts on an occupied cell of the occupancy grid".into());
+            }
+        }
+        let l = &self.robot.limits;
+        let v = obs.ego_velocity;
+        for (what, value, limit) in [
+            ("forward speed", v.vx, l.v_max),
+            ("reverse speed", -v.vx, l.v_reverse_max),
+            ("lateral speed", v.vy.abs(), l.lateral_speed_max),
+            ("yaw rate", v.omega.abs(), l.omega_max),
+        ] {
+            if value > LIMIT_WARNING_FACTOR * limit {
+                warnings.push(format!(
+                    "the robot starts at a {what} of {value:.3}, beyond its limit of {limit:.3}"
+                ));
+            }
+        }
+        warnings
     }
 
     /// The observation's static obstacles that a plan of `horizon` poses could reach (within
@@ -1558,7 +1605,8 @@ impl<M: FlowModel + Send> Planner for Human2Nav<M> {
 
     fn plan_within(&mut self, obs: &Observation, deadline: &Deadline) -> Result<Plan, PlanError> {
         obs.validate()?;
-        let plan = match self.try_plan(obs, deadline) {
+        let warnings = self.start_warnings(obs);
+        let mut plan = match self.try_plan(obs, deadline) {
             Ok(plan) if plan.is_finite() => plan,
             Ok(_) => Plan::stop_in_place(
                 obs,
@@ -1575,6 +1623,7 @@ impl<M: FlowModel + Send> Planner for Human2Nav<M> {
                 plan
             }
         };
+        plan.info.warnings = warnings;
         self.previous = (!plan.info.fallback).then(|| plan.clone());
         Ok(plan)
     }

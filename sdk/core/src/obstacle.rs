@@ -96,6 +96,38 @@ pub fn point_in_polygon(p: [f64; 2], vertices: &[[f64; 2]]) -> bool {
     inside
 }
 
+/// The first pair of edges `(i, j)`, `i < j`, of the closed polygon that meet although they
+/// are not neighbours (edge `k` runs from `vertices[k]` to the next vertex), or neighbours that
+/// fold back over each other; `None` for a simple polygon. Every pair is tested: O(n²), at most
+/// 8 million tests at [`MAX_POLYGON_VERTICES`].
+pub fn self_intersection(vertices: &[[f64; 2]]) -> Option<(usize, usize)> {
+    let n = vertices.len();
+    let edge = |k: usize| (vertices[k], vertices[(k + 1) % n]);
+    for i in 0..n {
+        let (p, q) = edge(i);
+        for j in i + 1..n {
+            let (r, s) = edge(j);
+            let neighbours = j == i + 1 || (i == 0 && j == n - 1);
+            if !neighbours {
+                if segments_intersect(p, q, r, s) {
+                    return Some((i, j));
+                }
+                continue;
+            }
+            // Neighbours share a vertex; they overlap only when collinear and turning back.
+            let (shared, a, b) = if j == i + 1 { (q, p, s) } else { (p, q, r) };
+            let (u, v) = (
+                [a[0] - shared[0], a[1] - shared[1]],
+                [b[0] - shared[0], b[1] - shared[1]],
+            );
+            if u[0] * v[1] - u[1] * v[0] == 0.0 && u[0] * v[0] + u[1] * v[1] > 0.0 {
+                return Some((i, j));
+            }
+        }
+    }
+    None
+}
+
 /// The polygon's edges as `(a, b)` pairs, the last closing it.
 fn edges(vertices: &[[f64; 2]]) -> impl Iterator<Item = ([f64; 2], [f64; 2])> + '_ {
     let n = vertices.len();
@@ -145,7 +177,23 @@ impl Obstacle {
                 for (i, v) in vertices.iter().enumerate() {
                     point(&format!("vertices[{i}]"), v)?;
                 }
-                Ok(())
+                let n = vertices.len();
+                if let Some(k) = (0..n).find(|&k| vertices[k] == vertices[(k + 1) % n]) {
+                    return Err(format!(
+                        "vertices[{}] repeats vertices[{k}]: an edge of length 0 (the polygon \
+                         closes itself; do not repeat the first vertex)",
+                        (k + 1) % n
+                    ));
+                }
+                match self_intersection(vertices) {
+                    Some((i, j)) => Err(format!(
+                        "not a simple polygon: edge {i} (vertices[{i}]–vertices[{}]) meets edge \
+                         {j} (vertices[{j}]–vertices[{}])",
+                        (i + 1) % vertices.len(),
+                        (j + 1) % vertices.len()
+                    )),
+                    None => Ok(()),
+                }
             }
             Obstacle::Segment { a, b } => {
                 point("a", a)?;
@@ -352,6 +400,57 @@ mod tests {
                 [c[0] - h, c[1] + h],
             ],
         }
+    }
+
+    #[test]
+    fn only_simple_polygons_pass_validation() {
+        let poly = |v: &[[f64; 2]]| Obstacle::Polygon {
+            vertices: v.to_vec(),
+        };
+        assert_eq!(square([0.0, 0.0], 1.0).validate(), Ok(()));
+        // A concave L and a triangle are simple.
+        let l = [
+            [0.0, 0.0],
+            [2.0, 0.0],
+            [2.0, 1.0],
+            [1.0, 1.0],
+            [1.0, 2.0],
+            [0.0, 2.0],
+        ];
+        assert_eq!(poly(&l).validate(), Ok(()));
+        assert_eq!(
+            poly(&[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]).validate(),
+            Ok(())
+        );
+        // A bow tie: edges 0 and 2 cross.
+        let bow = poly(&[[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]]);
+        let why = bow.validate().unwrap_err();
+        assert!(
+            why.contains("not a simple polygon") && why.contains("edge 0"),
+            "{why}"
+        );
+        // Two neighbouring edges folding back over each other.
+        let fold = poly(&[[0.0, 0.0], [2.0, 0.0], [1.0, 0.0], [1.0, 1.0]]);
+        assert!(fold.validate().unwrap_err().contains("edge 0"));
+        // Touching itself at a vertex.
+        let touch = poly(&[
+            [0.0, 0.0],
+            [2.0, 0.0],
+            [1.0, 1.0],
+            [2.0, 2.0],
+            [0.0, 2.0],
+            [1.0, 1.0],
+        ]);
+        assert!(
+            touch
+                .validate()
+                .unwrap_err()
+                .contains("not a simple polygon")
+        );
+        // The first vertex repeated at the end.
+        let closed = poly(&[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.0, 0.0]]);
+        let why = closed.validate().unwrap_err();
+        assert!(why.contains("vertices[0] repeats vertices[3]"), "{why}");
     }
 
     #[test]

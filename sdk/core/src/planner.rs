@@ -115,6 +115,12 @@ pub struct PlanInfo {
     /// How far each stage of an anytime planner got ([`Planner::plan_within`]); `None` for a
     /// planner without stages.
     pub stages: Option<Stages>,
+    /// What is wrong with the robot's own state that the planner planned through anyway: the
+    /// robot starts overlapping an obstacle, or faster than its limits. An observation is
+    /// refused ([`Observation::validate`]) only when no robot could be in it; these states a
+    /// real robot can reach (pushed into a table, odometry glitches), and a plan (braking at
+    /// worst) is still wanted, so the planner that knows the robot flags them here instead.
+    pub warnings: Vec<String>,
 }
 
 /// A stage of an anytime planning call, in the order they run.

@@ -292,6 +292,42 @@ fn an_observation_beyond_the_bounds_is_an_error_naming_the_field() {
     }
 }
 
+/// A robot that starts overlapping an obstacle, or faster than its limits (but within what an
+/// observation may hold), still gets a plan, flagged in `PlanInfo::warnings`; an ordinary start
+/// gets none.
+#[test]
+fn a_start_inside_an_obstacle_or_beyond_the_limits_is_flagged() {
+    let plain = planner(true).plan(&observation()).unwrap();
+    assert!(plain.info.warnings.is_empty(), "{:?}", plain.info.warnings);
+    let mut inside = observation();
+    inside.obstacles = vec![Obstacle::Circle {
+        center: [3.1, -1.0],
+        radius: 0.5,
+    }];
+    let plan = planner(true).plan(&inside).unwrap();
+    assert!(plan.is_finite());
+    assert!(
+        plan.info
+            .warnings
+            .iter()
+            .any(|w| w.contains("inside obstacles[0]")),
+        "{:?}",
+        plan.info.warnings
+    );
+    let mut fast = observation();
+    fast.ego_velocity = Twist2::new(5.0, 0.0, 0.0);
+    let plan = planner(true).plan(&fast).unwrap();
+    assert!(plan.is_finite());
+    assert!(
+        plan.info
+            .warnings
+            .iter()
+            .any(|w| w.contains("forward speed of 5.000")),
+        "{:?}",
+        plan.info.warnings
+    );
+}
+
 /// A model whose output is NaN: the planner must stop in place, never pass the NaN on.
 struct Broken;
 

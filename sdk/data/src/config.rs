@@ -63,8 +63,13 @@ pub struct SourcesConfig {
     pub sdd_trajnet: bool,
     /// The sgan/Trajectron benchmark files (`sgan/<file>`; they duplicate ETH/UCY). Default false.
     pub sgan: bool,
-    /// Use synthetic social-force scenes when no dataset directory exists. Default true.
+    /// Use synthetic social-force scenes when the default dataset directory (no
+    /// `paths.data_root`, no `$HUMAN2NAV_DATA`) does not exist. Default true. A directory that
+    /// was named and is missing is an error ([`crate::pipeline::Locations::resolve_checked`]).
     pub synthetic_fallback: bool,
+    /// Use the synthetic scenes even where datasets exist (tests, a build without the data).
+    /// Default false.
+    pub synthetic_only: bool,
     /// Number of synthetic scenes for the fallback cache (at most [`MAX_SYNTHETIC_SCENES`]).
     /// Default 400.
     pub synthetic_scenes: usize,
@@ -81,6 +86,7 @@ impl Default for SourcesConfig {
             sdd_trajnet: true,
             sgan: false,
             synthetic_fallback: true,
+            synthetic_only: false,
             synthetic_scenes: 400,
             seed: 1,
         }

@@ -30,20 +30,40 @@ pub fn find_workspace_root(start: &Path) -> Option<PathBuf> {
     })
 }
 
+/// Where the dataset directory was named.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DataRootFrom {
+    /// `paths.data_root` in the data config.
+    Config,
+    /// The environment variable [`DATA_ENV`].
+    Env,
+    /// Nowhere: the default `<workspace>/../shared/data`.
+    Default,
+}
+
 /// The dataset directory: `configured` (relative paths against `workspace`) if given and
 /// non-empty, else `$HUMAN2NAV_DATA`, else `<workspace>/../shared/data`.
 pub fn data_root(configured: Option<&Path>, workspace: &Path) -> PathBuf {
+    data_root_from(configured, workspace).0
+}
+
+/// [`data_root`] with where it was named.
+pub fn data_root_from(configured: Option<&Path>, workspace: &Path) -> (PathBuf, DataRootFrom) {
     if let Some(p) = configured.filter(|p| !p.as_os_str().is_empty()) {
-        return if p.is_absolute() {
+        let p = if p.is_absolute() {
             p.to_path_buf()
         } else {
             workspace.join(p)
         };
+        return (p, DataRootFrom::Config);
     }
     if let Some(env) = std::env::var_os(DATA_ENV).filter(|v| !v.is_empty()) {
-        return PathBuf::from(env);
+        return (PathBuf::from(env), DataRootFrom::Env);
     }
-    workspace.join("..").join("shared").join("data")
+    (
+        workspace.join("..").join("shared").join("data"),
+        DataRootFrom::Default,
+    )
 }
 
 /// Resolves a configured output path against the workspace root.

@@ -282,6 +282,46 @@ impl Locations {
             workspace,
         }
     }
+
+    /// [`Self::resolve`], refusing a dataset directory that was named and is not there: a
+    /// `paths.data_root` or `$HUMAN2NAV_DATA` that does not exist is an error naming it and
+    /// the path (a typo must not turn a build on real data into one on synthetic crowds).
+    /// Only the default directory may be missing; the synthetic fallback then applies.
+    pub fn resolve_checked(cfg: &DataConfig, config_path: &Path) -> Result<Self, DataError> {
+        let loc = Self::resolve(cfg, config_path);
+        if cfg.sources.synthetic_only || loc.data_root.is_dir() {
+            return Ok(loc);
+        }
+        let (_, from) = paths::data_root_from(Some(&cfg.paths.data_root), &loc.workspace);
+        let named = match from {
+            paths::DataRootFrom::Config => "paths.data_root".to_string(),
+            paths::DataRootFrom::Env => format!("${} (paths.data_root is unset)", paths::DATA_ENV),
+            paths::DataRootFrom::Default => return Ok(loc),
+        };
+        Err(DataError::Config {
+            path: config_path.to_path_buf(),
+            message: format!(
+                "{named}: the dataset directory {} does not exist (leave it unset for the \
+                 synthetic fallback, or set [sources] synthetic_only = true)",
+                loc.data_root.display()
+            ),
+        })
+    }
+
+    /// Whether the real datasets are read: the directory exists and `[sources]
+    /// synthetic_only` is off.
+    pub fn datasets(&self, cfg: &DataConfig) -> bool {
+        !cfg.sources.synthetic_only && self.data_root.is_dir()
+    }
+
+    /// Why the synthetic scenes are used instead of the datasets.
+    fn synthetic_reason(&self, cfg: &DataConfig) -> String {
+        if cfg.sources.synthetic_only {
+            "[sources] synthetic_only = true".to_string()
+        } else {
+            format!("no datasets at {}", self.data_root.display())
+        }
+    }
 }
 
 /// The scenes of a job: real ones when the dataset directory exists, else (if allowed) the
@@ -291,8 +331,8 @@ pub fn scenes(
     loc: &Locations,
     progress: &dyn Progress,
 ) -> Result<(Vec<Scene>, String, Vec<String>), DataError> {
-    if !loc.data_root.is_dir() {
-        if !cfg.sources.synthetic_fallback {
+    if !loc.datasets(cfg) {
+        if !cfg.sources.synthetic_fallback && !cfg.sources.synthetic_only {
             return Err(DataError::NoData(format!(
                 "{} does not exist (set paths.data_root or ${})",
                 loc.data_root.display(),
@@ -311,8 +351,8 @@ pub fn scenes(
             .flatten()
             .collect();
         let note = format!(
-            "no datasets at {}: using {} synthetic social-force scenes",
-            loc.data_root.display(),
+            "{}: using {} synthetic social-force scenes",
+            loc.synthetic_reason(cfg),
             scenes.len()
         );
         return Ok((scenes, "synthetic".into(), vec![note]));
@@ -481,11 +521,11 @@ pub fn build_episodes(
     progress: &dyn Progress,
 ) -> Result<EpisodeReport, DataError> {
     let opts = &cfg.episodes;
-    if !loc.data_root.is_dir() {
+    if !loc.datasets(cfg) {
         let episodes = synthetic_fallback(cfg, loc, opts.seed, progress)?;
         let note = format!(
-            "no datasets at {}: synthetic social-force episodes",
-            loc.data_root.display()
+            "{}: synthetic social-force episodes",
+            loc.synthetic_reason(cfg)
         );
         return Ok(EpisodeReport {
             suite: EpisodeSuite::new("synthetic", episodes),
@@ -572,16 +612,16 @@ pub fn build_interaction_episodes(
     let opts = &cfg.interaction;
     // Read first, so that a bad file is refused whether or not the datasets are there.
     let excluded = excluded_episode_ids(&opts.exclude_episodes, &loc.workspace)?;
-    if !loc.data_root.is_dir() {
+    if !loc.datasets(cfg) {
         let seed = match split {
             Split::Val => geometry.seed ^ 0x5641_4C00, // other crowds than the test fallback
             _ => geometry.seed,
         };
         let episodes = synthetic_fallback(cfg, loc, seed, progress)?;
         let note = format!(
-            "no datasets at {}: synthetic social-force episodes of the paper protocol, NOT \
+            "{}: synthetic social-force episodes of the paper protocol, NOT \
              interaction-rich (no time shift, no interaction criterion)",
-            loc.data_root.display()
+            loc.synthetic_reason(cfg)
         );
         let mut notes = vec![note];
         if !opts.exclude_episodes.is_empty() {
@@ -664,7 +704,7 @@ fn synthetic_fallback(
     seed: u64,
     progress: &dyn Progress,
 ) -> Result<Vec<crate::scenario::Episode>, DataError> {
-    if !cfg.sources.synthetic_fallback {
+    if !cfg.sources.synthetic_fallback && !cfg.sources.synthetic_only {
         return Err(DataError::NoData(format!(
             "{} does not exist",
             loc.data_root.display()

@@ -325,3 +325,26 @@ fn data_config_counts_and_times_are_bounded() {
     }
     assert!(DataConfig::default().validate().is_ok());
 }
+
+/// A dataset folder that was named and is missing is an error naming the field and the path;
+/// with `synthetic_only` the datasets are not looked for at all.
+#[test]
+fn a_named_dataset_folder_that_is_missing_is_an_error() {
+    let dir = common::scratch("named-root");
+    std::fs::create_dir_all(&dir).unwrap();
+    let config = dir.join("data.toml");
+    std::fs::write(&config, "[paths]\ndata_root = \"no/such/datsets\"\n").unwrap();
+    let cfg = DataConfig::load(&config).unwrap();
+    let e = message(Locations::resolve_checked(&cfg, &config).unwrap_err());
+    assert!(
+        e.contains("data.toml")
+            && e.contains("paths.data_root")
+            && e.contains("no/such/datsets")
+            && e.contains("does not exist"),
+        "{e}"
+    );
+    let mut only = cfg.clone();
+    only.sources.synthetic_only = true;
+    let loc = Locations::resolve_checked(&only, &config).unwrap();
+    assert!(!loc.datasets(&only));
+}

@@ -640,6 +640,12 @@ pub fn ensure_episode_files(
     };
     let dcfg = DataConfig::load(data_config).map_err(|e| data_err(e.to_string()))?;
     let loc = Locations::resolve(&dcfg, data_config);
+    if dcfg.sources.synthetic_only {
+        return Ok(Some(format!(
+            "[sources] synthetic_only = true in {}",
+            data_config.display()
+        )));
+    }
     if !loc.data_root.is_dir() {
         return Ok(Some(format!(
             "no datasets at {} (set ${} or paths.data_root in {})",

@@ -146,9 +146,21 @@ pub fn start_pose(episode: &Episode, heading: StartHeading) -> Pose2 {
     }
 }
 
-/// The observation of one planning step on `episode` (see the module docs).
+/// The observation of one planning step on `episode` (see the module docs); a time past the
+/// episode's end (its `time_budget`) is an error naming the episode and its length.
 pub fn observation_at(episode: &Episode, opts: &StepOptions) -> Result<Observation, SimError> {
     opts.validate()?;
+    // Past the end the replayed crowd has left: a plan there would be among nobody.
+    if opts.time > episode.time_budget {
+        return Err(SimError::setting(
+            "step",
+            "time",
+            format!(
+                "{} s is past the end of episode `{}`, which lasts {} s",
+                opts.time, episode.id, episode.time_budget
+            ),
+        ));
+    }
     let ego = start_pose(episode, opts.start_heading);
     let agents = CrowdReplay::new(episode).observe(
         opts.time,
@@ -937,6 +949,17 @@ mod tests {
             ..StepOptions::default()
         };
         assert!(observation_at(&ep, &bad).is_err());
+        // The last instant of the episode is fine; past it is an error naming its length.
+        let at = |time| StepOptions {
+            time,
+            ..StepOptions::default()
+        };
+        assert!(observation_at(&ep, &at(12.5)).is_ok());
+        let late = observation_at(&ep, &at(99.0)).unwrap_err().to_string();
+        assert!(
+            late.contains("step.time") && late.contains("`test/0`, which lasts 12.5 s"),
+            "{late}"
+        );
     }
 
     #[test]

@@ -546,11 +546,10 @@ pub use human2nav_core::fileset::MANIFEST_FILE;
 /// * `ckpt` with a manifest that matches its files: that set;
 /// * otherwise `<ckpt>.old` with a matching manifest (a save was interrupted between its two
 ///   renames): that set;
-/// * `ckpt` without a manifest but with both files (written before checkpoints had
-///   manifests): that set, unverified;
 /// * no `ckpt` folder (or an empty one): `None`, a fresh start;
-/// * anything else (a file missing, sizes or checksums that disagree): an error naming the
-///   folder and what is wrong. Training never restarts from step 0 on its own.
+/// * anything else (a file missing, sizes or checksums that disagree, both files without a
+///   manifest, a `ckpt` that is a file or a loop of links): an error naming the folder and
+///   what is wrong. Training never restarts from step 0 on its own.
 pub fn find_checkpoint(ckpt: &Path) -> Result<Option<PathBuf>, CfmError> {
     fileset::find_complete(ckpt, &CHECKPOINT_FILES).map_err(|e| match e {
         SetError::Incomplete { path, reason } => CfmError::Checkpoint {

@@ -910,9 +910,13 @@ mod tests {
         assert!(err(&ckpt).contains("state.toml is missing"));
         std::fs::remove_file(ckpt.join(MANIFEST_FILE)).unwrap();
         assert!(err(&ckpt).contains("state.toml is missing"));
-        // Both files without a manifest: a set written before manifests existed.
+        // Both files without a manifest: nothing checks them, so no resume (and no restart).
         std::fs::write(ckpt.join("state.toml"), &state).unwrap();
-        assert_eq!(find_checkpoint(&ckpt).unwrap(), Some(ckpt.clone()));
+        let e = err(&ckpt);
+        assert!(
+            e.contains("manifest.toml is missing") && e.contains("--fresh"),
+            "{e}"
+        );
 
         // Interrupted between the two renames: only `<ckpt>.old` is complete.
         fileset::write_manifest(&ckpt, &CHECKPOINT_FILES, tr.step()).unwrap();

@@ -20,21 +20,46 @@ torch_version=2.13.0
 
 log() { printf '[dev.sh] %s\n' "$*" >&2; }
 
+torch_ready() {
+    [ -x "$venv/bin/python3" ] &&
+        "$venv/bin/python3" -c "import torch, sys; sys.exit(torch.__version__.split('+')[0] != '$torch_version')" 2>/dev/null
+}
+
 ensure_torch() {
-    if [ -x "$venv/bin/python3" ] &&
-        "$venv/bin/python3" -c "import torch, sys; sys.exit(torch.__version__.split('+')[0] != '$torch_version')" 2>/dev/null; then
-        return
-    fi
+    torch_ready && return
     command -v python3 >/dev/null || { log "python3 is required to install PyTorch"; exit 1; }
-    log "installing PyTorch $torch_version from PyPI into $venv (one time, about 5 GB)"
     mkdir -p "$cache"
-    rm -rf "$venv.partial"
-    python3 -m venv "$venv.partial"
-    "$venv.partial/bin/pip" install --quiet --disable-pip-version-check "torch==$torch_version"
-    rm -rf "$venv"
-    mv "$venv.partial" "$venv"
-    # A venv's scripts name their own path; re-create them at the final location.
-    python3 -m venv --upgrade "$venv" >/dev/null
+    # Two runs on a fresh machine: the second waits on the lock for the first's install and
+    # then finds it done. Without flock, each installs into a folder of its own and the first
+    # to finish renames it into place (a rename onto a non-empty folder fails; the later one
+    # then discards its copy).
+    if command -v flock >/dev/null; then
+        exec 9>"$venv.lock"
+        if ! flock -n 9; then
+            log "another run is installing PyTorch into $venv; waiting for it"
+            flock 9
+        fi
+        if torch_ready; then
+            exec 9>&-
+            return
+        fi
+        rm -rf "$venv".partial.* # left by runs that were killed (none runs: we hold the lock)
+    fi
+    log "installing PyTorch $torch_version from PyPI into $venv (one time, about 5 GB)"
+    # A venv left by an older or broken install (the check above failed on it).
+    [ -e "$venv" ] && rm -rf "$venv"
+    local partial="$venv.partial.$$"
+    rm -rf "$partial"
+    python3 -m venv "$partial"
+    "$partial/bin/pip" install --quiet --disable-pip-version-check "torch==$torch_version"
+    if python3 -c 'import os, sys; os.rename(sys.argv[1], sys.argv[2])' "$partial" "$venv" 2>/dev/null; then
+        # A venv's scripts name their own path; re-create them at the final location.
+        python3 -m venv --upgrade "$venv" >/dev/null
+    else
+        log "another run installed $venv first; using it"
+        rm -rf "$partial"
+    fi
+    exec 9>&-
 }
 
 ensure_python_tools() {

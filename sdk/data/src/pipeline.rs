@@ -418,12 +418,18 @@ pub struct BuildReport {
     pub counts: BTreeMap<(String, Split), usize>,
 }
 
-/// Loads, resamples and converts every scene, and writes the tuple cache.
+/// Loads, resamples and converts every scene, and writes the tuple cache, holding the cache
+/// folder's [`DirLock`](human2nav_core::lock::DirLock) throughout (a second build of the same
+/// folder is an error naming the folder and the build that holds it).
 pub fn build_cache(
     cfg: &DataConfig,
     loc: &Locations,
     progress: &dyn Progress,
 ) -> Result<BuildReport, DataError> {
+    // One build per cache folder: two builds interleaving their split files and manifests
+    // left a cache that did not open. The second is refused before it reads anything.
+    let _lock = human2nav_core::lock::DirLock::acquire(&loc.cache_dir, "human2nav data build")
+        .map_err(|e| DataError::io(&loc.cache_dir, e))?;
     let (scenes, source, notes) = scenes(cfg, loc, progress)?;
     if scenes.len() > u16::MAX as usize {
         return Err(DataError::option("sources", "more than 65535 scenes"));

@@ -348,3 +348,29 @@ fn a_named_dataset_folder_that_is_missing_is_an_error() {
     let loc = Locations::resolve_checked(&only, &config).unwrap();
     assert!(!loc.datasets(&only));
 }
+
+/// Two builds of one cache folder: the second is refused before it reads anything, naming the
+/// folder and the build that holds it, and the first build's cache opens.
+#[test]
+fn a_second_build_of_one_cache_is_refused_while_the_first_runs() {
+    let mut cfg = DataConfig::default();
+    cfg.sources.synthetic_only = true;
+    cfg.sources.synthetic_scenes = 4;
+    let dir = common::scratch("locked-cache");
+    let loc = Locations {
+        workspace: dir.clone(),
+        data_root: dir.join("no-datasets-here"),
+        cache_dir: dir.join("cache"),
+        episodes: dir.join("episodes.json"),
+    };
+    let held = human2nav_core::lock::DirLock::acquire(&loc.cache_dir, "the first build").unwrap();
+    let e = message(pipeline::build_cache(&cfg, &loc, &NoProgress).unwrap_err());
+    assert!(
+        e.contains("cache") && e.contains(".human2nav.lock") && e.contains("the first build"),
+        "{e}"
+    );
+    drop(held);
+    let report = pipeline::build_cache(&cfg, &loc, &NoProgress).unwrap();
+    assert!(TupleCache::open(report.cache.dir()).is_ok());
+    assert!(!loc.cache_dir.join(".human2nav.lock").exists());
+}

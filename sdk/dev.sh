@@ -128,6 +128,8 @@ case "${1:-}" in
         # the dependency graph twice. The plugin libraries the tests load are built here too.
         cargo build --workspace --all-targets
         cargo test --workspace
+        # The API documentation builds without a warning (broken links, stray HTML).
+        RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
         # Planning without libtorch: the flow crate's own tests without its `torch` feature,
         # the C library installed to a prefix and used from C and C++ (pkg-config, CMake), and
         # the Python wheel in a virtualenv without torch.

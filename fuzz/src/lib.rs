@@ -2,7 +2,7 @@
 //!
 //! Each [`Target`] has seeds (the shipped files, or small inline samples of a dataset format)
 //! and a function that feeds one input to the real reader: through a temporary regular file
-//! where the reader takes a path, else directly. Inputs are seeds changed by [`mutate`]: bit and
+//! where the reader takes a path, else directly. Inputs are seeds changed by [`mutate()`]: bit and
 //! byte flips, insertions, truncation, numbers replaced by extremes (`1e300`, `NaN`, `-0`,
 //! `2^63`, ...), values of the wrong type, duplicated and dropped lines (duplicated keys), deep
 //! nesting, long strings and splices of other seeds.

@@ -4,7 +4,7 @@
 //! * [`state`]: robot and human states and the rotation into the robot-centric frame.
 //! * [`net`]: the value network (pairwise embedding, attention pooling, value head) in tch.
 //! * [`action`]: the 81 holonomic actions (5 exponentially spaced speeds × 16 headings + stop).
-//! * [`env`]: the circle-crossing environment with ORCA humans, and the CrowdNav reward.
+//! * [`env`](mod@env): the circle-crossing environment with ORCA humans, and the CrowdNav reward.
 //! * [`policy`]: the one-step look-ahead action selection.
 //! * [`eval`]: whole episodes with SARL, straight-to-goal or ORCA, and outcome rates.
 //! * [`train`]: imitation on ORCA demonstrations, then TD learning; checkpoints and resume.

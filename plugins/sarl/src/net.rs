@@ -8,7 +8,7 @@
 //!   ReLU); weights `w = softmax(α)` over the humans, so `Σ_i w_i = 1`;
 //! * crowd feature `c = Σ_i w_i h_i`;
 //! * value `V = mlp3([self state, c])`, the self state being the first
-//!   [`SELF_DIM`](crate::state::SELF_DIM) entries of a joint state.
+//!   [`SELF_DIM`] entries of a joint state.
 //!
 //! The layer sizes are CrowdNav's defaults (see [`NetConfig::default`]): mlp1 13 → 150 → 100,
 //! mlp2 100 → 100 → 50, attention 200 → 100 → 100 → 1 (with the global state), mlp3

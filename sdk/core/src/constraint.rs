@@ -99,6 +99,66 @@ pub enum ConstraintError {
 }
 
 /// One additive term of the feasibility cost.
+///
+/// `evaluate` writes one cost per trajectory and its gradient with respect to every pose value.
+/// A term that penalises the squared distance of each trajectory's last pose from the origin:
+///
+/// ```
+/// use human2nav_core::constraint::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
+/// use human2nav_core::{Limits, Twist2};
+///
+/// struct EndNearOrigin;
+///
+/// impl ConstraintTerm for EndNearOrigin {
+///     fn name(&self) -> &str {
+///         "end_near_origin"
+///     }
+///
+///     fn evaluate(
+///         &self,
+///         batch: TrajBatch<'_>,
+///         _ctx: &ConstraintContext<'_>,
+///         cost: &mut [f64],
+///         grad: &mut [f64],
+///     ) -> Result<(), ConstraintError> {
+///         grad.fill(0.0);
+///         let per = batch.horizon * 3;
+///         for (b, c) in cost.iter_mut().enumerate() {
+///             let last = (b + 1) * per - 3;
+///             let (x, y) = (batch.data[last], batch.data[last + 1]);
+///             *c = x * x + y * y;
+///             grad[last] = 2.0 * x;
+///             grad[last + 1] = 2.0 * y;
+///         }
+///         Ok(())
+///     }
+/// }
+///
+/// let poses = [0.0, 0.0, 0.0, 3.0, 4.0, 0.0]; // one trajectory of two poses
+/// let limits = Limits {
+///     v_max: 1.5,
+///     v_reverse_max: 0.5,
+///     a_max: 1.0,
+///     omega_max: 2.0,
+///     kappa_max: None,
+///     lateral_speed_max: 0.0,
+///     coupled: None,
+/// };
+/// let ctx = ConstraintContext {
+///     dt: 0.1,
+///     limits: &limits,
+///     initial_velocity: Twist2::ZERO,
+///     agents: &[],
+///     scene: Default::default(),
+/// };
+/// let (mut cost, mut grad) = ([0.0], [0.0; 6]);
+/// EndNearOrigin.evaluate(TrajBatch::new(&poses, 1, 2)?, &ctx, &mut cost, &mut grad)?;
+/// assert_eq!(cost, [25.0]);
+/// assert_eq!(grad[3..5], [6.0, 8.0]);
+/// # Ok::<(), ConstraintError>(())
+/// ```
+///
+/// Written as a plugin, the same term goes behind `human2nav_plugin::export_plugin!`.
 pub trait ConstraintTerm: Send + Sync {
     /// A short, stable name (`speed`, `acceleration`, `clearance`, ...).
     fn name(&self) -> &str;

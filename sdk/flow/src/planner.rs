@@ -588,6 +588,21 @@ impl RobotPlanner {
 
     /// Loads the robot profile at `robot_toml` and the model folder `model_dir` (run by the
     /// native backend), and builds the planner.
+    ///
+    /// ```
+    /// use human2nav_core::{Observation, Planner};
+    /// use human2nav_flow::planner::{PlannerConfig, RobotPlanner};
+    ///
+    /// let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    /// let config = PlannerConfig::load(&root.join("sdk/configs/planner.toml"))?;
+    /// let robot = root.join("robots/diablo/robot.toml");
+    /// let mut diablo = RobotPlanner::load(&robot, &config.model_dir(&root), config.human2nav)?;
+    /// // The robot at rest at the origin, its goal 4 m ahead, nobody around.
+    /// let obs = Observation { goal: [4.0, 0.0], ..Observation::default() };
+    /// let plan = diablo.planner.plan(&obs)?;
+    /// assert!(plan.poses.len() > 1 && plan.poses.last().is_some_and(|p| p.x > 0.0));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
     pub fn load(
         robot_toml: &Path,
         model_dir: &Path,

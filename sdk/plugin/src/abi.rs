@@ -562,7 +562,7 @@ pub const H2N_OBSTACLE_SEGMENT: u32 = 1;
 /// [`H2nObstacle::kind`]: a simple polygon of `vertex_count ≥ 3` vertices.
 pub const H2N_OBSTACLE_POLYGON: u32 = 2;
 
-/// A static obstacle in the world frame ([`human2nav_core::Obstacle`]); the fields its kind
+/// A static obstacle in the world frame ([`human2nav_core::obstacle::Obstacle`]); the fields its kind
 /// does not use are zero (ABI version 2).
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
@@ -588,7 +588,7 @@ pub struct H2nObstacle {
 }
 
 /// An occupancy grid in the layout of `nav_msgs/OccupancyGrid`
-/// ([`human2nav_core::OccupancyGrid`]; ABI version 2).
+/// ([`human2nav_core::obstacle::OccupancyGrid`]; ABI version 2).
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct H2nOccupancyGrid {

@@ -2460,7 +2460,7 @@ impl Planner for PluginPlanner {
 pub mod fuzzing {
     use super::*;
 
-    /// Validates an entry table exactly as after `dlopen` ([`PluginLibrary::from_entry`]) and
+    /// Validates an entry table exactly as after `dlopen` (`PluginLibrary::from_entry`) and
     /// returns the factories it declares, with the checks.
     ///
     /// # Safety
@@ -2475,7 +2475,7 @@ pub mod fuzzing {
         (r.map(|lib| lib.factories), checks)
     }
 
-    /// Validates a vtable of `kind` ([`checked_vtable`]); an unknown kind is an error.
+    /// Validates a vtable of `kind` (`checked_vtable`); an unknown kind is an error.
     ///
     /// # Safety
     /// As for `checked_vtable`, except that the memory need only stay valid for this call.

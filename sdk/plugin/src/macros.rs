@@ -9,14 +9,54 @@
 /// [`Embodiment`](human2nav_core::embodiment::Embodiment) or
 /// [`Planner`](human2nav_core::Planner)) and `E: Into<InitError>`.
 ///
-/// ```ignore
+/// ```
+/// use human2nav_core::constraint::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
+/// use human2nav_plugin::{InitError, PluginInit};
+///
+/// /// A flat cost per trajectory, set by the `cost` key of the plugin's TOML configuration.
+/// struct Flat(f64);
+///
+/// impl Flat {
+///     fn from_init(init: &PluginInit<'_>) -> Result<Self, InitError> {
+///         #[derive(serde::Deserialize)]
+///         #[serde(deny_unknown_fields)]
+///         struct Config {
+///             cost: f64,
+///         }
+///         let config: Config = init.config()?;
+///         if !config.cost.is_finite() {
+///             return Err(InitError::invalid("cost", "must be finite"));
+///         }
+///         Ok(Flat(config.cost))
+///     }
+/// }
+///
+/// impl ConstraintTerm for Flat {
+///     fn name(&self) -> &str {
+///         "flat"
+///     }
+///
+///     fn evaluate(
+///         &self,
+///         _batch: TrajBatch<'_>,
+///         _ctx: &ConstraintContext<'_>,
+///         cost: &mut [f64],
+///         grad: &mut [f64],
+///     ) -> Result<(), ConstraintError> {
+///         cost.fill(self.0);
+///         grad.fill(0.0);
+///         Ok(())
+///     }
+/// }
+///
 /// human2nav_plugin::export_plugin! {
-///     name: "personal_space",
-///     version: env!("CARGO_PKG_VERSION"),
+///     name: "flat_cost",
+///     version: "0.1.0",
 ///     factories: [
-///         constraint("personal_space", "soft personal-space clearance") => PersonalSpace::from_init,
+///         constraint("flat", "the same cost for every trajectory") => Flat::from_init,
 ///     ],
 /// }
+/// # fn main() {}
 /// ```
 ///
 /// The crate must be built as a `cdylib` (`crate-type = ["cdylib", "rlib"]` keeps it usable as

@@ -39,7 +39,7 @@ pub struct BenchPlan<'a> {
     pub command: String,
     /// Worker threads (`None`: rayon's default, one per core; at most [`MAX_THREADS`]).
     pub threads: Option<usize>,
-    /// Failed runs drawn per method (see [`failure_figures`]; 0: none).
+    /// Failed runs drawn per method (see `failure_figures`; 0: none).
     pub failures: usize,
     /// Write every run as an MCAP file under this folder ([`crate::record`]; `None`: none).
     pub record: Option<PathBuf>,

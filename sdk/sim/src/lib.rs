@@ -13,7 +13,7 @@
 //! * [`oracle`]: the clairvoyant yardstick (reads the recorded crowd's future).
 //! * [`foresight`]: a yardstick predictor for a planner under test, between constant velocity
 //!   and the recorded future.
-//! * [`bench`]: methods as planner factories, suites, the parallel deterministic runner.
+//! * [`bench`](mod@bench): methods as planner factories, suites, the parallel deterministic runner.
 //! * [`config`]: the benchmark TOML and suite building.
 //! * [`report`], [`figures`]: `results.csv`, `report.md` and the PNGs; [`stats`]: the paired
 //!   tests, intervals and density bins the report uses.

@@ -440,6 +440,17 @@ struct RawConstraint {
 
 impl RobotProfile {
     /// Reads, validates and resolves a `robot.toml` and its URDF.
+    ///
+    /// ```
+    /// use human2nav_core::robot::RobotProfile;
+    ///
+    /// let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    /// let diablo = RobotProfile::load(&root.join("robots/diablo/robot.toml"))?;
+    /// assert_eq!(diablo.name, "diablo");
+    /// // Each limit is the tighter of the profile's value and what the URDF allows.
+    /// assert!(diablo.limits.v_max > 0.0 && diablo.limits.omega_max > 0.0);
+    /// # Ok::<(), human2nav_core::robot::ProfileError>(())
+    /// ```
     pub fn load(path: &Path) -> Result<RobotProfile, ProfileError> {
         let text = crate::input::read_user_file(path, "robot profile", MAX_PROFILE_BYTES).map_err(
             |source| ProfileError::Read {

@@ -353,7 +353,7 @@ impl CfmModel {
     }
 
     /// Network features `[K, 5, T]` of metric poses (flat `[K, T, 3]`), in the model's kind:
-    /// the same values as [`trajectory_features`] of the normalised poses.
+    /// the same values as [`trajectory_features`](super::trajectory_features) of the normalised poses.
     pub fn feature_tensor(&self, x: &[f64]) -> Result<(Tensor, usize), FlowError> {
         let t = self.card.net.horizon;
         let k = io_map::batch_of(x.len(), t)?;

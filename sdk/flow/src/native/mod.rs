@@ -3,8 +3,8 @@
 //! A planning call makes a few dozen network calls on batches of 4–16 trajectories of 32
 //! poses. Through libtorch each call is some 150 small operators, and on tensors this small the
 //! per-operator dispatch, allocation and oneDNN set-up cost more than the arithmetic. The native
-//! path runs the same network ([`net`]: the same layers, read by name from the same
-//! safetensors file) as a fixed sequence of batched kernels ([`kernels`]: one SGEMM per
+//! path runs the same network (`net`: the same layers, read by name from the same
+//! safetensors file) as a fixed sequence of batched kernels (`kernels`: one SGEMM per
 //! convolution over the whole batch, group normalisation and the activation), with every buffer
 //! reused from call to call. It computes the forward pass and the gradient of its input (the
 //! vector-Jacobian product guidance needs); weight gradients, and so training, stay with tch.

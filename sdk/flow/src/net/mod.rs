@@ -10,7 +10,7 @@
 //!   embedding, goal embedding]`.
 //! * BEV encoder: three stride-2 3×3 convolutions with GroupNorm and the activation, an adaptive average
 //!   pool to 4×4 and a linear layer. The activation is SiLU by default (Mish, as in
-//!   Diffusion Policy, is available; see [`Activation`]). Goal encoder: a two-layer MLP on
+//!   Diffusion Policy, is available; see [`Activation`](crate::config::Activation)). Goal encoder: a two-layer MLP on
 //!   `(g_x, g_y)/goal_scale, (v_x, v_y)/speed_scale`. Time: sinusoidal embedding of `100·t`
 //!   followed by a two-layer MLP.
 //!

@@ -9,7 +9,8 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use human2nav_core::{AgentState, Limits, Observation, Planner, Pose2, Twist2};
 use human2nav_mppi::{MppiConfig, MppiPlanner};
-use human2nav_orca::{OrcaConfig, OrcaPlanner};
+// ORCA without its plugin entry point: two plugin crates in one binary would define it twice.
+use human2nav_orca_core::{OrcaConfig, OrcaPlanner};
 use std::f64::consts::TAU;
 use std::hint::black_box;
 

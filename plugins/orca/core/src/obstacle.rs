@@ -283,7 +283,7 @@ impl Obstacles {
         if t > 1.0 && t_right < 0.0 {
             return Some(on_circle(right_cutoff));
         }
-        let dist_cutoff = if t < 0.0 || t > 1.0 || same {
+        let dist_cutoff = if !(0.0..=1.0).contains(&t) || same {
             f64::INFINITY
         } else {
             (velocity - (left_cutoff + cutoff * t)).norm_sq()

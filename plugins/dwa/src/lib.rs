@@ -3,16 +3,13 @@
 //! scored by heading, clearance and speed. See `README.md` for the parameters and how they
 //! compare with the paper's and with Nav2's DWB controller.
 //!
-//! The motion model rule and the obstacle and pedestrian geometry are the MPPI plugin's
-//! (`plugins/mppi/src/{kinematics,world}.rs`), compiled here as modules of this crate: one
-//! rule for both planners, and no library linked between two plugins.
+//! The motion model rule and the obstacle and pedestrian geometry are shared with the MPPI
+//! plugin through `human2nav-local-core` (`plugins/local_core`).
 
 pub mod config;
-#[path = "../../mppi/src/kinematics.rs"]
-pub mod kinematics;
 pub mod planner;
-#[path = "../../mppi/src/world.rs"]
-pub mod world;
+
+pub use human2nav_local_core::{kinematics, world};
 
 pub use config::DwaConfig;
 pub use kinematics::{Bounds, MotionModel, motion_model};

@@ -5,13 +5,13 @@
 //!
 //! * [`kinematics`]: the motion model read off the robot's limits, and the velocity bounds;
 //! * [`world`]: static obstacles and occupancy cells near the robot, pedestrians at constant
-//!   velocity;
+//!   velocity (both from `human2nav-local-core`, shared with the DWA plugin);
 //! * [`config`]: the settings; [`planner`]: the algorithm.
 
 pub mod config;
-pub mod kinematics;
 pub mod planner;
-pub mod world;
+
+pub use human2nav_local_core::{kinematics, world};
 
 pub use config::MppiConfig;
 pub use kinematics::{Bounds, MotionModel, motion_model};

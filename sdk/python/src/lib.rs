@@ -229,6 +229,7 @@ fn plan_dict<'py>(py: Python<'py>, plan: &Plan) -> PyResult<Bound<'py, PyDict>> 
     d.set_item("guidance_iterations", info.guidance_iterations)?;
     d.set_item("fallback", info.fallback)?;
     d.set_item("notes", info.notes.clone())?;
+    d.set_item("warnings", info.warnings.clone())?;
     if let Some(s) = &info.stages {
         let stages = PyDict::new(py);
         for (name, p) in [

@@ -168,8 +168,9 @@ class Plan:
     """``(G, T + 1, 3)``: the guided samples (empty when guidance is off)."""
     info: Dict[str, Any]
     """``selected``, ``phi_before``, ``phi_after``, ``guidance_iterations``, ``fallback``,
-    ``notes`` and ``stages`` (how far sampling, guidance and correction got, as
-    ``(done, planned)``, and which stage a budget cut short)."""
+    ``notes``, ``warnings`` (the robot started inside an obstacle or beyond its limits) and
+    ``stages`` (how far sampling, guidance and correction got, as ``(done, planned)``, and
+    which stage a budget cut short)."""
 
     @property
     def times(self) -> np.ndarray:
@@ -260,7 +261,7 @@ class Planner:
         )
         info = {k: raw[k] for k in (
             "selected", "phi_before", "phi_after", "guidance_iterations", "fallback", "notes",
-            "stages",
+            "warnings", "stages",
         )}
         return Plan(
             t0=raw["t0"],

@@ -23,7 +23,7 @@ use human2nav_data::loaders::{eth, sgan, ucy};
 use human2nav_data::tuples::{CompactTuple, Split, TupleOptions, TupleStats};
 use human2nav_data::{Manifest, SceneInfo, TupleCache};
 use human2nav_flow::ModelCard;
-use human2nav_flow::planner::{Backend, PlannerConfig, load_model};
+use human2nav_flow::planner::{Backend, PlannerConfig, RobotPlanner, load_model};
 use human2nav_plugin::resolve::resolve_library_path;
 use human2nav_plugin::{PluginHost, PluginLibrary};
 use serde_json::Value;
@@ -160,6 +160,14 @@ fn robot_edit(from: &'static str, to: &'static str) -> impl Fn(&Path) -> Result<
     move |dir| {
         assert!(DIABLO.contains(from), "diablo's robot.toml has no `{from}`");
         robot_with(dir, &DIABLO.replacen(from, to, 1), None)
+    }
+}
+
+/// Diablo with `from` replaced by `to` (which must occur) in its URDF.
+fn urdf_edit(from: &'static str, to: &'static str) -> impl Fn(&Path) -> Result<(), String> {
+    move |dir| {
+        assert!(DIABLO_URDF.contains(from), "diablo's URDF has no `{from}`");
+        robot_with(dir, DIABLO, Some(&DIABLO_URDF.replacen(from, to, 1)))
     }
 }
 
@@ -426,6 +434,86 @@ fn robot_cases() -> Vec<Case> {
             let end = DIABLO.find("[controller]").expect("controller table");
             robot_with(d, &format!("{}{}", &DIABLO[..start], &DIABLO[end..]), None)
         }),
+        err(
+            a,
+            "`v_max = 1e-300`",
+            "accepted: infinite costs (1/limit overflows)",
+            &["limits.v_max", "1e-300"],
+            robot_edit("v_max = 1.5", "v_max = 1e-300"),
+        ),
+        err(
+            a,
+            "`v_max = 1e300`",
+            "accepted",
+            &["limits.v_max", "1e300"],
+            robot_edit("v_max = 1.5", "v_max = 1e300"),
+        ),
+        err(
+            a,
+            "controller gain `k_x = 1e300`",
+            "accepted",
+            &["controller.k_x", "1e3"],
+            robot_edit("k_x = 1.5", "k_x = 1e300"),
+        ),
+        err(
+            a,
+            "guidance `gamma = 1e-300`",
+            "accepted: Φ's softplus overflowed",
+            &["cost.gamma", "1e-300"],
+            robot_edit("gamma = 10.0", "gamma = 1e-300"),
+        ),
+        err(
+            a,
+            "the same wheel joint listed twice",
+            "accepted: the wheel counted twice",
+            &[
+                "embodiment.wheel_joints[1]",
+                "already embodiment.wheel_joints[0]",
+            ],
+            robot_edit(
+                "\"right_wheel_joint\"",
+                "\"left_wheel_joint\", \"right_wheel_joint\"",
+            ),
+        ),
+        err(
+            a,
+            "two wheel joints at the same position",
+            "accepted: a track of 0 m",
+            &["embodiment.wheel_joints[1]", "sits where wheel_joints[0]"],
+            urdf_edit("xyz=\"0 -0.24 0.09\"", "xyz=\"0 0.24 0.09\""),
+        ),
+        err(
+            a,
+            "URDF joints forming a cycle",
+            "accepted",
+            &["diablo.urdf", "cycle"],
+            urdf_edit(
+                "</robot>",
+                "<joint name=\"loop\" type=\"fixed\"><parent link=\"left_wheel\"/>\
+                 <child link=\"base_link\"/></joint></robot>",
+            ),
+        ),
+        err(
+            a,
+            "URDF link defined twice",
+            "accepted: the last one won",
+            &["diablo.urdf", "link `left_wheel`", "defined twice"],
+            urdf_edit("</robot>", "<link name=\"left_wheel\"/></robot>"),
+        ),
+        err(
+            a,
+            "URDF wheel `velocity = \"nan\"`",
+            "accepted: the cap was dropped silently",
+            &["joint `left_wheel_joint`", "velocity=\"NaN\""],
+            urdf_edit("velocity=\"22.0\"", "velocity=\"nan\""),
+        ),
+        err(
+            a,
+            "URDF wheel `velocity = \"-22\"`",
+            "accepted: the cap was dropped silently",
+            &["joint `left_wheel_joint`", "velocity=\"-22\""],
+            urdf_edit("velocity=\"22.0\"", "velocity=\"-22\""),
+        ),
         covered(
             a,
             "plugin embodiment naming a missing library, a wrong factory or a bad config",
@@ -458,6 +546,7 @@ const BENCH: &str = include_str!("../../../sdk/configs/bench.toml");
 const DATA: &str = include_str!("../../../sdk/configs/data.toml");
 const GUIDANCE: &str = include_str!("../../../sdk/configs/guidance.toml");
 const SARL: &str = include_str!("../../../sdk/configs/sarl.toml");
+const TRAIN: &str = include_str!("../../../sdk/configs/train.toml");
 
 fn edit(text: &str, from: &str, to: &str) -> String {
     assert!(text.contains(from), "the shipped file has no `{from}`");
@@ -957,6 +1046,52 @@ fn config_cases() -> Vec<Case> {
         ),
         err(
             a,
+            "planner.toml `dt = 0.4` (the model was trained at 0.1 s)",
+            "accepted: every sample replayed four times as fast",
+            &["human2nav.dt", "0.4 s", "0.1 s apart"],
+            |d| {
+                let p = write(d, "planner.toml", edit(PLANNER, "dt = 0.1 ", "dt = 0.4 "));
+                let cfg = PlannerConfig::load(&p).map_err(|e| chain(&e))?;
+                fail(RobotPlanner::load(
+                    &root().join("robots/diablo/robot.toml"),
+                    &cfg.model_dir(&root()),
+                    cfg.human2nav,
+                ))
+            },
+        ),
+        err(
+            a,
+            "train.toml `batch_size = 1000000000`",
+            "12 GB of batch building before it was killed",
+            &["train.batch_size", "largest batch"],
+            |d| {
+                let p = write(
+                    d,
+                    "train.toml",
+                    edit(TRAIN, "batch_size = 128", "batch_size = 1000000000"),
+                );
+                let cfg = human2nav_experiments::train::TrainConfig::load(&p)
+                    .map_err(|e| format!("{e:#}"))?;
+                cfg.validate().map_err(|e| format!("{e:#}"))
+            },
+        ),
+        err(
+            a,
+            "data.toml `data_root` naming a folder that does not exist (`data build`)",
+            "a warning, then a synthetic cache and exit 0",
+            &[
+                "data.toml",
+                "paths.data_root",
+                "no/such/datsets",
+                "does not exist",
+            ],
+            |d| {
+                let p = write(d, "data.toml", "[paths]\ndata_root = \"no/such/datsets\"\n");
+                cli(&["data", "build", "--config", &p.to_string_lossy()])
+            },
+        ),
+        err(
+            a,
             "`baseline eval-sarl --humans 40`",
             NR,
             &["40 humans", "env.human_num", "do not fit"],
@@ -1297,6 +1432,56 @@ fn data_cases() -> Vec<Case> {
                     "2 - the number of splines\n3 - Num of control points\n279.0 -123.0 0 87.3\n",
                 )
             },
+        ),
+        err(
+            a,
+            "UCY spline whose frame jumps backwards",
+            "accepted: the walker went back in time",
+            &["annotation.vsp:5", "comes after frame 20", "backwards"],
+            |d| {
+                vsp(
+                    d,
+                    "1 - the number of splines\n3 - Num of control points\n\
+                     279.0 -123.0 10 87.3\n280.0 -123.0 20 87.3\n281.0 -123.0 5 87.3\n",
+                )
+            },
+        ),
+        err(
+            a,
+            "episode with one agent id twice",
+            "accepted: one person in two places",
+            &[
+                "episodes.json",
+                "agents[1].id",
+                "already the id of agents[0]",
+            ],
+            episode_edit(|e| {
+                if let Some(agents) = e["agents"].as_array_mut() {
+                    let first = agents[0].clone();
+                    agents.push(first);
+                    let n = agents.len();
+                    agents.swap(1, n - 1);
+                }
+            }),
+        ),
+        err(
+            a,
+            "episode agent with no positions",
+            "accepted",
+            &["episodes.json", "agents[0].positions", "no positions"],
+            episode_edit(|e| e["agents"][0]["positions"] = serde_json::json!([])),
+        ),
+        err(
+            a,
+            "episode polygon that crosses itself",
+            "accepted though the format says \"simple polygon\"",
+            &["obstacles[0]", "not a simple polygon", "edge 0"],
+            episode_edit(|e| {
+                e["obstacles"] = serde_json::json!([{
+                    "kind": "polygon",
+                    "vertices": [[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]]
+                }])
+            }),
         ),
         err(a, "homography that is singular", NR, &["H.txt"], |d| {
             fail(Homography::load(&write(
@@ -1966,6 +2151,38 @@ fn resume_cases() -> Vec<Case> {
         ),
         err(
             a,
+            "flow checkpoint with both files and no manifest",
+            "resumed without any check",
+            &["manifest.toml is missing", "--fresh"],
+            flow_checkpoint(
+                &[("state.safetensors", "x"), ("state.toml", "step = 1")],
+                false,
+            ),
+        ),
+        err(
+            a,
+            "flow checkpoint path that is a file",
+            "training restarted from step 0",
+            &["checkpoint", "not a folder"],
+            |d| {
+                let ck = write(d, "checkpoint", "x");
+                fail(human2nav_flow::train::find_checkpoint(&ck))
+            },
+        ),
+        err(
+            a,
+            "flow checkpoint path that is a loop of symbolic links",
+            "training restarted from step 0",
+            &["checkpoint", "symbolic links"],
+            |d| {
+                let (a, b) = (d.join("checkpoint"), d.join("other"));
+                std::os::unix::fs::symlink(&b, &a).map_err(|e| e.to_string())?;
+                std::os::unix::fs::symlink(&a, &b).map_err(|e| e.to_string())?;
+                fail(human2nav_flow::train::find_checkpoint(&a))
+            },
+        ),
+        err(
+            a,
             "SARL checkpoint without `progress.toml`",
             "resumed as \"no checkpoint\": a silent restart at episode 0",
             &["progress.toml is missing", "without --resume"],
@@ -2087,6 +2304,26 @@ fn resume_cases() -> Vec<Case> {
         ),
         err(
             c,
+            "`data build` on a cache another build writes",
+            "both exited 0; 4 of 6 tries left a corrupt cache",
+            &["cache", ".human2nav.lock", "hostile test"],
+            |d| {
+                let cache = d.join("cache");
+                let p = write(
+                    d,
+                    "data.toml",
+                    format!(
+                        "[paths]\ncache_dir = {:?}\n[sources]\nsynthetic_only = true\n\
+                         synthetic_scenes = 2\n",
+                        cache.display().to_string()
+                    ),
+                );
+                let _held = DirLock::acquire(&cache, "hostile test").map_err(|e| e.to_string())?;
+                cli(&["data", "build", "--config", &p.to_string_lossy()])
+            },
+        ),
+        err(
+            c,
             "`baseline train-sarl` on a run folder another run writes",
             NR,
             &["locking the run directory", "hostile test"],
@@ -2106,10 +2343,102 @@ fn resume_cases() -> Vec<Case> {
     ]
 }
 
+/// A planner for diablo with the shipped model and settings, and an observation of it at rest
+/// at the origin, 4 m from its goal.
+fn diablo_planner() -> Result<(RobotPlanner, Observation), String> {
+    let cfg =
+        PlannerConfig::load(&root().join("sdk/configs/planner.toml")).map_err(|e| chain(&e))?;
+    let rp = RobotPlanner::load(
+        &root().join("robots/diablo/robot.toml"),
+        &cfg.model_dir(&root()),
+        cfg.human2nav,
+    )
+    .map_err(|e| chain(&e))?;
+    let obs = Observation {
+        goal: [4.0, 0.0],
+        ..Observation::default()
+    };
+    Ok((rp, obs))
+}
+
+/// Plans for diablo at `obs` edited by `f`; `Ok` when the plan is finite and its warnings
+/// name `warning`, the warnings or the error otherwise.
+fn flagged(f: fn(&mut Observation), warning: &'static str) -> impl Fn(&Path) -> Result<(), String> {
+    move |_| {
+        let (mut rp, mut obs) = diablo_planner()?;
+        f(&mut obs);
+        let plan = rp.planner.plan(&obs).map_err(|e| chain(&e))?;
+        if plan.is_finite() && plan.info.warnings.iter().any(|w| w.contains(warning)) {
+            Ok(())
+        } else {
+            Err(format!("warnings {:?}", plan.info.warnings))
+        }
+    }
+}
+
+/// The cases of one planning call: the robot's own state, and `plan --time`.
+fn planner_call_cases() -> Vec<Case> {
+    let a = "planner calls";
+    vec![
+        err(
+            a,
+            "robot at 100 m/s",
+            "a normal plan, no warning",
+            &["ego velocity is faster than 30 m/s"],
+            |_| {
+                let (mut rp, mut obs) = diablo_planner()?;
+                obs.ego_velocity = human2nav_core::Twist2::new(100.0, 0.0, 0.0);
+                fail(rp.planner.plan(&obs))
+            },
+        ),
+        accepted(
+            a,
+            "robot at 5 m/s (its `v_max` is 1.5)",
+            "a normal plan, no warning",
+            "planned, flagged in `PlanInfo::warnings` (`forward speed of 5.000`)",
+            flagged(
+                |o| o.ego_velocity = human2nav_core::Twist2::new(5.0, 0.0, 0.0),
+                "forward speed of 5.000",
+            ),
+        ),
+        accepted(
+            a,
+            "robot starting inside an obstacle",
+            "a normal plan, no warning",
+            "planned, flagged in `PlanInfo::warnings` (`inside obstacles[0]`)",
+            flagged(
+                |o| {
+                    o.obstacles = vec![human2nav_core::obstacle::Obstacle::Circle {
+                        center: [0.1, 0.0],
+                        radius: 0.5,
+                    }]
+                },
+                "inside obstacles[0]",
+            ),
+        ),
+        err(
+            a,
+            "`plan --time 999` (past the episode's end)",
+            "a plan among nobody",
+            &["--time 999", "past the end of episode", "which lasts"],
+            |_| {
+                cli(&[
+                    "plan",
+                    "--time",
+                    "999",
+                    "--robot",
+                    "robots/diablo/robot.toml",
+                ])
+            },
+        ),
+    ]
+}
+
 fn catalogue() -> Vec<Case> {
     let mut all = robot_cases();
     all.extend(config_cases());
     all.extend(data_cases());
+    all.extend(planner_call_cases());
     all.extend(model_cases());
     all.extend(plugin_cases());
     all.extend(resume_cases());
@@ -2410,7 +2739,7 @@ fn render(cases: &[Case]) -> String {
          `BLESS=1 cargo test -p human2nav-cli --test hostile_inputs`). \"After\" is what the test \
          checks: an error whose text contains the fragments shown (the file, field or line it \
          names), a documented bound, or the regression test that pins the case. \"Before\" is the \
-         behaviour issue #17 or the history recorded; \"not recorded\" where neither did.\n\n\
+         behaviour issues #17 and #51 or the history recorded; \"not recorded\" where neither did.\n\n\
          | area | cases | run here | pinned elsewhere |\n|---|---|---|---|\n",
     );
     for a in &areas {

@@ -308,3 +308,12 @@ mod tests {
         assert!(err.is_config(), "{err}");
     }
 }
+
+// The Rust snippets of the plugin guides are doctests of this crate: they are written against
+// the same dependencies (`human2nav` without its default features, and `serde`) as the plugin
+// crates the guides build. `cargo test -p human2nav-example-proximity-speed --doc` compiles
+// them and runs their unit tests; `tests/tests/guides.rs` checks that every guide page with
+// Rust code is listed here.
+#[cfg(doctest)]
+#[doc = include_str!("../../../docs/guide/constraint-plugin.md")]
+mod guide_constraint_plugin {}

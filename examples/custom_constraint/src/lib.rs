@@ -317,3 +317,11 @@ mod tests {
 #[cfg(doctest)]
 #[doc = include_str!("../../../docs/guide/constraint-plugin.md")]
 mod guide_constraint_plugin {}
+
+#[cfg(doctest)]
+#[doc = include_str!("../../../docs/guide/planner-plugin.md")]
+mod guide_planner_plugin {}
+
+#[cfg(doctest)]
+#[doc = include_str!("../../../docs/guide/embodiment-plugin.md")]
+mod guide_embodiment_plugin {}

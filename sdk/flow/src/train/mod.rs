@@ -387,16 +387,34 @@ pub const MAX_BATCH_BYTES: u64 = 16 << 30;
 /// each of its three levels; one per U-Net channel and waypoint, four per level), in f32,
 /// counted twice (values and gradients): about 346 KiB for the shipped network.
 pub fn bytes_per_example(net: &NetConfig) -> u64 {
-    let cells = net.bev_cells as u64;
-    let inputs = net.bev_len() as u64 + net.crowd_len() as u64 + 4 + 6 * net.horizon as u64;
-    let encoder: u64 = net
+    // Saturating: a configuration is checked with this before anything else bounds its sizes.
+    let n = |v: usize| v as u64;
+    let cells = n(net.bev_cells);
+    let crowd = net.crowd.as_ref().map_or(0, |c| {
+        n(c.points).saturating_mul(n(crate::net::CROWD_FEATURES as usize))
+    });
+    let inputs = cells
+        .saturating_mul(cells)
+        .saturating_mul(3)
+        .saturating_add(crowd)
+        .saturating_add(4)
+        .saturating_add(n(net.horizon).saturating_mul(6));
+    let encoder = net
         .bev_channels
         .iter()
         .enumerate()
-        .map(|(k, &c)| c as u64 * (cells >> k).pow(2))
-        .sum();
-    let unet = 4 * net.horizon as u64 * net.down_dims.iter().map(|&d| d as u64).sum::<u64>();
-    2 * 4 * (inputs + encoder + unet)
+        .map(|(k, &c)| n(c).saturating_mul((cells >> k).saturating_pow(2)))
+        .fold(0u64, u64::saturating_add);
+    let unet = n(net.horizon).saturating_mul(4).saturating_mul(
+        net.down_dims
+            .iter()
+            .map(|&d| n(d))
+            .fold(0, u64::saturating_add),
+    );
+    inputs
+        .saturating_add(encoder)
+        .saturating_add(unet)
+        .saturating_mul(8)
 }
 
 /// The largest `train.batch_size` for `net` ([`MAX_BATCH_BYTES`] over [`bytes_per_example`]).
@@ -586,5 +604,12 @@ mod tests {
             err.contains("train.batch_size") && err.contains(&format!("largest batch is {max}")),
             "{err}"
         );
+        // Sizes no validation has bounded yet saturate instead of overflowing.
+        let huge = NetConfig {
+            bev_cells: usize::MAX,
+            ..NetConfig::default()
+        };
+        assert_eq!(bytes_per_example(&huge), u64::MAX);
+        assert!(at(1).check_batch_size(&huge).is_err());
     }
 }

@@ -7,6 +7,10 @@
 //! `2^63`, ...), values of the wrong type, duplicated and dropped lines (duplicated keys), deep
 //! nesting, long strings and splices of other seeds.
 //!
+//! The `capi_*` targets call the C API's `extern "C"` functions through its Rust library, as a C
+//! program would, and check what its header promises (a status, a message on failure, finite
+//! outputs, a planner that a bad call leaves usable).
+//!
 //! A target passes when every call returns (`Ok` or `Err`): a panic is a bug. The bounded run
 //! ([`run_bounded`], what `cargo test -p human2nav-fuzz` does) lets a panic fail the test; the
 //! long run (the `human2nav-fuzz` binary) catches panics only to count and save them.

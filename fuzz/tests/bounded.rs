@@ -1,7 +1,8 @@
 //! The bounded run: every target on a fixed seed for `HUMAN2NAV_FUZZ_CASES` cases (default
 //! 256), or for `HUMAN2NAV_FUZZ_SECONDS` seconds. A panic in a reader fails its test. The
 //! `model` targets need the default feature of that name (libtorch); `plugin_observation` needs
-//! the plugin libraries built (`cargo build --workspace`).
+//! the plugin libraries built (`cargo build --workspace`); the `capi_*` targets need the shipped
+//! Diablo profile, planner.toml and model.
 
 use human2nav_fuzz::{run_bounded, targets};
 
@@ -57,7 +58,9 @@ bounded!(
     plugin_entry,
     plugin_vtable,
     tuple_cache,
-    plugin_observation;
+    plugin_observation,
+    capi_create,
+    capi_plan;
     model: model_card,
     planner_config,
     train_toml,
@@ -87,4 +90,26 @@ fn observations_reach_the_plugins() {
         "{planned} plans and {evaluated} evaluations of {n} inputs; planner errors: {errors:#?}"
     );
     eprintln!("plugin_observation: {planned} plans, {evaluated} evaluations of {n} inputs");
+}
+
+/// The C API target gets both outcomes: plans that come back (and are read) and observations
+/// the library refuses with a message.
+#[test]
+fn capi_plans_and_refuses() {
+    use human2nav_fuzz::targets::capi::run_plan;
+    let t = targets::by_name("capi_plan").expect("target exists");
+    let seeds = (t.seeds)();
+    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(51);
+    let (mut planned, n) = (0, 128);
+    let mut refusals = std::collections::BTreeSet::new();
+    for _ in 0..n {
+        let r = run_plan(&human2nav_fuzz::next_input(&mut rng, &seeds));
+        planned += usize::from(r.status == Some(human2nav_c::h2n_status::Ok));
+        refusals.extend(r.message);
+    }
+    assert!(
+        planned > 0 && planned < n,
+        "{planned} plans of {n} inputs; refusals: {refusals:#?}"
+    );
+    eprintln!("capi_plan: {planned} plans of {n} inputs");
 }

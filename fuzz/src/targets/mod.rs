@@ -1,5 +1,6 @@
 //! The targets, one per kind of input.
 
+pub mod capi;
 pub mod config;
 pub mod data;
 #[cfg(feature = "model")]
@@ -17,6 +18,7 @@ pub fn all() -> Vec<Target> {
     t.extend(data::targets());
     t.extend(plugin::targets());
     t.extend(observe::targets());
+    t.extend(capi::targets());
     t
 }
 

@@ -99,28 +99,28 @@ fn fresh_constraint(host: &PluginHost) -> PluginConstraint {
 }
 
 /// Reads the input as a stream of choices; past its end, zeros.
-struct Draw<'a> {
-    b: &'a [u8],
-    i: usize,
+pub(crate) struct Draw<'a> {
+    pub(crate) b: &'a [u8],
+    pub(crate) i: usize,
     /// One value in `hostile` is an extreme (NaN, inf, 1e300, raw bits, ...); 0: none. Set per
     /// input, so that some observations are entirely ordinary and reach the plugin.
-    hostile: u8,
+    pub(crate) hostile: u8,
 }
 
 impl Draw<'_> {
-    fn u8(&mut self) -> u8 {
+    pub(crate) fn u8(&mut self) -> u8 {
         let v = self.b.get(self.i).copied().unwrap_or(0);
         self.i += 1;
         v
     }
-    fn u16(&mut self) -> u16 {
+    pub(crate) fn u16(&mut self) -> u16 {
         u16::from_le_bytes([self.u8(), self.u8()])
     }
-    fn u64(&mut self) -> u64 {
+    pub(crate) fn u64(&mut self) -> u64 {
         (0..8).fold(0u64, |v, _| (v << 8) | u64::from(self.u8()))
     }
     /// A value: ordinary (metres, m/s, within ±16), or (one in `hostile`) an extreme.
-    fn f64(&mut self) -> f64 {
+    pub(crate) fn f64(&mut self) -> f64 {
         let extreme = self.hostile != 0 && self.u8() % self.hostile == 0;
         if !extreme {
             return (f64::from(self.u16()) - 32768.0) / 2048.0;
@@ -137,7 +137,7 @@ impl Draw<'_> {
         }
     }
     /// A count: mostly small, sometimes large.
-    fn count(&mut self, small: usize, large: usize) -> usize {
+    pub(crate) fn count(&mut self, small: usize, large: usize) -> usize {
         match self.u8() % 8 {
             0 => 0,
             1 => usize::from(self.u16()) % (large + 1),

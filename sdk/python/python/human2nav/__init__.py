@@ -70,7 +70,11 @@ class Circle:
     radius: float
 
     def _json(self) -> Dict[str, Any]:
-        return {"kind": "circle", "center": _point(self.center), "radius": float(self.radius)}
+        return {
+            "kind": "circle",
+            "center": _point(self.center),
+            "radius": _float("Circle radius", self.radius),
+        }
 
 
 @dataclass(frozen=True)
@@ -81,7 +85,7 @@ class Polygon:
     """``(n, 2)``, n ≥ 3, either orientation."""
 
     def _json(self) -> Dict[str, Any]:
-        v = np.asarray(self.vertices, dtype=np.float64)
+        v = _array("Polygon vertices", self.vertices)
         if v.ndim != 2 or v.shape[1] != 2:
             raise ValueError(f"Polygon vertices must be an (n, 2) array, got shape {v.shape}")
         return {"kind": "polygon", "vertices": v.tolist()}
@@ -114,16 +118,20 @@ class OccupancyGrid:
         grid = np.asarray(self.data)
         if grid.ndim != 2:
             raise ValueError(f"OccupancyGrid data must be 2-D (height, width), got {grid.shape}")
+        if grid.size and not np.isfinite(grid).all():
+            raise ValueError("OccupancyGrid data must be finite (-1, 0 … 100)")
         if grid.size and (grid.min() < -128 or grid.max() > 127):
             raise ValueError("OccupancyGrid data must fit in int8 (-1, 0 … 100)")
         x, y, theta = _vector("origin", self.origin, 3)
         return {
             "origin": {"x": x, "y": y, "theta": theta},
-            "resolution": float(self.resolution),
+            "resolution": _float("OccupancyGrid resolution", self.resolution),
             "width": int(grid.shape[1]),
             "height": int(grid.shape[0]),
             "data": grid.astype(np.int64).ravel().tolist(),
-            "occupied_threshold": int(self.occupied_threshold),
+            "occupied_threshold": _integer(
+                "OccupancyGrid occupied_threshold", self.occupied_threshold
+            ),
         }
 
 
@@ -184,8 +192,46 @@ def _trajectories(value: List[List[Tuple[float, float, float]]]) -> np.ndarray:
     return np.asarray(value, dtype=np.float64)
 
 
+def _float(name: str, value: Any) -> float:
+    """``float(value)``; an integer too large for a float is a ``ValueError`` naming ``name``
+    (Python raises ``OverflowError``)."""
+    try:
+        return float(value)
+    except OverflowError:
+        raise ValueError(f"{name} is too large for a float") from None
+
+
+def _integer(name: str, value: Any) -> int:
+    """``int(value)``; an infinite float is a ``ValueError`` naming ``name`` (Python raises
+    ``OverflowError``)."""
+    try:
+        return int(value)
+    except OverflowError:
+        raise ValueError(f"{name} must be an integer, got {value!r}") from None
+
+
+def _unsigned(name: str, value: Any) -> int:
+    """``int(value)`` checked to fit the SDK's unsigned 64-bit integers (a seed, a count, an
+    index, an id): out of range, or infinite, is a ``ValueError`` naming ``name``."""
+    number = _integer(name, value)
+    if not 0 <= number < 2**64:
+        raise ValueError(f"{name} must be an integer in 0 … 2^64 − 1, got {value!r}")
+    return number
+
+
+def _array(name: str, value: Any) -> np.ndarray:
+    """``value`` as a float64 array; complex numbers are a ``TypeError`` (numpy would drop their
+    imaginary part) and an integer too large for a float a ``ValueError``."""
+    if np.iscomplexobj(value):
+        raise TypeError(f"{name} holds complex numbers")
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except OverflowError:
+        raise ValueError(f"{name} holds a number too large for a float") from None
+
+
 def _vector(name: str, value: Sequence[float], n: int) -> Tuple[float, ...]:
-    array = np.asarray(value, dtype=np.float64)
+    array = _array(name, value)
     if array.shape != (n,):
         raise ValueError(f"{name} must hold {n} numbers, got shape {array.shape}")
     return tuple(float(v) for v in array)
@@ -194,7 +240,7 @@ def _vector(name: str, value: Sequence[float], n: int) -> Tuple[float, ...]:
 def _agents(agents: Optional[ArrayLike], ids: Optional[Sequence[int]]) -> List[Tuple[Any, ...]]:
     if agents is None:
         return []
-    array = np.asarray(agents, dtype=np.float64)
+    array = _array("agents", agents)
     if array.size == 0:
         return []
     if array.ndim != 2 or array.shape[1] != 5:
@@ -204,11 +250,9 @@ def _agents(agents: Optional[ArrayLike], ids: Optional[Sequence[int]]) -> List[T
         )
     if ids is None:
         ids = range(len(array))
-    ids = [int(i) for i in ids]
+    ids = [_unsigned(f"agent_ids[{k}]", i) for k, i in enumerate(ids)]
     if len(ids) != len(array):
         raise ValueError(f"agent_ids holds {len(ids)} ids for {len(array)} agents")
-    if any(i < 0 for i in ids):
-        raise ValueError("agent_ids must be non-negative")
     return [(i, *map(float, row)) for i, row in zip(ids, array)]
 
 
@@ -251,12 +295,12 @@ class Planner:
         static scene; Human2Nav's selection keeps its candidates off them, ORCA ignores them.
         """
         raw = self._native.plan(
-            float(time),
+            _float("time", time),
             _vector("ego", ego, 3),
             _vector("ego_velocity", ego_velocity, 3),
             _vector("goal", goal, 2),
             _agents(agents, agent_ids),
-            float(budget_ms),
+            _float("budget_ms", budget_ms),
             _scene(obstacles, occupancy),
         )
         info = {k: raw[k] for k in (
@@ -302,8 +346,8 @@ class Human2NavPlanner(Planner):
                 Path(model_dir),
                 None if config is None else Path(config),
                 guidance,
-                seed,
-                samples,
+                None if seed is None else _unsigned("seed", seed),
+                None if samples is None else _unsigned("samples", samples),
                 backend,
             )
         )
@@ -357,10 +401,10 @@ def run_episode(
         planner._native,
         robot,
         None if episodes is None else Path(episodes),
-        int(index),
+        _unsigned("index", index),
         episode_id,
         crowd,
-        float(replan_hz),
+        _float("replan_hz", replan_hz),
     )
     return EpisodeResult(
         episode_id=ident,

@@ -475,9 +475,15 @@ fn orca_through_the_host_respects_a_wall() {
         ..open.clone()
     };
     let mut end = |obs: &Observation| *orca.plan(obs).unwrap().poses.last().unwrap();
-    assert!(end(&open).y > 3.0, "without the wall ORCA heads for the goal");
+    assert!(
+        end(&open).y > 3.0,
+        "without the wall ORCA heads for the goal"
+    );
     let stop = end(&walled);
-    assert!(stop.y < 1.0 - 0.3, "ORCA's plan ends at {stop:?}, through the wall");
+    assert!(
+        stop.y < 1.0 - 0.3,
+        "ORCA's plan ends at {stop:?}, through the wall"
+    );
 }
 
 /// A library built for ABI version 1 still loads and plans. It is given what version 1 knows,

@@ -2,83 +2,16 @@
 //! plan's pose at 0.1 s and the body twist that reaches it), then plans again.
 
 use human2nav_core::obstacle::{Obstacle, OccupancyGrid};
-use human2nav_core::{AgentState, ControllerGains, Limits, Observation, Planner, Pose2, Twist2};
+use human2nav_core::{AgentState, Limits, Observation, Planner, Pose2, Twist2};
 use human2nav_mppi::{MotionModel, MppiConfig, MppiPlanner};
-use human2nav_plugin::{InitError, PluginInit, RobotContext};
+use human2nav_plugin::{InitError, PluginInit};
 
-const PERIOD: f64 = 0.1;
-
-fn diff_drive() -> Limits {
-    Limits {
-        v_max: 1.5,
-        v_reverse_max: 0.5,
-        a_max: 1.0,
-        omega_max: 2.0,
-        kappa_max: None,
-        lateral_speed_max: 0.05,
-        coupled: None,
-    }
-}
-
-fn omni() -> Limits {
-    Limits {
-        v_max: 2.0,
-        v_reverse_max: 1.0,
-        a_max: 1.5,
-        omega_max: 1.8,
-        kappa_max: None,
-        lateral_speed_max: 0.6,
-        coupled: None,
-    }
-}
-
-fn ackermann() -> Limits {
-    Limits {
-        v_max: 1.5,
-        v_reverse_max: 0.8,
-        a_max: 1.0,
-        omega_max: 1.0,
-        kappa_max: Some(1.0 / 1.6),
-        lateral_speed_max: 0.05,
-        coupled: None,
-    }
-}
-
-fn robot(limits: Limits) -> RobotContext {
-    RobotContext {
-        limits,
-        gains: ControllerGains::default(),
-        footprint_radius: 0.3,
-    }
-}
+use human2nav_local_core::closed_loop::{self, Run, ackermann, diff_drive, omni, robot, walker};
 
 fn planner(limits: Limits, config: &str) -> MppiPlanner {
     MppiPlanner::from_init(&PluginInit::new(config, Some(robot(limits)))).expect("valid config")
 }
 
-fn walker(id: u64, position: [f64; 2], velocity: [f64; 2]) -> AgentState {
-    AgentState {
-        id,
-        position,
-        velocity,
-        radius: 0.3,
-        history: Vec::new(),
-    }
-}
-
-/// A closed-loop run: per period the robot takes the plan's pose one period on.
-struct Run {
-    reached: bool,
-    time: f64,
-    /// Smallest clearance to a pedestrian (centre distance minus both radii) over the run.
-    min_walker_clearance: f64,
-    /// Smallest clearance to the static obstacles over the run.
-    min_wall_clearance: f64,
-    /// Largest |Δθ| / |Δp| between consecutive plan poses of every plan (where |Δp| > 1 mm).
-    max_plan_curvature: f64,
-}
-
-/// A run from the origin facing the goal.
 fn drive(
     planner: &mut dyn Planner,
     goal: [f64; 2],
@@ -86,11 +19,9 @@ fn drive(
     obstacles: &[Obstacle],
     limit_s: f64,
 ) -> Run {
-    let facing = goal[1].atan2(goal[0]);
-    drive_from(planner, facing, goal, agents, obstacles, limit_s)
+    closed_loop::drive(planner, goal, agents, obstacles, limit_s).expect("plans")
 }
 
-/// A run from the origin with heading `theta`.
 fn drive_from(
     planner: &mut dyn Planner,
     theta: f64,
@@ -99,65 +30,7 @@ fn drive_from(
     obstacles: &[Obstacle],
     limit_s: f64,
 ) -> Run {
-    planner.reset();
-    let mut pose = Pose2::new(0.0, 0.0, theta);
-    let mut velocity = Twist2::ZERO;
-    let mut run = Run {
-        reached: false,
-        time: 0.0,
-        min_walker_clearance: f64::INFINITY,
-        min_wall_clearance: f64::INFINITY,
-        max_plan_curvature: 0.0,
-    };
-    let steps = (limit_s / PERIOD).round() as usize;
-    for k in 0..steps {
-        let t = k as f64 * PERIOD;
-        let walkers: Vec<AgentState> = agents
-            .iter()
-            .map(|a| AgentState {
-                position: a.walked_on(t),
-                ..a.clone()
-            })
-            .collect();
-        let obs = Observation {
-            time: t,
-            ego: pose,
-            ego_velocity: velocity,
-            goal,
-            agents: walkers.clone(),
-            obstacles: obstacles.to_vec(),
-            ..Default::default()
-        };
-        let plan = planner.plan(&obs).expect("plans");
-        assert!(plan.is_finite());
-        for w in plan.poses.windows(2) {
-            let ds = (w[1].x - w[0].x).hypot(w[1].y - w[0].y);
-            if ds > 1e-3 {
-                let dth = human2nav_core::se2::wrap_angle(w[1].theta - w[0].theta);
-                run.max_plan_curvature = run.max_plan_curvature.max(dth.abs() / ds);
-            }
-        }
-        // The plan's pose one period on (plans are PERIOD apart by default).
-        let next = plan.poses.get(1).copied().unwrap_or(pose);
-        let twist = pose.between(next).log();
-        velocity = Twist2::new(twist.vx / PERIOD, twist.vy / PERIOD, twist.omega / PERIOD);
-        pose = next;
-        let p = [pose.x, pose.y];
-        for a in agents {
-            let q = a.walked_on(t + PERIOD);
-            let d = (p[0] - q[0]).hypot(p[1] - q[1]) - 0.3 - a.radius;
-            run.min_walker_clearance = run.min_walker_clearance.min(d);
-        }
-        for o in obstacles {
-            run.min_wall_clearance = run.min_wall_clearance.min(o.distance(p) - 0.3);
-        }
-        run.time = t + PERIOD;
-        if (p[0] - goal[0]).hypot(p[1] - goal[1]) < 0.3 {
-            run.reached = true;
-            break;
-        }
-    }
-    run
+    closed_loop::drive_from(planner, theta, goal, agents, obstacles, limit_s).expect("plans")
 }
 
 #[test]

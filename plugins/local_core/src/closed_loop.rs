@@ -176,3 +176,24 @@ pub fn drive_from(
     }
     Ok(run)
 }
+
+/// The scene the planners' criterion benches time a call on, the same as ORCA's
+/// `orca/plan_10_pedestrians`: the robot at the origin at 1 m/s toward a goal 10 m ahead, 10
+/// pedestrians on a ring of radius 3 m walking toward its centre at 0.5 m/s.
+pub fn ring_of_ten() -> Observation {
+    let agents = (0u32..10)
+        .map(|i| {
+            let a = std::f64::consts::TAU * f64::from(i) / 10.0;
+            let p = [3.0 * a.cos(), 3.0 * a.sin()];
+            walker(u64::from(i), p, [-0.5 * p[0] / 3.0, -0.5 * p[1] / 3.0])
+        })
+        .collect();
+    Observation {
+        time: 0.0,
+        ego: Pose2::new(0.0, 0.0, 0.0),
+        ego_velocity: Twist2::new(1.0, 0.0, 0.0),
+        goal: [10.0, 0.0],
+        agents,
+        ..Default::default()
+    }
+}

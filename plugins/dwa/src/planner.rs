@@ -14,9 +14,12 @@
 //!    brake before that point: `|v| ≤ √(2·dist·a_max)`;
 //! 4. the admissible sample maximising
 //!    `G = heading_weight·heading + clearance_weight·dist/clearance_max +
-//!    velocity_weight·v_x/vx_max` wins, `heading = 1 − |bearing of the goal from the end
-//!    pose|/π`. The plan is its rollout. Without an admissible sample the plan brakes at
-//!    `a_max` along the current heading (marked as a fallback).
+//!    velocity_weight·v_x/vx_max` wins, `heading = 1 − |bearing of the goal|/π` from the pose
+//!    Fox et al. predict: one `control_period` at the sample's velocity, then braking at
+//!    `a_max` (measured at the end of the whole rollout instead, a sample that would pass the
+//!    goal within `sim_time` scores as facing away, and the robot stops short of the goal).
+//!    The plan is its rollout. Without an admissible sample the plan brakes at `a_max` along
+//!    the current heading (marked as a fallback).
 
 use crate::config::DwaConfig;
 use crate::kinematics::{Bounds, MotionModel};
@@ -211,15 +214,22 @@ impl DwaPlanner {
         walls.min(walker_clearance(&scene.walkers, p, t, self.radius))
     }
 
+    /// Where Fox et al. measure the heading: the pose reached by driving `u` for one control
+    /// period and then braking at `a_max` along the same arc. Braking from speed `s` covers the
+    /// arc of driving `u` for `s / (2·a_max)`, so the pose is `u` held for
+    /// `control_period + s / (2·a_max)`.
+    fn predicted_pose(&self, from: Pose2, u: [f64; 3], speed: f64) -> Pose2 {
+        let t = self.config.control_period + speed / (2.0 * self.bounds.ax_max);
+        from.euler_step(Twist2::new(u[0], u[1], u[2]), t)
+    }
+
     fn evaluate(&self, scene: &Scene, u: [f64; 3]) -> Candidate {
         let c = &self.config;
         let start = self.clearance(scene, [scene.ego.x, scene.ego.y], 0.0);
         let step_len = u[0].hypot(u[1]) * c.plan_dt;
         let mut contact: Option<f64> = None;
         let mut overlaps = false;
-        let mut end = scene.ego;
         for (k, pose) in self.rollout(scene.ego, u) {
-            end = pose;
             let d = self.clearance(scene, [pose.x, pose.y], k as f64 * c.plan_dt);
             // Only getting closer counts: a robot already inside the margin may leave it.
             let closing = d < start - 1e-9;
@@ -229,9 +239,10 @@ impl DwaPlanner {
             overlaps |= closing && d < 0.0;
         }
         let dist = contact.map_or(c.clearance_max, |s| s.min(c.clearance_max));
-        let bearing = (scene.goal[1] - end.y).atan2(scene.goal[0] - end.x);
-        let heading = 1.0 - wrap_angle(bearing - end.theta).abs() / PI;
         let speed = u[0].hypot(u[1]);
+        let at = self.predicted_pose(scene.ego, u, speed);
+        let bearing = (scene.goal[1] - at.y).atan2(scene.goal[0] - at.x);
+        let heading = 1.0 - wrap_angle(bearing - at.theta).abs() / PI;
         let brakes_in_time = contact.is_none() || speed <= (2.0 * dist * self.bounds.ax_max).sqrt();
         let velocity = (u[0] / self.bounds.vx_max).max(0.0);
         let score = c.heading_weight * heading

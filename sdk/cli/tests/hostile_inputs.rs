@@ -1982,6 +1982,13 @@ fn plugin_cases() -> Vec<Case> {
         ),
         covered(
             a,
+            "`plugin inspect` on a library that aborts or hangs in its entry function",
+            "took `plugin inspect` down with it (no isolation)",
+            "checked in a process of its own: one error line naming the signal or the timeout",
+            "sdk/cli/tests/plugin_inspect.rs::a_library_that_aborts_or_hangs_on_load_is_reported_not_fatal",
+        ),
+        covered(
+            a,
             "planner call that never returns",
             "hung the host",
             "safe plan after the deadline, said so; the planner is dead afterwards",

@@ -119,3 +119,29 @@ fn inspect_lists_its_checks_and_refuses_broken_tables() {
         text(&out.stdout)
     );
 }
+
+/// A library that aborts, or hangs, when it is loaded ends the inspecting child process, not
+/// this command: one clear error line each, and an ordinary exit status.
+#[test]
+fn a_library_that_aborts_or_hangs_on_load_is_reported_not_fatal() {
+    let out = inspect("human2nav_fixture_crash_on_load");
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("took the inspecting process down (signal SIGABRT)"),
+        "{stderr}"
+    );
+
+    let out = Command::new(env!("CARGO_BIN_EXE_human2nav"))
+        .args(["plugin", "inspect", "--timeout-s", "2"])
+        .arg(profile_dir().join("human2nav_fixture_crash_on_load"))
+        .env("H2N_FIXTURE_ON_LOAD", "sleep")
+        .output()
+        .expect("running human2nav");
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("did not finish within 2.0 s and its process was killed"),
+        "{stderr}"
+    );
+}

@@ -92,15 +92,10 @@ impl DwaPlanner {
     /// of the shared kinematics module), the configuration's own values taking precedence.
     pub fn new(config: DwaConfig, robot: Option<(&Limits, f64)>) -> Result<Self, InitError> {
         config.validate()?;
-        let limits = config.overrides().apply(robot.map(|r| r.0))?;
-        let bounds = Bounds::new(&limits, config.wz_accel_max)?;
-        let radius = config.radius.or(robot.map(|r| r.1)).unwrap_or(0.3);
-        if !(radius.is_finite() && radius > 0.0) {
-            return Err(InitError::invalid(
-                "radius",
-                format!("the robot's footprint radius {radius} must be finite and > 0"),
-            ));
-        }
+        let (bounds, radius) =
+            config
+                .overrides()
+                .resolve(config.wz_accel_max, config.radius, robot)?;
         Ok(Self {
             config,
             bounds,

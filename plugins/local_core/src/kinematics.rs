@@ -158,7 +158,33 @@ impl LimitOverrides {
         }
         Ok(l)
     }
+
+    /// What a planner drives with: the velocity bounds of the robot's limits with the set
+    /// values in place ([`Self::apply`], [`Bounds::new`]), and the disc radius (`radius` when
+    /// the configuration sets it, else the robot's footprint radius, else
+    /// [`DEFAULT_RADIUS`]). `robot` is the robot's limits and footprint radius, `None` without
+    /// a robot. Errors name the key.
+    pub fn resolve(
+        &self,
+        wz_accel_max: Option<f64>,
+        radius: Option<f64>,
+        robot: Option<(&Limits, f64)>,
+    ) -> Result<(Bounds, f64), InitError> {
+        let limits = self.apply(robot.map(|r| r.0))?;
+        let bounds = Bounds::new(&limits, wz_accel_max)?;
+        let radius = radius.or(robot.map(|r| r.1)).unwrap_or(DEFAULT_RADIUS);
+        if !(radius.is_finite() && radius > 0.0) {
+            return Err(InitError::invalid(
+                "radius",
+                format!("the robot's footprint radius {radius} must be finite and > 0"),
+            ));
+        }
+        Ok((bounds, radius))
+    }
 }
+
+/// The robot's disc radius (m) when neither the configuration nor a robot gives one.
+pub const DEFAULT_RADIUS: f64 = 0.3;
 
 /// The velocity bounds of one motion model: the speed box, the curvature and coupled limits,
 /// and the acceleration.

@@ -56,6 +56,9 @@ pub const ABI_VERSION: u32 = 2;
 /// The oldest ABI version this host loads: version-1 plugins (pedestrians only) still work.
 pub const MIN_ABI_VERSION: u32 = 1;
 
+/// The first ABI version whose planners read the observation's obstacles and occupancy grid.
+pub const OBSTACLES_SINCE: u32 = 2;
+
 /// Name of the symbol every plugin library exports.
 pub const ENTRY_SYMBOL: &str = "human2nav_plugin_entry";
 

@@ -534,7 +534,7 @@ impl PluginLibrary {
 
 /// How the checks and `plugin inspect` describe a library's ABI version.
 pub(crate) fn abi_version_text(found: u32) -> String {
-    if found < 2 {
+    if found < OBSTACLES_SINCE {
         format!(
             "{found} (this host: {ABI_VERSION}; a version-{found} planner is given pedestrians, not \
              static obstacles or the occupancy grid)"

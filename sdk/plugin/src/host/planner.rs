@@ -294,7 +294,7 @@ impl PlannerCore {
             g
         });
         // A version-1 plugin reads the prefix before `obstacles`; it is told nothing more.
-        job.unseen = (self.abi_version < 2)
+        job.unseen = (self.abi_version < OBSTACLES_SINCE)
             .then(|| unseen_by_v1(job.obstacles.len(), occupancy.is_some()))
             .flatten();
         let obs = H2nObservation {

@@ -1,16 +1,23 @@
 //! ROS 2 bags in MCAP storage (rosbag2's default since Iron): the messages of chosen topics
-//! read and decoded from CDR with the definitions the bag carries ([`msgdef`], [`cdr`]), each
-//! checked against the fields the reader needs; and a writer of CDR messages with their
-//! definitions, as rosbag2 writes them (schema encoding `ros2msg`, message encoding `cdr`).
+//! read as a stream, in log-time order, and decoded from CDR with the definitions the bag
+//! carries ([`BagReader`], [`msgdef`], [`cdr`]), each checked against the fields the reader
+//! needs; transforms between frames ([`tf`]); what `human2nav replay` gives the planner
+//! ([`inputs`]); and a writer of CDR messages with their definitions, as rosbag2 writes them
+//! (schema encoding `ros2msg`, message encoding `cdr`).
 //!
 //! A bag is an `.mcap` file or a rosbag2 folder holding one (its `metadata.yaml` is not
-//! needed). Errors name the file, the topic and the message's index on its topic (from 0): a
-//! message that does not decode (truncated, malformed), a definition without a needed field or
-//! with another type for it, a topic of another message type, header stamps going backwards, a
-//! file cut short.
+//! needed). Errors name the file, the topic and the message's index on its topic (from 0, in the
+//! order read): a message that does not decode (truncated, malformed), a definition without a
+//! needed field or with another type for it, a topic of another message type, header stamps
+//! going backwards, a file cut short.
 
 pub mod cdr;
+pub mod inputs;
 pub mod msgdef;
+mod reader;
+pub mod tf;
+
+pub use reader::{BagMessage, BagReader};
 
 use cdr::Value;
 use msgdef::Definitions;
@@ -25,7 +32,7 @@ use std::path::{Path, PathBuf};
 #[error("{0}")]
 pub struct BagError(pub String);
 
-fn err(s: impl Into<String>) -> BagError {
+pub(crate) fn err(s: impl Into<String>) -> BagError {
     BagError(s.into())
 }
 
@@ -92,94 +99,34 @@ pub struct Topic {
 }
 
 /// A header stamp in nanoseconds.
-fn stamp_of(v: &Value) -> Option<i128> {
+pub(crate) fn stamp_of(v: &Value) -> Option<i128> {
     let sec = v.number("header.stamp.sec")?;
     let nsec = v.number("header.stamp.nanosec")?;
     Some(sec as i128 * 1_000_000_000 + nsec as i128)
 }
 
-/// Reads the topics of `specs` from the MCAP file `path` (other topics are skipped): every
-/// message decoded, checked as the module docs say. A topic of `specs` the bag lacks is simply
-/// absent from the result.
+/// Reads the topics of `specs` from the MCAP file `path` whole (other topics are skipped):
+/// every message decoded, checked as the module docs say, held in memory. A topic of `specs`
+/// the bag lacks is simply absent from the result. For a bag of any size, read it message by
+/// message with [`BagReader`] instead.
 pub fn read_topics(path: &Path, specs: &[TopicSpec]) -> Result<BTreeMap<String, Topic>, BagError> {
-    let file = path.display();
-    let bytes = std::fs::read(path).map_err(|e| err(format!("`{file}`: {e}")))?;
-    let stream = mcap::MessageStream::new(&bytes)
-        .map_err(|e| err(format!("`{file}` is not an MCAP file: {e}")))?;
-    // Per channel id: the topic's definitions, or None for a topic not asked for.
-    let mut channels: BTreeMap<u16, Option<(String, Definitions)>> = BTreeMap::new();
     let mut out: BTreeMap<String, Topic> = BTreeMap::new();
-    for (seen, item) in stream.enumerate() {
-        let m = item.map_err(|e| {
-            if seen == 0 {
-                err(format!(
-                    "`{file}` is not an MCAP file, or is truncated or malformed before its \
-                     first message: {e}"
-                ))
-            } else {
-                err(format!(
-                    "`{file}` is truncated or malformed after {seen} messages{}: {e}",
-                    last_read(&out)
-                ))
-            }
-        })?;
-        let id = m.channel.id;
-        if let std::collections::btree_map::Entry::Vacant(slot) = channels.entry(id) {
-            let topic = &m.channel.topic;
-            slot.insert(match specs.iter().find(|s| s.topic == *topic) {
-                None => None,
-                Some(spec) => Some(definitions_of(&m.channel, spec)?),
-            });
-        }
-        let Some(Some((msgtype, defs))) = channels.get(&id) else {
-            continue;
-        };
-        let topic = out.entry(m.channel.topic.clone()).or_insert_with(|| Topic {
-            msgtype: msgtype.clone(),
-            messages: Vec::new(),
-        });
-        let index = topic.messages.len();
-        let value = cdr::decode(defs, &m.data).map_err(|e| {
-            err(format!(
-                "`{file}`: topic `{}`, message {index}: {e}",
-                m.channel.topic
-            ))
-        })?;
-        let stamp = stamp_of(&value);
-        if let (Some(now), Some(before)) = (stamp, topic.messages.last().and_then(|p| p.stamp))
-            && now < before
-        {
-            return Err(err(format!(
-                "`{file}`: topic `{}`, message {index}: its header stamp {:.3} s is before \
-                 message {}'s {:.3} s (timestamps going backwards)",
-                m.channel.topic,
-                now as f64 * 1e-9,
-                index - 1,
-                before as f64 * 1e-9
-            )));
-        }
-        topic.messages.push(Message {
-            index,
-            log_time: m.log_time,
-            stamp,
-            value,
-        });
+    for m in BagReader::open(path, specs)? {
+        let m = m?;
+        out.entry(m.topic.to_string())
+            .or_insert_with(|| Topic {
+                msgtype: m.msgtype.to_string(),
+                messages: Vec::new(),
+            })
+            .messages
+            .push(m.message);
     }
     Ok(out)
 }
 
-/// ", the last of topic `/x` being its message N" for the error of a file cut short.
-fn last_read(out: &BTreeMap<String, Topic>) -> String {
-    out.iter()
-        .filter_map(|(name, t)| t.messages.last().map(|m| (m.log_time, name, m.index)))
-        .max()
-        .map(|(_, name, index)| format!(" (the last read: topic `{name}`, message {index})"))
-        .unwrap_or_default()
-}
-
 /// The definitions of a channel of `spec`'s topic, checked: ROS 2 message definitions, CDR, one
 /// of the accepted types, with the needed fields.
-fn definitions_of(
+pub(crate) fn definitions_of(
     channel: &mcap::Channel<'_>,
     spec: &TopicSpec,
 ) -> Result<(String, Definitions), BagError> {
@@ -397,9 +344,10 @@ mod tests {
         .unwrap();
         bag.write("/cmd", 1_500_000_000, &twist_message(1.0, 0.0, 2.0))
             .unwrap();
+        // Logged after the first plan, but stamped before it.
         bag.write(
             "/plan",
-            1_400_000_000,
+            1_600_000_000,
             &path_message(1_400_000_000, "odom", &poses),
         )
         .unwrap();

@@ -1,31 +1,25 @@
 //! `human2nav replay <bag>`: the planner run on what a robot recorded. A ROS 2 bag (MCAP
-//! storage, CDR) gives the robot's odometry, its goal, the people a tracker saw and, when
-//! there is one, an occupancy grid; at the planning rate, from the first time both odometry and
-//! a goal are known to the last odometry message, Human2Nav plans from the latest of each, and
-//! the plan (`nav_msgs/msg/Path`) and the first segment's velocity (`geometry_msgs/msg/Twist`)
-//! are written to a new bag at that time, with a Foxglove scene of the calls beside it.
+//! storage, CDR) gives the robot's odometry, its goal, the people a tracker saw, when there is
+//! one an occupancy grid, and the transforms between their frames; at the planning rate, from
+//! the first time both odometry and a goal are known to the last odometry message, Human2Nav
+//! plans from the latest of each, and the plan (`nav_msgs/msg/Path`) and the first segment's
+//! velocity (`geometry_msgs/msg/Twist`) are written to a new bag at that time, with a Foxglove
+//! scene of the calls beside it.
 //!
-//! People come from `people_msgs/msg/People` (id: the order in which each `name` first appears;
-//! position and velocity as given) or from SPENCER's `spencer_tracking_msgs/msg/TrackedPersons`
-//! (id: `track_id`; position `pose.pose.position`, velocity `twist.twist.linear`); each person's
-//! recent positions are their earlier messages' at 0.1 s steps, and every person gets the disc
-//! radius `--person-radius`. Every topic must be in the odometry's frame (no transforms are
-//! applied); times are header stamps.
+//! The bag is read as a stream, and what the planner gets (topics and their mapping, frames,
+//! timing) is [`human2nav_sim::rosbag::inputs`]; this module loads the planner and writes the
+//! outputs.
 
 use anyhow::{Context, bail};
 use clap::Args;
-use human2nav_core::obstacle::OccupancyGrid;
-use human2nav_core::{AgentState, Observation, Planner, Pose2, Twist2};
+use human2nav_core::{Observation, Planner};
 use human2nav_data::paths::find_workspace_root;
 use human2nav_flow::planner::{PlannerConfig, PredictionModel, RobotPlanner};
 use human2nav_sim::record::Recorder;
-use human2nav_sim::rosbag::cdr::Value;
-use human2nav_sim::rosbag::{
-    self, BagWriter, Message, PATH_DEFINITION, TWIST_DEFINITION, Topic, TopicSpec,
-};
+use human2nav_sim::rosbag::inputs::{Call, InputSettings, InputTopics, ReplayInputs};
+use human2nav_sim::rosbag::{self, BagWriter, PATH_DEFINITION, TWIST_DEFINITION};
 use indicatif::{ProgressBar, ProgressStyle};
-use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 /// Arguments of `human2nav replay`.
@@ -46,7 +40,7 @@ pub struct ReplayArgs {
     /// workspace root]; the Foxglove scene goes beside it as <name>.scene.mcap.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Odometry topic (nav_msgs/msg/Odometry).
+    /// Odometry topic (nav_msgs/msg/Odometry); its frame is the one everything is planned in.
     #[arg(long, default_value = "/odom")]
     pub odom: String,
     /// Goal topic (geometry_msgs/msg/PoseStamped).
@@ -59,9 +53,21 @@ pub struct ReplayArgs {
     /// Occupancy grid topic (nav_msgs/msg/OccupancyGrid), used when the bag has it.
     #[arg(long, default_value = "/map")]
     pub map: String,
+    /// Transforms (tf2_msgs/msg/TFMessage) that bring the goal, people and map into the
+    /// odometry's frame; each message is transformed with the latest at or before its stamp.
+    #[arg(long, default_value = "/tf")]
+    pub tf: String,
+    /// Static transforms (tf2_msgs/msg/TFMessage), valid at any stamp.
+    #[arg(long, default_value = "/tf_static")]
+    pub tf_static: String,
     /// Planning calls per second of recorded time.
     #[arg(long, default_value_t = 10.0)]
     pub rate: f64,
+    /// How late (s) a message may be logged, after the odometry of its stamp, and still count
+    /// for the calls at or after its stamp; one logged later counts from the next call on. The
+    /// replay holds about this many seconds of messages.
+    #[arg(long, default_value_t = 1.0)]
+    pub max_delay: f64,
     /// Disc radius given to every person (m).
     #[arg(long, default_value_t = 0.3)]
     pub person_radius: f64,
@@ -71,195 +77,6 @@ pub struct ReplayArgs {
     /// Topic of the velocity commands written.
     #[arg(long, default_value = "/human2nav/cmd_vel")]
     pub cmd_topic: String,
-}
-
-const STAMP: [(&str, &str); 3] = [
-    ("header.stamp.sec", "int32"),
-    ("header.stamp.nanosec", "uint32"),
-    ("header.frame_id", "string"),
-];
-
-fn with_stamp(fields: &[(&'static str, &'static str)]) -> Vec<(&'static str, &'static str)> {
-    STAMP.iter().chain(fields).copied().collect()
-}
-
-/// What the replay reads from each topic.
-fn specs(args: &ReplayArgs) -> Vec<TopicSpec> {
-    let f64s = |paths: &[&'static str]| -> Vec<(&'static str, &'static str)> {
-        paths.iter().map(|p| (*p, "float64")).collect()
-    };
-    let odom = f64s(&[
-        "pose.pose.position.x",
-        "pose.pose.position.y",
-        "pose.pose.orientation.x",
-        "pose.pose.orientation.y",
-        "pose.pose.orientation.z",
-        "pose.pose.orientation.w",
-        "twist.twist.linear.x",
-        "twist.twist.linear.y",
-        "twist.twist.angular.z",
-    ]);
-    let mut people = vec![
-        ("people", "people_msgs/Person[]"),
-        ("people.name", "string"),
-    ];
-    people.extend(f64s(&[
-        "people.position.x",
-        "people.position.y",
-        "people.velocity.x",
-        "people.velocity.y",
-    ]));
-    let mut tracks = vec![
-        ("tracks", "spencer_tracking_msgs/TrackedPerson[]"),
-        ("tracks.track_id", "uint64"),
-    ];
-    tracks.extend(f64s(&[
-        "tracks.pose.pose.position.x",
-        "tracks.pose.pose.position.y",
-        "tracks.twist.twist.linear.x",
-        "tracks.twist.twist.linear.y",
-    ]));
-    let mut map = vec![
-        ("info.resolution", "float32"),
-        ("info.width", "uint32"),
-        ("info.height", "uint32"),
-        ("data", "int8[]"),
-    ];
-    map.extend(f64s(&[
-        "info.origin.position.x",
-        "info.origin.position.y",
-        "info.origin.orientation.z",
-        "info.origin.orientation.w",
-    ]));
-    vec![
-        TopicSpec {
-            topic: args.odom.clone(),
-            types: vec![("nav_msgs/msg/Odometry", with_stamp(&odom))],
-        },
-        TopicSpec {
-            topic: args.goal.clone(),
-            types: vec![(
-                "geometry_msgs/msg/PoseStamped",
-                with_stamp(&f64s(&["pose.position.x", "pose.position.y"])),
-            )],
-        },
-        TopicSpec {
-            topic: args.people.clone(),
-            types: vec![
-                ("people_msgs/msg/People", with_stamp(&people)),
-                (
-                    "spencer_tracking_msgs/msg/TrackedPersons",
-                    with_stamp(&tracks),
-                ),
-            ],
-        },
-        TopicSpec {
-            topic: args.map.clone(),
-            types: vec![("nav_msgs/msg/OccupancyGrid", with_stamp(&map))],
-        },
-    ]
-}
-
-/// A number the spec guarantees (checked against the definition; 0 if it is somehow absent).
-fn num(v: &Value, path: &str) -> f64 {
-    v.number(path).unwrap_or(0.0)
-}
-
-fn yaw(v: &Value, prefix: &str) -> f64 {
-    let q = |c: &str| num(v, &format!("{prefix}.{c}"));
-    let (x, y, z, w) = (q("x"), q("y"), q("z"), q("w"));
-    (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z))
-}
-
-/// The latest message of `topic` stamped at or before `t` (ns).
-fn latest(topic: Option<&Topic>, t: i128) -> Option<&Message> {
-    let msgs = &topic?.messages;
-    let n = msgs.partition_point(|m| m.stamp.unwrap_or(i128::MIN) <= t);
-    n.checked_sub(1).map(|i| &msgs[i])
-}
-
-/// One person seen in a tracker message.
-#[derive(Clone, Copy, Debug)]
-struct Seen {
-    id: u64,
-    position: [f64; 2],
-    velocity: [f64; 2],
-}
-
-/// The people of one message of the people topic (`names` numbers people_msgs' names).
-fn people_of(msg: &Message, msgtype: &str, names: &mut BTreeMap<String, u64>) -> Vec<Seen> {
-    let v = &msg.value;
-    if msgtype.starts_with("spencer_tracking_msgs") {
-        v.list("tracks")
-            .unwrap_or_default()
-            .iter()
-            .map(|p| Seen {
-                id: num(p, "track_id") as u64,
-                position: [
-                    num(p, "pose.pose.position.x"),
-                    num(p, "pose.pose.position.y"),
-                ],
-                velocity: [
-                    num(p, "twist.twist.linear.x"),
-                    num(p, "twist.twist.linear.y"),
-                ],
-            })
-            .collect()
-    } else {
-        v.list("people")
-            .unwrap_or_default()
-            .iter()
-            .map(|p| {
-                let next = names.len() as u64;
-                let id = *names
-                    .entry(p.text("name").unwrap_or("").to_string())
-                    .or_insert(next);
-                Seen {
-                    id,
-                    position: [num(p, "position.x"), num(p, "position.y")],
-                    velocity: [num(p, "velocity.x"), num(p, "velocity.y")],
-                }
-            })
-            .collect()
-    }
-}
-
-/// A `nav_msgs/OccupancyGrid` message as the planner's grid.
-fn grid_of(v: &Value) -> OccupancyGrid {
-    let data = v
-        .list("data")
-        .unwrap_or_default()
-        .iter()
-        .map(|c| match c {
-            Value::Int(i) => *i as i8,
-            _ => -1,
-        })
-        .collect();
-    OccupancyGrid {
-        origin: Pose2::new(
-            num(v, "info.origin.position.x"),
-            num(v, "info.origin.position.y"),
-            yaw(v, "info.origin.orientation"),
-        ),
-        resolution: num(v, "info.resolution"),
-        width: num(v, "info.width") as usize,
-        height: num(v, "info.height") as usize,
-        data,
-        occupied_threshold: 65,
-    }
-}
-
-/// Refuses a message whose frame is not `frame`.
-fn same_frame(topic: &str, msg: &Message, frame: &str) -> anyhow::Result<()> {
-    let f = msg.value.text("header.frame_id").unwrap_or("");
-    if !f.is_empty() && !frame.is_empty() && f != frame {
-        bail!(
-            "topic `{topic}`, message {}: frame `{f}`, but the odometry is in `{frame}`; replay \
-             applies no transforms, so record every topic in one frame",
-            msg.index
-        );
-    }
-    Ok(())
 }
 
 /// Runs `human2nav replay`.
@@ -276,34 +93,31 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             args.person_radius
         );
     }
+    if !(args.max_delay.is_finite() && args.max_delay >= 0.0 && args.max_delay <= 60.0) {
+        bail!("--max-delay {}: give seconds, from 0 to 60", args.max_delay);
+    }
     let file = rosbag::mcap_file(&args.bag)?;
-    let topics = rosbag::read_topics(&file, &specs(&args))?;
-    let required = |name: &str| -> anyhow::Result<&Topic> {
-        match topics.get(name) {
-            Some(t) if !t.messages.is_empty() => Ok(t),
-            _ => bail!(
-                "`{}` has no messages on topic `{name}` (name another with --{})",
-                file.display(),
-                if name == args.odom { "odom" } else { "goal" }
-            ),
-        }
+    let topics = InputTopics {
+        odom: args.odom.clone(),
+        goal: args.goal.clone(),
+        people: args.people.clone(),
+        map: args.map.clone(),
+        tf: args.tf.clone(),
+        tf_static: args.tf_static.clone(),
     };
-    let odom = required(&args.odom)?;
-    let goal = required(&args.goal)?;
-    let people = topics.get(&args.people);
-    let map = topics.get(&args.map);
-    let frame = odom.messages[0]
-        .value
-        .text("header.frame_id")
-        .unwrap_or("")
-        .to_string();
-    for (name, topic) in [
-        (&args.goal, Some(goal)),
-        (&args.people, people),
-        (&args.map, map),
-    ] {
-        for m in topic.map(|t| t.messages.as_slice()).unwrap_or_default() {
-            same_frame(name, m, &frame)?;
+    let settings = InputSettings {
+        rate: args.rate,
+        person_radius: args.person_radius,
+        max_delay: args.max_delay,
+    };
+    let mut inputs = ReplayInputs::open(&file, &topics, settings)?;
+    // Where the file's summary counts the messages, a missing topic is refused before the
+    // planner is loaded.
+    if let Some(counts) = inputs.reader().summary_counts() {
+        for (name, flag) in [(&args.odom, "odom"), (&args.goal, "goal")] {
+            if counts.get(name).copied().unwrap_or(0) == 0 {
+                bail!(no_messages(&file, name, flag));
+            }
         }
     }
 
@@ -331,172 +145,124 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         workspace.join(format!("out/replay/{stem}.mcap"))
     });
     let scene_path = out.with_extension("scene.mcap");
-    let mut bag = BagWriter::create(&out)?;
-    bag.add_topic(&args.plan_topic, "nav_msgs/msg/Path", PATH_DEFINITION)?;
-    bag.add_topic(&args.cmd_topic, "geometry_msgs/msg/Twist", TWIST_DEFINITION)?;
-    let mut scene = Recorder::create(&scene_path, if frame.is_empty() { "odom" } else { &frame })?;
+    let done = replay(&args, &file, &mut inputs, &mut rp, &out, &scene_path);
+    if done.is_err() {
+        // A bag found broken part way through leaves no half-written outputs behind.
+        let _ = std::fs::remove_file(&out);
+        let _ = std::fs::remove_file(&scene_path);
+    }
+    done
+}
 
-    let stamp = |t: &Topic, i: usize| t.messages[i].stamp.unwrap_or(0);
-    let start = stamp(odom, 0).max(stamp(goal, 0));
-    let end = stamp(odom, odom.messages.len() - 1);
-    if start > end {
-        bail!(
-            "the first goal on `{}` comes after the last odometry on `{}`: nothing to plan",
+fn no_messages(file: &Path, topic: &str, flag: &str) -> String {
+    format!(
+        "`{}` has no messages on topic `{topic}` (name another with --{flag})",
+        file.display()
+    )
+}
+
+/// Why a bag gave no planning call.
+fn no_calls(args: &ReplayArgs, file: &Path, inputs: &ReplayInputs) -> anyhow::Error {
+    let counts = inputs.reader().counts();
+    let count = |t: &str| counts.get(t).copied().unwrap_or(0);
+    if count(&args.odom) == 0 {
+        return anyhow::anyhow!(no_messages(file, &args.odom, "odom"));
+    }
+    if count(&args.goal) == 0 {
+        return anyhow::anyhow!(no_messages(file, &args.goal, "goal"));
+    }
+    if inputs.first_goal().is_none() {
+        return anyhow::anyhow!(
+            "none of the {} goals on `{}` could be brought into the odometry's frame: each is \
+             stamped before the first transform of its frame (the first: {})",
+            count(&args.goal),
             args.goal,
-            args.odom
+            inputs
+                .stats()
+                .first_untransformed
+                .as_deref()
+                .unwrap_or("none")
         );
     }
-    let step = (1e9 / args.rate).round() as i128;
-    let calls = ((end - start) / step) as u64 + 1;
-    let bar = ProgressBar::new(calls).with_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} planning calls")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
-    );
-    // Every person's track: (stamp, position), in order.
-    let mut names = BTreeMap::new();
-    let mut tracks: BTreeMap<u64, Vec<(i128, [f64; 2])>> = BTreeMap::new();
-    let seen: Vec<(i128, Vec<Seen>)> = people
-        .map(|p| {
-            p.messages
-                .iter()
-                .map(|m| (m.stamp.unwrap_or(0), people_of(m, &p.msgtype, &mut names)))
-                .collect()
-        })
-        .unwrap_or_default();
-    for (t, list) in &seen {
-        for s in list {
-            tracks.entry(s.id).or_default().push((*t, s.position));
-        }
-    }
-    let history_at = |id: u64, t: i128| -> Vec<[f64; 2]> {
-        let Some(track) = tracks.get(&id) else {
-            return Vec::new();
-        };
-        (1..=8)
-            .rev()
-            .filter_map(|k| {
-                let at = t - k * 100_000_000;
-                let n = track.partition_point(|(s, _)| *s <= at);
-                n.checked_sub(1).map(|i| track[i].1)
-            })
-            .collect()
-    };
+    anyhow::anyhow!(
+        "the first goal on `{}` comes after the last odometry on `{}`: nothing to plan",
+        args.goal,
+        args.odom
+    )
+}
 
+/// The planning calls, and the bag and scene they write.
+fn replay(
+    args: &ReplayArgs,
+    file: &Path,
+    inputs: &mut ReplayInputs,
+    rp: &mut RobotPlanner,
+    out: &Path,
+    scene_path: &Path,
+) -> anyhow::Result<ExitCode> {
+    let bar = ProgressBar::new_spinner().with_style(
+        ProgressStyle::with_template("{elapsed_precise} {spinner} {pos} planning calls, {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+    );
+    let mut outputs: Option<(BagWriter, Recorder)> = None;
     let (mut failed, mut last_goal) = (0usize, None);
-    for k in 0..calls {
-        let t = start + i128::from(k) * step;
-        let (Some(o), Some(g)) = (latest(Some(odom), t), latest(Some(goal), t)) else {
-            continue;
-        };
-        let v = &o.value;
-        let ego = Pose2::new(
-            num(v, "pose.pose.position.x"),
-            num(v, "pose.pose.position.y"),
-            yaw(v, "pose.pose.orientation"),
-        );
-        let goal_xy = [
-            num(&g.value, "pose.position.x"),
-            num(&g.value, "pose.position.y"),
-        ];
-        // The latest people message, unless more than a second old.
-        let now_seen: &[Seen] = match seen.partition_point(|(s, _)| *s <= t).checked_sub(1) {
-            Some(i) if t - seen[i].0 <= 1_000_000_000 => &seen[i].1,
-            _ => &[],
-        };
-        let agents: Vec<AgentState> = now_seen
-            .iter()
-            .map(|s| AgentState {
-                id: s.id,
-                position: s.position,
-                velocity: s.velocity,
-                radius: args.person_radius,
-                history: history_at(s.id, t),
-            })
-            .collect();
-        let time = (t - start) as f64 * 1e-9;
-        let obs = Observation {
-            time,
-            frame_id: if frame.is_empty() {
-                "odom".into()
-            } else {
-                frame.clone()
-            },
-            ego,
-            ego_velocity: Twist2::new(
-                num(v, "twist.twist.linear.x"),
-                num(v, "twist.twist.linear.y"),
-                num(v, "twist.twist.angular.z"),
-            ),
-            goal: goal_xy,
-            agents,
-            obstacles: Vec::new(),
-            occupancy: latest(map, t).map(|m| grid_of(&m.value)),
-        };
-        if let Some(grid) = &obs.occupancy
-            && let Err(e) = grid.validate()
-        {
-            let index = latest(map, t).map_or(0, |m| m.index);
-            bail!(
-                "topic `{}`, message {index}: the occupancy grid's {e}",
-                args.map
-            );
-        }
-        let ns = u64::try_from(t).unwrap_or(0);
-        if last_goal != Some(g.index) {
-            scene.static_scene(time, &rp.profile.footprint_shapes, goal_xy, &[])?;
-            last_goal = Some(g.index);
-        }
-        scene.robot(time, ego)?;
-        scene.observed_people(time, &obs.agents)?;
-        match rp.planner.plan(&obs) {
-            Ok(plan) if plan.poses.len() > 1 && plan.dt > 0.0 => {
-                let poses: Vec<[f64; 3]> = plan.poses.iter().map(|p| [p.x, p.y, p.theta]).collect();
-                bag.write(
-                    &args.plan_topic,
-                    ns,
-                    &rosbag::path_message(ns, &obs.frame_id, &poses),
-                )?;
-                let (a, b) = (plan.poses[0], plan.poses[1]);
-                let (dx, dy) = (b.x - a.x, b.y - a.y);
-                let (c, s) = (a.theta.cos(), a.theta.sin());
-                let dtheta = (b.theta - a.theta + std::f64::consts::PI)
-                    .rem_euclid(2.0 * std::f64::consts::PI)
-                    - std::f64::consts::PI;
-                let twist = rosbag::twist_message(
-                    (c * dx + s * dy) / plan.dt,
-                    (-s * dx + c * dy) / plan.dt,
-                    dtheta / plan.dt,
-                );
-                bag.write(&args.cmd_topic, ns, &twist)?;
-                let candidates = if plan.info.guided.is_empty() {
-                    &plan.info.candidates
-                } else {
-                    &plan.info.guided
-                };
-                scene.plan(time, &plan.poses, candidates)?;
+    while let Some(call) = inputs.next_call()? {
+        let start = inputs.start().unwrap_or(call.stamp);
+        let time = (call.stamp - start) as f64 * 1e-9;
+        let (bag, scene) = match &mut outputs {
+            Some(o) => o,
+            None => {
+                let mut bag = BagWriter::create(out)?;
+                bag.add_topic(&args.plan_topic, "nav_msgs/msg/Path", PATH_DEFINITION)?;
+                bag.add_topic(&args.cmd_topic, "geometry_msgs/msg/Twist", TWIST_DEFINITION)?;
+                let scene = Recorder::create(scene_path, &call.frame)?;
+                outputs.insert((bag, scene))
             }
-            Ok(_) | Err(_) => {
-                failed += 1;
-                bag.write(&args.cmd_topic, ns, &rosbag::twist_message(0.0, 0.0, 0.0))?;
-                scene.log(time, 3, "planning call failed: stop")?;
-            }
+        };
+        if last_goal != Some(call.goal_index) {
+            scene.static_scene(time, &rp.profile.footprint_shapes, call.goal, &[])?;
+            last_goal = Some(call.goal_index);
+        }
+        if !plan_once(args, rp, &call, time, bag, scene)? {
+            failed += 1;
         }
         bar.inc(1);
+        bar.set_message(format!("{time:.1} s of recorded time"));
     }
     bar.finish_and_clear();
+    let Some((bag, scene)) = outputs else {
+        return Err(no_calls(args, file, inputs));
+    };
     bag.finish()?;
     scene.finish()?;
+    let counts = inputs.reader().counts();
+    let count = |t: &str| counts.get(t).copied().unwrap_or(0);
+    let (start, end) = (
+        inputs.start().unwrap_or(0),
+        inputs.odometry_span().map_or(0, |(_, e)| e),
+    );
     println!(
         "{} planning calls at {} Hz over {:.1} s of `{}` ({} odometry, {} goal, {} people \
          messages)",
-        calls,
+        inputs.calls(),
         args.rate,
         (end - start) as f64 * 1e-9,
         file.display(),
-        odom.messages.len(),
-        goal.messages.len(),
-        people.map_or(0, |p| p.messages.len())
+        count(&args.odom),
+        count(&args.goal),
+        count(&args.people)
+    );
+    let stats = inputs.stats();
+    println!(
+        "read:  {} messages {}; held at most {} at once (messages waiting for their planning \
+         time, and transforms)",
+        inputs.reader().seen(),
+        if inputs.reader().indexed() {
+            "in log-time order, through the file's index"
+        } else {
+            "in file order (the file has no index)"
+        },
+        stats.peak_held
     );
     println!(
         "bag:   {} ({} and {})",
@@ -505,9 +271,82 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         args.cmd_topic
     );
     println!("scene: {}", scene_path.display());
+    if stats.late > 0 {
+        eprintln!(
+            "{} messages were logged more than --max-delay {} s after the odometry of their \
+             stamp: each counted from the next planning call on",
+            stats.late, args.max_delay
+        );
+    }
+    if let Some(first) = &stats.first_untransformed {
+        eprintln!(
+            "{} messages were left out, stamped before the first transform of their frame (the \
+             first: {first})",
+            stats.untransformed
+        );
+    }
     if failed > 0 {
         eprintln!("{failed} planning calls failed: a zero velocity was written for each");
         return Ok(ExitCode::FAILURE);
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// One planning call: the plan and its first segment's velocity written, or a zero velocity
+/// where it failed (false).
+fn plan_once(
+    args: &ReplayArgs,
+    rp: &mut RobotPlanner,
+    call: &Call,
+    time: f64,
+    bag: &mut BagWriter,
+    scene: &mut Recorder,
+) -> anyhow::Result<bool> {
+    let obs = Observation {
+        time,
+        frame_id: call.frame.clone(),
+        ego: call.ego,
+        ego_velocity: call.ego_velocity,
+        goal: call.goal,
+        agents: call.agents.clone(),
+        obstacles: Vec::new(),
+        occupancy: call.occupancy.clone(),
+    };
+    let ns = u64::try_from(call.stamp).unwrap_or(0);
+    scene.robot(time, call.ego)?;
+    scene.observed_people(time, &obs.agents)?;
+    match rp.planner.plan(&obs) {
+        Ok(plan) if plan.poses.len() > 1 && plan.dt > 0.0 => {
+            let poses: Vec<[f64; 3]> = plan.poses.iter().map(|p| [p.x, p.y, p.theta]).collect();
+            bag.write(
+                &args.plan_topic,
+                ns,
+                &rosbag::path_message(ns, &obs.frame_id, &poses),
+            )?;
+            let (a, b) = (plan.poses[0], plan.poses[1]);
+            let (dx, dy) = (b.x - a.x, b.y - a.y);
+            let (c, s) = (a.theta.cos(), a.theta.sin());
+            let dtheta = (b.theta - a.theta + std::f64::consts::PI)
+                .rem_euclid(2.0 * std::f64::consts::PI)
+                - std::f64::consts::PI;
+            let twist = rosbag::twist_message(
+                (c * dx + s * dy) / plan.dt,
+                (-s * dx + c * dy) / plan.dt,
+                dtheta / plan.dt,
+            );
+            bag.write(&args.cmd_topic, ns, &twist)?;
+            let candidates = if plan.info.guided.is_empty() {
+                &plan.info.candidates
+            } else {
+                &plan.info.guided
+            };
+            scene.plan(time, &plan.poses, candidates)?;
+            Ok(true)
+        }
+        Ok(_) | Err(_) => {
+            bag.write(&args.cmd_topic, ns, &rosbag::twist_message(0.0, 0.0, 0.0))?;
+            scene.log(time, 3, "planning call failed: stop")?;
+            Ok(false)
+        }
+    }
 }

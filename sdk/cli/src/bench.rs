@@ -53,7 +53,8 @@ pub struct BenchArgs {
     /// Also write every run as an MCAP file that Foxglove opens (robot, footprint, people,
     /// obstacles, goal, each plan and its candidates, the outcome) under <out>/record/, as
     /// <suite>/<robot>/<method>/<episode>.mcap (zstd chunks, 0.1 to 0.3 MB per run: narrow with
-    /// --quick, --suites, --methods and --robots).
+    /// --quick, --suites, --methods and --robots). With --shard, each shard records its own
+    /// runs, and --merge gathers them.
     #[arg(long)]
     pub record: bool,
     /// Run only the K-th of N slices of the runs (K from 1 to N; run i, counted from 0 in the
@@ -64,9 +65,11 @@ pub struct BenchArgs {
     #[arg(long, value_name = "K/N", value_parser = parse_shard)]
     pub shard: Option<ShardSpec>,
     /// Join the folders of all N shards into the results.csv, report.md and figures one run
-    /// writes (results.csv byte for byte; the figures re-run the runs they draw). The options
-    /// come from the shards; `--out`, `--threads` and `--config` (when the configuration has
-    /// moved; it must be the same) may be given.
+    /// writes (results.csv byte for byte; the figures re-run the runs they draw), and, when the
+    /// shards ran with --record, their recordings into <out>/record/ as one run lays them out
+    /// (hard links, or copies across file systems; shards that recorded and shards that did not
+    /// are refused). The options come from the shards; `--out`, `--threads` and `--config` (when
+    /// the configuration has moved; it must be the same) may be given.
     #[arg(
         long,
         value_name = "DIR",

@@ -235,3 +235,99 @@ fn bad_shard_specs_and_options_beside_merge_are_refused() {
     assert!(e.contains("cannot be used with '--quick'"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The files under `dir`, relative to it, sorted.
+fn tree(dir: &Path) -> Vec<PathBuf> {
+    fn walk(root: &Path, dir: &Path, out: &mut Vec<PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let path = e.unwrap().path();
+            if path.is_dir() {
+                walk(root, &path, out);
+            } else {
+                out.push(path.strip_prefix(root).unwrap().to_path_buf());
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(dir, dir, &mut out);
+    out.sort();
+    out
+}
+
+#[test]
+fn recorded_shards_merged_gather_the_recordings_one_run_writes() {
+    let dir = small_bench("record");
+    let common = [
+        "--config",
+        "bench.toml",
+        "--threads",
+        "1",
+        "--robots",
+        "diablo",
+    ];
+    let recorded = [&common[..], &["--record"]].concat();
+    ok(&bench(&dir, &[&recorded[..], &["--out", "one"]].concat()));
+    ok(&bench(
+        &dir,
+        &[&recorded[..], &["--shard", "1/2", "--out", "s1"]].concat(),
+    ));
+    ok(&bench(
+        &dir,
+        &[&recorded[..], &["--shard", "2/2", "--out", "s2"]].concat(),
+    ));
+    let merge = ["--merge", "s1", "s2", "--out", "merged", "--threads", "1"];
+    let merged = ok(&bench(&dir, &merge));
+    assert!(
+        merged.contains("gathered the 24 recordings of the shards"),
+        "{merged}"
+    );
+
+    // The recordings one run writes, under the same names, byte for byte.
+    let one = tree(&dir.join("one/record"));
+    assert_eq!(one.len(), 24, "{one:?}");
+    assert!(
+        one.iter()
+            .all(|f| f.extension().is_some_and(|e| e == "mcap")),
+        "{one:?}"
+    );
+    assert_eq!(one, tree(&dir.join("merged/record")));
+    for f in &one {
+        assert!(
+            std::fs::read(dir.join("one/record").join(f)).unwrap()
+                == std::fs::read(dir.join("merged/record").join(f)).unwrap(),
+            "{} differs",
+            f.display()
+        );
+    }
+    assert!(
+        std::fs::read(dir.join("one/results.csv")).unwrap()
+            == std::fs::read(dir.join("merged/results.csv")).unwrap(),
+        "results.csv of the merge differs from one run's"
+    );
+    assert_eq!(files(&dir.join("one")), files(&dir.join("merged")));
+    // The shards keep theirs, and a second merge into the same folder replaces its files.
+    let (s1, s2) = (tree(&dir.join("s1/record")), tree(&dir.join("s2/record")));
+    assert_eq!((s1.len(), s2.len()), (12, 12));
+    ok(&bench(&dir, &merge));
+    assert_eq!(one, tree(&dir.join("merged/record")));
+
+    // A shard that recorded with one that did not.
+    ok(&bench(
+        &dir,
+        &[&common[..], &["--shard", "2/2", "--out", "plain"]].concat(),
+    ));
+    let e = refused(&bench(&dir, &["--merge", "s1", "plain", "--out", "m"]));
+    assert!(
+        e.contains("`s1` ran with --record and `plain` without: a merge gathers the recordings of every shard or of none"),
+        "{e}"
+    );
+    // A recording missing from a shard.
+    std::fs::remove_file(dir.join("s2/record").join(&s2[0])).unwrap();
+    let e = refused(&bench(&dir, &["--merge", "s1", "s2", "--out", "m"]));
+    assert!(
+        e.contains("shard 2/2 (`s2`) ran with --record, but its recording")
+            && e.contains("is missing"),
+        "{e}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -209,7 +209,10 @@ impl Bench {
                 .request
                 .failures
                 .unwrap_or(if self.request.quick { 1 } else { 4 }),
-            record: self.request.record.then(|| self.out.join("record")),
+            record: self
+                .request
+                .record
+                .then(|| self.out.join(human2nav_sim::shard::RECORD_DIR)),
         }
     }
 

@@ -15,6 +15,11 @@
 //! agree between shards (the effective configuration, every option that changes results, a
 //! fingerprint of the runs), what the merge needs to set the benchmark up again, and the
 //! shard's timing.
+//!
+//! A shard run with `--record` also holds `record/`, the MCAP file of each of its runs
+//! ([`crate::record::run_file`]); the merge gathers them into its own `record/` under the same
+//! names, as one run with `--record` lays them out ([`gather_recordings`]). Shards that recorded
+//! and shards that did not are not merged.
 
 use crate::bench::ResultRow;
 use crate::error::SimError;
@@ -29,8 +34,11 @@ use std::str::FromStr;
 pub const MANIFEST_FILE: &str = "shard.json";
 /// The file of a shard folder with its rows, every number exact.
 pub const EXACT_CSV_FILE: &str = "results-exact.csv";
-/// The version of [`ShardManifest`]'s layout.
-pub const MANIFEST_FORMAT: u32 = 1;
+/// The folder of a shard's (and a run's) recordings, under its output folder.
+pub const RECORD_DIR: &str = "record";
+/// The version of [`ShardManifest`]'s layout (2: its settings say whether the shard recorded
+/// its runs).
+pub const MANIFEST_FORMAT: u32 = 2;
 
 /// A short fingerprint of `data` (text or a file's bytes) for [`ShardManifest::settings`]: its length and its 64-bit
 /// FNV-1a hash (stable across platforms and releases), as `"<len> bytes, <hex>"`.
@@ -127,6 +135,14 @@ impl ShardManifest {
     /// The shard spec of [`ShardManifest::shard`].
     pub fn spec(&self) -> Result<ShardSpec, String> {
         self.shard.parse()
+    }
+
+    /// Whether the shard recorded its runs (`bench --record`; the setting `record`).
+    pub fn recorded(&self) -> bool {
+        self.settings
+            .get("record")
+            .and_then(Value::as_bool)
+            .unwrap_or(false)
     }
 }
 
@@ -334,6 +350,21 @@ pub fn merge_shards(dirs: &[PathBuf]) -> Result<MergedShards, SimError> {
                 s.spec
             )));
         }
+        if s.manifest.recorded() != first.manifest.recorded() {
+            let (with, without) = if first.manifest.recorded() {
+                (first, s)
+            } else {
+                (s, first)
+            };
+            return Err(SimError::Shards(format!(
+                "`{}` ran with --record and `{}` without: a merge gathers the recordings of \
+                 every shard or of none (run shard {} again with --record, or shard {} without)",
+                with.dir.display(),
+                without.dir.display(),
+                without.spec,
+                with.spec
+            )));
+        }
         if let Some(diff) = settings_difference(&first.manifest.settings, &s.manifest.settings) {
             return Err(SimError::Shards(format!(
                 "shards of different benchmarks: {diff} (`{}` against `{}`)",
@@ -388,6 +419,53 @@ pub fn merge_shards(dirs: &[PathBuf]) -> Result<MergedShards, SimError> {
         next[k] += 1;
     }
     Ok(MergedShards { rows, shards })
+}
+
+/// Gathers the recordings of merged shards that ran with `--record` into `into` (the merge's
+/// `record/` folder): each run's file, at [`crate::record::run_file`] under each shard's
+/// [`RECORD_DIR`], to the same name under `into`, hard-linked where the shard lies on the same
+/// file system and copied otherwise (the shards keep theirs). Every file is checked to be there
+/// before one is gathered; a missing one is named with its shard. Returns how many were
+/// gathered (0 for shards that did not record).
+pub fn gather_recordings(merged: &MergedShards, into: &Path) -> Result<usize, SimError> {
+    let mut files = Vec::new();
+    for shard in merged.shards.iter().filter(|s| s.manifest.recorded()) {
+        for row in &shard.rows {
+            let name = crate::record::run_file(row);
+            let from = shard.dir.join(RECORD_DIR).join(&name);
+            if !from.is_file() {
+                return Err(SimError::Shards(format!(
+                    "shard {} (`{}`) ran with --record, but its recording `{}` of run {} / {} \
+                     / {} / {} is missing (an interrupted shard or a moved file: run the shard \
+                     again)",
+                    shard.spec,
+                    shard.dir.display(),
+                    from.display(),
+                    row.suite,
+                    row.robot,
+                    row.method,
+                    row.episode
+                )));
+            }
+            files.push((from, into.join(name)));
+        }
+    }
+    for (from, to) in &files {
+        if let Some(dir) = to.parent() {
+            std::fs::create_dir_all(dir).map_err(|e| SimError::io(dir, e))?;
+        }
+        if to.exists() {
+            // The merge written into a shard's own folder: the file is already in place.
+            if from.canonicalize().ok() == to.canonicalize().ok() {
+                continue;
+            }
+            std::fs::remove_file(to).map_err(|e| SimError::io(to, e))?;
+        }
+        if std::fs::hard_link(from, to).is_err() {
+            std::fs::copy(from, to).map_err(|e| SimError::io(to, e))?;
+        }
+    }
+    Ok(files.len())
 }
 
 #[cfg(test)]

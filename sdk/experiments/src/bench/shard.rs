@@ -2,7 +2,8 @@
 //! runs its slice of the runs and writes its folder ([`human2nav_sim::shard`]); a merge reads
 //! the folders, sets the benchmark up again from what they recorded, checks that it is the
 //! benchmark they ran, and writes the `results.csv`, report and figures of the whole run (the
-//! figures that show runs re-run them, as one run does).
+//! figures that show runs re-run them, as one run does), gathering the shards' recordings when
+//! they ran with `--record`.
 
 use super::{Bench, BenchRequest};
 use anyhow::{Context, bail};
@@ -178,6 +179,7 @@ impl Bench {
             ("robots", serde_json::to_value(&r.robots)?),
             ("suites", serde_json::to_value(&r.suites)?),
             ("failures", serde_json::to_value(r.failures)?),
+            ("record", Value::from(r.record)),
             ("episodes", Value::Object(episodes)),
             ("robot_setups", Value::Object(robots)),
             ("method_files", Value::Object(method_files)),
@@ -302,7 +304,7 @@ impl Bench {
             robots: serde_json::from_value(json("robots")).with_context(|| field("robots"))?,
             suites: serde_json::from_value(json("suites")).with_context(|| field("suites"))?,
             shard: None,
-            record: false,
+            record: merged.shards[0].manifest.recorded(),
         };
         let bench = Bench::prepare(&request, log)?;
         if let Some(diff) = settings_difference(settings, &bench.shard_settings()?) {
@@ -332,6 +334,13 @@ impl Bench {
             merged.shards.len(),
             bench.out.display()
         ));
+        let recordings = shard::gather_recordings(&merged, &bench.out.join(shard::RECORD_DIR))?;
+        if recordings > 0 {
+            log(format!(
+                "gathered the {recordings} recordings of the shards into {}",
+                bench.out.join(shard::RECORD_DIR).display()
+            ));
+        }
         let times = MethodTimes {
             per_method: merged.method_times(),
         };

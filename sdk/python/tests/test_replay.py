@@ -374,4 +374,6 @@ def test_a_long_bag_is_read_as_a_stream(tmp_path):
     messages, held = int(read[1]), int(read[2])
     # 1,201 odometry and transforms each, 601 people, the map, the goal and the static ones.
     assert messages == 1201 * 2 + 601 + 3, messages
-    assert held < 100, done.stdout
+    # The odometry and people of about a second and the transforms of about three (50 a second),
+    # not the bag's 3,006.
+    assert held < 150, done.stdout

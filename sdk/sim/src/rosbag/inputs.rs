@@ -563,7 +563,9 @@ impl ReplayInputs {
         apply_to: Option<i128>,
         call_to: Option<i128>,
     ) -> Result<Option<Call>, BagError> {
-        let Some(apply_to) = apply_to else {
+        // Nothing is applied before the odometry gives the frame (a bag without it is
+        // refused once read).
+        let (Some(apply_to), Some(_)) = (apply_to, &self.frame) else {
             return Ok(None);
         };
         loop {
@@ -957,6 +959,15 @@ mod tests {
             ) && e.contains("(the transforms read connect `base_link`, `odom`)"),
             "{e}"
         );
+        // Without odometry there is no frame to bring anything into: no call, and no error
+        // about frames (the caller says the topic is empty).
+        let topics = InputTopics {
+            odom: "/nothing".into(),
+            ..InputTopics::default()
+        };
+        let mut inputs = ReplayInputs::open(&path, &topics, InputSettings::default()).unwrap();
+        assert!(inputs.next_call().unwrap().is_none());
+        assert_eq!(inputs.calls(), 0);
         let _ = std::fs::remove_file(&path);
     }
 }

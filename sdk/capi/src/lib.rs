@@ -43,7 +43,7 @@
 use human2nav_core::embodiment::{Embodiment, RobotState};
 use human2nav_core::human2nav::{budget_deadline, pose_at};
 use human2nav_core::obstacle::{MAX_POLYGON_VERTICES, Obstacle};
-use human2nav_core::robot::RobotProfile;
+use human2nav_core::robot::{PluginIsolation, RobotProfile};
 use human2nav_core::{AgentState, Observation, Plan, PlanError, Pose2, Stage, Twist2};
 use human2nav_flow::planner::{PlannerConfig, PlannerError, RobotPlanner, load_model};
 use human2nav_plugin::PluginHost;
@@ -431,12 +431,16 @@ fn finite(name: &str, values: &[f64]) -> Result<(), Failure> {
 // Creating and freeing planners
 // ---------------------------------------------------------------------------------------------
 
-/// Builds the planner from a loaded profile, a configuration and a model folder.
+/// Builds the planner from a loaded profile, a configuration and a model folder. The
+/// profile's plugins run in the calling program's process unless it writes
+/// `isolation = "process"` (the program embedding this library is the host, and no helper
+/// executable is installed with it; see `human2nav_plugin::process`).
 fn build(
     mut profile: RobotProfile,
     config: PlannerConfig,
     model_dir: &str,
 ) -> Result<Box<h2n_planner>, Failure> {
+    profile.default_plugin_isolation(PluginIsolation::InProcess);
     let embodiment = PluginHost::new()
         .robot_embodiment(&mut profile)
         .map_err(|e| Failure::new(h2n_status::Plugin, e.to_string()))?;

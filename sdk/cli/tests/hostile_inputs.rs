@@ -1826,6 +1826,59 @@ fn plugin_lib(name: &str) -> PathBuf {
     p
 }
 
+/// Diablo's profile in `dir` with its embodiment replaced by the fixture's `unicycle` with
+/// `config`, and `extra` appended; nothing said about isolation or deadlines (the defaults).
+fn fixture_robot(dir: &Path, config: &str, extra: &str) -> PathBuf {
+    let lib = plugin_lib("human2nav_fixture_test_plugin");
+    let builtin = "kind = \"differential_drive\"\nwheel_joints = [\"left_wheel_joint\", \"right_wheel_joint\"]";
+    assert!(
+        DIABLO.contains(builtin),
+        "diablo's robot.toml has no `{builtin}`"
+    );
+    let toml = DIABLO.replacen(
+        builtin,
+        &format!(
+            "kind = \"plugin\"\nlibrary = {:?}\nplugin = \"unicycle\"\nconfig = {config:?}",
+            lib.display().to_string()
+        ),
+        1,
+    );
+    write(dir, "diablo.urdf", DIABLO_URDF);
+    write(dir, "robot.toml", format!("{toml}\n{extra}"))
+}
+
+/// `human2nav robot check` on [`fixture_robot`].
+fn robot_check_fixture(
+    config: &'static str,
+    extra: &'static str,
+) -> impl Fn(&Path) -> Result<(), String> {
+    move |dir| {
+        let p = fixture_robot(dir, config, extra);
+        cli(&["robot", "check", &p.to_string_lossy()])
+    }
+}
+
+/// `human2nav bench` on one synthetic episode per class: `robot` (a path) and `methods`.
+fn bench_fixture(dir: &Path, robot: &Path, methods: &str) -> Result<(), String> {
+    let cfg = write(
+        dir,
+        "bench.toml",
+        format!(
+            "seed = 3\nrobots = [{:?}]\n{methods}\n[[suites]]\nname = \"synthetic\"\n\
+             kind = \"synthetic\"\nper_class = 1\n",
+            robot.display().to_string()
+        ),
+    );
+    let out = dir.join("out");
+    cli(&[
+        "bench",
+        "--config",
+        &cfg.to_string_lossy(),
+        "--out",
+        &out.to_string_lossy(),
+    ])
+}
+
 fn orca_with(config: &'static str) -> impl Fn(&Path) -> Result<(), String> {
     move |_| fail(PluginHost::new().planner(&plugin_lib("human2nav_orca"), "orca", config, None))
 }
@@ -2035,6 +2088,94 @@ fn plugin_cases() -> Vec<Case> {
             "killed the host",
             "helper restarted, host lives on",
             "sdk/plugin/tests/process.rs::the_host_survives_a_constraint_that_segfaults_or_aborts",
+        ),
+        err(
+            a,
+            "embodiment plugin that sleeps in `saturate`, default settings, `robot check`",
+            "hung `robot check` (embodiments had no deadline)",
+            &[
+                "[embodiment]",
+                "embodiment `unicycle`",
+                "did not answer `saturate` within 1000 ms (killed)",
+            ],
+            robot_check_fixture("sleep_ms = 3600000\nonly_call = \"saturate\"", ""),
+        ),
+        err(
+            a,
+            "embodiment plugin that aborts in `step`, default settings, `robot check`",
+            "killed `robot check` (embodiments ran in process)",
+            &[
+                "[embodiment]",
+                "embodiment `unicycle`",
+                "died during `step`: signal SIGABRT",
+            ],
+            robot_check_fixture("abort = true\nonly_call = \"step\"", ""),
+        ),
+        err(
+            a,
+            "constraint plugin that aborts in `evaluate`, default settings, `robot check`",
+            "killed `robot check` (in process by default)",
+            &[
+                "[[constraint]] 0",
+                "constraint `quadratic`",
+                "died during `evaluate`: signal SIGABRT",
+            ],
+            |d| {
+                let lib = plugin_lib("human2nav_fixture_test_plugin");
+                let extra = format!(
+                    "[[constraint]]\nlibrary = {:?}\nplugin = \"quadratic\"\nconfig = \"abort = true\"\n",
+                    lib.display().to_string()
+                );
+                let p = fixture_robot(d, "", &extra);
+                cli(&["robot", "check", &p.to_string_lossy()])
+            },
+        ),
+        err(
+            a,
+            "embodiment plugin that sleeps in `track`, default settings, `bench`",
+            "hung `bench` (embodiments had no deadline)",
+            &[
+                "[embodiment]",
+                "embodiment `unicycle`",
+                "did not answer `track` within 1000 ms (killed)",
+            ],
+            |d| {
+                let robot = fixture_robot(d, "sleep_ms = 3600000\nonly_call = \"track\"", "");
+                bench_fixture(
+                    d,
+                    &robot,
+                    "[[methods]]\nname = \"straight\"\nkind = \"straight\"\n",
+                )
+            },
+        ),
+        err(
+            a,
+            "planner plugin that aborts in `plan`, default settings, `bench`",
+            "killed `bench` (in process by default)",
+            &[
+                "planner `straight`",
+                "died during `plan`: signal SIGABRT",
+                "the instance is marked dead",
+            ],
+            |d| {
+                let lib = plugin_lib("human2nav_fixture_test_plugin");
+                bench_fixture(
+                    d,
+                    &root().join("robots/diablo/robot.toml"),
+                    &format!(
+                        "[[methods]]\nname = \"aborts\"\nkind = \"plugin\"\nlibrary = {:?}\n\
+                         plugin = \"straight\"\nconfig = {{ abort = true }}\n",
+                        lib.display().to_string()
+                    ),
+                )
+            },
+        ),
+        covered(
+            a,
+            "embodiment plugin that hangs, aborts, segfaults or panics (process host) or sleeps (in process)",
+            "hung or killed the host",
+            "the robot is halted; the failure names the plugin and the call; no restart",
+            "sdk/plugin/tests/embodiment.rs::the_host_survives_an_embodiment_that_aborts_or_segfaults",
         ),
         covered(
             a,

@@ -6,7 +6,7 @@
 use approx::assert_relative_eq;
 use human2nav_core::embodiment::EmbodimentKind;
 use human2nav_core::robot::footprint::FootprintShape;
-use human2nav_core::robot::{EmbodimentSpec, Origin, ProfileError, RobotProfile};
+use human2nav_core::robot::{EmbodimentSpec, Origin, PluginIsolation, ProfileError, RobotProfile};
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -256,6 +256,39 @@ fn plugin_references_resolve_relative_to_the_profile() {
 }
 
 #[test]
+fn plugin_isolation_defaults_to_a_helper_process_unless_written_or_chosen_by_the_embedder() {
+    let (_, result) = load_edited("diablo", |t| {
+        let t = t.replace(
+            "[embodiment]\nkind = \"differential_drive\"\nwheel_joints = [\"left_wheel_joint\", \"right_wheel_joint\"]",
+            "[embodiment]\nkind = \"plugin\"\nlibrary = \"skid\"\nplugin = \"skid_steer\"\ndeadline_ms = 50\nwheel_joints = [\"left_wheel_joint\", \"right_wheel_joint\"]",
+        );
+        format!(
+            "{t}\n[[constraint]]\nlibrary = \"a\"\nplugin = \"a\"\n\n[[constraint]]\nlibrary = \"b\"\nplugin = \"b\"\nisolation = \"in_process\"\n"
+        )
+    });
+    let mut p = result.unwrap();
+    let EmbodimentSpec::Plugin(e) = &p.embodiment else {
+        panic!("{:?}", p.embodiment)
+    };
+    assert_eq!((e.deadline_ms, e.isolation), (Some(50.0), None));
+    assert_eq!(PluginIsolation::default(), PluginIsolation::Process);
+    assert_eq!(p.constraints[0].isolation, None);
+    assert_eq!(p.constraints[1].isolation, Some(PluginIsolation::InProcess));
+    // What the C API and Python do: the unwritten ones run in the embedding process, the
+    // written one stays as written.
+    p.default_plugin_isolation(PluginIsolation::InProcess);
+    let EmbodimentSpec::Plugin(e) = &p.embodiment else {
+        unreachable!()
+    };
+    assert_eq!(e.isolation, Some(PluginIsolation::InProcess));
+    assert_eq!(p.constraints[0].isolation, Some(PluginIsolation::InProcess));
+    let mut p2 = p.clone();
+    p2.constraints[1].isolation = Some(PluginIsolation::Process);
+    p2.default_plugin_isolation(PluginIsolation::InProcess);
+    assert_eq!(p2.constraints[1].isolation, Some(PluginIsolation::Process));
+}
+
+#[test]
 fn malformed_toml_names_line_and_column() {
     let (toml, result) = load_edited("diablo", |t| set_line(t, "a_max", "a_max = = 1.0"));
     match result {
@@ -389,6 +422,23 @@ fn embodiment_section_consistency() {
         set_line(t, "kind", "kind = \"omnidirectional\"\nplugin = \"x\"")
     });
     expect_invalid(result, &toml, "embodiment.plugin", "only allowed");
+    for (line, field) in [
+        ("isolation = \"process\"", "embodiment.isolation"),
+        ("deadline_ms = 10", "embodiment.deadline_ms"),
+    ] {
+        let (toml, result) = load_edited("go2", |t| {
+            set_line(t, "kind", &format!("kind = \"omnidirectional\"\n{line}"))
+        });
+        expect_invalid(result, &toml, field, "only allowed");
+    }
+    let (toml, result) = load_edited("go2", |t| {
+        set_line(
+            t,
+            "kind",
+            "kind = \"plugin\"\nlibrary = \"x\"\nplugin = \"y\"\ndeadline_ms = -1",
+        )
+    });
+    expect_invalid(result, &toml, "embodiment.deadline_ms", ">= 0");
     let (toml, result) = load_edited("diablo", |t| {
         set_line(
             t,

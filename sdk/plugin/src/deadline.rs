@@ -1,5 +1,6 @@
-//! Deadlines on plugin calls: a planner's `plan`/`reset` or a constraint's `evaluate` that does
-//! not return in time must not hang the host.
+//! Deadlines on plugin calls: a planner's `plan`/`reset`, a constraint's `evaluate` or an
+//! embodiment's `holonomic`, `saturate`, `step`, `track` or `coupled_limit` that does not return
+//! in time must not hang the host.
 //!
 //! A thread stuck inside foreign code cannot be stopped, so the only way for the caller to get
 //! control back is not to be that thread. With a deadline, a proxy owns one worker thread for
@@ -14,7 +15,9 @@
 //!   (and its instance) until the process exits;
 //! * a planner returns the safe plan (stop in place: the tracking controller brakes to a stop
 //!   within the robot's limits) flagged as a fallback with `PlanInfo::error` set; a constraint
-//!   returns an error (guidance then fails and the planner falls back as on any term error).
+//!   returns an error (guidance then fails and the planner falls back as on any term error); an
+//!   embodiment returns the safe value (zero command, the robot halted where it is) and
+//!   `PluginEmbodiment::failure` names the call.
 //!
 //! Without a deadline (`deadline_ms = 0`) calls run on the caller's thread, as before, with no
 //! copies. The cost of the deadline is the hand-off to the worker and back (two thread wake-ups)
@@ -23,14 +26,18 @@
 //! Constraint terms: guidance calls a term many times per planning call, possibly from several
 //! threads. The same mechanism applies per `evaluate` call (a per-planning-call watchdog could
 //! only report a hang, not return control to the planner); calls to one term are then
-//! serialised through its worker, and each pays the hand-off. Embodiments are not covered: their
-//! calls are microseconds of arithmetic on the simulator's step, and the trait has no way to
-//! report a failure other than the safe value.
+//! serialised through its worker, and each pays the hand-off. Embodiments too: their calls are
+//! microseconds of arithmetic on the simulator's step, but one that sleeps hung `robot check`
+//! and `bench`; calls to one embodiment, shared by a benchmark's threads, are serialised through
+//! its worker.
+//!
+//! In a helper process ([`crate::process`]) the deadline is the client's wait for the answer;
+//! past it the helper is killed.
 
 use std::sync::mpsc;
 use std::time::Duration;
 
-/// The deadline a plugin planner or constraint call gets when its declaration sets none
+/// The deadline a plugin call gets when its declaration sets none
 /// (`deadline_ms` absent): one second, ten replanning periods at the benchmark's 10 Hz.
 pub const DEFAULT_DEADLINE: Duration = Duration::from_millis(1000);
 

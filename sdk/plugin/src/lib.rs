@@ -20,10 +20,10 @@
 //! * [`libfile`]: the library file is checked before the OS loader maps it (a truncated
 //!   library would fault inside `dlopen`); [`validate`]: every table, function slot, count and
 //!   string a plugin hands over is checked before use, against documented caps;
-//!   [`inspect`]: what `human2nav plugin inspect` reports; [`deadline`]: planner and constraint
-//!   calls that do not return in time do not hang the host; [`process`]: planners and
-//!   constraint terms declared with `isolation = "process"` run in a helper process that is
-//!   restarted when the plugin aborts, segfaults or hangs.
+//!   [`inspect`]: what `human2nav plugin inspect` reports; [`deadline`]: plugin calls that do
+//!   not return in time do not hang the host; [`process`]: planners, constraint terms and
+//!   embodiments run in a helper process unless declared `isolation = "in_process"`, so a
+//!   plugin that aborts, segfaults or hangs does not take the host down.
 //!
 //! Why not export Rust trait objects: their layout is not stable across compiler versions, so
 //! a plugin built with another rustc would be undefined behaviour. Only C types cross.
@@ -54,5 +54,5 @@ pub use host::{
 pub use human2nav_core::robot::PluginIsolation;
 pub use init::{InitError, PluginInit, RobotContext, parse_config};
 pub use inspect::{InspectReport, inspect_library};
-pub use robot::{LoadedRobot, PluginSpec, RobotResolution, robot_context};
+pub use robot::{LoadedRobot, PluginSpec, RobotResolution, ref_isolation, robot_context};
 pub use validate::{Check, CheckStatus};

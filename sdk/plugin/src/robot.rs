@@ -28,10 +28,10 @@ use std::time::Duration;
 /// library = "../../target/{profile}/human2nav_orca"   # relative to this file
 /// plugin = "orca"                                     # factory name
 /// weight = 1.0                                        # constraint terms only; default 1
-/// deadline_ms = 1000                                  # planners and constraint terms; per
-///                                                     # call; default 1000; 0: none
-/// isolation = "in_process"                            # or "process": planners and constraint
-///                                                     # terms in a helper process (crate::process)
+/// deadline_ms = 1000                                  # per call; default 1000; 0: none
+/// isolation = "process"                               # default: a helper process of its own
+///                                                     # (crate::process); "in_process": opt-in
+///                                                     # for speed, a crash takes the host down
 /// config = """
 /// time_horizon = 2.0
 /// """
@@ -49,12 +49,12 @@ pub struct PluginSpec {
     /// TOML handed to the plugin verbatim.
     #[serde(default)]
     pub config: String,
-    /// Deadline of each call (planners and constraint terms; see [`crate::deadline`]).
+    /// Deadline of each call (see [`crate::deadline`]).
     #[serde(default)]
     pub deadline_ms: Option<f64>,
-    /// Where the instance runs (planners and constraint terms; see [`crate::process`]).
+    /// Where the instance runs (`None`: not written, a helper process; see [`crate::process`]).
     #[serde(default)]
-    pub isolation: PluginIsolation,
+    pub isolation: Option<PluginIsolation>,
 }
 
 fn default_weight() -> f64 {
@@ -136,6 +136,12 @@ fn ref_deadline(r: &PluginRef, kind: PluginKind) -> Result<Option<Duration>, Plu
     })
 }
 
+/// Where a reference's instance runs: as written, else [`PluginIsolation::default`] (a helper
+/// process).
+pub fn ref_isolation(r: &PluginRef) -> PluginIsolation {
+    r.isolation.unwrap_or_default()
+}
+
 impl PluginHost {
     /// A constraint term from a profile's or config's reference, with the reference's deadline
     /// and isolation.
@@ -151,17 +157,26 @@ impl PluginHost {
             &r.config,
             robot,
             deadline,
-            r.isolation,
+            ref_isolation(r),
         )
     }
 
-    /// An embodiment from a reference, for the robot described by `robot`.
+    /// An embodiment from a reference, for the robot described by `robot`, with the
+    /// reference's deadline and isolation.
     pub fn embodiment_ref(
         &self,
         r: &PluginRef,
         robot: &RobotContext,
     ) -> Result<PluginEmbodiment, PluginError> {
-        self.embodiment(&r.library, &r.plugin, &r.config, robot)
+        let deadline = ref_deadline(r, PluginKind::Embodiment)?;
+        self.embodiment_with_options(
+            &r.library,
+            &r.plugin,
+            &r.config,
+            robot,
+            deadline,
+            ref_isolation(r),
+        )
     }
 
     /// A planner from a reference, optionally for a robot, with the reference's deadline and
@@ -178,7 +193,7 @@ impl PluginHost {
             &r.config,
             robot,
             deadline,
-            r.isolation,
+            ref_isolation(r),
         )
     }
 
@@ -236,6 +251,15 @@ impl PluginHost {
                 })?;
         }
         Ok(phi)
+    }
+}
+
+/// Where an instance runs, for the lines of `robot check`.
+fn where_it_runs(own_process: bool) -> &'static str {
+    if own_process {
+        " in its own process"
+    } else {
+        " in this process"
     }
 }
 
@@ -309,10 +333,13 @@ impl PluginHost {
             )));
         }
         Ok(format!(
-            "embodiment `{}` from {}: created with its config; holonomic {holonomic}; saturate, \
-             step and track from rest answered",
+            "embodiment `{}` from {}: created with its config{}; holonomic {holonomic}; \
+             saturate, step and track from rest answered (deadline {})",
             e.name(),
-            r.library.display()
+            r.library.display(),
+            where_it_runs(e.in_own_process()),
+            e.deadline()
+                .map_or("none".to_owned(), crate::deadline::describe)
         ))
     }
 
@@ -347,9 +374,10 @@ impl PluginHost {
             )));
         }
         Ok(format!(
-            "constraint `{}` from {}: created with its config; evaluate answered (deadline {})",
+            "constraint `{}` from {}: created with its config{}; evaluate answered (deadline {})",
             term.name(),
             r.library.display(),
+            where_it_runs(term.in_own_process()),
             term.deadline()
                 .map_or("none".to_owned(), crate::deadline::describe)
         ))

@@ -10,7 +10,7 @@
 use human2nav_core::embodiment::Embodiment;
 use human2nav_core::human2nav::budget_deadline;
 use human2nav_core::obstacle::{Obstacle, OccupancyGrid};
-use human2nav_core::robot::{ProfileError, RobotProfile};
+use human2nav_core::robot::{PluginIsolation, ProfileError, RobotProfile};
 use human2nav_core::{AgentState, Observation, Plan, PlanError, Planner, Pose2, Twist2};
 use human2nav_flow::planner::{Backend, PlannerConfig, PlannerError, RobotPlanner, load_model};
 use human2nav_orca_core::planner::{OrcaConfig, OrcaPlanner};
@@ -81,7 +81,11 @@ struct PyRobot {
 }
 
 impl PyRobot {
+    /// The profile's plugins run in the Python process unless it writes
+    /// `isolation = "process"` (no helper executable ships with the package; see
+    /// `human2nav_plugin::process`).
     fn new(mut profile: RobotProfile) -> PyResult<Self> {
+        profile.default_plugin_isolation(PluginIsolation::InProcess);
         let embodiment = PluginHost::new()
             .robot_embodiment(&mut profile)
             .map_err(sdk_error)?;

@@ -18,10 +18,11 @@
 //! replan_hz = 5.0                               # optional: this method's replanning rate
 //! deadline_ms = 1000                            # plugin only: deadline per planner call
 //!                                               # (default 1000; 0: none; human2nav_plugin::deadline)
-//! isolation = "in_process"                      # plugin only: in_process (default) | process:
-//!                                               # the planner runs in a helper process, restarted
-//!                                               # when it aborts, segfaults or hangs
-//!                                               # (human2nav_plugin::process)
+//! isolation = "process"                         # plugin only: process (default): the planner
+//!                                               # runs in a helper process, restarted when it
+//!                                               # aborts, segfaults or hangs
+//!                                               # (human2nav_plugin::process); "in_process":
+//!                                               # opt-in for speed, a crash ends the benchmark
 //!
 //! [[suites]]
 //! name = "real"
@@ -88,11 +89,12 @@ pub struct MethodConfig {
     /// for the rest of its episode (see [`human2nav_plugin::deadline`]).
     #[serde(default)]
     pub deadline_ms: Option<f64>,
-    /// Where a `plugin` method's planner runs: in the host process (default) or in a helper
-    /// process of its own, restarted when it aborts, segfaults or hangs (a failed call gets the
-    /// stop-in-place plan and counts as failed; see [`human2nav_plugin::process`]).
+    /// Where a `plugin` method's planner runs: in a helper process of its own (`None`, not
+    /// written, is [`PluginIsolation::Process`]), restarted when it aborts, segfaults or hangs
+    /// (a failed call gets the stop-in-place plan and counts as failed; see
+    /// [`human2nav_plugin::process`]), or, opted into with `"in_process"`, in the host process.
     #[serde(default)]
-    pub isolation: PluginIsolation,
+    pub isolation: Option<PluginIsolation>,
 }
 
 /// One suite as configured.
@@ -332,7 +334,7 @@ impl BenchConfig {
         }
         deadline_from_ms(m.deadline_ms)
             .map_err(|e| SimError::setting(format!("methods[{i}]"), "deadline_ms", e))?;
-        if m.isolation != PluginIsolation::InProcess && m.kind != "plugin" {
+        if m.isolation.is_some() && m.kind != "plugin" {
             return Err(SimError::setting(
                 format!("methods[{i}]"),
                 "isolation",
@@ -808,7 +810,7 @@ fn builtin_planner(
             }
             let deadline = deadline_from_ms(m.deadline_ms)
                 .map_err(|e| SimError::setting(section(), "deadline_ms", e))?;
-            let isolation = m.isolation;
+            let isolation = m.isolation.unwrap_or_default();
             let host = Arc::clone(host);
             Ok(Some(MethodSpec::new(m.name.clone(), move |ctx| {
                 let robot = RobotContext {
@@ -841,10 +843,17 @@ mod tests {
             "name = \"orca\"\nkind = \"plugin\"\nlibrary = \"x\"\nisolation = \"process\"",
         )
         .expect("parses");
-        assert_eq!(m.isolation, PluginIsolation::Process);
+        assert_eq!(m.isolation, Some(PluginIsolation::Process));
+        // Not written: a helper process.
         let m: MethodConfig =
             toml::from_str("name = \"orca\"\nkind = \"plugin\"\nlibrary = \"x\"").expect("parses");
-        assert_eq!(m.isolation, PluginIsolation::InProcess);
+        assert_eq!(m.isolation, None);
+        assert_eq!(m.isolation.unwrap_or_default(), PluginIsolation::Process);
+        let m: MethodConfig = toml::from_str(
+            "name = \"orca\"\nkind = \"plugin\"\nlibrary = \"x\"\nisolation = \"in_process\"",
+        )
+        .expect("parses");
+        assert_eq!(m.isolation, Some(PluginIsolation::InProcess));
         assert!(
             toml::from_str::<MethodConfig>("name = \"a\"\nkind = \"plugin\"\nisolation = \"fork\"")
                 .is_err()

@@ -11,7 +11,8 @@
 //! kind = "differential_drive"      # differential_drive | ackermann | omnidirectional | plugin
 //! wheel_joints = ["left_wheel_joint", "right_wheel_joint"]
 //! steering_joints = []             # ackermann only
-//! # kind = "plugin" only: library = "...", plugin = "...", config = """..."""
+//! # kind = "plugin" only: library = "...", plugin = "...", config = """...""", and
+//! # deadline_ms and isolation as for a [[constraint]] (per saturate, step or track call)
 //!
 //! [footprint]                      # optional; required when the base collision is a mesh
 //! radius = 0.35
@@ -35,8 +36,9 @@
 //! config = """..."""               # default ""
 //! deadline_ms = 1000               # per evaluate call; default: the plugin host's (1000 ms);
 //!                                  # 0: none; at most 3 600 000 (see human2nav_plugin::deadline)
-//! isolation = "in_process"         # in_process (default) | process: run the term in its own
-//!                                  # helper process (see human2nav_plugin::process)
+//! isolation = "process"            # process (default): the term runs in a helper process of
+//!                                  # its own (human2nav_plugin::process); "in_process": in the
+//!                                  # host, faster, but a crash takes the host down
 //! ```
 //!
 //! Unknown fields are rejected everywhere. Every error names the file and the field (or the
@@ -171,19 +173,21 @@ impl ProfileError {
     }
 }
 
-/// Longest deadline a `[[constraint]]` may set (`deadline_ms`, one hour).
+/// Longest deadline a plugin declaration may set (`deadline_ms`, one hour).
 pub const MAX_PLUGIN_DEADLINE_MS: f64 = 3_600_000.0;
 
 /// Where a plugin instance runs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum PluginIsolation {
-    /// In the host process (the default): fastest, but a plugin that aborts or segfaults takes
-    /// the host down with it.
-    #[default]
+    /// In the host process, opted into with `isolation = "in_process"`: no per-call process
+    /// round trip, but a plugin that aborts or segfaults takes the host down with it (a hang
+    /// still only costs the call's deadline).
     InProcess,
-    /// In a helper process of its own, restarted when it dies or hangs (planners and constraint
-    /// terms; see `human2nav_plugin::process`).
+    /// In a helper process of its own (the default): a plugin that aborts, segfaults or hangs
+    /// costs a call (planners and constraint terms, whose helper is restarted) or the
+    /// embodiment (halted), never the host; see `human2nav_plugin::process`.
+    #[default]
     Process,
 }
 
@@ -199,12 +203,13 @@ pub struct PluginRef {
     pub config: String,
     /// Weight of a constraint term (1 for embodiments).
     pub weight: f64,
-    /// Deadline of each call of a constraint term, in milliseconds, as written (`None`: the
-    /// plugin host's default; `0`: none). Embodiments have none (always `None`).
+    /// Deadline of each call, in milliseconds, as written (`None`: the plugin host's default;
+    /// `0`: none).
     pub deadline_ms: Option<f64>,
-    /// Where the instance runs (constraint terms and planners; embodiments always run in the
-    /// host process).
-    pub isolation: PluginIsolation,
+    /// Where the instance runs, as written (`None`: not written, which is
+    /// [`PluginIsolation::default`], a helper process, unless the program embedding the SDK
+    /// chose otherwise with [`RobotProfile::default_plugin_isolation`]).
+    pub isolation: Option<PluginIsolation>,
     /// The robot.toml that declared this reference.
     pub declared_in: PathBuf,
 }
@@ -214,8 +219,7 @@ pub struct PluginRef {
 pub enum EmbodimentSpec {
     /// One of the built-in kinematic models ([`RobotProfile::builtin_embodiment`] builds it).
     Builtin(EmbodimentKind),
-    /// A model from a plugin library (`kind = "plugin"`); its weight is 1, it has no deadline
-    /// and runs in the host process.
+    /// A model from a plugin library (`kind = "plugin"`); its weight is 1.
     Plugin(PluginRef),
 }
 
@@ -395,6 +399,10 @@ struct RawEmbodiment {
     plugin: Option<String>,
     #[serde(default)]
     config: Option<String>,
+    #[serde(default)]
+    deadline_ms: Option<f64>,
+    #[serde(default)]
+    isolation: Option<PluginIsolation>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -431,7 +439,7 @@ struct RawConstraint {
     #[serde(default)]
     deadline_ms: Option<f64>,
     #[serde(default)]
-    isolation: PluginIsolation,
+    isolation: Option<PluginIsolation>,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -539,6 +547,24 @@ impl RobotProfile {
                 self.controller,
             ))),
             EmbodimentSpec::Plugin(_) => None,
+        }
+    }
+
+    /// Sets where each plugin this profile names runs when its declaration does not say
+    /// (`isolation` not written): for a program that embeds the SDK and chooses another default
+    /// than [`PluginIsolation::default`] (the C API and the Python package choose
+    /// [`PluginIsolation::InProcess`]: the embedding program is the host, and no helper
+    /// executable ships with them). A written `isolation` is kept.
+    pub fn default_plugin_isolation(&mut self, isolation: PluginIsolation) {
+        let refs = self
+            .constraints
+            .iter_mut()
+            .chain(match &mut self.embodiment {
+                EmbodimentSpec::Plugin(r) => Some(r),
+                EmbodimentSpec::Builtin(_) => None,
+            });
+        for r in refs {
+            r.isolation.get_or_insert(isolation);
         }
     }
 

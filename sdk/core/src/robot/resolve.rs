@@ -12,9 +12,9 @@
 use super::footprint::FootprintShape;
 use super::urdf::UrdfModel;
 use super::{
-    EmbodimentKind, EmbodimentSpec, LimitProvenance, MAX_PLUGIN_DEADLINE_MS, Origin,
-    PluginIsolation, PluginRef, ProfileError, Provenance, RawConstraint, RawEmbodiment, RawLimits,
-    RawProfile, SteeringJoint, WheelJoint,
+    EmbodimentKind, EmbodimentSpec, LimitProvenance, MAX_PLUGIN_DEADLINE_MS, Origin, PluginRef,
+    ProfileError, Provenance, RawConstraint, RawEmbodiment, RawLimits, RawProfile, SteeringJoint,
+    WheelJoint,
 };
 use crate::limits::{ControllerGains, GuidanceWeights, Limits};
 use std::path::{Path, PathBuf};
@@ -280,15 +280,30 @@ fn plugin_embodiment(
         .as_deref()
         .ok_or_else(|| ck.invalid("embodiment.plugin", "required with kind = \"plugin\""))?;
     ck.non_empty("embodiment.plugin", plugin)?;
+    if let Some(ms) = e.deadline_ms {
+        plugin_deadline(ck, "embodiment.deadline_ms", ms)?;
+    }
     Ok(EmbodimentSpec::Plugin(PluginRef {
         library: resolve_path(dir, library),
         plugin: plugin.to_string(),
         config: e.config.clone().unwrap_or_default(),
         weight: 1.0,
-        deadline_ms: None,
-        isolation: PluginIsolation::InProcess,
+        deadline_ms: e.deadline_ms,
+        isolation: e.isolation,
         declared_in: ck.file.to_path_buf(),
     }))
+}
+
+/// A plugin's `deadline_ms`: in `[0, MAX_PLUGIN_DEADLINE_MS]` (0: none).
+fn plugin_deadline(ck: &Checker<'_>, field: &str, ms: f64) -> Result<(), ProfileError> {
+    let ms = ck.non_negative(field, ms)?;
+    if ms > MAX_PLUGIN_DEADLINE_MS {
+        return Err(ck.invalid(
+            field,
+            format!("at most {MAX_PLUGIN_DEADLINE_MS} ms (0: no deadline), got {ms}"),
+        ));
+    }
+    Ok(())
 }
 
 /// A built-in `kind`, which allows none of the plugin fields (`library`, `plugin`, `config`).
@@ -307,6 +322,8 @@ fn builtin_embodiment(e: &RawEmbodiment, ck: &Checker<'_>) -> Result<EmbodimentS
         ("embodiment.library", e.library.is_some()),
         ("embodiment.plugin", e.plugin.is_some()),
         ("embodiment.config", e.config.is_some()),
+        ("embodiment.deadline_ms", e.deadline_ms.is_some()),
+        ("embodiment.isolation", e.isolation.is_some()),
     ] {
         if present {
             return Err(ck.invalid(field, "only allowed with kind = \"plugin\""));
@@ -356,14 +373,7 @@ pub(super) fn constraints(
                 other => other,
             })?;
         if let Some(ms) = c.deadline_ms {
-            let field = format!("constraint[{i}].deadline_ms");
-            let ms = ck.non_negative(&field, ms)?;
-            if ms > MAX_PLUGIN_DEADLINE_MS {
-                return Err(ck.invalid(
-                    &field,
-                    format!("at most {MAX_PLUGIN_DEADLINE_MS} ms (0: no deadline), got {ms}"),
-                ));
-            }
+            plugin_deadline(ck, &format!("constraint[{i}].deadline_ms"), ms)?;
         }
         constraints.push(PluginRef {
             library: resolve_path(dir, &c.library),

@@ -247,6 +247,11 @@ impl PluginConstraint {
         self.deadline
     }
 
+    /// True when the term runs in a helper process of its own.
+    pub fn in_own_process(&self) -> bool {
+        matches!(self.exec, ConstraintExec::Process(_))
+    }
+
     fn unusable(&self) -> ConstraintError {
         ConstraintError::Failed {
             term: self.name.clone(),

@@ -8,14 +8,15 @@
 //!
 //! Before the OS loader sees a file, [`crate::libfile`] checks it (a truncated library would
 //! otherwise fault inside `dlopen`); every table, function slot, count and string the plugin
-//! hands over is checked before use ([`crate::validate`]); planner and constraint calls run under
-//! a deadline ([`crate::deadline`]).
+//! hands over is checked before use ([`crate::validate`]); every call runs under a deadline
+//! ([`crate::deadline`]), and, with [`PluginIsolation::Process`], in a helper process
+//! ([`crate::process`]).
 //!
-//! A plugin call that panicked (or missed its deadline) marks its instance unusable: later
-//! calls fail with an error naming the original failure (constraints, planners) or return the
-//! documented safe value (embodiments, whose trait methods cannot fail: zero twist, robot halted
-//! in place). The [`PluginHost`] that created an instance lists such failures in
-//! [`PluginHost::failures`].
+//! A plugin call that panicked (or missed its deadline, or whose helper process died) marks its
+//! instance unusable: later calls fail with an error naming the original failure (constraints,
+//! planners) or return the documented safe value (embodiments, whose trait methods cannot fail:
+//! zero twist, robot halted in place). The [`PluginHost`] that created an instance lists such
+//! failures in [`PluginHost::failures`].
 
 use crate::abi::*;
 use crate::deadline::{self, NoAnswer, Worker};

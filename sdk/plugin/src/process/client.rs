@@ -59,6 +59,8 @@ pub(crate) struct ProcessClient {
     deadline: Option<Duration>,
     running: Option<Running>,
     restarts: u32,
+    /// [`MAX_RESTARTS`], or 0 for an embodiment (never restarted).
+    max_restarts: u32,
     /// Set once the restarts are used up: every call fails with it.
     dead: Option<String>,
     enc: Enc,
@@ -126,6 +128,11 @@ impl ProcessClient {
             deadline,
             running: None,
             restarts: 0,
+            max_restarts: if init.kind == PluginKind::Embodiment {
+                0
+            } else {
+                MAX_RESTARTS
+            },
             dead: None,
             enc,
         };
@@ -283,10 +290,10 @@ impl ProcessClient {
     /// Adds the restart policy to a failure's message; past the last restart the client is
     /// dead.
     fn after_failure(&mut self, message: String) -> String {
-        if self.restarts >= MAX_RESTARTS {
+        if self.restarts >= self.max_restarts {
             return self.give_up(message);
         }
-        let left = MAX_RESTARTS - self.restarts;
+        let left = self.max_restarts - self.restarts;
         let message = format!(
             "{message}; a new process is started for the next call ({left} restart{} left)",
             if left == 1 { "" } else { "s" }
@@ -297,9 +304,14 @@ impl ProcessClient {
 
     fn give_up(&mut self, message: String) -> String {
         self.stop();
-        let message = format!(
-            "{message}; no restarts left (at most {MAX_RESTARTS}): the instance is marked dead"
-        );
+        let message = if self.max_restarts == 0 {
+            format!("{message}; the instance is marked dead (an embodiment is not restarted)")
+        } else {
+            format!(
+                "{message}; no restarts left (at most {}): the instance is marked dead",
+                self.max_restarts
+            )
+        };
         eprintln!("warning: {message}");
         self.dead = Some(message.clone());
         message
@@ -341,6 +353,19 @@ impl ProcessClient {
         let answer = self.round_trip("evaluate")?;
         let mut d = Dec::new(&answer);
         self.decoded(decode_evaluate_answer(&mut d, cost, grad))
+    }
+
+    /// An embodiment call: `Err` for a failed call (a dead or hung process, which marks the
+    /// instance dead), else the value and the failure the helper's proxy recorded, if any.
+    pub(crate) fn embodiment(
+        &mut self,
+        call: &EmbodimentCall<'_>,
+    ) -> Result<(EmbodimentValue, Option<String>), String> {
+        call.encode(&mut self.enc);
+        self.enc.finish();
+        let answer = self.round_trip(call.name())?;
+        let mut d = Dec::new(&answer);
+        self.decoded(decode_embodiment_answer(&mut d, call))
     }
 
     /// A malformed answer is a failed call; the process is restarted for the next one.

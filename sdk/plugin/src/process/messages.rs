@@ -284,3 +284,175 @@ pub(crate) fn decode_unit_answer(d: &mut Dec<'_>) -> Result<Result<(), String>, 
         Ok(Err(d.str()?))
     }
 }
+
+/// An embodiment call: what the host sends and the helper decodes.
+#[derive(Clone, Debug, PartialEq)]
+#[expect(
+    clippy::large_enum_variant,
+    reason = "a call lives for one round trip and is matched at once; boxing the plan would add an allocation per call"
+)]
+pub(crate) enum EmbodimentCall<'a> {
+    Holonomic,
+    Saturate {
+        state: RobotState,
+        cmd: Twist2,
+        dt: f64,
+    },
+    Step {
+        state: RobotState,
+        cmd: Twist2,
+        dt: f64,
+    },
+    Track {
+        state: RobotState,
+        plan: Cow<'a, Plan>,
+        t: f64,
+    },
+    CoupledLimit,
+}
+
+impl EmbodimentCall<'_> {
+    /// The call's name, as messages show it.
+    pub(crate) fn name(&self) -> &'static str {
+        match self {
+            Self::Holonomic => "holonomic",
+            Self::Saturate { .. } => "saturate",
+            Self::Step { .. } => "step",
+            Self::Track { .. } => "track",
+            Self::CoupledLimit => "coupled_limit",
+        }
+    }
+
+    pub(crate) fn encode(&self, e: &mut Enc) {
+        match self {
+            Self::Holonomic => e.start(OP_HOLONOMIC),
+            Self::Saturate { state, cmd, dt } | Self::Step { state, cmd, dt } => {
+                e.start(if matches!(self, Self::Saturate { .. }) {
+                    OP_SATURATE
+                } else {
+                    OP_STEP
+                });
+                e.state(state);
+                e.twist(*cmd);
+                e.f64(*dt);
+            }
+            Self::Track { state, plan, t } => {
+                e.start(OP_TRACK);
+                e.state(state);
+                e.f64(plan.t0);
+                e.f64(plan.dt);
+                e.u64(plan.poses.len() as u64);
+                for &p in &plan.poses {
+                    e.pose(p);
+                }
+                e.f64(*t);
+            }
+            Self::CoupledLimit => e.start(OP_COUPLED_LIMIT),
+        }
+    }
+
+    /// The call of operation `op` (read already); `None` for an operation that is not an
+    /// embodiment's.
+    pub(crate) fn decode(op: u8, d: &mut Dec<'_>) -> Result<Option<Self>, String> {
+        Ok(Some(match op {
+            OP_HOLONOMIC => Self::Holonomic,
+            OP_SATURATE => Self::Saturate {
+                state: d.state()?,
+                cmd: d.twist()?,
+                dt: d.f64()?,
+            },
+            OP_STEP => Self::Step {
+                state: d.state()?,
+                cmd: d.twist()?,
+                dt: d.f64()?,
+            },
+            OP_TRACK => {
+                let state = d.state()?;
+                let (t0, dt) = (d.f64()?, d.f64()?);
+                let n = d.count(24)?;
+                let mut poses = Vec::with_capacity(n);
+                for _ in 0..n {
+                    poses.push(d.pose()?);
+                }
+                Self::Track {
+                    state,
+                    plan: Cow::Owned(Plan {
+                        t0,
+                        dt,
+                        poses,
+                        info: PlanInfo::default(),
+                    }),
+                    t: d.f64()?,
+                }
+            }
+            OP_COUPLED_LIMIT => Self::CoupledLimit,
+            _ => return Ok(None),
+        }))
+    }
+}
+
+/// What an embodiment call answered.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum EmbodimentValue {
+    Holonomic(bool),
+    Twist(Twist2),
+    State(RobotState),
+    CoupledLimit(Option<CoupledLimit>),
+}
+
+/// The answer to an embodiment call: the value and the failure the helper's proxy recorded
+/// (its checks of the answer, a failed or panicking call), if any.
+pub(crate) fn encode_embodiment_answer(
+    e: &mut Enc,
+    value: &EmbodimentValue,
+    failure: Option<&str>,
+) {
+    e.start(ANSWER_OK);
+    match value {
+        EmbodimentValue::Holonomic(h) => e.u8(u8::from(*h)),
+        EmbodimentValue::Twist(t) => e.twist(*t),
+        EmbodimentValue::State(s) => e.state(s),
+        EmbodimentValue::CoupledLimit(c) => {
+            let c = c.as_ref().map(H2nCoupledLimit::from).unwrap_or_default();
+            for v in [c.v, c.lateral, c.omega, c.max] {
+                e.f64(v);
+            }
+        }
+    }
+    e.opt_str(failure);
+}
+
+/// Decodes the answer to `call`: the value (a coupled limit checked as the in-process host
+/// checks it) and the helper's failure message, if any.
+pub(crate) fn decode_embodiment_answer(
+    d: &mut Dec<'_>,
+    call: &EmbodimentCall<'_>,
+) -> Result<(EmbodimentValue, Option<String>), String> {
+    if d.u8()? != ANSWER_OK {
+        return Err(format!(
+            "the helper refused `{}`: {}",
+            call.name(),
+            d.str()?
+        ));
+    }
+    let value = match call {
+        EmbodimentCall::Holonomic => EmbodimentValue::Holonomic(d.u8()? != 0),
+        EmbodimentCall::Saturate { .. } | EmbodimentCall::Track { .. } => {
+            EmbodimentValue::Twist(d.twist()?)
+        }
+        EmbodimentCall::Step { .. } => EmbodimentValue::State(d.state()?),
+        EmbodimentCall::CoupledLimit => {
+            let c = H2nCoupledLimit {
+                v: d.f64()?,
+                lateral: d.f64()?,
+                omega: d.f64()?,
+                max: d.f64()?,
+            };
+            EmbodimentValue::CoupledLimit(
+                c.to_limit()
+                    .map_err(|(field, m)| format!("coupled_limit: {field} = {m}"))?,
+            )
+        }
+    };
+    Ok((value, d.opt_str()?))
+}

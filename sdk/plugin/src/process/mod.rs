@@ -1,9 +1,13 @@
-//! Out-of-process plugin instances: a planner or constraint term that runs in a helper process
-//! of its own, so that a plugin that aborts, segfaults or hangs costs one call, not the host.
+//! Out-of-process plugin instances: a planner, constraint term or embodiment that runs in a
+//! helper process of its own, so that a plugin that aborts, segfaults or hangs costs its own
+//! use, not the host.
 //!
-//! Setting: `isolation = "process"` (default `"in_process"`) in a bench `[[methods]]` plugin
-//! entry, a [`crate::PluginSpec`] or a robot profile's `[[constraint]]`. Embodiments always run
-//! in the host process (microseconds per simulator step; their trait cannot report a failure).
+//! Setting: `isolation` in a bench `[[methods]]` plugin entry, a [`crate::PluginSpec`], a robot
+//! profile's `[[constraint]]` or its `[embodiment]` (`kind = "plugin"`): `"process"`, the
+//! default when nothing is written, or `"in_process"`, an explicit opt-in for speed (the cost
+//! per call: `cargo bench -p human2nav-plugin --bench process`). The C API and the Python
+//! package run a profile's plugins in process unless the profile writes `"process"`
+//! ([`human2nav_core::robot::RobotProfile::default_plugin_isolation`]).
 //!
 //! **The helper.** `human2nav-plugin-host` (a binary of this crate) loads one library with every
 //! check of the in-process host, creates one instance (without a deadline of its own) and serves
@@ -14,12 +18,14 @@
 //!
 //! **Protocol.** Each message is a little-endian `u32` length and that many bytes; the first
 //! byte is the operation (request) or the status (answer: 0 OK, 1 error). Numbers are `u64`
-//! or the IEEE bits of `f64` (so plans and gradients are bit-identical to in-process calls);
-//! strings are a length and UTF-8. The first request creates the instance (kind, library,
-//! factory, TOML config, optional robot as TOML); then `reset`, `plan` (the observation; the
-//! answer is the plan or the planner's error) and `evaluate` (batch, context, and the cost and
-//! gradient to add to; the answer is both, or the term's error). Messages are capped at
-//! [`MAX_MESSAGE_BYTES`].
+//! or the IEEE bits of `f64` (so plans, gradients and robot states are bit-identical to
+//! in-process calls); strings are a length and UTF-8. The first request creates the instance
+//! (kind, library, factory, TOML config, optional robot); then a planner's `reset` and `plan`
+//! (the observation; the answer is the plan or the planner's error), a constraint's `evaluate`
+//! (batch, context, and the cost and gradient to add to; the answer is both, or the term's
+//! error), an embodiment's `holonomic`, `saturate`, `step`, `track` and `coupled_limit` (the
+//! answer is the value and the failure, if any, that the helper's own checks found). Messages
+//! are capped at [`MAX_MESSAGE_BYTES`].
 //!
 //! **Failures and restarts.** Every call waits at most the instance's deadline (none with
 //! `deadline_ms = 0`: then only a dead process is noticed). When the process closes its end
@@ -31,15 +37,21 @@
 //! starts a fresh process and instance (a planner loses its state: as after `reset`). At most
 //! [`MAX_RESTARTS`] restarts per instance (proxy); after that the instance is marked dead like
 //! an in-process one ([`crate::PluginHost::failures`]) and calls fail at once, so a plugin that
-//! crashes on every call does not spawn processes for ever.
+//! crashes on every call does not spawn processes for ever. An embodiment is not restarted: as
+//! after any other failure of an embodiment, the first one marks it dead and the robot halts
+//! where it is (an embodiment that cannot step is not safe to keep driving).
 
+use crate::abi::H2nCoupledLimit;
 use crate::error::{PluginError, PluginKind};
 use crate::init::RobotContext;
 use human2nav_core::constraint::{ConstraintContext, ConstraintError, TrajBatch};
+use human2nav_core::embodiment::RobotState;
 use human2nav_core::obstacle::{Obstacle, OccupancyGrid};
 use human2nav_core::{
-    AgentState, ControllerGains, Limits, Observation, Plan, PlanError, PlanInfo, Pose2, Twist2,
+    AgentState, ControllerGains, CoupledLimit, Limits, Observation, Plan, PlanError, PlanInfo,
+    Pose2, Twist2,
 };
+use std::borrow::Cow;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Stdio};
@@ -61,6 +73,11 @@ pub(crate) const OP_INIT: u8 = 1;
 pub(crate) const OP_RESET: u8 = 2;
 pub(crate) const OP_PLAN: u8 = 3;
 pub(crate) const OP_EVALUATE: u8 = 4;
+pub(crate) const OP_HOLONOMIC: u8 = 5;
+pub(crate) const OP_SATURATE: u8 = 6;
+pub(crate) const OP_STEP: u8 = 7;
+pub(crate) const OP_TRACK: u8 = 8;
+pub(crate) const OP_COUPLED_LIMIT: u8 = 9;
 pub(crate) const ANSWER_OK: u8 = 0;
 pub(crate) const ANSWER_ERR: u8 = 1;
 

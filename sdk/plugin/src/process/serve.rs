@@ -6,6 +6,28 @@ use super::*;
 enum Served {
     Planner(crate::host::PluginPlanner),
     Constraint(crate::host::PluginConstraint),
+    Embodiment(crate::host::PluginEmbodiment),
+}
+
+/// Runs an embodiment call on the helper's proxy (which checks every answer).
+fn embodiment_value(
+    emb: &crate::host::PluginEmbodiment,
+    call: &EmbodimentCall<'_>,
+) -> EmbodimentValue {
+    use human2nav_core::embodiment::Embodiment;
+    match call {
+        EmbodimentCall::Holonomic => EmbodimentValue::Holonomic(emb.holonomic()),
+        EmbodimentCall::Saturate { state, cmd, dt } => {
+            EmbodimentValue::Twist(emb.saturate(state, *cmd, *dt))
+        }
+        EmbodimentCall::Step { state, cmd, dt } => {
+            EmbodimentValue::State(emb.step(state, *cmd, *dt))
+        }
+        EmbodimentCall::Track { state, plan, t } => {
+            EmbodimentValue::Twist(emb.track(state, plan, *t))
+        }
+        EmbodimentCall::CoupledLimit => EmbodimentValue::CoupledLimit(emb.coupled_limit()),
+    }
 }
 
 /// The protocol's output: the original stdout, after fd 1 was pointed at stderr (so a plugin
@@ -95,9 +117,19 @@ fn serve(input: &mut dyn Read, out: &mut dyn Write) -> std::io::Result<()> {
                 None,
             )
             .map(Served::Constraint),
+        PluginKind::Embodiment => match init.robot.as_ref() {
+            Some(robot) => host
+                .embodiment_with_deadline(&init.library, &init.factory, &init.config, robot, None)
+                .map(Served::Embodiment),
+            None => Err(PluginError::Process {
+                instance: format!("embodiment `{}`", init.factory),
+                message: "an embodiment is created for a robot, and none was sent".into(),
+            }),
+        },
         other => Err(PluginError::Process {
             instance: format!("{other} `{}`", init.factory),
-            message: "only planners and constraint terms run in their own process".into(),
+            message: "only planners, constraint terms and embodiments run in their own process"
+                .into(),
         }),
     };
     let mut served = match created {
@@ -107,6 +139,7 @@ fn serve(input: &mut dyn Read, out: &mut dyn Write) -> std::io::Result<()> {
                 Served::Constraint(c) => {
                     human2nav_core::constraint::ConstraintTerm::name(c).to_owned()
                 }
+                Served::Embodiment(b) => human2nav_core::embodiment::Embodiment::name(b).to_owned(),
             };
             e.start(ANSWER_OK);
             e.str(&name);
@@ -122,6 +155,17 @@ fn serve(input: &mut dyn Read, out: &mut dyn Write) -> std::io::Result<()> {
     while read_message(input, &mut buf)? {
         let mut d = Dec::new(&buf);
         let op = d.u8().map_err(invalid)?;
+        if let Served::Embodiment(emb) = &served {
+            let Some(call) = EmbodimentCall::decode(op, &mut d).map_err(invalid)? else {
+                return Err(invalid(format!(
+                    "operation {op} does not apply to an embodiment"
+                )));
+            };
+            let value = embodiment_value(emb, &call);
+            encode_embodiment_answer(&mut e, &value, emb.failure().as_deref());
+            send(out, &mut e)?;
+            continue;
+        }
         match (op, &mut served) {
             (OP_RESET, Served::Planner(p)) => {
                 human2nav_core::Planner::reset(p);

@@ -46,6 +46,10 @@ impl Enc {
         self.f64(t.vy);
         self.f64(t.omega);
     }
+    pub(crate) fn state(&mut self, s: &RobotState) {
+        self.pose(s.pose);
+        self.twist(s.velocity);
+    }
     pub(crate) fn opt_str(&mut self, s: Option<&str>) {
         match s {
             Some(s) => {
@@ -181,6 +185,12 @@ impl<'a> Dec<'a> {
     }
     pub(crate) fn twist(&mut self) -> Result<Twist2, String> {
         Ok(Twist2::new(self.f64()?, self.f64()?, self.f64()?))
+    }
+    pub(crate) fn state(&mut self) -> Result<RobotState, String> {
+        Ok(RobotState {
+            pose: self.pose()?,
+            velocity: self.twist()?,
+        })
     }
     pub(crate) fn opt_str(&mut self) -> Result<Option<String>, String> {
         Ok(match self.u8()? {

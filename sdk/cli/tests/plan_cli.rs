@@ -32,6 +32,7 @@ fn model_dir(tag: &str) -> PathBuf {
         goal_scale: 4.0,
         speed_scale: 1.0,
         goal_conditioned: true,
+        velocity_conditioned: true,
     };
     let dir = std::env::temp_dir().join(format!("h2n-plan-cli-{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);

@@ -154,7 +154,8 @@ pub struct EvalSection {
     pub crowd_weights: Vec<f64>,
     /// Also run [`human2nav_flow::eval::counterfactual_probe`]: a standing person placed on
     /// each window's constant-velocity line where the recorded future avoided it, the samples
-    /// with and without that person in the raster. Default false.
+    /// with and without that person in the raster, once per crowd weight. Default
+    /// false.
     pub counterfactual_probe: bool,
     /// Split whose windows are evaluated: `test` (the default, and what a model card
     /// reports), `val` (to study settings without looking at the test scenes) or `train`.
@@ -379,7 +380,7 @@ pub fn train(
     } else {
         let norm = Normalisation::estimate(&train_set, cfg.train.seed)?;
         let trainer = Trainer::new(&cfg.net, &norm, &cfg.train, &train_set, &val_set, device)?;
-        // The trainer's copy: `train.goal` decides whether the goal is seen.
+        // The trainer's copy: `train.goal` and `train.velocity` decide what the network sees.
         eprintln!("normalisation: {:?}", trainer.model().card().normalisation);
         trainer
     };
@@ -811,26 +812,30 @@ pub fn run_evaluation(
             step: cache.manifest().dt,
             ..cfg.train.counterfactual.clone().unwrap_or_default()
         };
-        let bar = ProgressBar::new(windows.len() as u64);
-        bar.set_style(ProgressStyle::with_template(
-            "probing a counterfactual person [{wide_bar}] {pos}/{len} windows  ETA {eta}",
-        )?);
         let placing = (&person, cache.manifest().bev);
-        let p = counterfactual_probe(model, &windows, &opts, placing, cfg.eval.contact, |i| {
-            bar.set_position(i as u64)
-        })?;
-        bar.finish_and_clear();
-        eprintln!(
-            "{}: counterfactual probe (a standing person on the straight line, clear of the \
-             recorded future; {} of {} windows): samples meeting the person {:.3} seen / {:.3} \
-             unseen; {:.3} m apart",
-            cfg.eval.split,
-            p.windows,
-            windows.len(),
-            p.observed,
-            p.hidden,
-            p.displacement
-        );
+        for &weight in &cfg.eval.crowd_weights {
+            let bar = ProgressBar::new(windows.len() as u64);
+            bar.set_style(ProgressStyle::with_template(&format!(
+                "probing a counterfactual person, w = {weight} [{{wide_bar}}] {{pos}}/{{len}} windows  ETA {{eta}}"
+            ))?);
+            let guided = CrowdGuidance::new(model, weight)?;
+            let p =
+                counterfactual_probe(&guided, &windows, &opts, placing, cfg.eval.contact, |i| {
+                    bar.set_position(i as u64)
+                })?;
+            bar.finish_and_clear();
+            eprintln!(
+                "{}: counterfactual probe, w = {weight} (a standing person on the straight line, \
+                 clear of the recorded future; {} of {} windows): samples meeting the person \
+                 {:.3} seen / {:.3} unseen; {:.3} m apart",
+                cfg.eval.split,
+                p.windows,
+                windows.len(),
+                p.observed,
+                p.hidden,
+                p.displacement
+            );
+        }
     }
     let info = EvaluationInfo {
         protocol: format!(

@@ -113,6 +113,7 @@ fn model_dir() -> PathBuf {
         goal_scale: 5.5,
         speed_scale: 1.3,
         goal_conditioned: true,
+        velocity_conditioned: true,
     };
     let model = CfmModel::new(&NetConfig::default(), &norm, Device::Cpu).expect("default config");
     let tmp = std::env::temp_dir().join(format!("h2n-planning-bench-{}", std::process::id()));

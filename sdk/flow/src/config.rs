@@ -266,11 +266,17 @@ pub struct Normalisation {
     /// and at inference, so the model generates where a walker goes from its velocity and the
     /// scene alone: a goal-free, multimodal predictor of people (`train.goal = false`).
     /// Default true.
-    #[serde(default = "goal_conditioned_default")]
+    #[serde(default = "conditioned_default")]
     pub goal_conditioned: bool,
+    /// Whether the network sees the ego velocity. `false`: the velocity input is always zero,
+    /// in training and at inference, so the model has only its heading (the frame), the goal
+    /// and the scene to go on (`train.velocity = false`; a lever of the model issue,
+    /// docs/experiments/2026-12-07-velocity-and-dose.md). Default true.
+    #[serde(default = "conditioned_default")]
+    pub velocity_conditioned: bool,
 }
 
-fn goal_conditioned_default() -> bool {
+fn conditioned_default() -> bool {
     true
 }
 
@@ -282,6 +288,7 @@ impl Default for Normalisation {
             goal_scale: 1.0,
             speed_scale: 1.0,
             goal_conditioned: true,
+            velocity_conditioned: true,
         }
     }
 }

@@ -989,6 +989,7 @@ mod tests {
             goal_scale: 4.0,
             speed_scale: 1.0,
             goal_conditioned,
+            velocity_conditioned: true,
         };
         let dir = std::env::temp_dir().join(format!("h2n-planner-{tag}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);

@@ -568,6 +568,7 @@ mod tests {
             goal_scale: 5.0,
             speed_scale: 1.2,
             goal_conditioned: true,
+            velocity_conditioned: true,
         }
     }
 

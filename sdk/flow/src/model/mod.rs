@@ -29,7 +29,8 @@ pub const MAX_WEIGHTS_BYTES: u64 = 1 << 30;
 /// Writes the normalised condition of one example: the raster with its velocity channels
 /// divided by the speed scale into `bev_out` (`3·H·W`), and
 /// `[g_x/goal_scale, g_y/goal_scale, v_x/speed_scale, v_y/speed_scale]` into `goal_out` (the
-/// goal zero for a model that is not [`Normalisation::goal_conditioned`]).
+/// goal zero for a model that is not [`Normalisation::goal_conditioned`], the velocity zero for
+/// one that is not [`Normalisation::velocity_conditioned`]).
 ///
 /// Training and inference both go through this function, so the network sees the same inputs.
 pub fn normalise_condition(
@@ -53,6 +54,11 @@ pub fn normalise_condition(
     };
     goal_out[0] = (goal[0] / norm.goal_scale) as f32;
     goal_out[1] = (goal[1] / norm.goal_scale) as f32;
+    let velocity = if norm.velocity_conditioned {
+        velocity
+    } else {
+        [0.0; 2]
+    };
     goal_out[2] = (velocity[0] / norm.speed_scale) as f32;
     goal_out[3] = (velocity[1] / norm.speed_scale) as f32;
 }
@@ -116,5 +122,47 @@ pub fn trajectory_features(poses: &[f64], out: &mut [f32]) {
         out[2 * t + i] = p[2].cos() as f32;
         out[3 * t + i] = p[2].sin() as f32;
         out[4 * t + i] = (i + 1) as f32 / t as f32;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn encoded(norm: &Normalisation) -> ([f32; 12], [f32; 4]) {
+        let bev = [1.0, 0.0, 0.0, 1.0, 2.6, 0.0, 0.0, -2.6, 0.0, 1.3, 0.0, 0.0];
+        let (mut bev_out, mut goal_out) = ([0.0; 12], [0.0; 4]);
+        normalise_condition(
+            norm,
+            &bev,
+            [4.0, -2.0],
+            [1.3, 0.65],
+            &mut bev_out,
+            &mut goal_out,
+        );
+        (bev_out, goal_out)
+    }
+
+    #[test]
+    fn the_condition_is_scaled_and_the_inputs_a_model_does_not_see_are_zero() {
+        let norm = Normalisation {
+            goal_scale: 2.0,
+            speed_scale: 1.3,
+            ..Normalisation::default()
+        };
+        let (bev, goal) = encoded(&norm);
+        assert_eq!(goal, [2.0, -1.0, 1.0, 0.5]);
+        assert_eq!(bev[..4], [1.0, 0.0, 0.0, 1.0]);
+        assert_eq!(bev[4..8], [2.0, 0.0, 0.0, -2.0]);
+
+        let blind = |goal_conditioned, velocity_conditioned| Normalisation {
+            goal_conditioned,
+            velocity_conditioned,
+            ..norm.clone()
+        };
+        assert_eq!(encoded(&blind(false, true)).1, [0.0, 0.0, 1.0, 0.5]);
+        assert_eq!(encoded(&blind(true, false)).1, [2.0, -1.0, 0.0, 0.0]);
+        // The raster is the same whatever the model does not see.
+        assert_eq!(encoded(&blind(false, false)).0, bev);
     }
 }

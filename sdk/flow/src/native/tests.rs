@@ -14,6 +14,7 @@ fn norm() -> Normalisation {
         goal_scale: 5.0,
         speed_scale: 1.2,
         goal_conditioned: true,
+        velocity_conditioned: true,
     }
 }
 

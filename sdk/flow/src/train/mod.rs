@@ -170,6 +170,7 @@ impl Normalisation {
             goal_scale,
             speed_scale,
             goal_conditioned: true,
+            velocity_conditioned: true,
         };
         norm.validate()?;
         Ok(norm)
@@ -229,6 +230,9 @@ pub struct TrainOptions {
     /// ([`Normalisation::goal_conditioned`]): from a walker's velocity and the scene alone it
     /// generates where the walker goes, a multimodal predictor of people. Default true.
     pub goal: bool,
+    /// Condition the model on the ego velocity. `false` trains a model that does not see it
+    /// ([`Normalisation::velocity_conditioned`]). Default true.
+    pub velocity: bool,
     /// Counterfactual walkers ([`Counterfactual`]); absent (the default): none, and batches
     /// are exactly those of earlier versions.
     pub counterfactual: Option<Counterfactual>,
@@ -372,6 +376,7 @@ impl Default for TrainOptions {
             mirror: false,
             path_sigma: 0.0,
             goal: true,
+            velocity: true,
             counterfactual: None,
         }
     }

@@ -345,6 +345,7 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
         tch::manual_seed(opts.seed as i64);
         let norm = &Normalisation {
             goal_conditioned: opts.goal,
+            velocity_conditioned: opts.velocity,
             ..norm.clone()
         };
         let model = CfmModel::new(net, norm, device)?;

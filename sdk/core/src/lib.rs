@@ -40,6 +40,7 @@ pub mod planner;
 pub mod projection;
 pub mod robot;
 pub mod se2;
+pub mod social_force;
 pub mod tfs;
 pub mod trajectory;
 

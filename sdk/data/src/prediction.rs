@@ -17,10 +17,8 @@
 //!   model of a walker in a turn);
 //! * [`Predictor::SocialForce`]: the pedestrian and the people within 6 m of it walk on at
 //!   their last steps' velocities while keeping clear of each other, by the social force model
-//!   of Helbing & Molnár (1995, Phys. Rev. E 51, 4282) with their parameters: relaxation time
-//!   0.5 s towards the last step's velocity, repulsion `(V0/σ)·exp(−d/σ)` between discs `d`
-//!   apart (`V0/σ = 7 m/s²`, `σ = 0.3 m`), weighted 0.5 from behind a walker's 200° field of
-//!   view, speed capped at 1.3 times the last step's (at least 0.5 m/s). The one predictor here
+//!   of Helbing & Molnár ([`human2nav_core::social_force`], with their parameters), each driven
+//!   towards its last step's velocity and pushed off the others' discs. The one predictor here
 //!   that sees the other people, as an interaction-aware predictor must;
 //! * [`Predictor::Ridge`]: a linear model learned from data. In the frame of the pedestrian's
 //!   heading, it maps the `history` step velocities (and a constant) to the future's departure
@@ -38,6 +36,7 @@ use crate::resample::Scene;
 use crate::scenario::EpisodeSuite;
 use human2nav_core::forecast::HistoryRidge;
 use human2nav_core::se2::Pose2;
+use human2nav_core::social_force::SocialForce;
 use nalgebra::{DMatrix, DVector};
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -288,13 +287,7 @@ fn constant_turn(w: &Window, n: usize, horizon: usize) -> Vec<[f64; 2]> {
 /// people near it moved together, `horizon` steps of `dt`, each driven towards its last
 /// step's velocity and pushed off the others; the pedestrian's positions.
 fn social_force(w: &Window, horizon: usize, dt: f64) -> Vec<[f64; 2]> {
-    const RELAXATION: f64 = 0.5;
-    const STRENGTH: f64 = 7.0;
-    const RANGE: f64 = 0.3;
-    const BEHIND: f64 = 0.5;
-    // Half the field of view (200°) as a cosine: someone at a larger angle from the walking
-    // direction is behind.
-    let seen = (100f64).to_radians().cos();
+    let force = SocialForce::default();
     let m = w.past.len();
     let now = w.past[m - 1];
     // Velocities in m/s from here on.
@@ -312,40 +305,27 @@ fn social_force(w: &Window, horizon: usize, dt: f64) -> Vec<[f64; 2]> {
     let desired: Vec<[f64; 2]> = walkers.iter().map(|a| a.v).collect();
     let cap: Vec<f64> = desired
         .iter()
-        .map(|v| 1.3 * v[0].hypot(v[1]).max(0.5))
+        .map(|v| force.speed_cap(v[0].hypot(v[1])))
         .collect();
     let mut out = Vec::with_capacity(horizon);
-    let mut accel = vec![[0.0; 2]; walkers.len()];
+    let mut pushes = vec![[0.0; 2]; walkers.len()];
     for _ in 0..horizon {
-        for (i, a) in walkers.iter().enumerate() {
-            let mut f = [
-                (desired[i][0] - a.v[0]) / RELAXATION,
-                (desired[i][1] - a.v[1]) / RELAXATION,
-            ];
-            let speed = a.v[0].hypot(a.v[1]);
-            for (j, b) in walkers.iter().enumerate() {
+        for (a, push) in walkers.iter().zip(pushes.iter_mut()) {
+            *push = [0.0; 2];
+            for b in &walkers {
                 let d = sub(a.p, b.p);
                 let centres = d[0].hypot(d[1]);
-                if j == i || centres < 1e-9 {
-                    continue;
+                if centres < 1e-9 {
+                    continue; // the walker itself, or someone exactly on it
                 }
                 let n = [d[0] / centres, d[1] / centres];
-                let gap = (centres - a.radius - b.radius).max(-a.radius);
-                // Behind the walker: the cosine between its heading and the direction to b.
-                let ahead = speed < 1e-9 || -(n[0] * a.v[0] + n[1] * a.v[1]) / speed >= seen;
-                let push = STRENGTH * (-gap / RANGE).exp() * if ahead { 1.0 } else { BEHIND };
-                f[0] += push * n[0];
-                f[1] += push * n[1];
+                let f = force.push(centres - a.radius - b.radius, a.radius, a.v, n);
+                push[0] += f[0];
+                push[1] += f[1];
             }
-            accel[i] = f;
         }
-        for ((a, f), cap) in walkers.iter_mut().zip(&accel).zip(&cap) {
-            a.v = [a.v[0] + f[0] * dt, a.v[1] + f[1] * dt];
-            let speed = a.v[0].hypot(a.v[1]);
-            if speed > *cap {
-                a.v = [a.v[0] * cap / speed, a.v[1] * cap / speed];
-            }
-            a.p = [a.p[0] + a.v[0] * dt, a.p[1] + a.v[1] * dt];
+        for (((a, push), desired), cap) in walkers.iter_mut().zip(&pushes).zip(&desired).zip(&cap) {
+            (a.p, a.v) = force.step(a.p, a.v, *desired, *push, *cap, dt);
         }
         out.push(walkers[0].p);
     }

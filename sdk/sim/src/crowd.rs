@@ -5,29 +5,21 @@
 //! # The reactive crowd
 //!
 //! Each pedestrian follows its recorded track and reacts to the robot only (the recording
-//! already holds how people reacted to each other). The model is the social force model of
-//! Helbing & Molnár (1995, "Social force model for pedestrian dynamics", Phys. Rev. E 51,
-//! 4282) in its circular form, with their parameters, and a driving term whose desired
-//! velocity pulls the pedestrian back onto the recording:
+//! already holds how people reacted to each other), by the social force model of Helbing &
+//! Molnár ([`human2nav_core::social_force`], with their parameters) with a driving term whose
+//! desired velocity pulls the pedestrian back onto the recording:
 //!
 //! ```text
 //! v_des = v_rec(t) + (p_rec(t) − p) / T_return          capped at |v_des| ≤ v_cap
 //! a     = (v_des − v) / τ  +  w(φ) · (V0/σ) · exp(−d / σ) · n
-//! v'    = v + a·dt (capped at v_cap),   p' = p + v'·dt   (semi-implicit Euler, the sim step)
 //! ```
 //!
 //! * `p_rec`, `v_rec`: the recorded position and velocity at `t` ([`crate::replay`]);
+//!   `v_cap = 1.3 · max(|v_rec|, 0.5 m/s)`;
 //! * `d`: the clearance from the pedestrian's disc to the robot's footprint (the collision
 //!   body the simulator checks), `n` the unit direction from the centre of the nearest
 //!   footprint shape to the pedestrian (the circular specification's centre-to-centre
 //!   direction; a flat face's normal would push a walker meeting it head-on straight back);
-//! * `τ = 0.5 s`, `V0 = 2.1 m²/s²`, `σ = 0.3 m` (Helbing & Molnár 1995): the repulsion is
-//!   7 m/s² at contact, 1.3 m/s² at 0.5 m, 0.25 m/s² at 1 m;
-//! * `w(φ)`: their anisotropy — 1 when the robot lies within the pedestrian's 200° field of
-//!   view around its walking direction, else `c = 0.5`;
-//! * `v_cap = 1.3 · max(|v_rec|, 0.5 m/s)`: Helbing & Molnár's maximal speed `1.3·v0` with
-//!   the recorded speed as `v0`; the 0.5 m/s floor (ours) lets someone recorded standing
-//!   still step aside;
 //! * `T_return = 1 s` (ours, not from the literature): a pedestrian pushed off its recorded
 //!   path walks back onto it over about a second, hurrying at up to `v_cap` to catch up with
 //!   where the recording is by then.
@@ -42,88 +34,8 @@
 use crate::episode::{AgentTrack, Episode};
 use crate::replay::{CrowdReplay, PedestrianSample};
 use human2nav_core::robot::footprint::{self, FootprintShape};
+pub use human2nav_core::social_force::SocialForce;
 use human2nav_core::{AgentState, Pose2};
-use serde::{Deserialize, Serialize};
-
-/// Parameters of the reactive crowd (module docs). Every field is optional in TOML.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct SocialForce {
-    /// Relaxation time τ of the driving term (s). Default 0.5 (Helbing & Molnár 1995).
-    pub relaxation_time: f64,
-    /// Repulsion strength `V0/σ` at contact (m/s²). Default 7.0 = 2.1 / 0.3 (ibid.).
-    pub strength: f64,
-    /// Repulsion range σ (m). Default 0.3 (ibid.).
-    pub range: f64,
-    /// Field of view around the walking direction (degrees). Default 200 (ibid.).
-    pub field_of_view_deg: f64,
-    /// Weight of a robot outside the field of view. Default 0.5 (ibid.).
-    pub rear_weight: f64,
-    /// Maximal speed as a multiple of the recorded speed. Default 1.3 (ibid.).
-    pub max_speed_factor: f64,
-    /// The recorded speed used for the cap is at least this (m/s). Default 0.5.
-    pub min_speed: f64,
-    /// Time over which a displaced pedestrian walks back onto its recording (s). Default 1.0.
-    pub return_time: f64,
-}
-
-impl Default for SocialForce {
-    fn default() -> Self {
-        Self {
-            relaxation_time: 0.5,
-            strength: 7.0,
-            range: 0.3,
-            field_of_view_deg: 200.0,
-            rear_weight: 0.5,
-            max_speed_factor: 1.3,
-            min_speed: 0.5,
-            return_time: 1.0,
-        }
-    }
-}
-
-impl SocialForce {
-    /// Checks every parameter; the error names the field.
-    pub fn validate(&self) -> Result<(), (&'static str, String)> {
-        let positive = [
-            ("relaxation_time", self.relaxation_time),
-            ("strength", self.strength),
-            ("range", self.range),
-            ("return_time", self.return_time),
-            ("min_speed", self.min_speed),
-        ];
-        for (name, v) in positive {
-            if !(v.is_finite() && v > 0.0 && v <= 1e6) {
-                return Err((name, format!("must be finite, > 0 and ≤ 1e6, got {v}")));
-            }
-        }
-        if !(self.field_of_view_deg.is_finite()
-            && self.field_of_view_deg > 0.0
-            && self.field_of_view_deg <= 360.0)
-        {
-            return Err((
-                "field_of_view_deg",
-                format!("must be in (0, 360], got {}", self.field_of_view_deg),
-            ));
-        }
-        if !(self.rear_weight.is_finite() && (0.0..=1.0).contains(&self.rear_weight)) {
-            return Err((
-                "rear_weight",
-                format!("must be in [0, 1], got {}", self.rear_weight),
-            ));
-        }
-        if !(self.max_speed_factor.is_finite()
-            && self.max_speed_factor >= 1.0
-            && self.max_speed_factor <= 10.0)
-        {
-            return Err((
-                "max_speed_factor",
-                format!("must be in [1, 10], got {}", self.max_speed_factor),
-            ));
-        }
-        Ok(())
-    }
-}
 
 /// How the pedestrians of a suite behave.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -325,7 +237,7 @@ fn repulsion(
     if !d.is_finite() {
         return [0.0, 0.0];
     }
-    let magnitude = force.strength * (-d.max(-rec.radius) / force.range).exp();
+    let magnitude = force.magnitude(d, rec.radius);
     if magnitude < 0.1 * ENGAGE {
         return [0.0, 0.0];
     }
@@ -353,24 +265,19 @@ fn repulsion(
     } else {
         [1.0, 0.0]
     };
-    // Anisotropy: the robot lies in direction −n from the pedestrian.
+    // Anisotropy: the walker's own velocity, or the recording's when it is nearly still; a
+    // walker slower than 5 cm/s either way sees the robot wherever it is.
     let heading = if walker.velocity[0].hypot(walker.velocity[1]) > 0.05 {
         walker.velocity
     } else {
         rec.velocity
     };
-    let speed = heading[0].hypot(heading[1]);
-    let weight = if speed > 0.05 {
-        let cos_phi = -(heading[0] * n[0] + heading[1] * n[1]) / speed;
-        let half_fov = (0.5 * force.field_of_view_deg).to_radians();
-        if cos_phi >= half_fov.cos() {
-            1.0
-        } else {
-            force.rear_weight
-        }
+    let heading = if heading[0].hypot(heading[1]) > 0.05 {
+        heading
     } else {
-        1.0
+        [0.0, 0.0]
     };
+    let weight = force.weight(heading, n);
     [weight * magnitude * n[0], weight * magnitude * n[1]]
 }
 
@@ -382,31 +289,13 @@ fn step_walker(
     push: [f64; 2],
     dt: f64,
 ) {
-    let cap = force.max_speed_factor * rec.velocity[0].hypot(rec.velocity[1]).max(force.min_speed);
-    let clamp = |v: [f64; 2]| {
-        let s = v[0].hypot(v[1]);
-        if s > cap {
-            [v[0] * cap / s, v[1] * cap / s]
-        } else {
-            v
-        }
-    };
-    let desired = clamp([
+    let cap = force.speed_cap(rec.velocity[0].hypot(rec.velocity[1]));
+    let desired = [
         rec.velocity[0] + (rec.position[0] - walker.position[0]) / force.return_time,
         rec.velocity[1] + (rec.position[1] - walker.position[1]) / force.return_time,
-    ]);
-    let a = [
-        (desired[0] - walker.velocity[0]) / force.relaxation_time + push[0],
-        (desired[1] - walker.velocity[1]) / force.relaxation_time + push[1],
     ];
-    walker.velocity = clamp([
-        walker.velocity[0] + a[0] * dt,
-        walker.velocity[1] + a[1] * dt,
-    ]);
-    walker.position = [
-        walker.position[0] + walker.velocity[0] * dt,
-        walker.position[1] + walker.velocity[1] * dt,
-    ];
+    (walker.position, walker.velocity) =
+        force.step(walker.position, walker.velocity, desired, push, cap, dt);
 }
 
 /// Appends the walker's position to its history each time `t` passes a sample of its track.

@@ -9,31 +9,12 @@
 use human2nav_core::embodiment::{Embodiment, RobotState};
 use human2nav_core::robot::{PluginIsolation, PluginRef};
 use human2nav_core::{ControllerGains, CoupledLimit, Limits, Plan, PlanInfo, Pose2, Twist2};
-use human2nav_plugin::resolve::resolve_library_path;
 use human2nav_plugin::{PluginEmbodiment, PluginError, PluginHost, RobotContext};
 use std::path::PathBuf;
 use std::time::Duration;
 
-fn fixture() -> PathBuf {
-    let deps = std::env::current_exe()
-        .ok()
-        .and_then(|e| e.parent().map(PathBuf::from))
-        .expect("test binary directory");
-    for dir in [deps.clone(), deps.parent().unwrap_or(&deps).to_path_buf()] {
-        let p = dir.join("human2nav_fixture_test_plugin");
-        if resolve_library_path(&p).is_ok() {
-            return p;
-        }
-    }
-    panic!(
-        "the fixture cdylib was not built next to {}",
-        deps.display()
-    );
-}
-
-fn host() -> PluginHost {
-    PluginHost::new().with_process_helper(env!("CARGO_BIN_EXE_human2nav-plugin-host"))
-}
+mod common;
+use common::{fixture, host};
 
 fn robot() -> RobotContext {
     RobotContext {

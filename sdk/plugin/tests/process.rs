@@ -7,31 +7,11 @@
 
 use human2nav_core::constraint::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
 use human2nav_core::{AgentState, Limits, Observation, PlanError, Planner, Pose2, Twist2};
-use human2nav_plugin::resolve::resolve_library_path;
 use human2nav_plugin::{PluginError, PluginHost, PluginIsolation, PluginPlanner, process};
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-fn fixture() -> PathBuf {
-    let deps = std::env::current_exe()
-        .ok()
-        .and_then(|e| e.parent().map(PathBuf::from))
-        .expect("test binary directory");
-    for dir in [deps.clone(), deps.parent().unwrap_or(&deps).to_path_buf()] {
-        let p = dir.join("human2nav_fixture_test_plugin");
-        if resolve_library_path(&p).is_ok() {
-            return p;
-        }
-    }
-    panic!(
-        "the fixture cdylib was not built next to {}",
-        deps.display()
-    );
-}
-
-fn host() -> PluginHost {
-    PluginHost::new().with_process_helper(env!("CARGO_BIN_EXE_human2nav-plugin-host"))
-}
+mod common;
+use common::{fixture, host};
 
 fn obs(time: f64) -> Observation {
     Observation {

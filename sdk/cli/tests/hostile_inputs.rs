@@ -2579,6 +2579,27 @@ fn planner_call_cases() -> Vec<Case> {
                 ])
             },
         ),
+        covered(
+            a,
+            "C API `budget_ms` of 1e22, NaN, infinite or negative",
+            "1e22: a panic adding the budget to an instant; the planner stayed poisoned",
+            "`H2N_INVALID_ARGUMENT` naming `budget_ms`, as the CLI's cap",
+            "sdk/capi/tests/bad_input.rs::planning_refuses_bad_observations_and_budgets",
+        ),
+        covered(
+            a,
+            "C API ego pose at 1e300 m",
+            "a plan there",
+            "`H2N_INVALID_ARGUMENT`: `ego pose is more than 1000000 m`, the episodes' bound",
+            "sdk/capi/tests/bad_input.rs::planning_refuses_bad_observations_and_budgets",
+        ),
+        covered(
+            a,
+            "Python `budget_ms` of 1e22 or NaN; ego at 1e300 m",
+            "1e22: a `PanicException` that `except Exception` does not catch",
+            "`ValueError` naming `budget_ms` / `ego pose is more than`, the C API's text",
+            "sdk/python/tests/test_human2nav.py::test_bad_input_is_a_clear_error",
+        ),
     ]
 }
 

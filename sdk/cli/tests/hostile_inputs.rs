@@ -2580,6 +2580,13 @@ fn planner_call_cases() -> Vec<Case> {
             },
         ),
         covered(
+            "plugins",
+            "plugin error whose claimed length runs past its text (1,009 NUL bytes)",
+            "the NUL bytes printed",
+            "the message ends at its first NUL, control characters dropped",
+            "sdk/plugin/src/host/tests.rs::a_claimed_error_length_is_not_trusted_past_the_text",
+        ),
+        covered(
             a,
             "C API `budget_ms` of 1e22, NaN, infinite or negative",
             "1e22: a panic adding the budget to an instant; the planner stayed poisoned",

@@ -81,17 +81,11 @@ impl PluginHost {
         };
         let exec = match deadline {
             None => ConstraintExec::Direct(core),
-            Some(_) => {
-                let worker =
-                    Worker::spawn(thread_name(&c.name), move |job: &mut Box<ConstraintJob>| {
-                        core.run(job)
-                    })
-                    .map_err(|e| worker_error(&c.label, e))?;
-                ConstraintExec::Worker(Mutex::new(Slot {
-                    worker: Some(worker),
-                    spare: None,
-                }))
-            }
+            Some(_) => ConstraintExec::Worker(Slot::spawn(
+                &c.name,
+                &c.label,
+                move |job: &mut Box<ConstraintJob>| core.run(job),
+            )?),
         };
         Ok(PluginConstraint {
             name: c.name,
@@ -100,13 +94,6 @@ impl PluginHost {
             exec,
         })
     }
-}
-
-/// A proxy's worker and the buffers of the call not in flight.
-struct Slot<J> {
-    /// `None` once the instance missed a deadline (the worker was let go).
-    worker: Option<Worker<Box<J>>>,
-    spare: Option<Box<J>>,
 }
 
 /// The functions of a constraint instance, with the instance.

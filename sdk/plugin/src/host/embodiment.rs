@@ -80,17 +80,11 @@ impl PluginHost {
         };
         let exec = match deadline {
             None => EmbodimentExec::Direct(core),
-            Some(_) => {
-                let worker =
-                    Worker::spawn(thread_name(&c.name), move |job: &mut Box<EmbodimentJob>| {
-                        core.run(job)
-                    })
-                    .map_err(|e| worker_error(&c.label, e))?;
-                EmbodimentExec::Worker(Mutex::new(WorkerSlot {
-                    worker: Some(worker),
-                    spare: None,
-                }))
-            }
+            Some(_) => EmbodimentExec::Worker(Slot::spawn(
+                &c.name,
+                &c.label,
+                move |job: &mut Box<EmbodimentJob>| core.run(job),
+            )?),
         };
         let mut e = PluginEmbodiment {
             name: c.name,
@@ -355,18 +349,11 @@ impl EmbodimentCore {
     }
 }
 
-/// A proxy's worker and the buffers of the call not in flight.
-struct WorkerSlot {
-    /// `None` once the instance missed a deadline (the worker was let go).
-    worker: Option<Worker<Box<EmbodimentJob>>>,
-    spare: Option<Box<EmbodimentJob>>,
-}
-
 enum EmbodimentExec {
     /// No deadline: calls run on the caller's thread, concurrently when the caller's are.
     Direct(EmbodimentCore),
     /// With a deadline: calls run on the instance's worker, one at a time.
-    Worker(Mutex<WorkerSlot>),
+    Worker(Mutex<Slot<EmbodimentJob>>),
     /// In a helper process of its own, one call at a time.
     Process(Mutex<ProcessClient>),
 }

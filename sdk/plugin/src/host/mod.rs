@@ -244,6 +244,30 @@ fn worker_error(label: &str, e: std::io::Error) -> PluginError {
     }
 }
 
+/// A proxy's worker (an instance in process under a deadline) and the buffers of the call not
+/// in flight; the constraint and embodiment proxies share it.
+struct Slot<J> {
+    /// `None` once the instance missed a deadline (the worker was let go).
+    worker: Option<Worker<Box<J>>>,
+    spare: Option<Box<J>>,
+}
+
+impl<J: Send + 'static> Slot<J> {
+    /// Starts the worker thread of instance `name` (`label` names it in errors), which runs
+    /// `run` on each job.
+    fn spawn(
+        name: &str,
+        label: &str,
+        run: impl FnMut(&mut Box<J>) + Send + 'static,
+    ) -> Result<Mutex<Self>, PluginError> {
+        let worker = Worker::spawn(thread_name(name), run).map_err(|e| worker_error(label, e))?;
+        Ok(Mutex::new(Slot {
+            worker: Some(worker),
+            spare: None,
+        }))
+    }
+}
+
 /// Copies agents into ABI records (history pointers left null) and their histories into one
 /// flat buffer; [`link_histories`] points the records into it where the call is made.
 fn load_agents(src: &[AgentState], agents: &mut Vec<H2nAgent>, history: &mut Vec<f64>) {

@@ -10,7 +10,7 @@ use human2nav_core::ablation::Arm;
 use human2nav_core::bev::BevSpec;
 use human2nav_core::constraint::Phi;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
-use human2nav_core::forecast::{CrowdPredictor, Forecast, constant_velocity_path};
+use human2nav_core::forecast::{CrowdPredictor, Forecast, ForecastError, constant_velocity_path};
 use human2nav_core::guidance::analytic::FixedWalk;
 use human2nav_core::guidance::{GuidanceVariant, PaperSettings};
 use human2nav_core::human2nav::{
@@ -1049,7 +1049,12 @@ impl CrowdPredictor for Scripted {
     fn name(&self) -> &str {
         "scripted"
     }
-    fn forecast(&mut self, obs: &Observation, horizon: usize, dt: f64) -> Result<Forecast, String> {
+    fn forecast(
+        &mut self,
+        obs: &Observation,
+        horizon: usize,
+        dt: f64,
+    ) -> Result<Forecast, ForecastError> {
         if self.fail {
             return Err("no forecast today".into());
         }

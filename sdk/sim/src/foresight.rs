@@ -27,7 +27,7 @@
 use crate::episode::Episode;
 use crate::replay::CrowdReplay;
 use human2nav_core::Observation;
-use human2nav_core::forecast::{CrowdPredictor, Forecast, constant_velocity_path};
+use human2nav_core::forecast::{CrowdPredictor, Forecast, ForecastError, constant_velocity_path};
 use std::collections::HashMap;
 
 /// What a [`Foresight`] knows (module docs). The bench keys of a `human2nav` method are
@@ -108,7 +108,12 @@ impl CrowdPredictor for Foresight {
         "foresight"
     }
 
-    fn forecast(&mut self, obs: &Observation, horizon: usize, dt: f64) -> Result<Forecast, String> {
+    fn forecast(
+        &mut self,
+        obs: &Observation,
+        horizon: usize,
+        dt: f64,
+    ) -> Result<Forecast, ForecastError> {
         let ForesightSettings {
             share,
             within,

@@ -1,417 +1,16 @@
-//! What a planner expects the people around the robot to do: [`Forecast`]s, and the
-//! [`CrowdPredictor`]s that make them.
-//!
-//! A forecast holds `scenes` possible futures of the crowd. In each, every agent has a
-//! position at each of the plan's `horizon` waypoints (`dt` apart, the first `dt` after the
-//! observation). An agent predicted one way only (at constant velocity, say) has one path,
-//! shared by every scene. Scenes are equally likely unless the forecast carries weights
-//! ([`Forecast::with_weights`]): a selection that scores a plan against each and takes the
-//! weighted mean ([`crate::human2nav`]) scores its expected cost.
-//!
-//! [`Forecast::constant_velocity`] is the one-scene forecast every planner of the SDK used
-//! before predictors existed. [`FlowPredictor`], a learned, multimodal predictor, samples a
-//! goal-free flow model of people (trained with `train.goal = false`); it implements
-//! [`CrowdPredictor`] and is handed to the planner like any other.
+//! [`FlowPredictor`]: people predicted by sampling a goal-free flow model of walkers.
 
+use super::{
+    CrowdPredictor, Forecast, ForecastAgent, ForecastError, MAX_SCENES, constant_velocity_path,
+};
 use crate::bev::{self, BevAgent, BevSpec};
 use crate::flow::{FlowCondition, FlowModel};
 use crate::guidance::{self, GuidanceWorkspace};
-use crate::planner::{AgentState, Observation};
+use crate::planner::Observation;
 use crate::se2::Pose2;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-
-/// Largest number of scenes of a forecast: each one is a pass of the selection over every
-/// candidate, so hundreds would be seconds a call.
-pub const MAX_SCENES: usize = 64;
-
-/// One agent's predicted paths.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ForecastAgent {
-    /// The agent's id, as observed.
-    pub id: u64,
-    /// Radius of its disc (m).
-    pub radius: f64,
-    /// One path (the same in every scene) or one per scene; each `horizon` positions `[x, y]`.
-    pub paths: Vec<Vec<[f64; 2]>>,
-}
-
-/// Possible futures of the observed agents (module docs). Build one with
-/// [`Forecast::constant_velocity`] or [`Forecast::new`].
-#[derive(Clone, Debug, PartialEq)]
-pub struct Forecast {
-    horizon: usize,
-    scenes: usize,
-    agents: Vec<ForecastAgent>,
-    /// Each scene's probability (summing to 1); `None`: equally likely.
-    weights: Option<Vec<f64>>,
-}
-
-impl Forecast {
-    /// A forecast of `scenes` scenes over `horizon` waypoints, checked: at least one scene (at
-    /// most [`MAX_SCENES`]), every agent with one path or `scenes` of them, each of `horizon`
-    /// finite positions, and a finite radius ≥ 0.
-    pub fn new(horizon: usize, scenes: usize, agents: Vec<ForecastAgent>) -> Result<Self, String> {
-        if !(1..=MAX_SCENES).contains(&scenes) {
-            return Err(format!(
-                "a forecast needs 1 to {MAX_SCENES} scenes, got {scenes}"
-            ));
-        }
-        for a in &agents {
-            if a.paths.len() != 1 && a.paths.len() != scenes {
-                return Err(format!(
-                    "agent {}: {} paths for {scenes} scenes (1 or {scenes} expected)",
-                    a.id,
-                    a.paths.len()
-                ));
-            }
-            if let Some(p) = a.paths.iter().find(|p| p.len() != horizon) {
-                return Err(format!(
-                    "agent {}: a path of {} positions for a horizon of {horizon}",
-                    a.id,
-                    p.len()
-                ));
-            }
-            let finite = a.paths.iter().flatten().flatten().all(|v| v.is_finite());
-            if !(finite && a.radius.is_finite() && a.radius >= 0.0) {
-                return Err(format!("agent {}: a non-finite position or radius", a.id));
-            }
-        }
-        Ok(Self {
-            horizon,
-            scenes,
-            agents,
-            weights: None,
-        })
-    }
-
-    /// The same forecast with scene `s` given probability `weights[s] / Σ weights`: one finite
-    /// weight ≥ 0 per scene, not all 0.
-    pub fn with_weights(self, weights: Vec<f64>) -> Result<Self, String> {
-        if weights.len() != self.scenes {
-            return Err(format!(
-                "{} weights for {} scenes",
-                weights.len(),
-                self.scenes
-            ));
-        }
-        if let Some(w) = weights.iter().find(|w| !(w.is_finite() && **w >= 0.0)) {
-            return Err(format!("a scene weight of {w} (finite and ≥ 0 expected)"));
-        }
-        let sum: f64 = weights.iter().sum();
-        if !(sum > 0.0 && sum.is_finite()) {
-            return Err(format!(
-                "the scene weights sum to {sum} (a positive, finite sum expected)"
-            ));
-        }
-        Ok(Self {
-            weights: Some(weights.iter().map(|w| w / sum).collect()),
-            ..self
-        })
-    }
-
-    /// Scene `scene`'s probability.
-    pub fn weight(&self, scene: usize) -> f64 {
-        self.weights
-            .as_ref()
-            .map_or(1.0 / self.scenes as f64, |w| w[scene])
-    }
-
-    /// The scenes' probabilities when they are not equally likely.
-    pub(crate) fn weights(&self) -> Option<&[f64]> {
-        self.weights.as_deref()
-    }
-
-    /// The expectation over the scenes of `f(scene)`: with equally likely scenes their sum
-    /// divided by their number, otherwise the weighted sum.
-    pub fn expectation(&self, f: impl FnMut(usize) -> f64) -> f64 {
-        expectation(self.weights.as_deref(), self.scenes, f)
-    }
-
-    /// Every agent moving on at its observed velocity: one scene, positions at `dt, 2dt, …`
-    /// after the observation, in the agents' frame.
-    pub fn constant_velocity(agents: &[AgentState], horizon: usize, dt: f64) -> Self {
-        Self {
-            horizon,
-            scenes: 1,
-            agents: one_path_per_agent(agents, |a| constant_velocity_path(a, horizon, dt)),
-            weights: None,
-        }
-    }
-
-    /// A one-scene forecast of `agents`: `path(a)` for each, checked as [`Forecast::new`]
-    /// checks (a point forecast such as a predictor that makes one guess per person returns).
-    pub fn one_path_each(
-        agents: &[AgentState],
-        horizon: usize,
-        path: impl FnMut(&AgentState) -> Vec<[f64; 2]>,
-    ) -> Result<Self, String> {
-        Self::new(horizon, 1, one_path_per_agent(agents, path))
-    }
-
-    /// Waypoints per path.
-    pub fn horizon(&self) -> usize {
-        self.horizon
-    }
-
-    /// Number of scenes.
-    pub fn scenes(&self) -> usize {
-        self.scenes
-    }
-
-    /// The agents and their paths.
-    pub fn agents(&self) -> &[ForecastAgent] {
-        &self.agents
-    }
-
-    /// Agent `agent`'s position at waypoint `step` (0-based: `dt` after the observation) of
-    /// scene `scene`.
-    pub fn position(&self, agent: usize, scene: usize, step: usize) -> [f64; 2] {
-        let paths = &self.agents[agent].paths;
-        paths[if paths.len() == 1 { 0 } else { scene }][step]
-    }
-
-    /// The same forecast with every position `p` replaced by `frame.inverse_act(p)`: from the
-    /// world frame into the frame whose pose in the world is `frame` (the robot's, say).
-    pub fn in_frame(&self, frame: Pose2) -> Self {
-        let agents = self
-            .agents
-            .iter()
-            .map(|a| ForecastAgent {
-                paths: a
-                    .paths
-                    .iter()
-                    .map(|p| p.iter().map(|&q| frame.inverse_act(q)).collect())
-                    .collect(),
-                ..a.clone()
-            })
-            .collect();
-        Self {
-            agents,
-            weights: self.weights.clone(),
-            ..*self
-        }
-    }
-}
-
-/// The expectation of `f(scene)` over `scenes` scenes of probabilities `weights` (`None`:
-/// equally likely, the mean).
-pub(crate) fn expectation(
-    weights: Option<&[f64]>,
-    scenes: usize,
-    mut f: impl FnMut(usize) -> f64,
-) -> f64 {
-    match weights {
-        None => (0..scenes).map(&mut f).sum::<f64>() / scenes as f64,
-        Some(w) => w.iter().enumerate().map(|(s, w)| w * f(s)).sum(),
-    }
-}
-
-/// Each of `agents` with the one path `path` gives it.
-fn one_path_per_agent(
-    agents: &[AgentState],
-    mut path: impl FnMut(&AgentState) -> Vec<[f64; 2]>,
-) -> Vec<ForecastAgent> {
-    agents
-        .iter()
-        .map(|a| ForecastAgent {
-            id: a.id,
-            radius: a.radius,
-            paths: vec![path(a)],
-        })
-        .collect()
-}
-
-/// `horizon` positions of `agent` moving on at its velocity, `dt` apart from `dt` on.
-pub fn constant_velocity_path(agent: &AgentState, horizon: usize, dt: f64) -> Vec<[f64; 2]> {
-    (1..=horizon)
-        .map(|j| agent.walked_on(j as f64 * dt))
-        .collect()
-}
-
-/// The mean of equally long `paths`, position by position.
-fn mean_path(paths: &[Vec<[f64; 2]>]) -> Vec<[f64; 2]> {
-    let share = 1.0 / paths.len().max(1) as f64;
-    let mut mean = vec![[0.0; 2]; paths.first().map_or(0, Vec::len)];
-    for path in paths {
-        for (m, p) in mean.iter_mut().zip(path) {
-            m[0] += p[0] * share;
-            m[1] += p[1] * share;
-        }
-    }
-    mean
-}
-
-/// From waypoint `from` on (0-based), every path in `sampled` follows `cv` (the constant-
-/// velocity path) at the offset it had at waypoint `from − 1`.
-fn hold_departure(sampled: &mut [Vec<[f64; 2]>], cv: &[[f64; 2]], from: usize) {
-    if from == 0 || from > cv.len() {
-        return;
-    }
-    for path in sampled {
-        let (p, c) = (path[from - 1], cv[from - 1]);
-        let offset = [p[0] - c[0], p[1] - c[1]];
-        for (q, c) in path.iter_mut().zip(cv).skip(from) {
-            *q = [c[0] + offset[0], c[1] + offset[1]];
-        }
-    }
-}
-
-/// A source of [`Forecast`]s for a planner.
-pub trait CrowdPredictor: Send {
-    /// A short name for diagnostics (`constant-velocity`, `flow`, …).
-    fn name(&self) -> &str;
-
-    /// The forecast of `obs.agents` over `horizon` waypoints `dt` apart, in the world frame of
-    /// `obs`, with every agent of the observation in it. An error makes the planner fall back
-    /// to constant velocity for this call (and say so in its plan's notes).
-    fn forecast(&mut self, obs: &Observation, horizon: usize, dt: f64) -> Result<Forecast, String>;
-}
-
-/// The forecast the planner makes without a predictor ([`Forecast::constant_velocity`]).
-#[derive(Clone, Copy, Debug, Default)]
-pub struct ConstantVelocity;
-
-impl CrowdPredictor for ConstantVelocity {
-    fn name(&self) -> &str {
-        "constant-velocity"
-    }
-
-    fn forecast(&mut self, obs: &Observation, horizon: usize, dt: f64) -> Result<Forecast, String> {
-        Ok(Forecast::constant_velocity(&obs.agents, horizon, dt))
-    }
-}
-
-/// A linear predictor of people from their recent positions: in the frame of the walker's
-/// heading, its last `history` steps (and a constant) map linearly to how far its next
-/// `horizon` positions depart from walking on at its last step. Fitted by ridge regression on
-/// recorded tracks (`human2nav data predict --fit-on <data.toml> --export <file>`), saved as
-/// TOML. An agent whose observation holds fewer than `history + 1` positions walks on at its
-/// velocity; past `horizon` the last departure is held.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct HistoryRidge {
-    /// Steps of history the model reads (`history + 1` positions, the last the present).
-    pub history: usize,
-    /// Steps it predicts.
-    pub horizon: usize,
-    /// Seconds per step of the tracks it was fitted on; the planner's waypoints must match.
-    pub dt: f64,
-    /// What it was fitted on, in words.
-    pub fitted_on: String,
-    /// Row-major `(2·history + 1) × (2·horizon)`: row `f` holds feature `f`'s weight on each
-    /// departure `(x, y)` of each predicted step, in the heading frame.
-    pub weights: Vec<f64>,
-}
-
-impl HistoryRidge {
-    /// Checks the shape and that every number is finite.
-    pub fn validate(&self) -> Result<(), String> {
-        if !(1..=1000).contains(&self.history) || !(1..=1000).contains(&self.horizon) {
-            return Err(format!(
-                "history and horizon must be 1 to 1000 steps, got {} and {}",
-                self.history, self.horizon
-            ));
-        }
-        if !(self.dt.is_finite() && self.dt > 0.0) {
-            return Err(format!("dt must be a time above 0 s, got {}", self.dt));
-        }
-        let want = (2 * self.history + 1) * 2 * self.horizon;
-        if self.weights.len() != want {
-            return Err(format!(
-                "weights: {} numbers, the shape {} × {} needs {want}",
-                self.weights.len(),
-                2 * self.history + 1,
-                2 * self.horizon
-            ));
-        }
-        if let Some(i) = self.weights.iter().position(|w| !w.is_finite()) {
-            return Err(format!("weights[{i}] is not a finite number"));
-        }
-        Ok(())
-    }
-
-    /// The walker's heading frame (a rotation) from its positions: the last step's direction,
-    /// or the whole history's displacement when the last step is (nearly) zero, or the world's
-    /// axes.
-    pub fn heading(past: &[[f64; 2]]) -> Pose2 {
-        let n = past.len();
-        if n >= 2 {
-            for d in [sub(past[n - 1], past[n - 2]), sub(past[n - 1], past[0])] {
-                if d[0].hypot(d[1]) > 1e-4 {
-                    return Pose2::new(0.0, 0.0, d[1].atan2(d[0]));
-                }
-            }
-        }
-        Pose2::IDENTITY
-    }
-
-    /// The features of `past` (positions, oldest first): each step's displacement in the
-    /// heading `frame`, then 1.
-    pub fn features(past: &[[f64; 2]], frame: Pose2) -> Vec<f64> {
-        past.windows(2)
-            .flat_map(|p| frame.inverse_rotate(sub(p[1], p[0])))
-            .chain(std::iter::once(1.0))
-            .collect()
-    }
-
-    /// `n` predicted positions after the last of `past` (`history + 1` positions, oldest
-    /// first): the last step held, plus the model's departures turned out of the heading frame
-    /// (the last one held past `horizon`). `None` when `past` has another length.
-    pub fn predict(&self, past: &[[f64; 2]], n: usize) -> Option<Vec<[f64; 2]>> {
-        if past.len() != self.history + 1 {
-            return None;
-        }
-        let frame = Self::heading(past);
-        let x = Self::features(past, frame);
-        let outputs = 2 * self.horizon;
-        let mut d = vec![0.0; outputs];
-        for (xf, row) in x.iter().zip(self.weights.chunks_exact(outputs)) {
-            for (d, w) in d.iter_mut().zip(row) {
-                *d += xf * w;
-            }
-        }
-        let now = past[self.history];
-        let step = sub(now, past[self.history - 1]);
-        Some(
-            (0..n)
-                .map(|i| {
-                    let k = i.min(self.horizon - 1);
-                    let dep = frame.rotate([d[2 * k], d[2 * k + 1]]);
-                    let s = (i + 1) as f64;
-                    [now[0] + step[0] * s + dep[0], now[1] + step[1] * s + dep[1]]
-                })
-                .collect(),
-        )
-    }
-}
-
-fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
-    [a[0] - b[0], a[1] - b[1]]
-}
-
-impl CrowdPredictor for HistoryRidge {
-    fn name(&self) -> &str {
-        "history-ridge"
-    }
-
-    fn forecast(&mut self, obs: &Observation, horizon: usize, dt: f64) -> Result<Forecast, String> {
-        if (dt - self.dt).abs() > 1e-9 {
-            return Err(format!(
-                "the history model was fitted at {} s steps, the plan's are {dt} s",
-                self.dt
-            ));
-        }
-        Forecast::one_path_each(&obs.agents, horizon, |a| {
-            let h = &a.history;
-            let past = &h[h.len().saturating_sub(self.history + 1)..];
-            self.predict(past, horizon)
-                .filter(|p| p.iter().flatten().all(|v| v.is_finite()))
-                .unwrap_or_else(|| constant_velocity_path(a, horizon, dt))
-        })
-    }
-}
 
 /// Settings of a [`FlowPredictor`] (the `[prediction]` table of a planner file).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -618,7 +217,7 @@ impl<M: FlowModel> FlowPredictor<M> {
         obs: &Observation,
         i: usize,
         horizon: usize,
-    ) -> Result<Vec<Vec<[f64; 2]>>, String> {
+    ) -> Result<Vec<Vec<[f64; 2]>>, ForecastError> {
         let a = &obs.agents[i];
         let speed = a.velocity[0].hypot(a.velocity[1]);
         let pose = Pose2::new(
@@ -660,7 +259,10 @@ impl<M: FlowModel> FlowPredictor<M> {
             self.settings.steps_n,
             &mut self.workspace,
         )
-        .map_err(|e| format!("agent {}: {e}", a.id))?;
+        .map_err(|source| ForecastError::Sampling {
+            agent: a.id,
+            source,
+        })?;
         Ok(out
             .chunks_exact(t * 3)
             .map(|traj| {
@@ -681,7 +283,12 @@ impl<M: FlowModel + Send> CrowdPredictor for FlowPredictor<M> {
         "flow"
     }
 
-    fn forecast(&mut self, obs: &Observation, horizon: usize, dt: f64) -> Result<Forecast, String> {
+    fn forecast(
+        &mut self,
+        obs: &Observation,
+        horizon: usize,
+        dt: f64,
+    ) -> Result<Forecast, ForecastError> {
         let chosen = self.chosen(obs);
         let mut paths: Vec<Vec<Vec<[f64; 2]>>> = obs
             .agents
@@ -738,52 +345,38 @@ impl<M: FlowModel + Send> CrowdPredictor for FlowPredictor<M> {
     }
 }
 
+/// The mean of equally long `paths`, position by position.
+fn mean_path(paths: &[Vec<[f64; 2]>]) -> Vec<[f64; 2]> {
+    let share = 1.0 / paths.len().max(1) as f64;
+    let mut mean = vec![[0.0; 2]; paths.first().map_or(0, Vec::len)];
+    for path in paths {
+        for (m, p) in mean.iter_mut().zip(path) {
+            m[0] += p[0] * share;
+            m[1] += p[1] * share;
+        }
+    }
+    mean
+}
+
+/// From waypoint `from` on (0-based), every path in `sampled` follows `cv` (the constant-
+/// velocity path) at the offset it had at waypoint `from − 1`.
+fn hold_departure(sampled: &mut [Vec<[f64; 2]>], cv: &[[f64; 2]], from: usize) {
+    if from == 0 || from > cv.len() {
+        return;
+    }
+    for path in sampled {
+        let (p, c) = (path[from - 1], cv[from - 1]);
+        let offset = [p[0] - c[0], p[1] - c[1]];
+        for (q, c) in path.iter_mut().zip(cv).skip(from) {
+            *q = [c[0] + offset[0], c[1] + offset[1]];
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn walker(id: u64, p: [f64; 2], v: [f64; 2]) -> AgentState {
-        AgentState {
-            id,
-            position: p,
-            velocity: v,
-            radius: 0.3,
-            history: Vec::new(),
-        }
-    }
-
-    #[test]
-    fn constant_velocity_moves_each_agent_on_from_the_first_step() {
-        let f = Forecast::constant_velocity(&[walker(7, [1.0, 2.0], [0.5, -1.0])], 3, 0.1);
-        assert_eq!((f.horizon(), f.scenes()), (3, 1));
-        let p = f.position(0, 0, 2);
-        assert!((p[0] - 1.15).abs() < 1e-12 && (p[1] - 1.7).abs() < 1e-12);
-    }
-
-    #[test]
-    fn a_shared_path_serves_every_scene_and_frames_change_positions() {
-        let agents = vec![
-            ForecastAgent {
-                id: 1,
-                radius: 0.3,
-                paths: vec![vec![[1.0, 0.0]; 2]],
-            },
-            ForecastAgent {
-                id: 2,
-                radius: 0.3,
-                paths: vec![vec![[0.0, 1.0]; 2], vec![[0.0, 2.0]; 2]],
-            },
-        ];
-        let f = Forecast::new(2, 2, agents).expect("valid");
-        assert_eq!(f.position(0, 1, 1), [1.0, 0.0]);
-        assert_eq!(f.position(1, 1, 0), [0.0, 2.0]);
-        // In the frame of a robot at (1, 0) facing +y, (1, 0) is its origin and (0, 2) is 2 m
-        // ahead and 1 m to the left.
-        let g = f.in_frame(Pose2::new(1.0, 0.0, std::f64::consts::FRAC_PI_2));
-        let near = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]) < 1e-12;
-        assert!(near(g.position(0, 0, 0), [0.0, 0.0]));
-        assert!(near(g.position(1, 1, 0), [2.0, 1.0]));
-    }
+    use crate::forecast::tests::walker;
 
     /// A "model" whose every sample veers left: 0.1 m forward and 0.05 m left per step, in the
     /// walker's frame.
@@ -946,82 +539,6 @@ mod tests {
         assert!(spread > 0.1, "the samples should scatter: {spread}");
     }
 
-    /// A history model whose only weight is on the constant feature: every walker departs to
-    /// its left by 0.1 m per step from walking on at its last step, whichever way it walks; a
-    /// walker with too short a history walks on at its velocity.
-    #[test]
-    fn the_history_model_departs_in_each_walkers_own_frame() {
-        let (history, horizon) = (2, 4);
-        let mut weights = vec![0.0; (2 * history + 1) * 2 * horizon];
-        let constant = 2 * history;
-        for k in 0..horizon {
-            weights[constant * 2 * horizon + 2 * k + 1] = 0.1 * (k + 1) as f64;
-        }
-        let mut model = HistoryRidge {
-            history,
-            horizon,
-            dt: 0.1,
-            fitted_on: "by hand".into(),
-            weights,
-        };
-        model.validate().unwrap();
-        let with_history = |id, history: Vec<[f64; 2]>, v| AgentState {
-            history,
-            ..walker(id, [0.0, 0.0], v)
-        };
-        let obs = Observation {
-            agents: vec![
-                // Along +x: its left is +y.
-                with_history(1, vec![[-0.2, 0.0], [-0.1, 0.0], [0.0, 0.0]], [1.0, 0.0]),
-                // Along +y: its left is −x.
-                with_history(2, vec![[0.0, -0.2], [0.0, -0.1], [0.0, 0.0]], [0.0, 1.0]),
-                // One step of history only: constant velocity.
-                with_history(3, vec![[0.0, -0.1], [0.0, 0.0]], [0.0, 1.0]),
-            ],
-            ..Observation::default()
-        };
-        let f = model.forecast(&obs, 6, 0.1).unwrap();
-        let near = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]) < 1e-12;
-        assert!(near(f.position(0, 0, 1), [0.2, 0.2]));
-        assert!(near(f.position(1, 0, 1), [-0.2, 0.2]));
-        // Past the model's four steps the last departure is held.
-        assert!(near(f.position(0, 0, 5), [0.6, 0.4]));
-        assert!(near(f.position(2, 0, 5), [0.0, 0.6]));
-        assert!(model.forecast(&obs, 6, 0.05).is_err());
-        model.weights.pop();
-        assert!(model.validate().unwrap_err().starts_with("weights: "));
-        model.weights.push(f64::NAN);
-        assert!(model.validate().unwrap_err().contains("finite"));
-    }
-
-    #[test]
-    fn the_expectation_weighs_each_scene_by_its_probability() {
-        let agent = ForecastAgent {
-            id: 1,
-            radius: 0.3,
-            paths: vec![vec![[0.0, 0.0]; 2]; 3],
-        };
-        let f = Forecast::new(2, 3, vec![agent]).unwrap();
-        let cost = |s: usize| [1.0, 2.0, 6.0][s];
-        assert_eq!(f.expectation(cost), 3.0);
-        let w = f.clone().with_weights(vec![2.0, 1.0, 1.0]).unwrap();
-        assert_eq!((w.weight(0), w.weight(2)), (0.5, 0.25));
-        assert!((w.expectation(cost) - 2.5).abs() < 1e-12);
-        // Weights survive a change of frame.
-        let moved = w.in_frame(Pose2::new(1.0, 2.0, 0.3));
-        assert_eq!(moved.weight(0), 0.5);
-        for (weights, why) in [
-            (vec![1.0, 1.0], "2 weights for 3 scenes"),
-            (vec![1.0, -1.0, 1.0], "a scene weight of -1"),
-            (vec![f64::NAN, 1.0, 1.0], "a scene weight of NaN"),
-            (vec![0.0; 3], "the scene weights sum to 0"),
-            (vec![f64::MAX; 3], "the scene weights sum to inf"),
-        ] {
-            let e = f.clone().with_weights(weights).unwrap_err();
-            assert!(e.starts_with(why), "{e}");
-        }
-    }
-
     #[test]
     fn flow_predictor_settings_name_the_bad_field() {
         let bad = |s: FlowPredictorSettings| s.validate().unwrap_err();
@@ -1059,23 +576,5 @@ mod tests {
             assert!(e.starts_with("constant_velocity_weight: "), "{e}");
         }
         assert!(toml::from_str::<FlowPredictorSettings>("sample = 3").is_err());
-    }
-
-    #[test]
-    fn malformed_forecasts_are_refused_with_the_agent_named() {
-        let path = |n: usize| vec![[0.0, 0.0]; n];
-        let one = |id: u64, paths: Vec<Vec<[f64; 2]>>| ForecastAgent {
-            id,
-            radius: 0.3,
-            paths,
-        };
-        assert!(Forecast::new(2, 0, Vec::new()).is_err());
-        assert!(Forecast::new(2, MAX_SCENES + 1, Vec::new()).is_err());
-        let e = Forecast::new(2, 3, vec![one(4, vec![path(2), path(2)])]).unwrap_err();
-        assert!(e.contains("agent 4") && e.contains("2 paths"), "{e}");
-        let e = Forecast::new(2, 1, vec![one(5, vec![path(3)])]).unwrap_err();
-        assert!(e.contains("agent 5") && e.contains("3 positions"), "{e}");
-        let e = Forecast::new(2, 1, vec![one(6, vec![vec![[f64::NAN, 0.0]; 2]])]).unwrap_err();
-        assert!(e.contains("agent 6"), "{e}");
     }
 }

@@ -617,6 +617,7 @@ fn export<S: human2nav_flow::train::TrainingSample>(
         path_sigma: cfg.train.path_sigma,
         mirror: cfg.train.mirror,
         counterfactual: cfg.train.counterfactual.clone(),
+        clearance: cfg.train.clearance.clone(),
         optimiser: cfg.train.describe_optimiser(),
         wall_time_s: wall,
         threads: cfg.run.threads,

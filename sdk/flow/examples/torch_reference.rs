@@ -79,12 +79,14 @@ fn main() -> anyhow::Result<()> {
         goal_vel: gv,
         points,
         target,
+        ..
     } = batch_from_draws(
         &tuples,
         &rows_idx,
         net,
         norm,
         &draws,
+        None,
         None,
         tch::Device::Cpu,
     );

@@ -125,6 +125,9 @@ pub struct TrainingInfo {
     /// ([`crate::train::Counterfactual`]); absent: none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub counterfactual: Option<crate::train::Counterfactual>,
+    /// The clearance term of the loss ([`crate::train::ClearanceLoss`]); absent: Eq. 3 alone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clearance: Option<crate::train::ClearanceLoss>,
     /// Optimiser and schedule, in words.
     pub optimiser: String,
     /// Wall time of training in seconds.

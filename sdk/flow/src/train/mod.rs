@@ -23,6 +23,10 @@ use std::path::{Path, PathBuf};
 mod trainer;
 #[cfg(feature = "torch")]
 pub use trainer::{Batch, BatchDraws, Trainer, VAL_MAX, batch_from_draws, evaluate_loss};
+#[cfg(feature = "torch")]
+mod clearance;
+#[cfg(feature = "torch")]
+pub use clearance::clearance_penalty;
 
 /// One training example as the trainer needs it. Implemented for the data crate's tuples and
 /// for [`Example`].
@@ -236,6 +240,78 @@ pub struct TrainOptions {
     /// Counterfactual walkers ([`Counterfactual`]); absent (the default): none, and batches
     /// are exactly those of earlier versions.
     pub counterfactual: Option<Counterfactual>,
+    /// A clearance term added to Eq. 3's loss ([`ClearanceLoss`]); absent (the default): the
+    /// loss is Eq. 3 alone, as in earlier versions.
+    pub clearance: Option<ClearanceLoss>,
+}
+
+/// A clearance term in the training loss: an objective beyond imitation.
+///
+/// From each batch row the network's velocity gives the endpoint it predicts,
+/// `x̂_1 = x_t·exp((1 − t)·v_θ)` (exact when `v_θ` is the target of Eq. 3). Every waypoint of
+/// `x̂_1` that comes within `distance` of a person of the raster walking on at constant
+/// velocity (an occupied cell centre moved by its velocity to the waypoint's time) adds
+/// `weight·((distance − d)/distance)²` per occupied cell, averaged over waypoints and rows.
+/// The people are those the network is shown (counterfactual walkers included), so what it
+/// gains by avoiding them it can only gain by looking.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ClearanceLoss {
+    /// Weight of the term against Eq. 3's mean squared error. Default 1.
+    pub weight: f64,
+    /// Contact distance (m) between a waypoint and a cell centre. Default 0.6 (the crowd
+    /// probe's contact).
+    pub distance: f64,
+    /// Occupied raster cells read per row, nearest to the ego first. Default 40.
+    pub points: usize,
+    /// Edge of a raster cell (m): the cache's resolution. Default 0.3.
+    pub cell: f64,
+    /// Seconds between waypoints. Default 0.1.
+    pub step: f64,
+}
+
+impl Default for ClearanceLoss {
+    fn default() -> Self {
+        Self {
+            weight: 1.0,
+            distance: 0.6,
+            points: 40,
+            cell: 0.3,
+            step: 0.1,
+        }
+    }
+}
+
+impl ClearanceLoss {
+    fn validate(&self) -> Result<(), CfmError> {
+        for (field, v) in [
+            ("train.clearance.weight", self.weight),
+            ("train.clearance.distance", self.distance),
+            ("train.clearance.cell", self.cell),
+            ("train.clearance.step", self.step),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(CfmError::option(field, "must be finite and > 0"));
+            }
+        }
+        if !(1..=4096).contains(&self.points) {
+            return Err(CfmError::option(
+                "train.clearance.points",
+                "must lie in [1, 4096]",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The people of a raster as [`crate::model::crowd_points`] reads them.
+    pub fn crowd(&self) -> crate::config::CrowdConfig {
+        crate::config::CrowdConfig {
+            points: self.points,
+            cell: self.cell,
+            step: self.step,
+            ..Default::default()
+        }
+    }
 }
 
 /// Slowest walker (m/s) a counterfactual person is placed for.
@@ -378,6 +454,7 @@ impl Default for TrainOptions {
             goal: true,
             velocity: true,
             counterfactual: None,
+            clearance: None,
         }
     }
 }
@@ -487,6 +564,9 @@ impl TrainOptions {
             ));
         }
         if let Some(c) = &self.counterfactual {
+            c.validate()?;
+        }
+        if let Some(c) = &self.clearance {
             c.validate()?;
         }
         self.time.validate()

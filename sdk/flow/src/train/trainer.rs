@@ -45,6 +45,11 @@ pub struct Batch {
     pub points: Tensor,
     /// `[B, 3, T]` standardised target velocities `ξ/σ`.
     pub target: Tensor,
+    /// `[B, 3, T]` the path point `x_t` itself: normalised translations and heading.
+    pub xt: Tensor,
+    /// `[B, P, 5]` the people the clearance term keeps the endpoint from, read from the
+    /// (mirrored, augmented) rasters as [`crowd_points`] reads them (`P = 0` without the term).
+    pub people: Tensor,
 }
 
 /// Eq. 3's path noise: `σ` and its own generator, so that the source draws, flow times and
@@ -125,6 +130,7 @@ fn build_batch<S: TrainingSample, R: Rng + ?Sized>(
     mirror: bool,
     path: Option<&mut PathNoise>,
     counterfactual: Option<&mut CounterfactualNoise<'_>>,
+    clearance: Option<&ClearanceLoss>,
     rng: &mut R,
     device: Device,
 ) -> Batch {
@@ -138,13 +144,15 @@ fn build_batch<S: TrainingSample, R: Rng + ?Sized>(
         counterfactual,
         rng,
     );
-    batch_from_draws(data, idx, net, norm, &draws, opts, device)
+    batch_from_draws(data, idx, net, norm, &draws, opts, clearance, device)
 }
 
 /// The batch of examples `idx` given its random part: the recipe of the trainer's batches
 /// (the SE(2) geodesic point and target of Eq. 3, trajectory features, mirrored and
-/// normalised conditions, counterfactual walkers when `counterfactual` is given), public so
-/// that a reference implementation can be checked against it on the same draws.
+/// normalised conditions, counterfactual walkers when `counterfactual` is given, the people of
+/// the clearance term when `clearance` is given), public so that a reference implementation can
+/// be checked against it on the same draws.
+#[allow(clippy::too_many_arguments)]
 pub fn batch_from_draws<S: TrainingSample>(
     data: &[S],
     idx: &[usize],
@@ -152,6 +160,7 @@ pub fn batch_from_draws<S: TrainingSample>(
     norm: &Normalisation,
     draws: &BatchDraws,
     counterfactual: Option<&Counterfactual>,
+    clearance: Option<&ClearanceLoss>,
     device: Device,
 ) -> Batch {
     let b = idx.len();
@@ -165,6 +174,10 @@ pub fn batch_from_draws<S: TrainingSample>(
     let mut gv = vec![0f32; b * 4];
     let crowd_len = net.crowd_len();
     let mut points = vec![0f32; b * crowd_len];
+    let people_cfg = clearance.map(ClearanceLoss::crowd);
+    let people_len = people_cfg.as_ref().map_or(0, |c| c.points * 5);
+    let mut people = vec![0f32; b * people_len];
+    let mut xt_all = vec![0f32; b * 3 * t_len];
     let mut poses = vec![0f64; t_len * 3];
     let mut flipped = vec![0f32; bev_len];
     let (mut stamped, mut disc) = (vec![0f32; bev_len], vec![0f32; bev_len]);
@@ -188,6 +201,9 @@ pub fn batch_from_draws<S: TrainingSample>(
                 xt = xt.compose(Pose2::exp(noise));
             }
             poses[3 * j..3 * j + 3].copy_from_slice(&xt.to_array());
+            for (c, v) in xt.to_array().into_iter().enumerate() {
+                xt_all[(row * 3 + c) * t_len + j] = v as f32;
+            }
             let xi = xi.to_array();
             for c in 0..3 {
                 tgt[c * t_len + j] = (xi[c] / norm.velocity_std[c]) as f32;
@@ -252,6 +268,10 @@ pub fn batch_from_draws<S: TrainingSample>(
             let out = &mut points[row * crowd_len..(row + 1) * crowd_len];
             crowd_points(c, norm, cells, src, out);
         }
+        if let Some(c) = &people_cfg {
+            let out = &mut people[row * people_len..(row + 1) * people_len];
+            crowd_points(c, norm, cells, src, out);
+        }
     }
     let (bi, ti, ci) = (b as i64, t_len as i64, cells as i64);
     Batch {
@@ -267,14 +287,25 @@ pub fn batch_from_draws<S: TrainingSample>(
         target: Tensor::from_slice(&target)
             .view([bi, 3, ti])
             .to_device(device),
+        xt: Tensor::from_slice(&xt_all)
+            .view([bi, 3, ti])
+            .to_device(device),
+        people: Tensor::from_slice(&people)
+            .view([bi, -1, CROWD_FEATURES])
+            .to_device(device),
     }
 }
 
-/// CFM loss (Eq. 3) of `model` on a batch: mean squared error of the standardised velocity.
-fn batch_loss(model: &CfmModel, b: &Batch) -> Tensor {
+/// CFM loss (Eq. 3) of `model` on a batch: mean squared error of the standardised velocity,
+/// plus the clearance term when `clearance` is given.
+fn batch_loss(model: &CfmModel, b: &Batch, clearance: Option<&ClearanceLoss>) -> Tensor {
     let cond = model.net().encode_condition(&b.bev, &b.goal_vel);
     let pred = model.net().forward(&b.x, &b.t, &cond, &b.points);
-    pred.mse_loss(&b.target, tch::Reduction::Mean)
+    let mse = pred.mse_loss(&b.target, tch::Reduction::Mean);
+    match clearance {
+        Some(c) => mse + super::clearance_penalty(&pred, b, &model.card().normalisation, c),
+        None => mse,
+    }
 }
 
 /// Training state that is not part of [`CfmModel`]: saved as `state.toml` beside the tensors.
@@ -573,6 +604,7 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
             PathNoise::new(self.opts.path_sigma, self.opts.seed, step).as_mut(),
             CounterfactualNoise::new(self.opts.counterfactual.as_ref(), self.opts.seed, step)
                 .as_mut(),
+            self.opts.clearance.as_ref(),
             &mut rng,
             self.model.device(),
         );
@@ -580,7 +612,7 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
         for p in &mut self.params {
             p.zero_grad();
         }
-        let loss = batch_loss(&self.model, &batch);
+        let loss = batch_loss(&self.model, &batch, self.opts.clearance.as_ref());
         let loss_value = loss.double_value(&[]);
         if !loss_value.is_finite() {
             return Err(CfmError::Diverged { step });
@@ -667,10 +699,11 @@ impl<'a, S: TrainingSample> Trainer<'a, S> {
                 false,
                 path.as_mut(),
                 None,
+                None,
                 &mut rng,
                 self.ema.device(),
             );
-            sum += batch_loss(&self.ema, &batch).double_value(&[]) * idx.len() as f64;
+            sum += batch_loss(&self.ema, &batch, None).double_value(&[]) * idx.len() as f64;
             count += idx.len();
         }
         Some(sum / count as f64)
@@ -736,10 +769,11 @@ pub fn evaluate_loss<S: TrainingSample>(
             false,
             None,
             None,
+            None,
             &mut rng,
             model.device(),
         );
-        sum += batch_loss(model, &b).double_value(&[]) * idx.len() as f64;
+        sum += batch_loss(model, &b, None).double_value(&[]) * idx.len() as f64;
         count += idx.len();
     }
     Ok(sum / count as f64)
@@ -845,6 +879,7 @@ mod tests {
                 &time,
                 false,
                 path.as_mut(),
+                None,
                 None,
                 &mut rng,
                 Device::Cpu,
@@ -1057,8 +1092,17 @@ mod tests {
         };
         let data = [ex];
         let occupied = |b: &Batch| b.bev.narrow(1, 0, 1).sum(Kind::Float).double_value(&[]);
-        let with = batch_from_draws(&data, &[0], &net, &norm, &draws, Some(&c), Device::Cpu);
-        let without = batch_from_draws(&data, &[0], &net, &norm, &draws, None, Device::Cpu);
+        let with = batch_from_draws(
+            &data,
+            &[0],
+            &net,
+            &norm,
+            &draws,
+            Some(&c),
+            None,
+            Device::Cpu,
+        );
+        let without = batch_from_draws(&data, &[0], &net, &norm, &draws, None, None, Device::Cpu);
         assert_eq!(occupied(&without), 0.0);
         assert!(occupied(&with) >= 1.0);
         assert_eq!(

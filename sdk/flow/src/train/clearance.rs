@@ -52,7 +52,16 @@ pub fn clearance_penalty(
     let qy = person(1) * s + person(3) * s * &tau;
     let d = ((x1 - qx).square() + (y1 - qy).square() + 1e-12).sqrt();
     let pen = ((d * -1.0 + c.distance) / c.distance).relu().square() * person(4);
-    pen.sum_dim_intlist(1, false, Kind::Float).mean(Kind::Float) * c.weight
+    // [B] per row: summed over people, averaged over waypoints, weighted by t^p.
+    let per_row = pen
+        .sum_dim_intlist(1, false, Kind::Float)
+        .mean_dim(1, false, Kind::Float);
+    let per_row = if c.time_power > 0.0 {
+        per_row * batch.t.pow_tensor_scalar(c.time_power)
+    } else {
+        per_row
+    };
+    per_row.mean(Kind::Float) * c.weight
 }
 
 #[cfg(test)]
@@ -140,6 +149,13 @@ mod tests {
                 .sum::<f64>();
         assert!(want > 0.05, "the scene must have a contact: {want}");
         approx::assert_relative_eq!(got, want, max_relative = 1e-4);
+        // Weighted by the flow time (0.35) squared.
+        let late = ClearanceLoss {
+            time_power: 2.0,
+            ..c
+        };
+        let got = clearance_penalty(&b.target, &b, &norm, &late).double_value(&[]);
+        approx::assert_relative_eq!(got, want * 0.35 * 0.35, max_relative = 1e-4);
     }
 
     #[test]
@@ -190,6 +206,13 @@ mod tests {
                     ..ClearanceLoss::default()
                 },
                 "train.clearance.points",
+            ),
+            (
+                ClearanceLoss {
+                    time_power: -1.0,
+                    ..ClearanceLoss::default()
+                },
+                "train.clearance.time_power",
             ),
         ] {
             let opts = crate::train::TrainOptions {

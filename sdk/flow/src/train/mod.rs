@@ -251,7 +251,8 @@ pub struct TrainOptions {
 /// `x̂_1 = x_t·exp((1 − t)·v_θ)` (exact when `v_θ` is the target of Eq. 3). Every waypoint of
 /// `x̂_1` that comes within `distance` of a person of the raster walking on at constant
 /// velocity (an occupied cell centre moved by its velocity to the waypoint's time) adds
-/// `weight·((distance − d)/distance)²` per occupied cell, averaged over waypoints and rows.
+/// `weight·((distance − d)/distance)²` per occupied cell, averaged over waypoints and rows (each
+/// row weighted by `t^time_power`).
 /// The people are those the network is shown (counterfactual walkers included), so what it
 /// gains by avoiding them it can only gain by looking.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -268,6 +269,10 @@ pub struct ClearanceLoss {
     pub cell: f64,
     /// Seconds between waypoints. Default 0.1.
     pub step: f64,
+    /// Each row's term is weighted by its flow time to this power, `t^p`: above 0 the late
+    /// predictions, which the samples end as, count more than the early ones, whose `x̂_1` is
+    /// a mean of the futures still possible. Default 0 (every flow time alike).
+    pub time_power: f64,
 }
 
 impl Default for ClearanceLoss {
@@ -278,6 +283,7 @@ impl Default for ClearanceLoss {
             points: 40,
             cell: 0.3,
             step: 0.1,
+            time_power: 0.0,
         }
     }
 }
@@ -293,6 +299,12 @@ impl ClearanceLoss {
             if !(v.is_finite() && v > 0.0) {
                 return Err(CfmError::option(field, "must be finite and > 0"));
             }
+        }
+        if !(self.time_power.is_finite() && (0.0..=8.0).contains(&self.time_power)) {
+            return Err(CfmError::option(
+                "train.clearance.time_power",
+                "must lie in [0, 8]",
+            ));
         }
         if !(1..=4096).contains(&self.points) {
             return Err(CfmError::option(

@@ -55,12 +55,8 @@ pub fn clearance_penalty(
     // [B] per row: summed over people, averaged over waypoints, weighted by t^p.
     let per_row = pen
         .sum_dim_intlist(1, false, Kind::Float)
-        .mean_dim(1, false, Kind::Float);
-    let per_row = if c.time_power > 0.0 {
-        per_row * batch.t.pow_tensor_scalar(c.time_power)
-    } else {
-        per_row
-    };
+        .mean_dim(1, false, Kind::Float)
+        * batch.t.pow_tensor_scalar(c.time_power);
     per_row.mean(Kind::Float) * c.weight
 }
 

@@ -88,7 +88,8 @@ use std::borrow::Cow;
 
 use crate::bev::{self, BevSpec};
 use crate::constraint::{
-    Clearance, ConstraintContext, Phi, PhiScratch, SceneContext, TrajBatch, arrival,
+    Clearance, ConstraintContext, ConstraintError, Phi, PhiScratch, SceneContext, TrajBatch,
+    arrival,
 };
 use crate::flow::{CrowdGuidance, FlowCondition, FlowModel};
 use crate::forecast::{CrowdPredictor, Forecast};
@@ -667,7 +668,7 @@ impl<M: FlowModel> Human2Nav<M> {
     /// A little over 120 lines: stage 2 fills half a dozen locals the selection and the plan's
     /// diagnostics read (candidates, their origin, Φ, the corrected flags, stages, notes);
     /// splitting it further would pass all of them back and forth.
-    fn try_plan(&mut self, obs: &Observation, deadline: &Deadline) -> Result<Plan, Failure> {
+    fn try_plan(&mut self, obs: &Observation, deadline: &Deadline) -> Result<Plan, StageError> {
         let horizon = self.model.horizon();
         let k = self.settings.samples;
         let (cond, agents) = self.condition(obs);
@@ -783,7 +784,7 @@ impl<M: FlowModel> Human2Nav<M> {
         // The robot's own motions are within its limits as they are: no correction. Not
         // after the deadline: scoring them takes milliseconds. As a recovery, only when no
         // model candidate the selection may choose is free of predicted contact.
-        let recover = || -> Result<bool, Failure> {
+        let recover = || -> Result<bool, StageError> {
             if !self.settings.motions_recovery {
                 return Ok(true);
             }
@@ -823,11 +824,9 @@ impl<M: FlowModel> Human2Nav<M> {
             )
         });
         let Some(chosen) = best else {
-            return Err(Failure::from(if candidates.is_empty() {
-                "the deadline passed before sampling began, and there was no previous plan"
-            } else {
-                "every candidate trajectory was non-finite"
-            }));
+            return Err(StageError::NoCandidate {
+                deadline: candidates.is_empty(),
+            });
         };
         Ok(self.assemble_plan(
             obs,
@@ -857,7 +856,7 @@ impl<M: FlowModel> Human2Nav<M> {
         deadline: &Deadline,
         stages: &mut Stages,
         notes: &mut Vec<String>,
-    ) -> Result<Option<GuidanceResult>, Failure> {
+    ) -> Result<Option<GuidanceResult>, StageError> {
         let guidance = self.settings.guidance;
         let scene = SceneContext {
             forecast: Some(forecast),
@@ -900,7 +899,7 @@ impl<M: FlowModel> Human2Nav<M> {
                     notes.push("deadline: it passed before sampling began".into());
                     None
                 }
-                Err(e) => return Err(Failure::guidance("sampling failed", e)),
+                Err(e) => return Err(StageError::Sampling(e)),
             },
         )
     }
@@ -917,7 +916,7 @@ impl<M: FlowModel> Human2Nav<M> {
         deadline: &Deadline,
         stages: &mut Stages,
         notes: &mut Vec<String>,
-    ) -> Result<GuidanceResult, Failure> {
+    ) -> Result<GuidanceResult, StageError> {
         let guidance = self.settings.guidance;
         let scene = SceneContext {
             forecast: Some(forecast),
@@ -939,7 +938,7 @@ impl<M: FlowModel> Human2Nav<M> {
             &mut self.workspace,
             deadline,
         )
-        .map_err(|e| Failure::guidance("guidance failed", e))?;
+        .map_err(StageError::Guidance)?;
         stages.guidance.done = result.iterations_run;
         if result.cut_short {
             stages.cut_short = Some(Stage::Guidance);
@@ -1215,7 +1214,7 @@ impl<M: FlowModel> Human2Nav<M> {
         ctx: &ConstraintContext<'_>,
         v0: Twist2,
         previous: Option<&[Pose2]>,
-    ) -> Result<Vec<usize>, Failure> {
+    ) -> Result<Vec<usize>, StageError> {
         let g = self.settings.guided_samples;
         let paper = self.settings.guidance.enabled
             && self.settings.guidance.variant == GuidanceVariant::Paper;
@@ -1268,15 +1267,15 @@ impl<M: FlowModel> Human2Nav<M> {
         &self,
         candidates: &[Vec<Pose2>],
         ctx: &ConstraintContext<'_>,
-    ) -> Result<Vec<bool>, Failure> {
+    ) -> Result<Vec<bool>, StageError> {
         let Some((data, poses)) = pose_batch(candidates)? else {
             return Ok(Vec::new());
         };
         let batch = TrajBatch::new(&data, candidates.len(), poses)
-            .map_err(|e| Failure::from(e.to_string()))?;
+            .map_err(StageError::Batch)?;
         self.clearance()
             .contact_free(batch, ctx)
-            .map_err(|e| Failure::from(e.to_string()))
+            .map_err(StageError::Contact)
     }
 
     /// Φ of every ego-frame candidate (each with the robot's pose, the identity, prepended as
@@ -1286,17 +1285,17 @@ impl<M: FlowModel> Human2Nav<M> {
         &self,
         candidates: &[Vec<Pose2>],
         ctx: &ConstraintContext<'_>,
-    ) -> Result<Vec<f64>, Failure> {
+    ) -> Result<Vec<f64>, StageError> {
         let Some((data, poses)) = pose_batch(candidates)? else {
             return Ok(Vec::new());
         };
         let batch = TrajBatch::new(&data, candidates.len(), poses)
-            .map_err(|e| Failure::from(e.to_string()))?;
+            .map_err(StageError::Batch)?;
         let mut cost = vec![0.0; candidates.len()];
         self.robot
             .phi
             .costs(batch, ctx, &mut cost, &mut PhiScratch::default())
-            .map_err(|e| Failure::term(format!("scoring the candidates with Φ: {e}")))?;
+            .map_err(StageError::Phi)?;
         Ok(cost)
     }
 
@@ -1421,33 +1420,58 @@ struct Chosen<'a> {
     index: usize,
 }
 
-/// Why a planning call stops in place instead: the reason, and whether a term of Φ failed
-/// (a constraint term that errs or answers a non-finite value is never left out in silence).
-struct Failure {
-    why: String,
-    term: bool,
+/// Why a planning call stopped in place instead of planning: the stage that failed. A
+/// failure of a term of Φ (`is_term`) is a broken extension, which callers count as
+/// a failed call; the others are the planner's own fallback.
+#[derive(Debug)]
+enum StageError {
+    /// Stage 1: sampling the flow model.
+    Sampling(GuidanceError),
+    /// Stage 2: Algorithm 1 on the shortlist.
+    Guidance(GuidanceError),
+    /// Scoring the candidates with Φ (a term failed or answered a non-finite cost).
+    Phi(ConstraintError),
+    /// The recovery's test of the model's candidates for predicted contact.
+    Contact(ConstraintError),
+    /// Candidates of different lengths cannot be scored together.
+    Lengths { first: usize, other: usize },
+    /// The candidates did not make one batch of poses.
+    Batch(ConstraintError),
+    /// Nothing to choose from: the deadline passed before sampling began and there was no
+    /// previous plan (`deadline`), or every candidate was non-finite.
+    NoCandidate { deadline: bool },
 }
 
-impl Failure {
-    /// A term of Φ failed.
-    fn term(why: String) -> Self {
-        Self { why, term: true }
-    }
-
-    /// A guidance call (sampling or Algorithm 1) failed; through a term of Φ or not.
-    fn guidance(stage: &str, e: GuidanceError) -> Self {
-        Self {
-            term: matches!(e, GuidanceError::Constraint(_)),
-            why: format!("{stage}: {e}"),
+impl StageError {
+    /// Whether a term of Φ failed (in sampling, Algorithm 1 or the selection).
+    fn is_term(&self) -> bool {
+        match self {
+            Self::Sampling(e) | Self::Guidance(e) => matches!(e, GuidanceError::Constraint(_)),
+            Self::Phi(_) => true,
+            Self::Contact(_) | Self::Lengths { .. } | Self::Batch(_) | Self::NoCandidate { .. } => {
+                false
+            }
         }
     }
 }
 
-impl<S: Into<String>> From<S> for Failure {
-    fn from(why: S) -> Self {
-        Self {
-            why: why.into(),
-            term: false,
+impl std::fmt::Display for StageError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Sampling(e) => write!(f, "sampling failed: {e}"),
+            Self::Guidance(e) => write!(f, "guidance failed: {e}"),
+            Self::Phi(e) => write!(f, "scoring the candidates with Φ: {e}"),
+            Self::Contact(e) | Self::Batch(e) => write!(f, "{e}"),
+            Self::Lengths { first, other } => write!(
+                f,
+                "candidates of {first} and {other} poses cannot be scored together"
+            ),
+            Self::NoCandidate { deadline: true } => f.write_str(
+                "the deadline passed before sampling began, and there was no previous plan",
+            ),
+            Self::NoCandidate { deadline: false } => {
+                f.write_str("every candidate trajectory was non-finite")
+            }
         }
     }
 }
@@ -1614,12 +1638,13 @@ impl<M: FlowModel + Send> Planner for Human2Nav<M> {
                 self.model.horizon() + 1,
                 "the selected plan was not finite",
             ),
-            Err(Failure { why, term }) => {
+            Err(failure) => {
+                let why = failure.to_string();
                 let mut plan =
                     Plan::stop_in_place(obs, self.settings.dt, self.model.horizon() + 1, &why);
                 // A term of Φ that fails is a broken extension, not the planner's own
                 // fallback: callers count the call as failed (the benchmark records it).
-                plan.info.error = term.then_some(why);
+                plan.info.error = failure.is_term().then_some(why);
                 plan
             }
         };
@@ -1635,7 +1660,7 @@ impl<M: FlowModel + Send> Planner for Human2Nav<M> {
 /// Ego-frame candidates as one flat batch of poses, each with the robot's pose (the identity)
 /// prepended as pose 0, and the poses per trajectory; `None` without candidates. Candidates
 /// of different lengths cannot be scored together (an error).
-fn pose_batch(candidates: &[Vec<Pose2>]) -> Result<Option<(Vec<f64>, usize)>, Failure> {
+fn pose_batch(candidates: &[Vec<Pose2>]) -> Result<Option<(Vec<f64>, usize)>, StageError> {
     let Some(first) = candidates.first() else {
         return Ok(None);
     };
@@ -1643,11 +1668,10 @@ fn pose_batch(candidates: &[Vec<Pose2>]) -> Result<Option<(Vec<f64>, usize)>, Fa
     let mut data = Vec::with_capacity(candidates.len() * poses * 3);
     for c in candidates {
         if c.len() + 1 != poses {
-            return Err(Failure::from(format!(
-                "candidates of {} and {} poses cannot be scored together",
-                first.len(),
-                c.len()
-            )));
+            return Err(StageError::Lengths {
+                first: first.len(),
+                other: c.len(),
+            });
         }
         data.extend_from_slice(&[0.0; 3]);
         data.extend(c.iter().flat_map(|p| p.to_array()));

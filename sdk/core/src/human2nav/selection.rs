@@ -1,0 +1,273 @@
+//! Stage 3, the selection: the shortlist for Algorithm 1, Φ and the clearance term on a batch
+//! of candidates, the goal term and the score, and the best candidate.
+
+use super::*;
+
+impl<M: FlowModel> Human2Nav<M> {
+    /// The samples that go on past sampling (to Algorithm 1, the slowed copies and the
+    /// correction): the [`Human2NavSettings::guided_samples`] best by the selection score
+    /// without its feasibility term (guidance and the correction are what fix feasibility),
+    /// all of them when that is 0 or at least `K`, or when the paper variant of Algorithm 1
+    /// runs (the paper guides every sample). Indices in sample order.
+    pub(super) fn shortlist(
+        &self,
+        samples: &[Vec<Pose2>],
+        goal: [f64; 2],
+        ctx: &ConstraintContext<'_>,
+        v0: Twist2,
+        previous: Option<&[Pose2]>,
+    ) -> Result<Vec<usize>, StageError> {
+        let g = self.settings.guided_samples;
+        let paper = self.settings.guidance.enabled
+            && self.settings.guidance.variant == GuidanceVariant::Paper;
+        if paper || g == 0 || g >= samples.len() {
+            return Ok((0..samples.len()).collect());
+        }
+        let samples = self.scored(samples);
+        let phi = self.phi_costs(&samples, ctx)?;
+        let mut scored: Vec<(f64, usize)> = samples
+            .iter()
+            .enumerate()
+            .map(|(i, c)| {
+                let s = self.score(c, goal, phi[i], v0, previous, false);
+                (if s.is_finite() { s } else { f64::INFINITY }, i)
+            })
+            .collect();
+        scored.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let mut keep: Vec<usize> = scored[..g].iter().map(|&(_, i)| i).collect();
+        keep.sort_unstable();
+        Ok(keep)
+    }
+
+    /// Φ's context for this call: the plan step, the limits, the robot's velocity, the
+    /// ego-frame agents, and the scene the clearance term reads (the forecast, the nearby
+    /// obstacles, the footprint and the clipped goal).
+    /// Φ's context at a planning instant: the plan step, the robot's limits, its velocity, the
+    /// nearby pedestrians and the scene (a free function so that it borrows fields, not the whole
+    /// planner).
+    pub(super) fn phi_context<'a>(
+        &'a self,
+        obs: &Observation,
+        agents: &'a [AgentState],
+        forecast: &'a Forecast,
+        goal: [f64; 2],
+    ) -> ConstraintContext<'a> {
+        let scene = SceneContext {
+            forecast: Some(forecast),
+            obstacles: &self.obstacles,
+            footprint: &self.robot.footprint,
+            goal: Some(goal),
+        };
+        phi_context(self.settings.dt, &self.robot.limits, obs, agents, scene)
+    }
+
+    /// The selection's clearance term (the one in Φ).
+    pub(super) fn clearance(&self) -> Clearance {
+        selection_clearance(&self.settings)
+    }
+
+    /// Whether each ego-frame candidate keeps out of contact with the people and obstacles as
+    /// forecast, by the selection's clearance term ([`Clearance::contact_free`]).
+    pub(super) fn contact_free(
+        &self,
+        candidates: &[Vec<Pose2>],
+        ctx: &ConstraintContext<'_>,
+    ) -> Result<Vec<bool>, StageError> {
+        let Some((data, poses)) = pose_batch(candidates)? else {
+            return Ok(Vec::new());
+        };
+        let batch = TrajBatch::new(&data, candidates.len(), poses).map_err(StageError::Batch)?;
+        self.clearance()
+            .contact_free(batch, ctx)
+            .map_err(StageError::Contact)
+    }
+
+    /// Φ of every ego-frame candidate (each with the robot's pose, the identity, prepended as
+    /// pose 0), without gradients. A term that fails or answers a non-finite cost is an error
+    /// naming it: the selection never scores without a term.
+    pub(super) fn phi_costs(
+        &self,
+        candidates: &[Vec<Pose2>],
+        ctx: &ConstraintContext<'_>,
+    ) -> Result<Vec<f64>, StageError> {
+        let Some((data, poses)) = pose_batch(candidates)? else {
+            return Ok(Vec::new());
+        };
+        let batch = TrajBatch::new(&data, candidates.len(), poses).map_err(StageError::Batch)?;
+        let mut cost = vec![0.0; candidates.len()];
+        self.robot
+            .phi
+            .costs(batch, ctx, &mut cost, &mut PhiScratch::default())
+            .map_err(StageError::Phi)?;
+        Ok(cost)
+    }
+
+    /// [`SelectionWeights::hold`] in plan steps.
+    pub(super) fn hold_steps(&self) -> usize {
+        steps(self.settings.selection.hold, self.settings.dt)
+    }
+
+    /// [`SelectionWeights::lookahead`] in plan steps.
+    pub(super) fn lookahead_steps(&self) -> usize {
+        steps(self.settings.selection.lookahead, self.settings.dt)
+    }
+
+    /// The candidates as the selection scores them: each [`continued`] for the lookahead, or
+    /// as they are without one.
+    pub(super) fn scored<'a>(&self, candidates: &'a [Vec<Pose2>]) -> Cow<'a, [Vec<Pose2>]> {
+        match self.lookahead_steps() {
+            0 => Cow::Borrowed(candidates),
+            ahead => Cow::Owned(candidates.iter().map(|c| continued(c, ahead)).collect()),
+        }
+    }
+
+    /// The selection score of one ego-frame candidate (lower is better), given its Φ (the
+    /// robot's constraint terms and the clearance term, [`Self::phi_costs`]); without
+    /// `with_feasibility` the TFS term is left out.
+    pub(super) fn score(
+        &self,
+        traj: &[Pose2],
+        goal: [f64; 2],
+        phi: f64,
+        v0: Twist2,
+        previous: Option<&[Pose2]>,
+        with_feasibility: bool,
+    ) -> f64 {
+        let w = &self.settings.selection;
+        // TFS costs a pass over the plan; with a zero weight (the shipped selection) it is
+        // not computed.
+        let feas = if with_feasibility && w.feasibility > 0.0 {
+            let mut with_start = Vec::with_capacity(traj.len() + 1);
+            with_start.push(Pose2::IDENTITY);
+            with_start.extend_from_slice(traj);
+            tfs::tfs_plan(&with_start, self.settings.dt, &self.robot.limits, v0)
+        } else {
+            1.0
+        };
+        let reach_per_step = self.robot.limits.v_max * self.settings.dt;
+        let progress = goal_term(traj, goal, w, reach_per_step);
+        let consistency = previous.map_or(0.0, |prev| {
+            let n = prev.len().min(traj.len()).max(1);
+            prev.iter()
+                .zip(traj)
+                .map(|(a, b)| (a.x - b.x).hypot(a.y - b.y))
+                .sum::<f64>()
+                / n as f64
+        });
+
+        w.feasibility * (1.0 - feas) + w.goal * progress + w.phi * phi + w.consistency * consistency
+    }
+}
+
+/// A duration in whole plan steps of `dt`.
+pub(super) fn steps(seconds: f64, dt: f64) -> usize {
+    (seconds / dt).round() as usize
+}
+
+/// The selection's goal term of the ego-frame candidate `traj`: `d/d_0` (module docs), or
+/// how soon it could arrive with [`Progress::Time`]; `reach_per_step` is the way `v_max`
+/// covers in one plan step. Which of its waypoints the clearance term scores (those up to its
+/// arrival) is the term's own business ([`Clearance::arrival`]).
+pub(super) fn goal_term(
+    traj: &[Pose2],
+    goal: [f64; 2],
+    w: &SelectionWeights,
+    reach_per_step: f64,
+) -> f64 {
+    let d0 = goal[0].hypot(goal[1]).max(1e-3);
+    let distance = |p: &Pose2| (p.x - goal[0]).hypot(p.y - goal[1]);
+    if w.progress == Progress::End {
+        return traj.last().map_or(d0, distance) / d0;
+    }
+    // The first waypoint within `arrival` ends the candidate.
+    if let Some(k) = arrival(traj, goal, w.arrival) {
+        return match w.progress {
+            Progress::Time => (k + 1) as f64 * reach_per_step / d0,
+            _ => 0.0,
+        };
+    }
+    match w.progress {
+        Progress::Time => {
+            (traj.len() as f64 * reach_per_step + traj.last().map_or(d0, distance)) / d0
+        }
+        _ => traj.iter().map(distance).fold(d0, f64::min) / d0,
+    }
+}
+
+/// The candidate with the lowest finite `score` among those whose poses are all finite. When
+/// the last-step correction ran (`corrected` holds one flag per candidate), a candidate it
+/// failed on is eligible only if it failed on every one: an uncorrected plan never wins over a
+/// corrected one, whatever the weight of the score's feasibility term.
+pub(super) fn select_best(
+    candidates: &[Vec<Pose2>],
+    corrected: &[bool],
+    mut score: impl FnMut(usize) -> f64,
+) -> Option<usize> {
+    let any_corrected = corrected.contains(&true);
+    let mut best: Option<(usize, f64)> = None;
+    for (i, c) in candidates.iter().enumerate() {
+        let eligible = !any_corrected || corrected.get(i).copied().unwrap_or(false);
+        if !eligible || !c.iter().all(|p| p.is_finite()) {
+            continue;
+        }
+        let s = score(i);
+        if s.is_finite() && best.is_none_or(|(_, b)| s < b) {
+            best = Some((i, s));
+        }
+    }
+    best.map(|(i, _)| i)
+}
+
+/// Ego-frame candidates as one flat batch of poses, each with the robot's pose (the identity)
+/// prepended as pose 0, and the poses per trajectory; `None` without candidates. Candidates
+/// of different lengths cannot be scored together (an error).
+pub(super) fn pose_batch(
+    candidates: &[Vec<Pose2>],
+) -> Result<Option<(Vec<f64>, usize)>, StageError> {
+    let Some(first) = candidates.first() else {
+        return Ok(None);
+    };
+    let poses = first.len() + 1;
+    let mut data = Vec::with_capacity(candidates.len() * poses * 3);
+    for c in candidates {
+        if c.len() + 1 != poses {
+            return Err(StageError::Lengths {
+                first: first.len(),
+                other: c.len(),
+            });
+        }
+        data.extend_from_slice(&[0.0; 3]);
+        data.extend(c.iter().flat_map(|p| p.to_array()));
+    }
+    Ok(Some((data, poses)))
+}
+
+/// The clearance term the selection weights (`selection.clearance`) from its settings.
+pub(super) fn selection_clearance(settings: &Human2NavSettings) -> Clearance {
+    let sel = &settings.selection;
+    Clearance {
+        margin: sel.margin,
+        collision: sel.collision,
+        hold: steps(sel.hold, settings.dt),
+        arrival: (sel.progress != Progress::End).then_some(sel.arrival),
+    }
+}
+
+/// Φ's context at a planning instant: the plan step, the robot's limits, its velocity, the
+/// nearby pedestrians and the scene (a free function so that it borrows fields, not the whole
+/// planner).
+pub(super) fn phi_context<'a>(
+    dt: f64,
+    limits: &'a Limits,
+    obs: &Observation,
+    agents: &'a [AgentState],
+    scene: SceneContext<'a>,
+) -> ConstraintContext<'a> {
+    ConstraintContext {
+        dt,
+        limits,
+        initial_velocity: obs.ego_velocity,
+        agents,
+        scene,
+    }
+}

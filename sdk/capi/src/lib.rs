@@ -42,15 +42,20 @@
 
 use human2nav_core::embodiment::{Embodiment, RobotState};
 use human2nav_core::human2nav::{budget_deadline, pose_at};
-use human2nav_core::obstacle::{MAX_POLYGON_VERTICES, Obstacle};
 use human2nav_core::robot::{PluginIsolation, RobotProfile};
-use human2nav_core::{AgentState, Observation, Plan, PlanError, Pose2, Stage, Twist2};
+use human2nav_core::{Plan, Pose2, Stage, Twist2};
 use human2nav_flow::planner::{PlannerConfig, PlannerError, RobotPlanner, load_model};
 use human2nav_plugin::PluginHost;
-use std::cell::RefCell;
 use std::ffi::{CStr, CString, c_char};
-use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
+
+mod args;
+mod failure;
+mod observation;
+
+use args::{finite, optional_str, planner_mut, required_out, required_ref, required_str};
+use failure::{Failure, LAST_ERROR, guard};
+use observation::observation;
 
 /// Largest number of pedestrians one observation may carry.
 pub const H2N_MAX_AGENTS: usize = 10_000;
@@ -273,72 +278,6 @@ pub struct h2n_plan {
 // Errors
 // ---------------------------------------------------------------------------------------------
 
-thread_local! {
-    static LAST_ERROR: RefCell<CString> = RefCell::new(CString::default());
-}
-
-/// A failed call: its status and message.
-struct Failure {
-    status: h2n_status,
-    message: String,
-}
-
-impl Failure {
-    fn new(status: h2n_status, message: impl Into<String>) -> Self {
-        Self {
-            status,
-            message: message.into(),
-        }
-    }
-
-    fn invalid(message: impl Into<String>) -> Self {
-        Self::new(h2n_status::InvalidArgument, message)
-    }
-}
-
-impl From<PlannerError> for Failure {
-    fn from(e: PlannerError) -> Self {
-        let status = match &e {
-            PlannerError::Config { .. }
-            | PlannerError::Setting { .. }
-            | PlannerError::Profile { .. } => h2n_status::Config,
-            PlannerError::Model { .. } => h2n_status::Model,
-            PlannerError::Plugin { .. } => h2n_status::Plugin,
-            PlannerError::Plan(PlanError::InvalidObservation(_)) => h2n_status::InvalidArgument,
-            PlannerError::Plan(PlanError::InvalidSettings(_)) => h2n_status::Config,
-            PlannerError::Plan(_) => h2n_status::Plan,
-        };
-        Self::new(status, e.to_string())
-    }
-}
-
-fn set_last_error(message: &str) {
-    // A message with an interior NUL is cut there rather than lost.
-    let text = message.split('\0').next().unwrap_or_default();
-    let c = CString::new(text).unwrap_or_default();
-    LAST_ERROR.with(|slot| *slot.borrow_mut() = c);
-}
-
-/// Runs `f`, turning its failure or panic into a status and the thread's last error.
-fn guard(f: impl FnOnce() -> Result<(), Failure>) -> h2n_status {
-    match catch_unwind(AssertUnwindSafe(f)) {
-        Ok(Ok(())) => h2n_status::Ok,
-        Ok(Err(failure)) => {
-            set_last_error(&failure.message);
-            failure.status
-        }
-        Err(payload) => {
-            let what = payload
-                .downcast_ref::<&str>()
-                .map(|s| (*s).to_owned())
-                .or_else(|| payload.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "unknown panic".to_owned());
-            set_last_error(&format!("internal error (panic): {what}"));
-            h2n_status::Panic
-        }
-    }
-}
-
 /// The message of the last failed call on this thread ("" before any). The pointer stays
 /// valid until the next failed call on this thread.
 #[unsafe(no_mangle)]
@@ -355,76 +294,6 @@ pub extern "C" fn h2n_version() -> *const c_char {
             Err(_) => c"unknown",
         };
     VERSION.as_ptr()
-}
-
-// ---------------------------------------------------------------------------------------------
-// Argument helpers
-// ---------------------------------------------------------------------------------------------
-
-/// A required string argument.
-///
-/// # Safety
-/// `p` is NULL or a NUL-terminated string valid for the call.
-unsafe fn required_str<'a>(p: *const c_char, name: &str) -> Result<&'a str, Failure> {
-    // SAFETY: forwarded from the caller.
-    unsafe { optional_str(p, name) }?.ok_or_else(|| Failure::invalid(format!("{name} is NULL")))
-}
-
-/// An optional string argument (NULL: `None`).
-///
-/// # Safety
-/// `p` is NULL or a NUL-terminated string valid for the call.
-unsafe fn optional_str<'a>(p: *const c_char, name: &str) -> Result<Option<&'a str>, Failure> {
-    if p.is_null() {
-        return Ok(None);
-    }
-    // SAFETY: the caller passes a NUL-terminated string (function contract).
-    let s = unsafe { CStr::from_ptr(p) };
-    s.to_str()
-        .map(Some)
-        .map_err(|e| Failure::invalid(format!("{name} is not UTF-8: {e}")))
-}
-
-/// The object behind a required pointer.
-///
-/// # Safety
-/// `p` is NULL or points to a live `T`.
-unsafe fn required_ref<'a, T>(p: *const T, name: &str) -> Result<&'a T, Failure> {
-    // SAFETY: forwarded from the caller.
-    unsafe { p.as_ref() }.ok_or_else(|| Failure::invalid(format!("{name} is NULL")))
-}
-
-/// The writable object behind a required output pointer.
-///
-/// # Safety
-/// `p` is NULL or points to writable memory for a `T`.
-unsafe fn required_out<'a, T>(p: *mut T, name: &str) -> Result<&'a mut T, Failure> {
-    // SAFETY: forwarded from the caller.
-    unsafe { p.as_mut() }.ok_or_else(|| Failure::invalid(format!("{name} is NULL")))
-}
-
-/// The planner behind a handle, refused when an earlier call panicked in it.
-///
-/// # Safety
-/// `p` is NULL or a planner from `h2n_planner_create*` not yet freed.
-unsafe fn planner_mut<'a>(p: *mut h2n_planner) -> Result<&'a mut h2n_planner, Failure> {
-    // SAFETY: forwarded from the caller.
-    let planner = unsafe { required_out(p, "planner") }?;
-    if planner.busy {
-        return Err(Failure::new(
-            h2n_status::Poisoned,
-            "the planner panicked in an earlier call; free it and create a new one",
-        ));
-    }
-    Ok(planner)
-}
-
-fn finite(name: &str, values: &[f64]) -> Result<(), Failure> {
-    if values.iter().all(|v| v.is_finite()) {
-        Ok(())
-    } else {
-        Err(Failure::invalid(format!("{name} is not finite")))
-    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -599,131 +468,6 @@ pub unsafe extern "C" fn h2n_planner_limits(
 // ---------------------------------------------------------------------------------------------
 // Planning
 // ---------------------------------------------------------------------------------------------
-
-/// The observation as the planner takes it, every number checked.
-///
-/// # Safety
-/// `obs.agents` points to `obs.agent_count` agents when the count is not 0.
-unsafe fn observation(obs: &h2n_observation) -> Result<Observation, Failure> {
-    if obs.agent_count > H2N_MAX_AGENTS {
-        return Err(Failure::invalid(format!(
-            "observation.agent_count {} is more than {H2N_MAX_AGENTS}",
-            obs.agent_count
-        )));
-    }
-    let agents: &[h2n_agent] = if obs.agent_count == 0 {
-        &[]
-    } else if obs.agents.is_null() {
-        return Err(Failure::invalid(format!(
-            "observation.agents is NULL but agent_count is {}",
-            obs.agent_count
-        )));
-    } else {
-        // SAFETY: non-null, `agent_count` elements (the caller's contract), capped above.
-        unsafe { std::slice::from_raw_parts(obs.agents, obs.agent_count) }
-    };
-    finite("observation.time", &[obs.time])?;
-    finite("observation.ego", &[obs.ego.x, obs.ego.y, obs.ego.theta])?;
-    let v = obs.ego_velocity;
-    finite("observation.ego_velocity", &[v.vx, v.vy, v.omega])?;
-    finite("observation.goal", &[obs.goal_x, obs.goal_y])?;
-    let mut out = Vec::with_capacity(agents.len());
-    for (i, a) in agents.iter().enumerate() {
-        finite(
-            &format!("observation.agents[{i}] (id {})", a.id),
-            &[a.x, a.y, a.vx, a.vy, a.radius],
-        )?;
-        if a.radius < 0.0 {
-            return Err(Failure::invalid(format!(
-                "observation.agents[{i}] (id {}): radius {} is negative",
-                a.id, a.radius
-            )));
-        }
-        out.push(AgentState {
-            id: a.id,
-            position: [a.x, a.y],
-            velocity: [a.vx, a.vy],
-            radius: a.radius,
-            history: Vec::new(),
-        });
-    }
-    // SAFETY: the caller's contract on `obstacles` and their vertices.
-    let obstacles = unsafe { obstacles(obs) }?;
-    Ok(Observation {
-        time: obs.time,
-        ego: Pose2::new(obs.ego.x, obs.ego.y, obs.ego.theta),
-        ego_velocity: Twist2::new(v.vx, v.vy, v.omega),
-        goal: [obs.goal_x, obs.goal_y],
-        agents: out,
-        obstacles,
-        ..Default::default()
-    })
-}
-
-/// The observation's obstacles, checked (the planner validates their numbers).
-///
-/// # Safety
-/// `obs.obstacles` points to `obs.obstacle_count` obstacles when the count is not 0, and each
-/// polygon's `vertices` to `2·vertex_count` numbers.
-unsafe fn obstacles(obs: &h2n_observation) -> Result<Vec<Obstacle>, Failure> {
-    if obs.obstacle_count > H2N_MAX_OBSTACLES {
-        return Err(Failure::invalid(format!(
-            "observation.obstacle_count {} is more than {H2N_MAX_OBSTACLES}",
-            obs.obstacle_count
-        )));
-    }
-    if obs.obstacle_count == 0 {
-        return Ok(Vec::new());
-    }
-    if obs.obstacles.is_null() {
-        return Err(Failure::invalid(format!(
-            "observation.obstacles is NULL but obstacle_count is {}",
-            obs.obstacle_count
-        )));
-    }
-    // SAFETY: non-null, `obstacle_count` elements (the caller's contract), capped above.
-    let raw = unsafe { std::slice::from_raw_parts(obs.obstacles, obs.obstacle_count) };
-    let mut out = Vec::with_capacity(raw.len());
-    for (i, o) in raw.iter().enumerate() {
-        let obstacle = match o.kind {
-            k if k == h2n_obstacle_kind::Circle as i32 => Obstacle::Circle {
-                center: [o.x0, o.y0],
-                radius: o.radius,
-            },
-            k if k == h2n_obstacle_kind::Segment as i32 => Obstacle::Segment {
-                a: [o.x0, o.y0],
-                b: [o.x1, o.y1],
-            },
-            k if k == h2n_obstacle_kind::Polygon as i32 => {
-                if !(3..=MAX_POLYGON_VERTICES).contains(&o.vertex_count) {
-                    return Err(Failure::invalid(format!(
-                        "observation.obstacles[{i}]: a polygon needs 3 to \
-                         {MAX_POLYGON_VERTICES} vertices, vertex_count is {}",
-                        o.vertex_count
-                    )));
-                }
-                if o.vertices.is_null() {
-                    return Err(Failure::invalid(format!(
-                        "observation.obstacles[{i}].vertices is NULL"
-                    )));
-                }
-                // SAFETY: non-null, 2·vertex_count numbers (contract), count capped above.
-                let xy = unsafe { std::slice::from_raw_parts(o.vertices, 2 * o.vertex_count) };
-                Obstacle::Polygon {
-                    vertices: xy.chunks_exact(2).map(|c| [c[0], c[1]]).collect(),
-                }
-            }
-            other => {
-                return Err(Failure::invalid(format!(
-                    "observation.obstacles[{i}].kind {other} is not an h2n_obstacle_kind \
-                     (0 circle, 1 segment, 2 polygon)"
-                )));
-            }
-        };
-        out.push(obstacle);
-    }
-    Ok(out)
-}
 
 /// Plans from `obs`. `budget_ms > 0` bounds the call: it returns the best plan found by then,
 /// never starting a network call after it, and always a feasible one (braking at worst; see

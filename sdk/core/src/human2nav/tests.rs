@@ -1,4 +1,3 @@
-
 use super::candidates::motion_count;
 use super::selection::goal_term;
 use super::*;

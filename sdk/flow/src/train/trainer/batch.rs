@@ -174,7 +174,9 @@ pub fn batch_from_draws<S: TrainingSample>(
     let crowd_len = net.crowd_len();
     let mut points = vec![0f32; b * crowd_len];
     let people_cfg = clearance.map(ClearanceLoss::crowd);
-    let people_len = people_cfg.as_ref().map_or(0, |c| c.points * 5);
+    let people_len = people_cfg
+        .as_ref()
+        .map_or(0, |c| c.points * CROWD_FEATURES as usize);
     let mut people = vec![0f32; b * people_len];
     let mut xt_all = vec![0f32; b * 3 * t_len];
     let mut poses = vec![0f64; t_len * 3];
@@ -269,7 +271,14 @@ pub fn batch_from_draws<S: TrainingSample>(
         }
         if let Some(c) = &people_cfg {
             let out = &mut people[row * people_len..(row + 1) * people_len];
-            crowd_points(c, norm, cells, src, out);
+            match &net.crowd {
+                // The same cells as the network's crowd pathway (as in the shipped recipe):
+                // copied rather than read from the raster a second time.
+                Some(n) if n.points == c.points && n.cell == c.cell => {
+                    out.copy_from_slice(&points[row * crowd_len..(row + 1) * crowd_len]);
+                }
+                _ => crowd_points(c, norm, cells, src, out),
+            }
         }
     }
     let (bi, ti, ci) = (b as i64, t_len as i64, cells as i64);

@@ -2,13 +2,23 @@
 //! waypoint, a shared two-layer MLP over every (crowd point, waypoint) pair and a max over the
 //! points, and the backward pass of its input (the waypoints' positions and headings).
 //!
-//! Pairs are laid out column-major over `(trajectory, waypoint, point)`, so each layer is one
-//! matrix product over the whole batch.
+//! The forward pass works through the pairs in tiles of whole waypoints (each tile's pair
+//! features and both layers' activations stay in cache, one matrix product per layer and tile)
+//! and keeps only which point each output's max picked. The max passes its gradient to that one
+//! point, so the backward pass recomputes the two layers for the picked pairs alone: at most
+//! `width` of the `points` pairs of a waypoint, where a dense pass would pull every pair back
+//! through both layers.
 
-use super::kernels::{activate_in_place, activation_derivative, resize_for_overwrite, sgemm};
+use super::kernels::{
+    activate_in_place, activation_derivative, derivative_in_place, resize_for_overwrite, sgemm,
+};
 use super::net::{WeightError, Weights, take};
 use crate::config::{Activation, CrowdConfig};
 use crate::net::{CROWD_FEATURES, CROWD_PAIR_FEATURES, TRAJ_CHANNELS};
+
+/// Pair columns per tile of the forward pass (rounded to whole waypoints): the tile's
+/// activations, `2 · width · TILE_COLUMNS` values, stay in the L2 cache.
+const TILE_COLUMNS: usize = 512;
 
 /// The pathway's weights.
 #[derive(Debug)]
@@ -29,14 +39,29 @@ pub(crate) struct Crowd {
 pub(crate) struct CrowdTape {
     /// Present points (the first `present` rows of the points).
     present: usize,
-    /// Pair features `[5, M]` and pre-activations `[width, M]` of both layers.
-    pairs: Vec<f32>,
-    z0: Vec<f32>,
-    z1: Vec<f32>,
     /// Per output `(w, b, j)`: the point the max picked.
     arg: Vec<u32>,
     /// The trajectory features `[5, K, T]` the pass read.
     feat: Vec<f32>,
+}
+
+/// Buffers of the passes, reused from call to call (no state between calls).
+#[derive(Debug, Default)]
+pub(crate) struct CrowdScratch {
+    pairs: Vec<f32>,
+    z0: Vec<f32>,
+    z1: Vec<f32>,
+    /// Forward: per output of a tile, the largest and smallest pre-activation (activated in
+    /// place) and the points they belong to.
+    ends: Vec<f32>,
+    ends_at: Vec<u32>,
+    /// Backward: the first layer's activations, the second layer's gradient, the picked
+    /// `(waypoint, point)` pairs, each output's column among them, one waypoint's picks.
+    a0: Vec<f32>,
+    dz: Vec<f32>,
+    cols: Vec<(u32, u32)>,
+    col_of: Vec<u32>,
+    picks: Vec<u32>,
 }
 
 const PAIR: usize = CROWD_PAIR_FEATURES as usize;
@@ -67,8 +92,10 @@ impl Crowd {
         (k, t_len): (usize, usize),
         points: &[f32],
         tape: &mut CrowdTape,
+        s: &mut CrowdScratch,
     ) {
-        let traj = TRAJ_CHANNELS as usize * k * t_len;
+        let plane = k * t_len;
+        let traj = TRAJ_CHANNELS as usize * plane;
         tape.feat.clear();
         tape.feat.extend_from_slice(&feat[..traj]);
         let stride = CROWD_FEATURES as usize;
@@ -77,90 +104,130 @@ impl Crowd {
             .take_while(|p| p[4] > 0.5)
             .count();
         tape.present = present;
-        let out_len = self.width * k * t_len;
+        let width = self.width;
+        feat.resize(traj + width * plane, 0.0);
         if present == 0 {
-            feat.resize(traj + out_len, 0.0);
+            feat[traj..].fill(0.0);
             return;
         }
-        let m = k * t_len * present;
-        resize_for_overwrite(&mut tape.pairs, PAIR * m);
-        let plane = k * t_len;
-        for b in 0..k {
-            for j in 0..t_len {
-                let w = Waypoint::of(&tape.feat, plane, b * t_len + j);
-                let tau = (j + 1) as f32 * self.step;
+        tape.arg.clear();
+        tape.arg.resize(width * plane, 0);
+        let per_tile = (TILE_COLUMNS / present).max(1);
+        for bj0 in (0..plane).step_by(per_tile) {
+            let rows = per_tile.min(plane - bj0);
+            let m = rows * present;
+            resize_for_overwrite(&mut s.pairs, PAIR * m);
+            for r in 0..rows {
+                let bj = bj0 + r;
+                let w = Waypoint::of(&tape.feat, plane, bj);
+                let tau = (bj % t_len + 1) as f32 * self.step;
                 for (n, p) in points.chunks_exact(stride).take(present).enumerate() {
-                    let f = w.pair(p, tau);
-                    let col = (b * t_len + j) * present + n;
-                    for (c, v) in f.iter().enumerate() {
-                        tape.pairs[c * m + col] = *v;
+                    for (c, v) in w.pair(p, tau).iter().enumerate() {
+                        s.pairs[c * m + r * present + n] = *v;
                     }
                 }
             }
-        }
-        let width = self.width;
-        layer(&self.w0, &self.b0, PAIR, &tape.pairs, m, &mut tape.z0);
-        let mut a0 = tape.z0.clone();
-        activate_in_place(self.act, &mut a0);
-        layer(&self.w1, &self.b1, width, &a0, m, &mut tape.z1);
-        let mut a1 = tape.z1.clone();
-        activate_in_place(self.act, &mut a1);
-        feat.resize(traj + out_len, 0.0);
-        tape.arg.clear();
-        tape.arg.resize(out_len, 0);
-        for c in 0..width {
-            for bj in 0..plane {
-                let row = &a1[c * m + bj * present..c * m + (bj + 1) * present];
-                let (mut best, mut arg) = (f32::NEG_INFINITY, 0usize);
-                for (n, &v) in row.iter().enumerate() {
-                    if v > best {
-                        best = v;
-                        arg = n;
-                    }
-                }
-                feat[traj + c * plane + bj] = best;
-                tape.arg[c * plane + bj] = arg as u32;
+            layer(&self.w0, &self.b0, PAIR, &s.pairs, m, &mut s.z0);
+            activate_in_place(self.act, &mut s.z0);
+            layer(&self.w1, &self.b1, width, &s.z0, m, &mut s.z1);
+            // Both activations fall from 0 to a single minimum and rise after it, so a row's
+            // largest activation is that of its largest or of its smallest pre-activation:
+            // only those two are activated.
+            s.ends.clear();
+            s.ends_at.clear();
+            for row in s.z1.chunks_exact(m).flat_map(|c| c.chunks_exact(present)) {
+                let ((lo, at_lo), (hi, at_hi)) = extremes(row);
+                s.ends.extend([hi, lo]);
+                s.ends_at.extend([at_hi as u32, at_lo as u32]);
+            }
+            activate_in_place(self.act, &mut s.ends);
+            for (i, (v, at)) in s
+                .ends
+                .chunks_exact(2)
+                .zip(s.ends_at.chunks_exact(2))
+                .enumerate()
+            {
+                let (c, r) = (i / rows, i % rows);
+                // The first point attaining the max, as a search of the activated row picks.
+                let hi = v[0] > v[1] || (v[0] == v[1] && at[0] < at[1]);
+                let out = c * plane + bj0 + r;
+                feat[traj + out] = if hi { v[0] } else { v[1] };
+                tape.arg[out] = if hi { at[0] } else { at[1] };
             }
         }
     }
 
     /// Adds to `dfeat[..5·K·T]` the pull-back of `dfeat[5·K·T..]` (the gradient arriving at
-    /// the pathway's features) through the pass recorded in `tape`.
+    /// the pathway's features) through the pass recorded in `tape`: only the pairs some
+    /// output's max picked carry a gradient, so both layers are recomputed and pulled back for
+    /// those columns alone, one matrix product per layer.
     pub(crate) fn backward(
         &self,
         dfeat: &mut [f32],
         (k, t_len): (usize, usize),
         points: &[f32],
         tape: &CrowdTape,
+        s: &mut CrowdScratch,
     ) {
-        let present = tape.present;
-        if present == 0 {
+        if tape.present == 0 {
             return;
         }
         let (plane, width) = (k * t_len, self.width);
         let traj = TRAJ_CHANNELS as usize * plane;
-        let m = plane * present;
         let (dtraj, dcrowd) = dfeat.split_at_mut(traj);
-        // The max passes the gradient to the point it picked.
-        let mut dz1 = vec![0f32; width * m];
-        for c in 0..width {
-            for bj in 0..plane {
-                let n = tape.arg[c * plane + bj] as usize;
-                dz1[c * m + bj * present + n] += dcrowd[c * plane + bj];
+        let stride = CROWD_FEATURES as usize;
+        // The picked pairs, grouped by waypoint and in point order within one, and the column
+        // of each output's pick.
+        s.cols.clear();
+        s.col_of.clear();
+        s.col_of.resize(width * plane, 0);
+        for bj in 0..plane {
+            s.picks.clear();
+            s.picks.extend((0..width).map(|c| tape.arg[c * plane + bj]));
+            s.picks.sort_unstable();
+            s.picks.dedup();
+            let start = s.cols.len();
+            s.cols.extend(s.picks.iter().map(|&n| (bj as u32, n)));
+            for c in 0..width {
+                let n = tape.arg[c * plane + bj];
+                let at = s.picks.partition_point(|&p| p < n);
+                s.col_of[c * plane + bj] = (start + at) as u32;
             }
         }
-        for (d, &z) in dz1.iter_mut().zip(&tape.z1) {
-            *d *= activation_derivative(self.act, z);
+        let m = s.cols.len();
+        resize_for_overwrite(&mut s.pairs, PAIR * m);
+        for (col, &(bj, n)) in s.cols.iter().enumerate() {
+            let (bj, n) = (bj as usize, n as usize);
+            let w = Waypoint::of(&tape.feat, plane, bj);
+            let tau = (bj % t_len + 1) as f32 * self.step;
+            let f = w.pair(&points[n * stride..(n + 1) * stride], tau);
+            for (c, v) in f.iter().enumerate() {
+                s.pairs[c * m + col] = *v;
+            }
         }
-        // dA0 = W1ᵀ·dZ1, then through the first activation; dF = W0ᵀ·dZ0.
-        let mut dz0 = vec![0f32; width * m];
+        // Forward through both layers on the picked columns: z0 becomes act'(z0), a0 = act(z0).
+        layer(&self.w0, &self.b0, PAIR, &s.pairs, m, &mut s.z0);
+        s.a0.clear();
+        s.a0.extend_from_slice(&s.z0);
+        activate_in_place(self.act, &mut s.a0);
+        derivative_in_place(self.act, &mut s.z0);
+        layer(&self.w1, &self.b1, width, &s.a0, m, &mut s.z1);
+        // dZ1: each output's gradient at its pick, through the second activation.
+        s.dz.clear();
+        s.dz.resize(width * m, 0.0);
+        for c in 0..width {
+            for bj in 0..plane {
+                let at = c * m + s.col_of[c * plane + bj] as usize;
+                s.dz[at] = dcrowd[c * plane + bj] * activation_derivative(self.act, s.z1[at]);
+            }
+        }
+        // dZ0 = act'(z0) ⊙ W1ᵀ·dZ1 (into a0), then dF = W0ᵀ·dZ0 (into pairs).
         sgemm(
-            width, m, width, &self.w1, 1, width, &dz1, m, 1, &mut dz0, false,
+            width, m, width, &self.w1, 1, width, &s.dz, m, 1, &mut s.a0, false,
         );
-        for (d, &z) in dz0.iter_mut().zip(&tape.z0) {
-            *d *= activation_derivative(self.act, z);
+        for (d, &da) in s.a0.iter_mut().zip(&s.z0) {
+            *d *= da;
         }
-        let mut dpairs = vec![0f32; PAIR * m];
         sgemm(
             PAIR,
             m,
@@ -168,30 +235,42 @@ impl Crowd {
             &self.w0,
             1,
             PAIR,
-            &dz0,
+            &s.a0,
             m,
             1,
-            &mut dpairs,
+            &mut s.pairs,
             false,
         );
-        let stride = CROWD_FEATURES as usize;
-        for b in 0..k {
-            for j in 0..t_len {
-                let bj = b * t_len + j;
-                let w = Waypoint::of(&tape.feat, plane, bj);
-                let tau = (j + 1) as f32 * self.step;
-                let mut g = [0f32; 4];
-                for (n, p) in points.chunks_exact(stride).take(present).enumerate() {
-                    let col = bj * present + n;
-                    let df: [f32; PAIR] = std::array::from_fn(|c| dpairs[c * m + col]);
-                    w.pull_back(p, tau, df, &mut g);
-                }
+        let mut g = [0f32; 4];
+        for (col, &(bj, n)) in s.cols.iter().enumerate() {
+            let (bj, n) = (bj as usize, n as usize);
+            let w = Waypoint::of(&tape.feat, plane, bj);
+            let tau = (bj % t_len + 1) as f32 * self.step;
+            let df: [f32; PAIR] = std::array::from_fn(|c| s.pairs[c * m + col]);
+            w.pull_back(&points[n * stride..(n + 1) * stride], tau, df, &mut g);
+            // The waypoint's last pick: its gradient is complete.
+            if s.cols.get(col + 1).is_none_or(|next| next.0 as usize != bj) {
                 for (c, v) in g.iter().enumerate() {
                     dtraj[c * plane + bj] += v;
                 }
+                g = [0.0; 4];
             }
         }
     }
+}
+
+/// The smallest and the largest value of `row` with their first indices.
+fn extremes(row: &[f32]) -> ((f32, usize), (f32, usize)) {
+    let (mut lo, mut hi) = ((row[0], 0), (row[0], 0));
+    for (n, &v) in row.iter().enumerate().skip(1) {
+        if v < lo.0 {
+            lo = (v, n);
+        }
+        if v > hi.0 {
+            hi = (v, n);
+        }
+    }
+    (lo, hi)
 }
 
 /// `z = W·x + b` for `m` columns: `W` `[out, inp]`, `x` `[inp, m]`, `z` `[out, m]`.

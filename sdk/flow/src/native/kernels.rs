@@ -554,6 +554,16 @@ multiversion! {
     }
 }
 
+multiversion! {
+    /// `x ← act'(x)` in place.
+    pub(crate) fn derivative_in_place(act: Activation, x: &mut [f32]) {
+        match act {
+            Activation::Silu => x.iter_mut().for_each(|v| *v = SiluAct::df(*v)),
+            Activation::Mish => x.iter_mut().for_each(|v| *v = MishAct::df(*v)),
+        }
+    }
+}
+
 /// The derivative of `act` at `x`.
 pub(crate) fn activation_derivative(act: Activation, x: f32) -> f32 {
     match act {

@@ -23,7 +23,7 @@ use crate::io_map::{self, batch_of, check_len};
 #[cfg(feature = "torch")]
 use crate::model::CfmModel;
 use crate::model::{CARD_FILE, crowd_points, normalise_condition};
-use crowd::CrowdTape;
+use crowd::{CrowdScratch, CrowdTape};
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use human2nav_core::input::read_user_bytes;
 use net::{Net, Pool, Tape, WeightError, Weights};
@@ -66,6 +66,7 @@ struct State {
     forwards: Vec<Forward>,
     clock: u64,
     pool: Pool,
+    crowd: CrowdScratch,
     feat: Vec<f32>,
     dfeat: Vec<f32>,
     cot: Vec<f32>,
@@ -237,7 +238,13 @@ impl NativeCfm {
         write_features(x, h, self.card.normalisation.position_scale, &mut st.feat);
         let f = &mut st.forwards[slot];
         if let Some(c) = &self.net.crowd {
-            c.forward(&mut st.feat, (k, h), &st.points, &mut f.crowd);
+            c.forward(
+                &mut st.feat,
+                (k, h),
+                &st.points,
+                &mut f.crowd,
+                &mut st.crowd,
+            );
         }
         self.net.forward(
             &st.feat,
@@ -345,6 +352,7 @@ impl FlowModel for NativeCfm {
             cot,
             pool,
             points,
+            crowd: scratch,
             ..
         } = &mut *st;
         let Forward {
@@ -363,7 +371,7 @@ impl FlowModel for NativeCfm {
         });
         self.net.backward(cot, &films[fi].1, tape, pool, dfeat);
         if let Some(c) = &self.net.crowd {
-            c.backward(dfeat, (k, h), points, crowd);
+            c.backward(dfeat, (k, h), points, crowd, scratch);
         }
         let s = self.card.normalisation.position_scale;
         io_map::pull_back_features(

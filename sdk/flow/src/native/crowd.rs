@@ -10,15 +10,17 @@
 //! through both layers.
 
 use super::kernels::{
-    activate_in_place, activation_derivative, derivative_in_place, resize_for_overwrite, sgemm,
+    activate_in_place, activation_derivative, derivative_in_place, multiversion,
+    resize_for_overwrite, sgemm,
 };
 use super::net::{WeightError, Weights, take};
 use crate::config::{Activation, CrowdConfig};
 use crate::net::{CROWD_FEATURES, CROWD_PAIR_FEATURES, TRAJ_CHANNELS};
 
-/// Pair columns per tile of the forward pass (rounded to whole waypoints): the tile's
-/// activations, `2 · width · TILE_COLUMNS` values, stay in the L2 cache.
-const TILE_COLUMNS: usize = 512;
+/// Waypoints per tile of the forward pass: the loops along a tile's waypoints fill whole
+/// vector registers, and its activations (`2 · width · points · 64` values, 640 KiB for the
+/// shipped 32 × 40) stay in the L2 cache.
+const TILE_WAYPOINTS: usize = 64;
 
 /// The pathway's weights.
 #[derive(Debug)]
@@ -52,9 +54,10 @@ pub(crate) struct CrowdScratch {
     z0: Vec<f32>,
     z1: Vec<f32>,
     /// Forward: per output of a tile, the largest and smallest pre-activation (activated in
-    /// place) and the points they belong to.
+    /// place) and the points they belong to; each waypoint's time ahead.
     ends: Vec<f32>,
     ends_at: Vec<u32>,
+    tau: Vec<f32>,
     /// Backward: the first layer's activations, the second layer's gradient, the picked
     /// `(waypoint, point)` pairs, each output's column among them, one waypoint's picks.
     a0: Vec<f32>,
@@ -112,47 +115,50 @@ impl Crowd {
         }
         tape.arg.clear();
         tape.arg.resize(width * plane, 0);
-        let per_tile = (TILE_COLUMNS / present).max(1);
-        for bj0 in (0..plane).step_by(per_tile) {
-            let rows = per_tile.min(plane - bj0);
+        s.tau.clear();
+        s.tau
+            .extend((0..plane).map(|bj| (bj % t_len + 1) as f32 * self.step));
+        // A tile's columns run over its waypoints for each point in turn (`n·rows + r`), so
+        // that every loop below runs along waypoints, contiguous in the features.
+        for bj0 in (0..plane).step_by(TILE_WAYPOINTS) {
+            let rows = TILE_WAYPOINTS.min(plane - bj0);
             let m = rows * present;
             resize_for_overwrite(&mut s.pairs, PAIR * m);
-            for r in 0..rows {
-                let bj = bj0 + r;
-                let w = Waypoint::of(&tape.feat, plane, bj);
-                let tau = (bj % t_len + 1) as f32 * self.step;
-                for (n, p) in points.chunks_exact(stride).take(present).enumerate() {
-                    for (c, v) in w.pair(p, tau).iter().enumerate() {
-                        s.pairs[c * m + r * present + n] = *v;
-                    }
-                }
-            }
+            let way = |c: usize| &tape.feat[c * plane + bj0..c * plane + bj0 + rows];
+            let waypoints = [way(0), way(1), way(2), way(3), &s.tau[bj0..bj0 + rows]];
+            tile_pairs(waypoints, &points[..present * stride], &mut s.pairs);
             layer(&self.w0, &self.b0, PAIR, &s.pairs, m, &mut s.z0);
             activate_in_place(self.act, &mut s.z0);
             layer(&self.w1, &self.b1, width, &s.z0, m, &mut s.z1);
-            // Both activations fall from 0 to a single minimum and rise after it, so a row's
-            // largest activation is that of its largest or of its smallest pre-activation:
-            // only those two are activated.
-            s.ends.clear();
+            // Both activations fall from 0 to a single minimum and rise after it, so an
+            // output's largest activation is that of its largest or of its smallest
+            // pre-activation: only those two are activated. `ends` is `[width, 2, rows]`.
+            resize_for_overwrite(&mut s.ends, 2 * width * rows);
             s.ends_at.clear();
-            for row in s.z1.chunks_exact(m).flat_map(|c| c.chunks_exact(present)) {
-                let ((lo, at_lo), (hi, at_hi)) = extremes(row);
-                s.ends.extend([hi, lo]);
-                s.ends_at.extend([at_hi as u32, at_lo as u32]);
+            s.ends_at.resize(2 * width * rows, 0);
+            for ((z, ends), at) in
+                s.z1.chunks_exact(m)
+                    .zip(s.ends.chunks_exact_mut(2 * rows))
+                    .zip(s.ends_at.chunks_exact_mut(2 * rows))
+            {
+                tile_extremes(z, rows, ends, at);
             }
             activate_in_place(self.act, &mut s.ends);
-            for (i, (v, at)) in s
-                .ends
-                .chunks_exact(2)
-                .zip(s.ends_at.chunks_exact(2))
-                .enumerate()
-            {
-                let (c, r) = (i / rows, i % rows);
-                // The first point attaining the max, as a search of the activated row picks.
-                let hi = v[0] > v[1] || (v[0] == v[1] && at[0] < at[1]);
-                let out = c * plane + bj0 + r;
-                feat[traj + out] = if hi { v[0] } else { v[1] };
-                tape.arg[out] = if hi { at[0] } else { at[1] };
+            for c in 0..width {
+                let (v, at) = (&s.ends[2 * c * rows..], &s.ends_at[2 * c * rows..]);
+                for r in 0..rows {
+                    let (hi, lo) = ((v[r], at[r]), (v[rows + r], at[rows + r]));
+                    // The first point attaining the max, as a search of the activated
+                    // outputs picks.
+                    let (best, arg) = if hi.0 > lo.0 || (hi.0 == lo.0 && hi.1 < lo.1) {
+                        hi
+                    } else {
+                        lo
+                    };
+                    let out = c * plane + bj0 + r;
+                    feat[traj + out] = best;
+                    tape.arg[out] = arg;
+                }
             }
         }
     }
@@ -259,18 +265,64 @@ impl Crowd {
     }
 }
 
-/// The smallest and the largest value of `row` with their first indices.
-fn extremes(row: &[f32]) -> ((f32, usize), (f32, usize)) {
-    let (mut lo, mut hi) = ((row[0], 0), (row[0], 0));
-    for (n, &v) in row.iter().enumerate().skip(1) {
-        if v < lo.0 {
-            lo = (v, n);
-        }
-        if v > hi.0 {
-            hi = (v, n);
+multiversion! {
+    /// The pair features `[5, present·rows]` (column `n·rows + r`) of a tile's `rows`
+    /// waypoints (`[x, y, cos θ, sin θ, τ]`, one slice of `rows` each) with every point
+    /// (`N × 5`), as [`Waypoint::pair`] computes them.
+    fn tile_pairs(waypoints: [&[f32]; 5], points: &[f32], pairs: &mut [f32]) {
+        let rows = waypoints[0].len();
+        let [px, py, cs, sn, tau] = waypoints.map(|w| &w[..rows]);
+        let m = pairs.len() / PAIR;
+        let (bx_all, rest) = pairs.split_at_mut(m);
+        let (by_all, rest) = rest.split_at_mut(m);
+        let (dist_all, rest) = rest.split_at_mut(m);
+        let (ux_all, uy_all) = rest.split_at_mut(m);
+        for (n, p) in points.chunks_exact(CROWD_FEATURES as usize).enumerate() {
+            let span = n * rows..(n + 1) * rows;
+            let bx = &mut bx_all[span.clone()];
+            let by = &mut by_all[span.clone()];
+            let dist = &mut dist_all[span.clone()];
+            let ux = &mut ux_all[span.clone()];
+            let uy = &mut uy_all[span];
+            for r in 0..rows {
+                let dx = p[0] + p[2] * tau[r] - px[r];
+                let dy = p[1] + p[3] * tau[r] - py[r];
+                let (x, y) = (cs[r] * dx + sn[r] * dy, cs[r] * dy - sn[r] * dx);
+                bx[r] = x;
+                by[r] = y;
+                dist[r] = (x * x + y * y + 1e-6).sqrt();
+                ux[r] = cs[r] * p[2] + sn[r] * p[3];
+                uy[r] = cs[r] * p[3] - sn[r] * p[2];
+            }
         }
     }
-    (lo, hi)
+}
+
+multiversion! {
+    /// Per waypoint `r` of one output channel's tile `z` (`[present, rows]`), the largest and
+    /// the smallest value over the points with the first point attaining each: `ends` and
+    /// `at` are `[largest; smallest]`, `rows` each.
+    fn tile_extremes(z: &[f32], rows: usize, ends: &mut [f32], at: &mut [u32]) {
+        let (hi, lo) = ends.split_at_mut(rows);
+        let (hi_at, lo_at) = at.split_at_mut(rows);
+        hi.copy_from_slice(&z[..rows]);
+        lo.copy_from_slice(&z[..rows]);
+        hi_at.fill(0);
+        lo_at.fill(0);
+        // Selects and unconditional stores, so that the loop vectorises along the waypoints.
+        for (n, row) in z.chunks_exact(rows).enumerate().skip(1) {
+            let n = n as u32;
+            let hi = hi.iter_mut().zip(hi_at.iter_mut());
+            let lo = lo.iter_mut().zip(lo_at.iter_mut());
+            for (&v, ((h, h_at), (l, l_at))) in row.iter().zip(hi.zip(lo)) {
+                let (up, down) = (v > *h, v < *l);
+                *h = if up { v } else { *h };
+                *h_at = if up { n } else { *h_at };
+                *l = if down { v } else { *l };
+                *l_at = if down { n } else { *l_at };
+            }
+        }
+    }
 }
 
 /// `z = W·x + b` for `m` columns: `W` `[out, inp]`, `x` `[inp, m]`, `z` `[out, m]`.

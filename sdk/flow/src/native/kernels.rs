@@ -38,6 +38,8 @@ macro_rules! multiversion {
     };
 }
 
+pub(crate) use multiversion;
+
 /// `eˣ` for `f32` without a library call, so that loops over it vectorise: Cephes' `expf`
 /// (range reduction by `ln 2`, a degree-6 polynomial, relative error about 2·10⁻⁷), with the
 /// argument clamped to `[−87, 88]` (the normal range; the activations never need more).

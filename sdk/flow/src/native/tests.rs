@@ -37,6 +37,17 @@ fn small() -> NetConfig {
 }
 
 /// A deterministic pseudo-random stream in [-1, 1).
+/// A model with weights drawn from torch's generator at `seed`. The generator is global and
+/// these tests start in parallel, so seeding and drawing happen under one lock: without it
+/// their draws interleave, a test's weights change from run to run, and an agreement close to
+/// the tolerance passes or fails by chance.
+fn seeded_model(cfg: &NetConfig, seed: i64) -> CfmModel {
+    static TORCH_RNG: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _guard = TORCH_RNG.lock().unwrap_or_else(|e| e.into_inner());
+    tch::manual_seed(seed);
+    CfmModel::new(cfg, &norm(), Device::Cpu).expect("valid config")
+}
+
 fn noise(seed: u64, n: usize) -> Vec<f64> {
     let mut s = seed
         .wrapping_mul(6364136223846793005)
@@ -90,8 +101,7 @@ fn rel_err(a: &[f64], b: &[f64]) -> f64 {
 }
 
 fn check_agreement(cfg: &NetConfig, seed: i64) {
-    tch::manual_seed(seed);
-    let torch = CfmModel::new(cfg, &norm(), Device::Cpu).expect("valid config");
+    let torch = seeded_model(cfg, seed);
     let native = NativeCfm::from_model(&torch).expect("same architecture");
     let h = cfg.horizon;
     for (k, case) in [(1usize, 1u64), (4, 2), (16, 3)] {
@@ -161,9 +171,8 @@ fn agrees_with_torch_with_the_crowd_pathway() {
 
 #[test]
 fn rows_are_independent_and_the_condition_cache_is_exact() {
-    tch::manual_seed(3);
     let cfg = small();
-    let torch = CfmModel::new(&cfg, &norm(), Device::Cpu).expect("valid config");
+    let torch = seeded_model(&cfg, 3);
     let native = NativeCfm::from_model(&torch).expect("same architecture");
     let h = cfg.horizon;
     let x = poses(3, h, 5);
@@ -192,11 +201,10 @@ fn rows_are_independent_and_the_condition_cache_is_exact() {
 
 #[test]
 fn load_reads_the_folder_and_rejects_mismatched_weights() {
-    tch::manual_seed(4);
     let dir = std::env::temp_dir().join(format!("h2n-native-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let cfg = small();
-    let torch = CfmModel::new(&cfg, &norm(), Device::Cpu).expect("valid config");
+    let torch = seeded_model(&cfg, 4);
     torch.save(&dir).expect("save");
     let native = NativeCfm::load(&dir).expect("load");
     let cond = condition(&cfg, 9);
@@ -247,9 +255,8 @@ fn load_reads_the_folder_and_rejects_mismatched_weights() {
 
 #[test]
 fn shape_errors_are_reported() {
-    tch::manual_seed(5);
     let cfg = small();
-    let torch = CfmModel::new(&cfg, &norm(), Device::Cpu).expect("valid config");
+    let torch = seeded_model(&cfg, 5);
     let native = NativeCfm::from_model(&torch).expect("same architecture");
     let cond = condition(&cfg, 1);
     let mut out = vec![0.0; 5];

@@ -314,7 +314,7 @@ fn build(
         .robot_embodiment(&mut profile)
         .map_err(|e| Failure::new(h2n_status::Plugin, e.to_string()))?;
     #[cfg(feature = "torch")]
-    if config.backend == human2nav_flow::planner::Backend::Torch {
+    if config.backend != human2nav_flow::planner::Backend::Native {
         human2nav_flow::tch::set_num_threads(i32::try_from(config.threads).unwrap_or(1));
     }
     let model = load_model(Path::new(model_dir), config.backend)?;

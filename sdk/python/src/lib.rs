@@ -286,7 +286,7 @@ impl PyPlanner {
         }
         cfg.validate().map_err(planner_error)?;
         #[cfg(feature = "torch")]
-        if cfg.backend == Backend::Torch {
+        if cfg.backend != Backend::Native {
             human2nav_flow::tch::set_num_threads(i32::try_from(cfg.threads).unwrap_or(1));
         }
         let model = load_model(&model_dir, cfg.backend).map_err(planner_error)?;

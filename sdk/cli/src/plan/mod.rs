@@ -77,8 +77,9 @@ pub struct PlanArgs {
     /// libtorch threads (overrides the configuration).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// What runs the network: native or torch (overrides the configuration; `--bench` measures
-    /// both when this is not given).
+    /// What runs the network: native, torch (libtorch on the CPU) or cuda (libtorch on a GPU)
+    /// (overrides the configuration; `--bench` measures native and torch when this is not
+    /// given).
     #[arg(long)]
     pub backend: Option<Backend>,
     /// Output PNG [default: out/plan/<robot>-<episode index>.png under the workspace root].

@@ -85,9 +85,12 @@ pub enum Backend {
     /// [`NativeCfm`]: Rust kernels on the CPU, no per-operator dispatch.
     #[default]
     Native,
-    /// `CfmModel`: libtorch, the reference implementation (CPU or GPU). Only in builds with
-    /// the `torch` feature ([`Backend::check_available`]).
+    /// `CfmModel`: libtorch on the CPU, the reference implementation. Only in builds with the
+    /// `torch` feature ([`Backend::check_available`]).
     Torch,
+    /// `CfmModel`: libtorch on the first CUDA device. Only in builds with the `torch` feature
+    /// whose libtorch has CUDA; loading fails naming the setting when no device is present.
+    Cuda,
 }
 
 fn torch_missing() -> PlannerError {
@@ -119,6 +122,7 @@ impl Backend {
         match self {
             Self::Native => "native",
             Self::Torch => "torch",
+            Self::Cuda => "cuda",
         }
     }
 
@@ -126,7 +130,7 @@ impl Backend {
     /// without it, an error on the `backend` setting that says how to get it
     /// ([`TORCH_MISSING`]).
     pub fn check_available(self) -> Result<(), PlannerError> {
-        if self == Self::Torch && !cfg!(feature = "torch") {
+        if self != Self::Native && !cfg!(feature = "torch") {
             return Err(torch_missing());
         }
         Ok(())
@@ -143,10 +147,10 @@ impl std::str::FromStr for Backend {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, String> {
-        [Self::Native, Self::Torch]
+        [Self::Native, Self::Torch, Self::Cuda]
             .into_iter()
             .find(|b| b.name() == s)
-            .ok_or_else(|| format!("unknown backend `{s}` (expected native or torch)"))
+            .ok_or_else(|| format!("unknown backend `{s}` (expected native, torch or cuda)"))
     }
 }
 
@@ -233,8 +237,20 @@ pub fn load_model(dir: &Path, backend: Backend) -> Result<PlannerModel, PlannerE
         Backend::Native => NativeCfm::load(dir).map(PlannerModel::from),
         #[cfg(feature = "torch")]
         Backend::Torch => CfmModel::load(dir, tch::Device::Cpu).map(PlannerModel::from),
+        #[cfg(feature = "torch")]
+        Backend::Cuda => {
+            if !tch::Cuda::is_available() {
+                return Err(PlannerError::Setting {
+                    field: "backend".into(),
+                    message: "`cuda`: libtorch sees no CUDA device here (use `native` or \
+                              `torch` on this machine)"
+                        .into(),
+                });
+            }
+            CfmModel::load(dir, tch::Device::Cuda(0)).map(PlannerModel::from)
+        }
         #[cfg(not(feature = "torch"))]
-        Backend::Torch => return Err(torch_missing()),
+        Backend::Torch | Backend::Cuda => return Err(torch_missing()),
     };
     model.map_err(|source| PlannerError::Model {
         path: dir.to_path_buf(),

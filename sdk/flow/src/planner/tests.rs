@@ -354,7 +354,64 @@ fn the_torch_backend_without_libtorch_says_how_to_get_it() {
             if field == "backend" && message.contains("--features torch")),
         "{err}"
     );
-    let err = load_model(&workspace().join("models/human2nav-cfm"), Backend::Torch).unwrap_err();
-    assert!(err.to_string().contains("`torch` cargo feature"), "{err}");
+    for backend in [Backend::Torch, Backend::Cuda] {
+        let err = load_model(&workspace().join("models/human2nav-cfm"), backend).unwrap_err();
+        assert!(err.to_string().contains("`torch` cargo feature"), "{err}");
+    }
     assert!(load_model(&workspace().join("models/human2nav-cfm"), Backend::Native).is_ok());
+}
+
+/// The GPU path: the shipped model on the first CUDA device computes what the native backend
+/// computes (velocity and VJP of 16 samples; CUDA convolutions may run in TF32, hence the
+/// tolerance), and a guided planner on it returns a plan from the robot. Without a CUDA
+/// device, asking for one is an error on `backend`, and the comparison is skipped.
+#[test]
+#[cfg(feature = "torch")]
+fn the_cuda_backend_agrees_with_the_native_one_where_a_gpu_is_present() {
+    use human2nav_core::flow::FlowModel;
+    let dir = workspace().join("models/human2nav-cfm");
+    if !tch::Cuda::is_available() {
+        let err = load_model(&dir, Backend::Cuda).unwrap_err();
+        assert!(
+            matches!(err, PlannerError::Setting { ref field, ref message }
+                if field == "backend" && message.contains("no CUDA device")),
+            "{err}"
+        );
+        eprintln!("no CUDA device: the GPU comparison is skipped");
+        return;
+    }
+    let gpu = load_model(&dir, Backend::Cuda).expect("model on the GPU");
+    let cpu = load_model(&dir, Backend::Native).expect("native model");
+    let h = cpu.horizon();
+    let cond = crate::perf::bench_condition(cpu.card().net.bev_cells);
+    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(5);
+    let x = crate::cfm::sample_source(16, h, cpu.source_std(), &mut rng);
+    let cot: Vec<f64> = (0..x.len()).map(|i| ((i % 7) as f64 - 3.0) * 0.1).collect();
+    let n = x.len();
+    let (mut va, mut vb, mut ja, mut jb) = (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    for t in [0.0, 0.6] {
+        gpu.velocity_vjp(&x, t, &cond, &cot, &mut va, &mut ja)
+            .expect("GPU VJP");
+        cpu.velocity_vjp(&x, t, &cond, &cot, &mut vb, &mut jb)
+            .expect("native VJP");
+        for (what, a, b) in [("velocity", &va, &vb), ("VJP", &ja, &jb)] {
+            let scale = b.iter().fold(0f64, |m, v| m.max(v.abs()));
+            let diff = a.iter().zip(b).fold(0f64, |m, (p, q)| m.max((p - q).abs()));
+            assert!(
+                diff <= 1e-2 * scale,
+                "{what} at t = {t}: {diff} against {scale}"
+            );
+        }
+    }
+    let profile = load_profile(&workspace().join("robots/diablo/robot.toml")).expect("profile");
+    let settings = Arm::Both.settings(&Human2NavSettings::default());
+    let mut rp = RobotPlanner::new(profile, gpu, settings).expect("planner on the GPU");
+    let obs = observation();
+    let plan = rp.planner.plan(&obs).expect("plan");
+    assert!(!plan.poses.is_empty());
+    assert!(
+        plan.poses
+            .iter()
+            .all(|p| p.x.is_finite() && p.y.is_finite())
+    );
 }

@@ -29,7 +29,7 @@
 //! step is penalised. The limits come from the [`ConstraintContext`] at evaluation time.
 
 use super::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
-use crate::trajectory::{SegmentJet, segment_jet};
+use crate::trajectory::{KAPPA_EPS, SegmentJet, segment_jet};
 use serde::{Deserialize, Serialize};
 
 /// `ε` of the smoothed absolute value `|r|_ε = sqrt(r² + ε²) − ε` of a limit ratio `r = q/L`.
@@ -68,6 +68,19 @@ impl SoftMargin {
     pub fn upper(&self, r: f64) -> (f64, f64) {
         let z = self.gamma * (r - 1.0 + self.delta);
         (softplus(z) / self.gamma, sigmoid(z))
+    }
+
+    /// The value of [`Self::upper`] alone.
+    #[inline]
+    pub fn upper_value(&self, r: f64) -> f64 {
+        softplus(self.gamma * (r - 1.0 + self.delta)) / self.gamma
+    }
+
+    /// The value of [`Self::abs`] alone.
+    #[inline]
+    pub fn abs_value(&self, r: f64) -> f64 {
+        let s = (r * r + SMOOTH_ABS_EPS * SMOOTH_ABS_EPS).sqrt();
+        self.upper_value(s - SMOOTH_ABS_EPS)
     }
 
     /// The two-sided margin of Eq. 8, `softplus(γ(|r|_ε − 1 + δ))/γ`, and its derivative with
@@ -199,6 +212,73 @@ impl BuiltinTerm {
         (p, dp * inv)
     }
 
+    /// [`Self::penalty`] without its derivative (the same arithmetic for the value).
+    #[inline]
+    fn penalty_value(&self, q: f64, limit: f64) -> f64 {
+        let inv = 1.0 / limit;
+        match self.kind {
+            BuiltinKind::Speed | BuiltinKind::Coupled => self.margin.upper_value(q * inv),
+            BuiltinKind::Reverse => self.margin.upper_value(-q * inv),
+            _ => self.margin.abs_value(q * inv),
+        }
+    }
+
+    /// The quantity of a segment from its values `(v, vy, ω)`, as [`Self::quantity`] computes
+    /// it.
+    #[inline]
+    fn quantity_value(&self, [v, vy, omega]: [f64; 3], ctx: &ConstraintContext<'_>) -> f64 {
+        match self.kind {
+            BuiltinKind::Coupled => match &ctx.limits.coupled {
+                Some(c) => coupled_value([v, vy, omega], c),
+                None => 0.0,
+            },
+            BuiltinKind::Speed | BuiltinKind::Reverse | BuiltinKind::Acceleration => v,
+            BuiltinKind::YawRate => omega,
+            BuiltinKind::Lateral => vy,
+            BuiltinKind::Curvature => {
+                let r = (v * v + KAPPA_EPS * KAPPA_EPS).sqrt();
+                omega / r
+            }
+        }
+    }
+
+    /// Adds this term's cost of every trajectory into `cost` from the segment values of the
+    /// batch ([`Segments`]), without the gradient: the cost [`ConstraintTerm::evaluate`]
+    /// gives, to the bit, for a fraction of the work (the segment values are shared by every
+    /// built-in term of Φ).
+    pub(crate) fn add_costs(
+        &self,
+        segments: &Segments,
+        ctx: &ConstraintContext<'_>,
+        cost: &mut [f64],
+    ) -> Result<(), ConstraintError> {
+        let Some((limit, _)) = self.limit(ctx)? else {
+            return Ok(());
+        };
+        let n_seg = segments.per_trajectory;
+        if n_seg == 0 {
+            return Ok(());
+        }
+        let (dt, inv_n) = (ctx.dt, 1.0 / n_seg as f64);
+        for (c, segs) in cost.iter_mut().zip(segments.values.chunks_exact(n_seg)) {
+            let mut sum = 0.0;
+            if self.kind == BuiltinKind::Acceleration {
+                let mut prev = segs[0][0];
+                sum += self.penalty_value((prev - ctx.initial_velocity.vx) / dt, limit);
+                for s in &segs[1..] {
+                    sum += self.penalty_value((s[0] - prev) / dt, limit);
+                    prev = s[0];
+                }
+            } else {
+                for &s in segs {
+                    sum += self.penalty_value(self.quantity_value(s, ctx), limit);
+                }
+            }
+            *c += sum * inv_n;
+        }
+        Ok(())
+    }
+
     /// The quantity of a segment and its gradient over the segment's six coordinates.
     #[inline]
     fn quantity(&self, jet: &SegmentJet, ctx: &ConstraintContext<'_>) -> (f64, [f64; 6]) {
@@ -297,6 +377,44 @@ fn coupled_quantity(jet: &SegmentJet, c: &crate::limits::CoupledLimit) -> (f64, 
     (q, dq)
 }
 
+/// [`coupled_quantity`] without its gradient (the same arithmetic for the value).
+#[inline]
+fn coupled_value(x: [f64; 3], c: &crate::limits::CoupledLimit) -> f64 {
+    let eps = SMOOTH_ABS_EPS * c.max;
+    let mut q = 0.0;
+    for (coef, x) in [c.v, c.lateral, c.omega].into_iter().zip(x) {
+        if coef == 0.0 {
+            continue;
+        }
+        let s = (x * x + eps * eps).sqrt();
+        q += coef * (s - eps);
+    }
+    q
+}
+
+/// The values `(v, vy, ω)` of every segment of a batch of trajectories, computed once (each
+/// needs a sine and a cosine) and read by every built-in term.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Segments {
+    values: Vec<[f64; 3]>,
+    per_trajectory: usize,
+}
+
+impl Segments {
+    /// Fills the values of `batch` at time step `dt`, exactly as [`segment_jet`] computes them.
+    pub(crate) fn fill(&mut self, batch: &TrajBatch<'_>, dt: f64) {
+        self.values.clear();
+        self.per_trajectory = batch.horizon.saturating_sub(1);
+        for b in 0..batch.batch {
+            let traj = batch.trajectory(b);
+            self.values.extend((0..self.per_trajectory).map(|i| {
+                let jet = segment_jet(&traj[3 * i..3 * i + 3], &traj[3 * i + 3..3 * i + 6], dt);
+                [jet.v, jet.vy, jet.omega]
+            }));
+        }
+    }
+}
+
 /// Checks the buffers against the batch and the context's time step.
 pub(crate) fn check_buffers(
     name: &str,
@@ -319,6 +437,11 @@ pub(crate) fn check_buffers(
             batch.data.len()
         )));
     }
+    check_dt(name, ctx)
+}
+
+/// The context's time step must be finite and positive.
+pub(crate) fn check_dt(name: &str, ctx: &ConstraintContext<'_>) -> Result<(), ConstraintError> {
     if !(ctx.dt.is_finite() && ctx.dt > 0.0) {
         return Err(ConstraintError::Failed {
             term: name.to_owned(),
@@ -357,5 +480,26 @@ impl ConstraintTerm for BuiltinTerm {
             );
         }
         Ok(())
+    }
+
+    /// The cost alone ([`BuiltinTerm::add_costs`]): the same values as `evaluate`.
+    fn cost(
+        &self,
+        batch: TrajBatch<'_>,
+        ctx: &ConstraintContext<'_>,
+        cost: &mut [f64],
+    ) -> Result<(), ConstraintError> {
+        if cost.len() != batch.batch {
+            return Err(ConstraintError::Shape(format!(
+                "`{}`: cost buffer holds {} values for {} trajectories",
+                self.name(),
+                cost.len(),
+                batch.batch
+            )));
+        }
+        check_dt(self.name(), ctx)?;
+        let mut segments = Segments::default();
+        segments.fill(&batch, ctx.dt);
+        self.add_costs(&segments, ctx, cost)
     }
 }

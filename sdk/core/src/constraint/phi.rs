@@ -1,6 +1,6 @@
 //! Φ of Eq. 9: the weighted sum of constraint terms.
 
-use super::builtin::{BuiltinKind, BuiltinTerm, SoftMargin, check_buffers};
+use super::builtin::{BuiltinKind, BuiltinTerm, Segments, SoftMargin, check_buffers, check_dt};
 use super::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
 use crate::limits::{GuidanceWeights, Limits};
 use std::sync::Arc;
@@ -22,6 +22,9 @@ struct Weighted {
     weight: f64,
     term: Arc<dyn ConstraintTerm>,
     limit: bool,
+    /// The built-in term behind `term`, for [`Phi::costs`] to score it from the segment values
+    /// every built-in term shares.
+    builtin: Option<BuiltinTerm>,
 }
 
 /// Scratch buffers of [`Phi::evaluate`]; they grow to the largest batch seen and are reused, so
@@ -30,6 +33,7 @@ struct Weighted {
 pub struct PhiScratch {
     cost: Vec<f64>,
     grad: Vec<f64>,
+    segments: Segments,
 }
 
 impl std::fmt::Debug for Phi {
@@ -69,10 +73,12 @@ impl Phi {
                 BuiltinKind::Coupled => weights.lambda_coupled,
             };
             if w != 0.0 {
+                let builtin = BuiltinTerm::new(kind, margin);
                 phi.terms.push(Weighted {
                     weight: w,
-                    term: Arc::new(BuiltinTerm::new(kind, margin)),
+                    term: Arc::new(builtin),
                     limit: true,
+                    builtin: Some(builtin),
                 });
             }
         }
@@ -95,6 +101,7 @@ impl Phi {
             weight,
             term: Arc::from(term),
             limit: false,
+            builtin: None,
         });
         Ok(())
     }
@@ -112,6 +119,7 @@ impl Phi {
                     weight: t.weight,
                     term: Arc::clone(&t.term),
                     limit: false,
+                    builtin: None,
                 })
                 .collect(),
         }
@@ -188,15 +196,30 @@ impl Phi {
         }
         cost.fill(0.0);
         scratch.cost.resize(cost.len(), 0.0);
+        // The built-in terms read one set of segment values instead of each computing its own.
+        if let Some(first) = self
+            .terms
+            .iter()
+            .find(|t| t.builtin.is_some() && t.weight != 0.0)
+        {
+            check_dt(first.term.name(), ctx)?;
+            scratch.segments.fill(&batch, ctx.dt);
+        }
         for Weighted {
-            weight: w, term, ..
+            weight: w,
+            term,
+            builtin,
+            ..
         } in &self.terms
         {
             if *w == 0.0 {
                 continue;
             }
             scratch.cost.fill(0.0);
-            term.cost(batch, ctx, &mut scratch.cost)?;
+            match builtin {
+                Some(b) => b.add_costs(&scratch.segments, ctx, &mut scratch.cost)?,
+                None => term.cost(batch, ctx, &mut scratch.cost)?,
+            }
             check_finite(term.as_ref(), &scratch.cost, batch.batch, "cost")?;
             for (c, s) in cost.iter_mut().zip(&scratch.cost) {
                 *c += w * s;

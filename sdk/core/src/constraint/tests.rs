@@ -538,3 +538,43 @@ fn a_term_that_answers_nan_is_an_error_naming_it() {
         );
     }
 }
+
+/// The cost-only path (each term's `cost`, and Φ's `costs`, whose built-in terms share one
+/// set of segment values) gives the costs `evaluate` gives, to the bit, on every limit set
+/// (curvature and coupled limits present and absent), including trajectories at rest and
+/// reversing.
+#[test]
+fn cost_only_paths_equal_evaluate_bit_for_bit() {
+    let (b, t) = (7, 12);
+    let mut data = demo_batch(b, t, 0.1);
+    // One trajectory at rest, one driven backwards.
+    let rest: Vec<f64> = (0..t).flat_map(|_| [0.3, -0.2, 0.5]).collect();
+    data[..3 * t].copy_from_slice(&rest);
+    for i in 0..t {
+        data[3 * t + 3 * i] = -0.05 * i as f64;
+    }
+    for l in [
+        limits(Some(0.8)),
+        limits(None),
+        with_tracks(limits(None)),
+        with_tracks(limits(Some(1.2))),
+    ] {
+        let c = ctx(&l);
+        let batch = TrajBatch::new(&data, b, t).unwrap();
+        for kind in BuiltinKind::ALL {
+            let term = BuiltinTerm::new(kind, MARGIN);
+            let (expected, _) = eval(&term, &data, b, t, &c);
+            let mut cost = vec![0.0; b];
+            term.cost(batch, &c, &mut cost).unwrap();
+            assert_eq!(cost, expected, "{}", kind.name());
+        }
+        let phi = Phi::from_weights(&weights(), &l);
+        let mut scratch = PhiScratch::default();
+        let (mut expected, mut grad) = (vec![0.0; b], vec![0.0; data.len()]);
+        phi.evaluate(batch, &c, &mut expected, &mut grad, &mut scratch)
+            .unwrap();
+        let mut cost = vec![0.0; b];
+        phi.costs(batch, &c, &mut cost, &mut scratch).unwrap();
+        assert_eq!(cost, expected);
+    }
+}

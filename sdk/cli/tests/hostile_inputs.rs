@@ -2396,14 +2396,14 @@ fn resume_cases() -> Vec<Case> {
             "SARL killed between the renames of a save",
             NR,
             "resumes from `checkpoint.old/`",
-            "plugins/sarl/src/train.rs::checkpoints_are_sets_with_a_manifest",
+            "plugins/sarl/src/train/tests.rs::checkpoints_are_sets_with_a_manifest",
         ),
         covered(
             a,
             "SARL checkpoint truncated file, run end to end",
             NR,
             "refused naming the file",
-            "plugins/sarl/src/train.rs::a_partial_checkpoint_is_refused_naming_the_file",
+            "plugins/sarl/src/train/tests.rs::a_partial_checkpoint_is_refused_naming_the_file",
         ),
         covered(
             a,

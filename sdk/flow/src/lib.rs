@@ -22,6 +22,10 @@
 //! with [`cfm::sample_source`] (or their own generator with that std).
 
 #![warn(missing_docs)]
+// The docs link the libtorch types (`CfmModel`, `CondUnet1d`, the trainer), which exist with the
+// `torch` feature only: a build without it documents the rest and leaves those links unchecked
+// (a workspace build turns `torch` on and checks every link).
+#![cfg_attr(not(feature = "torch"), allow(rustdoc::broken_intra_doc_links))]
 
 pub mod card;
 pub mod cfm;

@@ -122,10 +122,7 @@ impl Observation {
             .agents
             .iter()
             .map(|a| {
-                let at_now = [
-                    a.position[0] + a.velocity[0] * age,
-                    a.position[1] + a.velocity[1] * age,
-                ];
+                let at_now = a.walked_on(age);
                 AgentState {
                     position: pose.act(at_now),
                     velocity: pose.rotate(a.velocity),

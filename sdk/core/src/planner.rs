@@ -27,12 +27,10 @@ pub struct AgentState {
 }
 
 impl AgentState {
-    /// Where the agent is `t` seconds on, walking on at its velocity (constant velocity).
+    /// Where the agent is `t` seconds on, walking on at its velocity (constant velocity,
+    /// [`crate::forecast::walk_on`]).
     pub fn walked_on(&self, t: f64) -> [f64; 2] {
-        [
-            self.position[0] + self.velocity[0] * t,
-            self.position[1] + self.velocity[1] * t,
-        ]
+        crate::forecast::walk_on(self.position, self.velocity, t)
     }
 }
 

@@ -302,13 +302,7 @@ impl Planner for OraclePlanner {
                     Prediction::ConstantVelocity => obs
                         .agents
                         .iter()
-                        .map(|a| {
-                            let p = a.position;
-                            (
-                                [p[0] + a.velocity[0] * dt, p[1] + a.velocity[1] * dt],
-                                a.radius,
-                            )
-                        })
+                        .map(|a| (a.walked_on(dt), a.radius))
                         .collect(),
                 }
             })

@@ -301,11 +301,30 @@ fn one_path_per_agent(
         .collect()
 }
 
+/// Where something at `position` moving at `velocity` is `t` later: `position + velocity·t`,
+/// the one constant-velocity extrapolation of the SDK (the forecast, the evaluation baselines,
+/// [`AgentState::walked_on`]).
+#[inline]
+pub fn walk_on(position: [f64; 2], velocity: [f64; 2], t: f64) -> [f64; 2] {
+    [position[0] + velocity[0] * t, position[1] + velocity[1] * t]
+}
+
+/// `horizon` positions of something at `position` moving at `velocity`, `dt` apart from `dt`
+/// on ([`walk_on`] at `dt, 2dt, …`).
+pub fn constant_velocity_positions(
+    position: [f64; 2],
+    velocity: [f64; 2],
+    horizon: usize,
+    dt: f64,
+) -> Vec<[f64; 2]> {
+    (1..=horizon)
+        .map(|j| walk_on(position, velocity, j as f64 * dt))
+        .collect()
+}
+
 /// `horizon` positions of `agent` moving on at its velocity, `dt` apart from `dt` on.
 pub fn constant_velocity_path(agent: &AgentState, horizon: usize, dt: f64) -> Vec<[f64; 2]> {
-    (1..=horizon)
-        .map(|j| agent.walked_on(j as f64 * dt))
-        .collect()
+    constant_velocity_positions(agent.position, agent.velocity, horizon, dt)
 }
 
 /// A source of [`Forecast`]s for a planner.

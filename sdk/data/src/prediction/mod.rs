@@ -34,7 +34,7 @@
 use crate::error::DataError;
 use crate::resample::Scene;
 use crate::scenario::EpisodeSuite;
-use human2nav_core::forecast::HistoryRidge;
+use human2nav_core::forecast::{self, HistoryRidge};
 use human2nav_core::se2::Pose2;
 use human2nav_core::social_force::SocialForce;
 use nalgebra::{DMatrix, DVector};
@@ -252,8 +252,7 @@ fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
 
 /// Position after `i + 1` steps of velocity `v` (per step) from `p`.
 fn held(p: [f64; 2], v: [f64; 2], i: usize) -> [f64; 2] {
-    let s = (i + 1) as f64;
-    [p[0] + v[0] * s, p[1] + v[1] * s]
+    forecast::walk_on(p, v, (i + 1) as f64)
 }
 
 /// The constant-turn prediction of a window (`horizon` positions): the last step's length,

@@ -23,6 +23,7 @@ use crate::sampler::{integrate, sample};
 use human2nav_core::bev::BevSpec;
 use human2nav_core::constraint::{ConstraintContext, Phi};
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
+use human2nav_core::forecast;
 use human2nav_core::guidance::{self, GuidanceError, GuidanceSettings, GuidanceWorkspace};
 use human2nav_core::se2::Pose2;
 use human2nav_core::se2::Twist2;
@@ -151,19 +152,18 @@ pub fn displacement_errors(pred: &[f64], truth: &[Pose2]) -> (f64, f64) {
     (sum / n.max(1) as f64, last)
 }
 
-/// The constant-velocity prediction of `horizon` waypoints, flat `[T, 3]` (heading along the
-/// velocity, or 0 when standing).
+/// The constant-velocity prediction of `horizon` waypoints from the origin
+/// ([`forecast::constant_velocity_positions`]), flat `[T, 3]` (heading along the velocity, or
+/// 0 when standing).
 pub fn constant_velocity(velocity: [f64; 2], horizon: usize, dt: f64) -> Vec<f64> {
     let heading = if velocity[0].hypot(velocity[1]) > 1e-6 {
         velocity[1].atan2(velocity[0])
     } else {
         0.0
     };
-    (0..horizon)
-        .flat_map(|j| {
-            let s = (j + 1) as f64 * dt;
-            [velocity[0] * s, velocity[1] * s, heading]
-        })
+    forecast::constant_velocity_positions([0.0, 0.0], velocity, horizon, dt)
+        .into_iter()
+        .flat_map(|p| [p[0], p[1], heading])
         .collect()
 }
 
@@ -262,11 +262,9 @@ pub fn scene_windows(
                 let (p, q) = (t.positions[now], t.positions[before]);
                 let v = [(p[0] - q[0]) / scene.dt, (p[1] - q[1]) / scene.dt];
                 Some(
-                    (1..=h)
-                        .map(|j| {
-                            let s = j as f64 * scene.dt;
-                            pose.inverse_act([p[0] + v[0] * s, p[1] + v[1] * s])
-                        })
+                    forecast::constant_velocity_positions(p, v, h, scene.dt)
+                        .into_iter()
+                        .map(|q| pose.inverse_act(q))
                         .collect(),
                 )
             })

@@ -20,13 +20,13 @@
 //! no warm start carries over; with the same seed every arm draws the same source samples, so
 //! the differences are the stages' alone. [`ArmSummary`] aggregates the steps of one arm.
 
+use crate::feasibility::{self, Violations};
 use crate::guidance::GuidanceSettings;
 use crate::human2nav::Human2NavSettings;
 use crate::limits::Limits;
 use crate::planner::{Observation, Plan, PlanError, Planner};
 use crate::robot::footprint::{self, FootprintShape};
 use crate::se2::Pose2;
-use crate::tfs::{self, Violations};
 use std::time::Instant;
 
 /// One configuration of the ablation (module docs).
@@ -124,7 +124,7 @@ impl std::fmt::Display for Arm {
 
 /// Share of `violations` that break each limit, in the order of [`Violations::NAMES`] (all
 /// zero for an empty slice).
-pub fn limit_shares(violations: &[Violations]) -> [f64; tfs::LIMIT_COUNT] {
+pub fn limit_shares(violations: &[Violations]) -> [f64; feasibility::LIMIT_COUNT] {
     let n = violations.len().max(1) as f64;
     Violations::count(violations).map(|c| c as f64 / n)
 }
@@ -134,10 +134,10 @@ pub fn limit_shares(violations: &[Violations]) -> [f64; tfs::LIMIT_COUNT] {
 pub struct ArmStep {
     /// The arm that planned this step.
     pub arm: Arm,
-    /// Plan TFS ([`tfs::tfs_plan`]; pose 0 is the robot with its current velocity).
+    /// Plan TFS ([`feasibility::tfs_plan`]; pose 0 is the robot with its current velocity).
     pub tfs: f64,
     /// Share of the plan's waypoints that violate each limit ([`Violations::NAMES`] order).
-    pub violations: [f64; tfs::LIMIT_COUNT],
+    pub violations: [f64; feasibility::LIMIT_COUNT],
     /// Φ of the kept sample before Algorithm 1 (`None` when the plan follows no sample, e.g.
     /// braking to a stop).
     pub phi_before: Option<f64>,
@@ -211,9 +211,9 @@ pub fn mean_displacement(a: &[Pose2], b: &[Pose2]) -> f64 {
         / n as f64
 }
 
-/// TFS of a plan (its pose 0 is the robot at the planning instant), see [`tfs::tfs_plan`].
+/// TFS of a plan (its pose 0 is the robot at the planning instant), see [`feasibility::tfs_plan`].
 pub fn plan_tfs(plan: &Plan, limits: &Limits, obs: &Observation) -> f64 {
-    tfs::tfs_plan(&plan.poses, plan.dt, limits, obs.ego_velocity)
+    feasibility::tfs_plan(&plan.poses, plan.dt, limits, obs.ego_velocity)
 }
 
 /// Plans `obs` with each `(arm, planner)` (reset first) and measures each plan; the raw arm's
@@ -248,7 +248,7 @@ pub fn ablation_step<P: Planner + ?Sized>(
             ArmStep {
                 arm,
                 tfs: plan_tfs(&plan, limits, obs),
-                violations: limit_shares(&tfs::plan_violations(
+                violations: limit_shares(&feasibility::plan_violations(
                     &plan.poses,
                     plan.dt,
                     limits,
@@ -284,7 +284,7 @@ pub struct ArmSummary {
     /// Share of steps whose plan is entirely feasible (TFS = 1).
     pub all_feasible: f64,
     /// Mean share of waypoints violating each limit ([`Violations::NAMES`] order).
-    pub violations: [f64; tfs::LIMIT_COUNT],
+    pub violations: [f64; feasibility::LIMIT_COUNT],
     /// Mean Φ of the kept sample before Algorithm 1, over the steps that kept one.
     pub phi_before: f64,
     /// Mean Φ of the kept sample after Algorithm 1, over the steps that kept one.
@@ -321,7 +321,7 @@ impl ArmSummary {
                 sum / count as f64
             }
         };
-        let mut shares = [0.0; tfs::LIMIT_COUNT];
+        let mut shares = [0.0; feasibility::LIMIT_COUNT];
         for s in &steps {
             for (acc, v) in shares.iter_mut().zip(s.violations) {
                 *acc += v / n as f64;
@@ -486,7 +486,7 @@ mod tests {
         assert_eq!(steps[0].tfs, 1.0);
         assert_eq!(steps[0].displacement, 0.0);
         assert_eq!(steps[1].tfs, 0.0);
-        let share = |name: &str, v: [f64; tfs::LIMIT_COUNT]| {
+        let share = |name: &str, v: [f64; feasibility::LIMIT_COUNT]| {
             v[Violations::NAMES.iter().position(|n| *n == name).unwrap()]
         };
         assert_eq!(share("speed", steps[1].violations), 1.0);

@@ -189,7 +189,7 @@ pub fn plan_feedforward(plan: &Plan, t: f64, current: Twist2, h: f64) -> Twist2 
 ///   `|v_y − current_y| ≤ sqrt((a_max·h)² − (v_x − current_x)²)` (the robot limits the change
 ///   of `(v_x, v_y)` in norm; the executed TFS checks `v_x`'s);
 /// * with a curvature limit, `|ω| ≤ max(κ_max, |κ_ff|)·sqrt(v_x² + ε_κ²)` (the curvature as
-///   [`crate::tfs`] measures it, for the clipped `v_x`);
+///   [`crate::feasibility`] measures it, for the clipped `v_x`);
 /// * with a coupled limit `a·|v_x| + b·|v_y| + c·|ω| ≤ max`, the command's value at most
 ///   `max(max, value of ff)` as far as `ω` and then `v_y` can give way; `v_x` is left as the
 ///   bounds above made it (its changes are what the acceleration check sees).

@@ -29,7 +29,7 @@
 //!
 //! # Selection rule
 //! `score = w_feas·(1 − TFS) + w_goal·d/d_0 + w_Φ·Φ + w_cons·D`, where TFS is the
-//! trajectory feasibility score of the candidate ([`crate::tfs`]), `d/d_0` the candidate's
+//! trajectory feasibility score of the candidate ([`crate::feasibility`]), `d/d_0` the candidate's
 //! closest approach to the (clipped) goal relative to the current distance (0 once within
 //! [`SelectionWeights::arrival`]; [`Progress`] also offers the distance at its end and how
 //! soon it could arrive; [`SelectionWeights::lookahead`] scores each candidate continued past
@@ -91,6 +91,7 @@ use crate::constraint::{
     Clearance, ConstraintContext, ConstraintError, Phi, PhiScratch, SceneContext, TrajBatch,
     arrival,
 };
+use crate::feasibility;
 use crate::flow::{CrowdGuidance, FlowCondition, FlowModel};
 use crate::forecast::{CrowdPredictor, Forecast};
 use crate::guidance::{
@@ -106,7 +107,6 @@ use crate::planner::{
 use crate::projection::{self, ProjectionSettings};
 use crate::robot::footprint::{self, FootprintShape};
 use crate::se2::{Pose2, Twist2};
-use crate::tfs;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};

@@ -9,7 +9,8 @@
 //! * [`robot`]: robot profiles (`robot.toml` + URDF) with their [`limits`].
 //! * [`embodiment`]: kinematic models, command saturation and tracking controllers.
 //! * [`constraint`]: constraint terms, the soft-margin penalty of Eq. 8 and Φ of Eq. 9.
-//! * [`tfs`]: the trajectory feasibility score.
+//! * [`feasibility`]: the trajectory feasibility score (TFS; also reachable by its former name
+//!   `tfs`).
 //! * [`bev`]: the ego-centred bird's-eye-view raster shared by training and inference.
 //! * [`flow`], [`guidance`]: the flow-model interface and feasibility guidance (Algorithm 1).
 //! * [`forecast`]: what the people around the robot may do, and the predictors that say so.
@@ -25,6 +26,7 @@ pub mod ablation;
 pub mod bev;
 pub mod constraint;
 pub mod embodiment;
+pub mod feasibility;
 pub mod fileset;
 pub mod flow;
 pub mod forecast;
@@ -41,8 +43,10 @@ pub mod projection;
 pub mod robot;
 pub mod se2;
 pub mod social_force;
-pub mod tfs;
 pub mod trajectory;
+
+/// The former name of [`feasibility`], kept so that existing paths resolve.
+pub use feasibility as tfs;
 
 pub use flow::{FlowCondition, FlowError, FlowModel};
 pub use limits::{ControllerGains, CoupledLimit, GuidanceWeights, Limits};

@@ -295,7 +295,7 @@ fn gcd(mut a: usize, mut b: usize) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tfs::tfs_plan;
+    use crate::feasibility::tfs_plan;
 
     fn car() -> Limits {
         Limits {

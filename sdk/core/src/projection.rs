@@ -59,9 +59,9 @@ mod assembly;
 mod lq;
 mod solver;
 
+use crate::feasibility;
 use crate::limits::Limits;
 use crate::se2::{Pose2, Twist2, euler_step_jacobians, wrap_angle};
-use crate::tfs;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus, ZeroConeT,
@@ -242,7 +242,8 @@ pub fn project_with(
     let with_start: Vec<Pose2> = std::iter::once(Pose2::IDENTITY)
         .chain(target.iter().copied())
         .collect();
-    if target.is_empty() || tfs::tfs_plan(&with_start, dt, limits, initial_velocity) >= 1.0 {
+    if target.is_empty() || feasibility::tfs_plan(&with_start, dt, limits, initial_velocity) >= 1.0
+    {
         return Ok(Projected {
             poses: target.to_vec(),
             iterations: 0,

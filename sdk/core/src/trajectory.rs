@@ -25,7 +25,7 @@
 //!
 //! With the initial acceleration, the list `accelerations()[j]` (`j = 0 … T−2`) is the
 //! acceleration *ending* at segment `j`, i.e. arriving at waypoint `j + 1`; the TFS
-//! ([`crate::tfs`]) uses exactly this alignment.
+//! ([`crate::feasibility`]) uses exactly this alignment.
 //!
 //! The same quantities are available as allocation-free kernels on flat `[T, 3]` slices
 //! (`x, y, θ` per pose): [`segment_values`] for values and [`segment_jet`] for values plus their

@@ -68,10 +68,10 @@ pub mod prelude {
         ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch,
     };
     pub use human2nav_core::embodiment::Embodiment;
+    pub use human2nav_core::feasibility::{feasibility_mask, tfs_plan};
     pub use human2nav_core::human2nav::{GuidanceTerms, Human2Nav, Human2NavSettings};
     pub use human2nav_core::obstacle::Obstacle;
     pub use human2nav_core::robot::RobotProfile;
-    pub use human2nav_core::tfs::{feasibility_mask, tfs_plan};
     pub use human2nav_core::{
         AgentState, Deadline, FlowModel, Limits, Observation, Plan, PlanError, PlanInfo, Planner,
         Pose2, Twist2,

@@ -1,7 +1,7 @@
 //! Per-episode metrics computed from an [`EpisodeRun`].
 //!
 //! * **success / collision / timeout**: the [`Outcome`]; SR is the mean of `success`.
-//! * **TFS** = `min(TFS_plan, TFS_executed)` (paper §IV, [`human2nav_core::tfs`]): `TFS_plan` is
+//! * **TFS** = `min(TFS_plan, TFS_executed)` (paper §IV, [`human2nav_core::feasibility`]): `TFS_plan` is
 //!   the fraction of all planned waypoints of the episode (every plan, pooled) that satisfy the
 //!   robot's limits, each plan checked from the robot's velocity when it was requested;
 //!   `TFS_executed` is the fraction of the tracking controller's commands *before saturation*
@@ -27,7 +27,7 @@
 use crate::episode::Episode;
 use crate::runner::{Contact, EpisodeRun, Outcome};
 use human2nav_core::Limits;
-use human2nav_core::tfs;
+use human2nav_core::feasibility;
 use serde::{Deserialize, Serialize};
 
 /// Hall's intimate distance (m).
@@ -178,16 +178,16 @@ pub struct LimitCounts {
 
 impl LimitCounts {
     /// The names of the limits, in the order of [`LimitCounts::per_limit`].
-    pub const NAMES: [&'static str; tfs::LIMIT_COUNT] = tfs::Violations::NAMES;
+    pub const NAMES: [&'static str; feasibility::LIMIT_COUNT] = feasibility::Violations::NAMES;
 
     /// Counts the violations of each limit.
-    pub fn of(violations: &[tfs::Violations]) -> Self {
-        Self::from_per_limit(violations.len(), tfs::Violations::count(violations))
+    pub fn of(violations: &[feasibility::Violations]) -> Self {
+        Self::from_per_limit(violations.len(), feasibility::Violations::count(violations))
     }
 
     /// The counts of `commands` commands, one per limit in [`Self::NAMES`]' order (the
     /// inverse of [`Self::per_limit`]).
-    pub fn from_per_limit(commands: usize, per_limit: [usize; tfs::LIMIT_COUNT]) -> Self {
+    pub fn from_per_limit(commands: usize, per_limit: [usize; feasibility::LIMIT_COUNT]) -> Self {
         let [
             speed,
             reverse,
@@ -210,7 +210,7 @@ impl LimitCounts {
     }
 
     /// The counts in the order of [`LimitCounts::NAMES`].
-    pub fn per_limit(&self) -> [usize; tfs::LIMIT_COUNT] {
+    pub fn per_limit(&self) -> [usize; feasibility::LIMIT_COUNT] {
         [
             self.speed,
             self.reverse,
@@ -239,7 +239,7 @@ impl EpisodeMetrics {
             success: run.outcome == Outcome::Success,
             collision: run.outcome == Outcome::Collision,
             timeout: run.outcome == Outcome::Timeout,
-            tfs: tfs::tfs_min(tfs_plan, tfs_executed),
+            tfs: feasibility::tfs_min(tfs_plan, tfs_executed),
             tfs_plan,
             tfs_executed,
             path_length,
@@ -255,7 +255,7 @@ impl EpisodeMetrics {
             planner_errors: run.planner_errors.len(),
             contact: run.contact,
             obstacle_hit: run.obstacle_hit,
-            executed_violations: LimitCounts::of(&tfs::command_violations(
+            executed_violations: LimitCounts::of(&feasibility::command_violations(
                 &run.raw_commands,
                 run.dt,
                 limits,
@@ -279,7 +279,7 @@ impl EpisodeMetrics {
 pub fn tfs_scores(run: &EpisodeRun, limits: &Limits) -> (f64, f64) {
     let (mut feasible, mut total) = (0usize, 0usize);
     for p in &run.plans {
-        let v = tfs::plan_violations(&p.poses, p.dt, limits, p.initial_velocity);
+        let v = feasibility::plan_violations(&p.poses, p.dt, limits, p.initial_velocity);
         feasible += v.iter().filter(|x| x.feasible()).count();
         total += v.len();
     }
@@ -288,7 +288,10 @@ pub fn tfs_scores(run: &EpisodeRun, limits: &Limits) -> (f64, f64) {
     } else {
         feasible as f64 / total as f64
     };
-    (plan, tfs::tfs_executed(&run.raw_commands, run.dt, limits))
+    (
+        plan,
+        feasibility::tfs_executed(&run.raw_commands, run.dt, limits),
+    )
 }
 
 /// Mean jerk norm of positions sampled every `dt`, starting at rest (see the module docs).

@@ -20,7 +20,7 @@
 //! * the `K` sampled candidates before guidance: thin light blue lines; after guidance: faint
 //!   violet lines; the kept sample before guidance: dashed orange;
 //! * the final plan: each segment green when the waypoint it reaches is feasible and red when
-//!   not ([`human2nav_core::tfs::feasibility_mask`]), waypoints as dots;
+//!   not ([`human2nav_core::feasibility::feasibility_mask`]), waypoints as dots;
 //! * top left, the planner's ego-frame BEV raster (forward is up): free cells light grey,
 //!   occupied cells coloured by the direction of their velocity channels (hue, the wheel in the
 //!   corner) with saturation growing with speed (a static pedestrian is dark grey), black
@@ -39,8 +39,8 @@ pub use step::{StepOptions, load_episodes, observation_at, select_episode, start
 use crate::error::SimError;
 use crate::figures::{disc, draw_obstacles, star};
 use human2nav_core::bev::BevSpec;
+use human2nav_core::feasibility;
 use human2nav_core::forecast::Forecast;
-use human2nav_core::tfs;
 use human2nav_core::{Limits, Observation, Plan, Pose2};
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
@@ -92,13 +92,13 @@ pub struct PlanFigureNumbers {
 pub fn plan_numbers(fig: &PlanFigure<'_>) -> PlanFigureNumbers {
     let v0 = fig.observation.ego_velocity;
     let plan = fig.plan;
-    let mask = tfs::feasibility_mask(&plan.poses, plan.dt, fig.limits, v0);
+    let mask = feasibility::feasibility_mask(&plan.poses, plan.dt, fig.limits, v0);
     let waypoints = mask.len().saturating_sub(1);
     let feasible = mask.iter().skip(1).filter(|f| **f).count();
     let tfs_before =
-        before_guidance(fig).map(|poses| tfs::tfs_plan(poses, plan.dt, fig.limits, v0));
+        before_guidance(fig).map(|poses| feasibility::tfs_plan(poses, plan.dt, fig.limits, v0));
     PlanFigureNumbers {
-        tfs: tfs::tfs_plan(&plan.poses, plan.dt, fig.limits, v0),
+        tfs: feasibility::tfs_plan(&plan.poses, plan.dt, fig.limits, v0),
         tfs_before,
         feasible,
         waypoints,
@@ -491,7 +491,8 @@ fn draw_samples(chart: &mut Chart<'_, '_>, fig: &PlanFigure<'_>) -> Result<(), S
 fn draw_plan(chart: &mut Chart<'_, '_>, fig: &PlanFigure<'_>) -> Result<(), String> {
     let e = |x: &dyn std::fmt::Display| x.to_string();
     let obs = fig.observation;
-    let mask = tfs::feasibility_mask(&fig.plan.poses, fig.plan.dt, fig.limits, obs.ego_velocity);
+    let mask =
+        feasibility::feasibility_mask(&fig.plan.poses, fig.plan.dt, fig.limits, obs.ego_velocity);
     let segs: Vec<(Vec<(f64, f64)>, bool)> = fig
         .plan
         .poses

@@ -140,7 +140,7 @@ impl<M: FlowModel> Human2Nav<M> {
             let mut with_start = Vec::with_capacity(traj.len() + 1);
             with_start.push(Pose2::IDENTITY);
             with_start.extend_from_slice(traj);
-            tfs::tfs_plan(&with_start, self.settings.dt, &self.robot.limits, v0)
+            feasibility::tfs_plan(&with_start, self.settings.dt, &self.robot.limits, v0)
         } else {
             1.0
         };

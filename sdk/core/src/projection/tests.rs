@@ -34,7 +34,7 @@ fn tfs_of(poses: &[Pose2], limits: &Limits, v0: Twist2) -> f64 {
     let with_start: Vec<Pose2> = std::iter::once(Pose2::IDENTITY)
         .chain(poses.iter().copied())
         .collect();
-    tfs::tfs_plan(&with_start, 0.1, limits, v0)
+    feasibility::tfs_plan(&with_start, 0.1, limits, v0)
 }
 
 /// A human-like sample: a smooth curve walked at 1.3 m/s with centimetre jitter on every

@@ -27,7 +27,7 @@ use human2nav_core::forecast;
 use human2nav_core::guidance::{self, GuidanceError, GuidanceSettings, GuidanceWorkspace};
 use human2nav_core::se2::Pose2;
 use human2nav_core::se2::Twist2;
-use human2nav_core::{Limits, tfs};
+use human2nav_core::{Limits, feasibility};
 use human2nav_data::resample::Scene;
 use human2nav_data::track::AgentClass;
 use human2nav_data::tuples::{TrainingTuple, TupleOptions, scene_tuples};
@@ -611,7 +611,7 @@ pub fn guided_windows<M: FlowModel + ?Sized>(
                 .into_iter()
                 .chain(traj.iter().copied())
                 .collect();
-            tfs::tfs_plan_flat(&poses, opts.dt, limits, v0, &mut scratch)
+            feasibility::tfs_plan_flat(&poses, opts.dt, limits, v0, &mut scratch)
         };
         let truth: Vec<f64> = win.future.iter().flat_map(|p| p.to_array()).collect();
         m.tfs_human += tfs(&truth);

@@ -5,8 +5,8 @@
 //! keys are rejected. Relative paths are resolved against the workspace root.
 
 use crate::association::TrackerOptions;
+use crate::episode_mining::InteractionOptions;
 use crate::error::DataError;
-use crate::interaction::InteractionOptions;
 use crate::loaders::sdd::SddRawOptions;
 use crate::resample::ResampleOptions;
 use crate::scenario::MiningOptions;
@@ -25,7 +25,7 @@ pub struct PathsConfig {
     pub cache_dir: PathBuf,
     /// Episode suite file. Default `out/data/episodes.json`.
     pub episodes: PathBuf,
-    /// Interaction-rich episodes of the test scenes ([`crate::interaction`]). Default
+    /// Interaction-rich episodes of the test scenes ([`crate::episode_mining`]). Default
     /// `out/data/episodes-interaction.json`.
     pub interaction_episodes: PathBuf,
     /// Interaction-rich episodes of the validation scenes. Default

@@ -4,7 +4,7 @@
 //! Pipeline: [`loaders`] (ETH, UCY, sgan benchmark, SDD raw and TrajNet) → [`track::RawScene`]
 //! in metres → [`resample`] to 0.1 s with velocity and heading → [`tuples`] (BEV raster, goal,
 //! velocity, 32 future SE(2) poses) in a versioned binary [`cache`] split by scene, and
-//! [`scenario`] mining of benchmark [`Episode`]s from held-out scenes, with [`interaction`]
+//! [`scenario`] mining of benchmark [`Episode`]s from held-out scenes, with [`episode_mining`]
 //! mining interaction-rich ones (the robot's path and the crowd from different times).
 //! [`association`] builds tracks from identity-free detections with the Hungarian algorithm,
 //! [`homography`] maps image to world (Eq. 1), [`synthetic`] generates crowds of the four flow
@@ -20,9 +20,9 @@ pub mod association;
 pub mod cache;
 pub mod config;
 pub mod corridor;
+pub mod episode_mining;
 pub mod error;
 pub mod homography;
-pub mod interaction;
 pub mod limits;
 pub mod loaders;
 pub mod paths;
@@ -35,10 +35,13 @@ pub(crate) mod text;
 pub mod track;
 pub mod tuples;
 
+/// The former name of [`episode_mining`], kept so that existing paths resolve.
+pub use episode_mining as interaction;
+
 pub use cache::{Manifest, SceneInfo, TupleCache};
+pub use episode_mining::{InteractionOptions, InteractionStats, SuiteSummary};
 pub use error::DataError;
 pub use homography::Homography;
-pub use interaction::{InteractionOptions, InteractionStats, SuiteSummary};
 pub use resample::{ResampleOptions, Scene, Track};
 pub use scenario::{AgentTrack, Episode, EpisodeSuite, ScenarioClass};
 pub use track::{AgentClass, RawScene, RawTrack, Sample};

@@ -3,11 +3,11 @@
 
 use super::{Locations, Progress, Source, discover, load_source};
 use crate::config::DataConfig;
-use crate::error::DataError;
-use crate::interaction::{
+use crate::episode_mining::{
     InteractionReport, InteractionStats, mine_interaction_scene, select_interaction_suite,
     summarize,
 };
+use crate::error::DataError;
 use crate::paths;
 use crate::resample::resample;
 use crate::scenario::{EpisodeSuite, MiningStats, ScenarioClass, mine_scene, select};
@@ -110,7 +110,7 @@ fn not_held_out() -> DataError {
     )
 }
 
-/// Mines interaction-rich episodes ([`crate::interaction`]) from the scenes of `split`
+/// Mines interaction-rich episodes ([`crate::episode_mining`]) from the scenes of `split`
 /// (`[split] test` or `val`) and selects up to `episodes.per_class` per class. Errors when no
 /// scene of the split is found or a class yields no episode at all; fewer than `per_class`
 /// in a class is a note. Without a dataset directory and with `sources.synthetic_fallback`,
@@ -187,7 +187,7 @@ pub fn build_interaction_episodes(
             let scene = resample(&raw, &cfg.resample);
             let mut stats = InteractionStats::default();
             let mut eps = mine_interaction_scene(&scene, geometry, opts, &mut stats);
-            crate::interaction::withhold(&mut eps, &excluded, &mut stats);
+            crate::episode_mining::withhold(&mut eps, &excluded, &mut stats);
             progress.inc(1);
             Ok((src.name.clone(), eps, stats))
         })

@@ -179,7 +179,7 @@ pub(crate) fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
 }
 
 /// The agents that come within `radius` of a probe moving through the scene (the ego
-/// pedestrian here, the reference robot in [`crate::interaction`]): at each `(global step,
+/// pedestrian here, the reference robot in [`crate::episode_mining`]): at each `(global step,
 /// probe position)`, every track present then except `exclude`. Returns (track index, mean
 /// velocity over the steps it was in range), sorted by track index.
 pub(crate) fn relevant_agents(

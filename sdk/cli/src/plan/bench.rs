@@ -3,8 +3,8 @@
 
 use super::{PlanArgs, bar, windows};
 use human2nav_core::ablation::Arm;
+use human2nav_core::feasibility;
 use human2nav_core::human2nav::{Human2Nav, Human2NavSettings};
-use human2nav_core::tfs;
 use human2nav_core::{Observation, Planner, Stage};
 use human2nav_flow::net::Complexity;
 use human2nav_flow::planner::{
@@ -183,7 +183,7 @@ fn budget_table(
             }
             fallbacks += usize::from(plan.info.fallback);
             let ego: Vec<_> = plan.poses.iter().map(|p| obs.ego.between(*p)).collect();
-            tfs_sum += tfs::tfs_plan(&ego, plan.dt, &limits, obs.ego_velocity);
+            tfs_sum += feasibility::tfs_plan(&ego, plan.dt, &limits, obs.ego_velocity);
             pb.inc(1);
         }
         pb.finish_and_clear();

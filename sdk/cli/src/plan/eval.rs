@@ -5,7 +5,7 @@ use super::{PlanArgs, bar, windows};
 use anyhow::Context;
 use human2nav_core::Planner;
 use human2nav_core::ablation::{Arm, ArmSummary, ablation_step};
-use human2nav_core::tfs::Violations;
+use human2nav_core::feasibility::Violations;
 use human2nav_data::cache::TupleCache;
 use human2nav_data::tuples::Split;
 use human2nav_experiments::train::cache_windows;

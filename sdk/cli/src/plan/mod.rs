@@ -328,8 +328,12 @@ fn plan_one(
         fmt_opt(plan.info.phi_before),
         fmt_opt(plan.info.phi_after)
     );
-    let mask =
-        human2nav_core::tfs::feasibility_mask(&plan.poses, plan.dt, rp.limits(), obs.ego_velocity);
+    let mask = human2nav_core::feasibility::feasibility_mask(
+        &plan.poses,
+        plan.dt,
+        rp.limits(),
+        obs.ego_velocity,
+    );
     println!("   t [s]    x [m]    y [m]  θ [rad]  v [m/s]  feasible");
     for (k, p) in plan.poses.iter().enumerate() {
         if k % 4 != 0 && k + 1 != plan.poses.len() {

@@ -423,13 +423,7 @@ pub(crate) fn check_buffers(
     cost: &[f64],
     grad: &[f64],
 ) -> Result<(), ConstraintError> {
-    if cost.len() != batch.batch {
-        return Err(ConstraintError::Shape(format!(
-            "`{name}`: cost buffer holds {} values for {} trajectories",
-            cost.len(),
-            batch.batch
-        )));
-    }
+    check_cost_buffer(name, batch, cost)?;
     if grad.len() != batch.data.len() {
         return Err(ConstraintError::Shape(format!(
             "`{name}`: gradient buffer holds {} values for {} pose coordinates",
@@ -438,6 +432,22 @@ pub(crate) fn check_buffers(
         )));
     }
     check_dt(name, ctx)
+}
+
+/// The cost buffer must hold one value per trajectory of the batch.
+pub(crate) fn check_cost_buffer(
+    name: &str,
+    batch: &TrajBatch<'_>,
+    cost: &[f64],
+) -> Result<(), ConstraintError> {
+    if cost.len() != batch.batch {
+        return Err(ConstraintError::Shape(format!(
+            "`{name}`: cost buffer holds {} values for {} trajectories",
+            cost.len(),
+            batch.batch
+        )));
+    }
+    Ok(())
 }
 
 /// The context's time step must be finite and positive.
@@ -489,14 +499,7 @@ impl ConstraintTerm for BuiltinTerm {
         ctx: &ConstraintContext<'_>,
         cost: &mut [f64],
     ) -> Result<(), ConstraintError> {
-        if cost.len() != batch.batch {
-            return Err(ConstraintError::Shape(format!(
-                "`{}`: cost buffer holds {} values for {} trajectories",
-                self.name(),
-                cost.len(),
-                batch.batch
-            )));
-        }
+        check_cost_buffer(self.name(), &batch, cost)?;
         check_dt(self.name(), ctx)?;
         let mut segments = Segments::default();
         segments.fill(&batch, ctx.dt);

@@ -324,13 +324,7 @@ impl ConstraintTerm for Clearance {
         ctx: &ConstraintContext<'_>,
         cost: &mut [f64],
     ) -> Result<(), ConstraintError> {
-        if cost.len() != batch.batch {
-            return Err(ConstraintError::Shape(format!(
-                "`{CLEARANCE}`: {} costs for {} trajectories",
-                cost.len(),
-                batch.batch
-            )));
-        }
+        super::builtin::check_cost_buffer(CLEARANCE, &batch, cost)?;
         self.run(batch, ctx, cost, None)
     }
 }

@@ -1,6 +1,8 @@
 //! Φ of Eq. 9: the weighted sum of constraint terms.
 
-use super::builtin::{BuiltinKind, BuiltinTerm, Segments, SoftMargin, check_buffers, check_dt};
+use super::builtin::{
+    BuiltinKind, BuiltinTerm, Segments, SoftMargin, check_buffers, check_cost_buffer, check_dt,
+};
 use super::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
 use crate::limits::{GuidanceWeights, Limits};
 use std::sync::Arc;
@@ -187,13 +189,7 @@ impl Phi {
         cost: &mut [f64],
         scratch: &mut PhiScratch,
     ) -> Result<(), ConstraintError> {
-        if cost.len() != batch.batch {
-            return Err(ConstraintError::Shape(format!(
-                "`phi`: cost buffer holds {} values for {} trajectories",
-                cost.len(),
-                batch.batch
-            )));
-        }
+        check_cost_buffer("phi", &batch, cost)?;
         cost.fill(0.0);
         scratch.cost.resize(cost.len(), 0.0);
         // The built-in terms read one set of segment values instead of each computing its own.

@@ -179,11 +179,11 @@ impl TrackerOptions {
                 "must be at least 1",
             ));
         }
-        crate::limits::count_at_most(self.frame_step, 1_000_000, "association.frame_step")?;
-        crate::limits::option_in(
+        crate::input_limits::count_at_most(self.frame_step, 1_000_000, "association.frame_step")?;
+        crate::input_limits::option_in(
             self.max_missed,
             0.0,
-            crate::limits::MAX_TIME,
+            crate::input_limits::MAX_TIME,
             "association.max_missed",
         )?;
         Ok(())

@@ -10,7 +10,7 @@
 //! `3·H·W·4` bytes (12 KiB at 32 × 32), the stored one about 0.5 KiB.
 
 use crate::error::DataError;
-use crate::limits::{MAX_CACHE_FILE_BYTES, MAX_MANIFEST_BYTES};
+use crate::input_limits::{MAX_CACHE_FILE_BYTES, MAX_MANIFEST_BYTES};
 use crate::scenario::ScenarioClass;
 use crate::tuples::{CompactTuple, MAX_HORIZON, Split, TrainingTuple, TupleOptions, TupleStats};
 use human2nav_core::bev::BevSpec;

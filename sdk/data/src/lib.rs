@@ -10,7 +10,7 @@
 //! [`homography`] maps image to world (Eq. 1), [`synthetic`] generates crowds of the four flow
 //! classes. [`config`] is the `data.toml` schema, [`pipeline`] the parallel,
 //! thread-count-independent jobs behind `human2nav data build | episodes | associate`, and
-//! [`paths`] locates datasets and outputs. [`limits`] lists the bounds on what is read.
+//! [`paths`] locates datasets and outputs. [`input_limits`] lists the bounds on what is read.
 //! [`prediction`] scores simple pedestrian predictors on the recorded crowds of an episode
 //! file (`human2nav data predict`).
 
@@ -23,7 +23,9 @@ pub mod corridor;
 pub mod episode_mining;
 pub mod error;
 pub mod homography;
-pub mod limits;
+pub mod input_limits;
+/// The former name of [`input_limits`].
+pub use input_limits as limits;
 pub mod loaders;
 pub mod paths;
 pub mod pipeline;

@@ -74,11 +74,11 @@ impl ResampleOptions {
                 "must be at least 1",
             ));
         }
-        crate::limits::count_at_most(self.heading_window, 1000, "resample.heading_window")?;
-        crate::limits::option_in(
+        crate::input_limits::count_at_most(self.heading_window, 1000, "resample.heading_window")?;
+        crate::input_limits::option_in(
             self.min_duration,
             0.0,
-            crate::limits::MAX_TIME,
+            crate::input_limits::MAX_TIME,
             "resample.min_duration",
         )?;
         Ok(())

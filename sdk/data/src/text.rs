@@ -5,12 +5,12 @@ use crate::error::DataError;
 use std::path::Path;
 
 /// Reads a whole dataset text file (a regular file of at most
-/// [`MAX_DATASET_FILE_BYTES`](crate::limits::MAX_DATASET_FILE_BYTES)).
+/// [`MAX_DATASET_FILE_BYTES`](crate::input_limits::MAX_DATASET_FILE_BYTES)).
 pub(crate) fn read(path: &Path) -> Result<String, DataError> {
     human2nav_core::input::read_user_file(
         path,
         "dataset file",
-        crate::limits::MAX_DATASET_FILE_BYTES,
+        crate::input_limits::MAX_DATASET_FILE_BYTES,
     )
     .map_err(|e| DataError::io(path, e))
 }

@@ -133,10 +133,10 @@ impl TupleOptions {
                 return Err(DataError::option(f, "must be finite and positive"));
             }
         }
-        crate::limits::option_in(
+        crate::input_limits::option_in(
             self.goal_horizon,
             0.0,
-            crate::limits::MAX_TIME,
+            crate::input_limits::MAX_TIME,
             "tuples.goal_horizon",
         )?;
         if !(self.min_future_displacement.is_finite() && self.min_future_displacement >= 0.0) {

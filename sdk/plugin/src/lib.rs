@@ -15,7 +15,7 @@
 //!   rest of the SDK uses like built-ins. Libraries are never unloaded.
 //! * [`robot`]: [`PluginHost::load_robot`] turns a robot profile into a [`LoadedRobot`]
 //!   (embodiment + plugin constraint terms); [`PluginSpec`] names a plugin in other configs.
-//! * [`resolve`]: how library paths in profiles are resolved (relative to the declaring file,
+//! * [`locate`]: how library paths in profiles are resolved (relative to the declaring file,
 //!   optional extension and `lib` prefix, the `{profile}` placeholder).
 //! * [`libfile`]: the library file is checked before the OS loader maps it (a truncated
 //!   library would fault inside `dlopen`); [`validate`]: every table, function slot, count and
@@ -39,9 +39,11 @@ pub mod host;
 pub mod init;
 pub mod inspect;
 pub mod libfile;
+pub mod locate;
 mod macros;
 pub mod process;
-pub mod resolve;
+/// The former name of [`locate`].
+pub use locate as resolve;
 pub mod robot;
 pub mod validate;
 

@@ -10,7 +10,7 @@ use crate::deadline::deadline_from_ms;
 use crate::error::{PluginError, PluginKind};
 use crate::host::{PluginConstraint, PluginEmbodiment, PluginHost, PluginPlanner};
 use crate::init::RobotContext;
-use crate::resolve::resolve_relative;
+use crate::locate::resolve_relative;
 use human2nav_core::constraint::{
     ConstraintContext, ConstraintError, ConstraintTerm, Phi, TrajBatch,
 };

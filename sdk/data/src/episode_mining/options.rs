@@ -70,7 +70,7 @@ impl InteractionOptions {
         pos(self.reference_radius, "interaction.reference_radius")?;
         pos(self.reference_accel, "interaction.reference_accel")?;
         // Upper and lower bounds keep every derived step count within the scene.
-        use crate::limits::{MAX_TIME, count_at_most, option_in};
+        use crate::input_limits::{MAX_TIME, count_at_most, option_in};
         option_in(
             self.reference_accel,
             0.01,

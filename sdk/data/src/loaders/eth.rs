@@ -9,7 +9,7 @@
 use super::modal_step;
 use crate::error::DataError;
 use crate::homography::Homography;
-use crate::limits;
+use crate::input_limits;
 use crate::text;
 use crate::track::{AgentClass, RawScene, Sample, SourceTiming, group_rows};
 use std::path::Path;
@@ -48,7 +48,12 @@ pub fn load_obsmat(path: &Path, name: &str) -> Result<RawScene, DataError> {
                 "negative frame or pedestrian id",
             ));
         }
-        rows.push((id as u64, frame, limits::position([x, y], path, ln)?, ln));
+        rows.push((
+            id as u64,
+            frame,
+            input_limits::position([x, y], path, ln)?,
+            ln,
+        ));
     }
     if rows.is_empty() {
         return Err(DataError::NoData(format!(
@@ -75,7 +80,7 @@ pub fn load_obsmat(path: &Path, name: &str) -> Result<RawScene, DataError> {
     let samples = rows
         .into_iter()
         .map(|(id, f, p, ln)| {
-            let t = limits::time(f as f64 * frame_dt, path, ln)?;
+            let t = input_limits::time(f as f64 * frame_dt, path, ln)?;
             Ok((id, AgentClass::Pedestrian, Sample { t, p }))
         })
         .collect::<Result<_, DataError>>()?;

@@ -9,7 +9,7 @@
 
 use crate::error::DataError;
 use crate::homography::Homography;
-use crate::limits::{self, MAX_COORDINATE};
+use crate::input_limits::{self, MAX_COORDINATE};
 use crate::text;
 use crate::track::{AgentClass, RawScene, RawTrack, Sample, SourceTiming, group_rows};
 use serde::{Deserialize, Serialize};
@@ -21,7 +21,7 @@ pub const FPS: f64 = 30.0;
 
 /// Largest meter-per-pixel scale accepted from `estimated_scales.yaml` (the real ones are
 /// 0.03–0.05): with box corners within [`MAX_COORDINATE`] pixels, every world position then
-/// stays within [`MAX_COORDINATE`] metres ([`crate::limits`]).
+/// stays within [`MAX_COORDINATE`] metres ([`crate::input_limits`]).
 pub const MAX_SCALE: f64 = 1.0;
 
 /// Meter-per-pixel scales per video, from `estimated_scales.yaml`.
@@ -193,7 +193,7 @@ pub fn parse_raw(path: &Path) -> Result<Vec<SddRow>, DataError> {
         if id < 0 || frame < 0 {
             return Err(DataError::parse(path, ln, "negative track id or frame"));
         }
-        limits::time(frame as f64 / FPS, path, ln)?;
+        input_limits::time(frame as f64 / FPS, path, ln)?;
         for (v, f) in [
             (xmin, "xmin"),
             (ymin, "ymin"),
@@ -313,8 +313,8 @@ pub fn load_trajnet(path: &Path, name: &str) -> Result<RawScene, DataError> {
             continue;
         };
         let sample = Sample {
-            t: limits::time(frame as f64 / FPS, path, i + 1)?,
-            p: limits::position([x, -y], path, i + 1)?,
+            t: input_limits::time(frame as f64 / FPS, path, i + 1)?,
+            p: input_limits::position([x, -y], path, i + 1)?,
         };
         rows.push((id, AgentClass::Pedestrian, sample));
     }

@@ -7,7 +7,7 @@
 //! loader applies the right frame rate from the file name.
 
 use crate::error::DataError;
-use crate::limits;
+use crate::input_limits;
 use crate::text;
 use crate::track::{AgentClass, RawScene, Sample, SourceTiming, group_rows};
 use std::path::Path;
@@ -32,8 +32,8 @@ pub fn load(path: &Path, name: &str, dataset: &str) -> Result<RawScene, DataErro
             continue;
         };
         let sample = Sample {
-            t: limits::time(frame as f64 / fps, path, i + 1)?,
-            p: limits::position([x, y], path, i + 1)?,
+            t: input_limits::time(frame as f64 / fps, path, i + 1)?,
+            p: input_limits::position([x, y], path, i + 1)?,
         };
         rows.push((id, AgentClass::Pedestrian, sample));
     }

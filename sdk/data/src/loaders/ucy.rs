@@ -24,7 +24,7 @@
 
 use crate::error::DataError;
 use crate::homography::Homography;
-use crate::limits;
+use crate::input_limits;
 use crate::text;
 use crate::track::{AgentClass, RawScene, Sample, SourceTiming, group_rows};
 use std::path::{Path, PathBuf};
@@ -102,7 +102,7 @@ pub const MAX_VSP_COUNT: usize = 1_000_000;
 
 /// Parses the splines of an `annotation.vsp` file (file units, no homography). Counts are
 /// bounded by [`MAX_VSP_COUNT`] and by the lines left in the file, frames by
-/// [`crate::limits::MAX_TIME`]; within a spline frames never decrease.
+/// [`crate::input_limits::MAX_TIME`]; within a spline frames never decrease.
 pub fn parse_vsp(path: &Path) -> Result<Vec<Vec<ControlPoint>>, DataError> {
     let body = text::read(path)?;
     let lines: Vec<(usize, &str)> = body
@@ -166,7 +166,7 @@ pub fn parse_vsp(path: &Path) -> Result<Vec<Vec<ControlPoint>>, DataError> {
                 ));
             }
             let frame = text::integer(toks[2], path, ln, "frame")?;
-            limits::time(frame as f64 / FPS, path, ln)?;
+            input_limits::time(frame as f64 / FPS, path, ln)?;
             // A spline is a path through time: a frame before the previous one would make the
             // walker jump back (the real files never do; their frames only increase).
             if let Some(prev) = pts.last().map(|p: &ControlPoint| p.frame)
@@ -220,7 +220,7 @@ pub fn load_vsp(
                     AgentClass::Pedestrian,
                     Sample {
                         t: cp.frame as f64 / FPS,
-                        p: limits::position(p, path, cp.line)?,
+                        p: input_limits::position(p, path, cp.line)?,
                     },
                 )),
                 None => horizon += 1,

@@ -72,12 +72,12 @@ impl Episode {
     /// ([`EpisodeSuite::load`], [`EpisodeSuite::load_any`], and through them the benchmark and
     /// `plan --episode`): `dt` in [[`MIN_EPISODE_DT`], [`MAX_EPISODE_DT`]], `time_budget` in
     /// (0, [`MAX_TIME_BUDGET`]], start, goal and agent positions finite and within
-    /// [`MAX_COORDINATE`](crate::limits::MAX_COORDINATE) m of the origin, agent radii finite and
-    /// ≥ 0, every agent track starting within [`MAX_TIME`](crate::limits::MAX_TIME) s, holding
+    /// [`MAX_COORDINATE`](crate::input_limits::MAX_COORDINATE) m of the origin, agent radii finite and
+    /// ≥ 0, every agent track starting within [`MAX_TIME`](crate::input_limits::MAX_TIME) s, holding
     /// at least one position and an id no other track has. The error names the field
     /// (`agents[3].positions[7]`) and what is wrong with it.
     pub fn validate(&self) -> Result<(), (String, String)> {
-        use crate::limits::{MAX_COORDINATE, MAX_TIME};
+        use crate::input_limits::{MAX_COORDINATE, MAX_TIME};
         let field = |f: &str, m: String| Err((f.to_string(), m));
         if !(self.dt.is_finite() && (MIN_EPISODE_DT..=MAX_EPISODE_DT).contains(&self.dt)) {
             return field(
@@ -183,7 +183,7 @@ fn read_episode_file(path: &Path) -> Result<String, DataError> {
     human2nav_core::input::read_user_file(
         path,
         "episode file",
-        crate::limits::MAX_EPISODE_FILE_BYTES,
+        crate::input_limits::MAX_EPISODE_FILE_BYTES,
     )
     .map_err(|e| DataError::io(path, e))
 }
@@ -240,7 +240,7 @@ impl EpisodeSuite {
     }
 
     /// Reads a suite (a regular file of at most
-    /// [`MAX_EPISODE_FILE_BYTES`](crate::limits::MAX_EPISODE_FILE_BYTES)) and checks its
+    /// [`MAX_EPISODE_FILE_BYTES`](crate::input_limits::MAX_EPISODE_FILE_BYTES)) and checks its
     /// version, counts and every episode ([`Episode::validate`]).
     pub fn load(path: &Path) -> Result<Self, DataError> {
         let body = read_episode_file(path)?;

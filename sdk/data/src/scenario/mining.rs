@@ -90,7 +90,7 @@ impl MiningOptions {
         }
         // Upper bounds: a mined episode's budget must stay within MAX_TIME_BUDGET and every
         // step count derived from these within the scene.
-        use crate::limits::{MAX_COORDINATE, MAX_TIME, option_in};
+        use crate::input_limits::{MAX_COORDINATE, MAX_TIME, option_in};
         option_in(self.budget_factor, 1.0, 100.0, "episodes.budget_factor")?;
         option_in(
             self.reference_speed,

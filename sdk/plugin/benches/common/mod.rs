@@ -17,7 +17,7 @@ pub fn library(name: &str) -> PathBuf {
         .and_then(|exe| exe.parent().map(PathBuf::from))
         .unwrap_or_else(|| PathBuf::from("target/release/deps"));
     let here = deps.join(name);
-    if human2nav_plugin::resolve::resolve_library_path(&here).is_ok() {
+    if human2nav_plugin::locate::resolve_library_path(&here).is_ok() {
         return here;
     }
     deps.parent().unwrap_or(&deps).join(name)

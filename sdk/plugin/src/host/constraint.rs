@@ -3,7 +3,7 @@
 use super::*;
 
 impl PluginHost {
-    /// Creates a constraint term from `library` (path resolved per [`crate::resolve`]), whose
+    /// Creates a constraint term from `library` (path resolved per [`crate::locate`]), whose
     /// calls run under [`deadline::DEFAULT_DEADLINE`].
     pub fn constraint(
         &self,

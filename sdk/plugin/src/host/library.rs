@@ -72,7 +72,7 @@ pub(super) fn table_size(
 
 impl PluginLibrary {
     /// Loads (or returns the already loaded) library at `path`, resolved as described in
-    /// [`crate::resolve`]. Checks the file before the OS loader maps it and the ABI version
+    /// [`crate::locate`]. Checks the file before the OS loader maps it and the ABI version
     /// before reading anything else of the entry table, then every table it hands over.
     pub fn load(path: &Path) -> Result<Arc<PluginLibrary>, PluginError> {
         Self::load_checked(path).0

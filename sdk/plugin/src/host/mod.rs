@@ -23,8 +23,8 @@ use crate::deadline::{self, NoAnswer, Worker};
 use crate::error::{PluginError, PluginKind};
 use crate::init::RobotContext;
 use crate::libfile::{self, MAX_LIBRARY_BYTES};
+use crate::locate::resolve_library_path;
 use crate::process::{self as proc_host, ProcessClient};
-use crate::resolve::resolve_library_path;
 use crate::validate::{
     Check, EvaluateBuffers, MAX_DESCRIPTION_BYTES, MAX_FACTORIES, MAX_MESSAGE_BYTES,
     MAX_NAME_BYTES, MAX_PLAN_POSES, MAX_TABLE_BYTES, plugin_str,

@@ -402,7 +402,7 @@ pub(crate) fn start_instance(
         instance: instance.clone(),
         message,
     };
-    let file = crate::resolve::resolve_library_path(library)?;
+    let file = crate::locate::resolve_library_path(library)?;
     let file = std::fs::canonicalize(&file).unwrap_or(file);
     let helper = find_helper(helper).map_err(process)?;
     let init = InitRequest {

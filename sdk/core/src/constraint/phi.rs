@@ -18,14 +18,12 @@ pub struct Phi {
     terms: Vec<Weighted>,
 }
 
-/// One term of Φ with its weight; `limit`: one of the robot's built-in limit terms
-/// ([`Phi::from_weights`]) rather than a pushed one.
+/// One term of Φ with its weight; `builtin`: the robot's built-in limit term behind `term`
+/// ([`Phi::from_weights`]) rather than a pushed one, which [`Phi::costs`] scores from the
+/// segment values every built-in term shares.
 struct Weighted {
     weight: f64,
     term: Arc<dyn ConstraintTerm>,
-    limit: bool,
-    /// The built-in term behind `term`, for [`Phi::costs`] to score it from the segment values
-    /// every built-in term shares.
     builtin: Option<BuiltinTerm>,
 }
 
@@ -79,7 +77,6 @@ impl Phi {
                 phi.terms.push(Weighted {
                     weight: w,
                     term: Arc::new(builtin),
-                    limit: true,
                     builtin: Some(builtin),
                 });
             }
@@ -102,7 +99,6 @@ impl Phi {
         self.terms.push(Weighted {
             weight,
             term: Arc::from(term),
-            limit: false,
             builtin: None,
         });
         Ok(())
@@ -116,11 +112,10 @@ impl Phi {
             terms: self
                 .terms
                 .iter()
-                .filter(|t| !t.limit)
+                .filter(|t| t.builtin.is_none())
                 .map(|t| Weighted {
                     weight: t.weight,
                     term: Arc::clone(&t.term),
-                    limit: false,
                     builtin: None,
                 })
                 .collect(),

@@ -135,8 +135,10 @@ pub(super) fn bench(
          Algorithm 1's iterations before it). \
          per call: network = flow-network calls (the condition encoding included in the first); rest = everything \
          else (BEV, sampling arithmetic, Φ, adjoint, last-step correction QPs, selection). MFLOP/call counts the \
-         network's convolutions (a VJP is its forward pass plus the transposed products); limit = MFLOP/call at \
-         the SGEMM rate above, so p50 / limit is how far a call is from the machine's arithmetic bound."
+         network's convolutions (a VJP is its forward pass plus the transposed products) and a crowd pathway at \
+         every one of its cells, occupied or not, so it overstates the work where fewer are occupied; limit = \
+         MFLOP/call at the SGEMM rate above, so p50 / limit is how far a call is from the machine's arithmetic \
+         bound (a lower bound on that distance with a crowd pathway)."
     );
     if cfg.human2nav.budget_ms > 0.0 {
         let mut settings = cfg.human2nav;

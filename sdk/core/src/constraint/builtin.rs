@@ -492,7 +492,7 @@ impl ConstraintTerm for BuiltinTerm {
         Ok(())
     }
 
-    /// The cost alone ([`BuiltinTerm::add_costs`]): the same values as `evaluate`.
+    /// The cost alone, without the gradient: the same values as `evaluate`.
     fn cost(
         &self,
         batch: TrajBatch<'_>,

@@ -1,6 +1,6 @@
 //! The reference planner with the trained flow model: a [`Human2Nav<PlannerModel>`] built from a
 //! robot profile (`robot.toml` + URDF + plugin constraint terms) and a model folder
-//! (`model.toml` card + weights), plus the two measurements the issue asks of it:
+//! (`model.toml` card + weights), and two measurements of it:
 //!
 //! * the guidance ablation (raw, Algorithm 1, QP, both) lives in
 //!   [`human2nav_core::ablation`]; `human2nav plan --eval` runs it with this planner;

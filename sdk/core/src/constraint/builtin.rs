@@ -29,7 +29,7 @@
 //! step is penalised. The limits come from the [`ConstraintContext`] at evaluation time.
 
 use super::{ConstraintContext, ConstraintError, ConstraintTerm, TrajBatch};
-use crate::trajectory::{KAPPA_EPS, SegmentJet, segment_jet};
+use crate::trajectory::{SegmentJet, curvature, segment_jet};
 use serde::{Deserialize, Serialize};
 
 /// `ε` of the smoothed absolute value `|r|_ε = sqrt(r² + ε²) − ε` of a limit ratio `r = q/L`.
@@ -66,8 +66,10 @@ impl SoftMargin {
     /// (one-sided: only large positive `r` is penalised).
     #[inline]
     pub fn upper(&self, r: f64) -> (f64, f64) {
-        let z = self.gamma * (r - 1.0 + self.delta);
-        (softplus(z) / self.gamma, sigmoid(z))
+        (
+            self.upper_value(r),
+            sigmoid(self.gamma * (r - 1.0 + self.delta)),
+        )
     }
 
     /// The value of [`Self::upper`] alone.
@@ -235,10 +237,7 @@ impl BuiltinTerm {
             BuiltinKind::Speed | BuiltinKind::Reverse | BuiltinKind::Acceleration => v,
             BuiltinKind::YawRate => omega,
             BuiltinKind::Lateral => vy,
-            BuiltinKind::Curvature => {
-                let r = (v * v + KAPPA_EPS * KAPPA_EPS).sqrt();
-                omega / r
-            }
+            BuiltinKind::Curvature => curvature(v, omega),
         }
     }
 
@@ -357,7 +356,7 @@ impl BuiltinTerm {
 #[inline]
 fn coupled_quantity(jet: &SegmentJet, c: &crate::limits::CoupledLimit) -> (f64, [f64; 6]) {
     let eps = SMOOTH_ABS_EPS * c.max;
-    let mut q = 0.0;
+    let q = coupled_value([jet.v, jet.vy, jet.omega], c);
     let mut dq = [0.0; 6];
     for (coef, x, dx) in [
         (c.v, jet.v, &jet.dv),
@@ -368,7 +367,6 @@ fn coupled_quantity(jet: &SegmentJet, c: &crate::limits::CoupledLimit) -> (f64, 
             continue;
         }
         let s = (x * x + eps * eps).sqrt();
-        q += coef * (s - eps);
         let g = coef * x / s;
         for (d, dxj) in dq.iter_mut().zip(dx) {
             *d += g * dxj;

@@ -268,7 +268,7 @@ impl Crowd {
 multiversion! {
     /// The pair features `[5, present·rows]` (column `n·rows + r`) of a tile's `rows`
     /// waypoints (`[x, y, cos θ, sin θ, τ]`, one slice of `rows` each) with every point
-    /// (`N × 5`), as [`Waypoint::pair`] computes them.
+    /// (`N × 5`), by [`Waypoint::pair`], laid out so that the loop runs along waypoints.
     fn tile_pairs(waypoints: [&[f32]; 5], points: &[f32], pairs: &mut [f32]) {
         let rows = waypoints[0].len();
         let [px, py, cs, sn, tau] = waypoints.map(|w| &w[..rows]);
@@ -285,14 +285,13 @@ multiversion! {
             let ux = &mut ux_all[span.clone()];
             let uy = &mut uy_all[span];
             for r in 0..rows {
-                let dx = p[0] + p[2] * tau[r] - px[r];
-                let dy = p[1] + p[3] * tau[r] - py[r];
-                let (x, y) = (cs[r] * dx + sn[r] * dy, cs[r] * dy - sn[r] * dx);
-                bx[r] = x;
-                by[r] = y;
-                dist[r] = (x * x + y * y + 1e-6).sqrt();
-                ux[r] = cs[r] * p[2] + sn[r] * p[3];
-                uy[r] = cs[r] * p[3] - sn[r] * p[2];
+                let w = Waypoint {
+                    px: px[r],
+                    py: py[r],
+                    cs: cs[r],
+                    sn: sn[r],
+                };
+                [bx[r], by[r], dist[r], ux[r], uy[r]] = w.pair(p, tau[r]);
             }
         }
     }
@@ -356,6 +355,7 @@ impl Waypoint {
 
     /// The point `p` carried on to `tau`: its offset from the waypoint in the world
     /// `(dx, dy)` and in the waypoint's frame `(bx, by)`, and the (smoothed) distance.
+    #[inline(always)]
     fn offset(&self, p: &[f32], tau: f32) -> ([f32; 2], [f32; 2], f32) {
         let dx = p[0] + p[2] * tau - self.px;
         let dy = p[1] + p[3] * tau - self.py;
@@ -366,6 +366,7 @@ impl Waypoint {
 
     /// The point carried on to `tau`, relative to the waypoint in its frame: offset, distance,
     /// and the point's velocity in that frame.
+    #[inline(always)]
     fn pair(&self, p: &[f32], tau: f32) -> [f32; PAIR] {
         let (_, [bx, by], dist) = self.offset(p, tau);
         let ux = self.cs * p[2] + self.sn * p[3];

@@ -21,6 +21,18 @@ pub struct FlowCondition {
     pub velocity: [f64; 2],
 }
 
+/// One group of a batched velocity call ([`FlowModel::velocity_batch`]): trajectories under
+/// one condition at one flow time.
+#[derive(Clone, Copy, Debug)]
+pub struct FlowQuery<'a> {
+    /// Poses, flat `[K, T, 3]`.
+    pub x: &'a [f64],
+    /// Flow time.
+    pub t: f64,
+    /// The condition of all `K` trajectories.
+    pub cond: &'a FlowCondition,
+}
+
 /// Why a flow model failed.
 #[derive(Debug, thiserror::Error)]
 pub enum FlowError {
@@ -71,6 +83,47 @@ pub trait FlowModel {
         out: &mut [f64],
         vjp: &mut [f64],
     ) -> Result<(), FlowError>;
+
+    /// The velocities of several groups of trajectories, each under its own condition and
+    /// flow time, written one group after another into `out` (as long as all the groups'
+    /// poses together). The same values as one [`Self::velocity`] per group, which is what
+    /// this default does; a model may run the groups as one batch instead (the native network:
+    /// one matrix product per layer for all of them). [`crate::human2nav::Human2Nav::plan_batch`]
+    /// batches several planners' sampling through it.
+    fn velocity_batch(&self, queries: &[FlowQuery<'_>], out: &mut [f64]) -> Result<(), FlowError> {
+        velocity_each(self, queries, out)
+    }
+
+    /// Which network answers this model's calls: handles with the same `Some` value run the
+    /// same weights, so that one of them can answer the others' queries in
+    /// [`Self::velocity_batch`]. `None` (the default): unknown, nothing is batched across
+    /// handles.
+    fn network_id(&self) -> Option<usize> {
+        None
+    }
+}
+
+/// [`FlowModel::velocity_batch`] as one [`FlowModel::velocity`] per group (the trait's
+/// default, for models that batch only sometimes).
+pub fn velocity_each<M: FlowModel + ?Sized>(
+    model: &M,
+    queries: &[FlowQuery<'_>],
+    out: &mut [f64],
+) -> Result<(), FlowError> {
+    let total: usize = queries.iter().map(|q| q.x.len()).sum();
+    if out.len() != total {
+        return Err(FlowError::Shape(format!(
+            "batched velocity: {} output values for {total} input values",
+            out.len()
+        )));
+    }
+    let mut rest = out;
+    for q in queries {
+        let (o, r) = rest.split_at_mut(q.x.len());
+        model.velocity(q.x, q.t, q.cond, o)?;
+        rest = r;
+    }
+    Ok(())
 }
 
 /// `k` source samples of `t` poses each, flat `[k, t, 3]`: per waypoint `x0 = exp(ξ0)` with
@@ -122,7 +175,7 @@ impl<M> CrowdGuidance<M> {
     }
 
     /// `cond` with its raster emptied.
-    fn empty(cond: &FlowCondition) -> FlowCondition {
+    pub(crate) fn empty(cond: &FlowCondition) -> FlowCondition {
         FlowCondition {
             bev: vec![0.0; cond.bev.len()],
             ..cond.clone()
@@ -130,7 +183,7 @@ impl<M> CrowdGuidance<M> {
     }
 
     /// `out ← out∅ + w·(out − out∅)`.
-    fn combine(&self, out: &mut [f64], unconditional: &[f64]) {
+    pub(crate) fn combine(&self, out: &mut [f64], unconditional: &[f64]) {
         for (o, u) in out.iter_mut().zip(unconditional) {
             *o = u + self.weight * (*o - u);
         }
@@ -222,6 +275,14 @@ impl<M: FlowModel + ?Sized> FlowModel for &M {
         vjp: &mut [f64],
     ) -> Result<(), FlowError> {
         (**self).velocity_vjp(x, t, cond, cotangent, out, vjp)
+    }
+
+    fn velocity_batch(&self, queries: &[FlowQuery<'_>], out: &mut [f64]) -> Result<(), FlowError> {
+        (**self).velocity_batch(queries, out)
+    }
+
+    fn network_id(&self) -> Option<usize> {
+        (**self).network_id()
     }
 }
 

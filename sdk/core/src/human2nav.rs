@@ -111,6 +111,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+mod batch;
 mod candidates;
 mod inputs;
 mod selection;
@@ -118,6 +119,7 @@ mod settings;
 #[cfg(test)]
 mod tests;
 
+use batch::{Replay, Replayed};
 use candidates::Source;
 pub use candidates::{continued, goal_approach, time_scaled};
 use selection::{phi_context, select_best, selection_clearance};
@@ -169,6 +171,8 @@ pub struct Human2Nav<M> {
     reach: f64,
     /// Where the selection expects people to go; `None`: constant velocity.
     predictor: Option<Box<dyn CrowdPredictor>>,
+    /// The flow velocities [`Self::plan_batch`] computed for this planner's current call.
+    replay: Replay,
 }
 
 impl<M> std::fmt::Debug for Human2Nav<M> {
@@ -228,6 +232,7 @@ impl<M: FlowModel> Human2Nav<M> {
             projection: projection::ProjectionSolver::default(),
             previous: None,
             predictor: None,
+            replay: Replay::default(),
         })
     }
 
@@ -258,13 +263,16 @@ impl<M: FlowModel> Human2Nav<M> {
 
     /// Plans within `deadline`, returning the plan or the reason the flow stage failed (for
     /// [`Planner::plan_within`], which turns such failures into the stop-in-place fallback).
-    ///
-    /// A little over 120 lines: stage 2 fills half a dozen locals the selection and the plan's
-    /// diagnostics read (candidates, their origin, Φ, the corrected flags, stages, notes);
-    /// splitting it further would pass all of them back and forth.
     fn try_plan(&mut self, obs: &Observation, deadline: &Deadline) -> Result<Plan, StageError> {
+        let prepared = self.prepare(obs);
+        self.try_plan_prepared(obs, prepared, deadline)
+    }
+
+    /// What a planning call computes before the flow model runs: the condition, the agents in
+    /// the ego frame, the forecast, the obstacles near the robot (kept in `self.obstacles`), the
+    /// source samples (drawn from the planner's generator) and the warm start.
+    fn prepare(&mut self, obs: &Observation) -> Prepared {
         let horizon = self.model.horizon();
-        let k = self.settings.samples;
         let (cond, agents) = self.condition(obs);
         let mut notes = Vec::new();
         let ahead = self.lookahead_steps();
@@ -275,13 +283,44 @@ impl<M: FlowModel> Human2Nav<M> {
             &mut notes,
         );
         self.obstacles = self.nearby_obstacles(obs, horizon + ahead);
-        let x0 = self.draw_source(k, horizon);
-        let goal = cond.goal;
+        let x0 = self.draw_source(self.settings.samples, horizon);
         let warm = if self.settings.warm_start {
             self.shifted_previous(obs, horizon)
         } else {
             None
         };
+        Prepared {
+            cond,
+            agents,
+            notes,
+            forecast,
+            x0,
+            warm,
+        }
+    }
+
+    /// [`Self::try_plan`] from its [`Self::prepare`]d inputs.
+    ///
+    /// A little over 120 lines: stage 2 fills half a dozen locals the selection and the plan's
+    /// diagnostics read (candidates, their origin, Φ, the corrected flags, stages, notes);
+    /// splitting it further would pass all of them back and forth.
+    fn try_plan_prepared(
+        &mut self,
+        obs: &Observation,
+        prepared: Prepared,
+        deadline: &Deadline,
+    ) -> Result<Plan, StageError> {
+        let horizon = self.model.horizon();
+        let k = self.settings.samples;
+        let Prepared {
+            cond,
+            agents,
+            mut notes,
+            forecast,
+            x0,
+            warm,
+        } = prepared;
+        let goal = cond.goal;
         let previous_ego = warm.as_deref();
         let guidance = self.settings.guidance;
         let mut stages = Stages {
@@ -466,7 +505,7 @@ impl<M: FlowModel> Human2Nav<M> {
         Ok(
             match guidance::sample_guided_until(
                 &CrowdGuidance {
-                    model: &self.model,
+                    model: Replayed::new(&self.model, &self.replay),
                     weight: self.settings.crowd_weight,
                 },
                 cond,
@@ -521,7 +560,7 @@ impl<M: FlowModel> Human2Nav<M> {
         let ctx = phi_context(self.settings.dt, &self.robot.limits, obs, agents, scene);
         let result = guidance::guide_subset_until(
             &CrowdGuidance {
-                model: &self.model,
+                model: Replayed::new(&self.model, &self.replay),
                 weight: self.settings.crowd_weight,
             },
             cond,
@@ -542,6 +581,39 @@ impl<M: FlowModel> Human2Nav<M> {
             ));
         }
         Ok(result)
+    }
+
+    /// The plan a call returns from what [`Self::try_plan`] gave: the plan if finite, else
+    /// stopping in place with the reason; the start `warnings` added, the plan kept for the
+    /// warm start and the batched velocities of [`Self::plan_batch`] dropped.
+    fn conclude(
+        &mut self,
+        obs: &Observation,
+        result: Result<Plan, StageError>,
+        warnings: Vec<String>,
+    ) -> Plan {
+        let mut plan = match result {
+            Ok(plan) if plan.is_finite() => plan,
+            Ok(_) => Plan::stop_in_place(
+                obs,
+                self.settings.dt,
+                self.model.horizon() + 1,
+                "the selected plan was not finite",
+            ),
+            Err(failure) => {
+                let why = failure.to_string();
+                let mut plan =
+                    Plan::stop_in_place(obs, self.settings.dt, self.model.horizon() + 1, &why);
+                // A term of Φ that fails is a broken extension, not the planner's own
+                // fallback: callers count the call as failed (the benchmark records it).
+                plan.info.error = failure.is_term().then_some(why);
+                plan
+            }
+        };
+        plan.info.warnings = warnings;
+        self.previous = (!plan.info.fallback).then(|| plan.clone());
+        self.replay.clear();
+        plan
     }
 
     /// The plan of the chosen candidate in the world frame, with its diagnostics: the samples
@@ -620,6 +692,18 @@ impl<M: FlowModel> Human2Nav<M> {
             info,
         }
     }
+}
+
+/// The inputs of a planning call up to the flow model ([`Human2Nav::prepare`]).
+struct Prepared {
+    cond: FlowCondition,
+    agents: Vec<AgentState>,
+    notes: Vec<String>,
+    forecast: Forecast,
+    /// The `K` source samples, flat `[K, T, 3]`.
+    x0: Vec<f64>,
+    /// The previous plan shifted to now, in the ego frame (with `warm_start`).
+    warm: Option<Vec<Pose2>>,
 }
 
 /// The candidates of a planning call, where each came from, the Φ before and after
@@ -722,26 +806,7 @@ impl<M: FlowModel + Send> Planner for Human2Nav<M> {
     fn plan_within(&mut self, obs: &Observation, deadline: &Deadline) -> Result<Plan, PlanError> {
         obs.validate()?;
         let warnings = self.start_warnings(obs);
-        let mut plan = match self.try_plan(obs, deadline) {
-            Ok(plan) if plan.is_finite() => plan,
-            Ok(_) => Plan::stop_in_place(
-                obs,
-                self.settings.dt,
-                self.model.horizon() + 1,
-                "the selected plan was not finite",
-            ),
-            Err(failure) => {
-                let why = failure.to_string();
-                let mut plan =
-                    Plan::stop_in_place(obs, self.settings.dt, self.model.horizon() + 1, &why);
-                // A term of Φ that fails is a broken extension, not the planner's own
-                // fallback: callers count the call as failed (the benchmark records it).
-                plan.info.error = failure.is_term().then_some(why);
-                plan
-            }
-        };
-        plan.info.warnings = warnings;
-        self.previous = (!plan.info.fallback).then(|| plan.clone());
-        Ok(plan)
+        let result = self.try_plan(obs, deadline);
+        Ok(self.conclude(obs, result, warnings))
     }
 }

@@ -47,18 +47,8 @@ pub(super) fn forward(
         }
         let w = &mut ws.ws[i * m..(i + 1) * m];
         let u = &ws.u[i * m..(i + 1) * m];
-        for j in 0..m {
-            w[j] = ws.fout[j] + u[j];
-        }
         let next = &mut rest[..m];
-        for ((p, v), o) in x
-            .chunks_exact(3)
-            .zip(w.chunks_exact(3))
-            .zip(next.chunks_exact_mut(3))
-        {
-            let q = Pose2::from_slice(p).euler_step(Twist2::from_slice(v), dt);
-            o.copy_from_slice(&q.to_array());
-        }
+        euler_advance(x, &ws.fout, u, dt, w, next);
         if !all_finite(next) {
             return Err(GuidanceError::NonFinite {
                 stage: "rollout",
@@ -67,6 +57,29 @@ pub(super) fn forward(
         }
     }
     Ok(n)
+}
+
+/// One step of a rollout: the velocity `w = f + u` of every waypoint, and the waypoint it
+/// reaches, `next = x·exp(dt·w)`.
+pub(crate) fn euler_advance(
+    x: &[f64],
+    f: &[f64],
+    u: &[f64],
+    dt: f64,
+    w: &mut [f64],
+    next: &mut [f64],
+) {
+    for (w, (f, u)) in w.iter_mut().zip(f.iter().zip(u)) {
+        *w = f + u;
+    }
+    for ((p, v), o) in x
+        .chunks_exact(3)
+        .zip(w.chunks_exact(3))
+        .zip(next.chunks_exact_mut(3))
+    {
+        let q = Pose2::from_slice(p).euler_step(Twist2::from_slice(v), dt);
+        o.copy_from_slice(&q.to_array());
+    }
 }
 
 /// Completes a rollout cut short after `from ≥ 1` steps: the steps `from … N − 1` continue at

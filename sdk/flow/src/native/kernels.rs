@@ -340,6 +340,51 @@ pub(crate) struct BlockNorm<'a> {
     pub conv_bias: &'a [f32],
 }
 
+/// The FiLM vectors `[scale; shift]` of a batch's rows: row `b`'s vector for a block of `c`
+/// channels starts at `data[start(b) + offset]`, with `start(b)` from `rows` (one vector per
+/// condition of a batch of several) or `0` for every row (one shared by the batch).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Film<'a> {
+    data: &'a [f32],
+    rows: Option<&'a [usize]>,
+    offset: usize,
+}
+
+impl<'a> Film<'a> {
+    /// One FiLM vector for every row.
+    pub(crate) fn shared(data: &'a [f32]) -> Self {
+        Self {
+            data,
+            rows: None,
+            offset: 0,
+        }
+    }
+
+    /// Row `b`'s vector at `data[rows[b]..]`.
+    pub(crate) fn per_row(data: &'a [f32], rows: &'a [usize]) -> Self {
+        Self {
+            data,
+            rows: Some(rows),
+            offset: 0,
+        }
+    }
+
+    /// The same vectors read `offset` further on (a block's part of them).
+    pub(crate) fn at(self, offset: usize) -> Self {
+        Self {
+            offset: self.offset + offset,
+            ..self
+        }
+    }
+
+    /// Row `b`'s scale and shift of `c` channels.
+    #[inline(always)]
+    fn row(&self, b: usize, c: usize) -> (&'a [f32], &'a [f32]) {
+        let s = self.rows.map_or(0, |r| r[b]) + self.offset;
+        (&self.data[s..s + c], &self.data[s + c..s + 2 * c])
+    }
+}
+
 /// An activation as a scalar function and its derivative.
 trait Act {
     fn f(x: f32) -> f32;
@@ -395,7 +440,7 @@ fn norm_act_impl<A: Act>(
     n: BlockNorm<'_>,
     batch: usize,
     len: usize,
-    film: Option<(&[f32], &[f32])>,
+    film: Option<Film<'_>>,
     xhat: &mut [f32],
     inv_std: &mut [f32],
     out: &mut [f32],
@@ -403,6 +448,7 @@ fn norm_act_impl<A: Act>(
     let per = n.gamma.len() / n.groups;
     let count = (per * len) as f64;
     for b in 0..batch {
+        let film = film.map(|f| f.row(b, n.gamma.len()));
         for g in 0..n.groups {
             let channels = g * per..(g + 1) * per;
             let row = |c: usize| (c * batch + b) * len..(c * batch + b + 1) * len;
@@ -451,7 +497,7 @@ multiversion! {
         n: BlockNorm<'_>,
         batch: usize,
         len: usize,
-        film: Option<(&[f32], &[f32])>,
+        film: Option<Film<'_>>,
         xhat: &mut Vec<f32>,
         inv_std: &mut Vec<f32>,
         out: &mut Vec<f32>,
@@ -473,13 +519,14 @@ fn norm_act_backward_impl<A: Act>(
     n: BlockNorm<'_>,
     batch: usize,
     len: usize,
-    film_scale: Option<&[f32]>,
+    film: Option<Film<'_>>,
     xhat: &[f32],
     inv_std: &[f32],
 ) {
     let per = n.gamma.len() / n.groups;
     let count = (per * len) as f64;
     for b in 0..batch {
+        let film_scale = film.map(|f| f.row(b, n.gamma.len()).0);
         for g in 0..n.groups {
             let channels = g * per..(g + 1) * per;
             let row = |c: usize| (c * batch + b) * len..(c * batch + b + 1) * len;
@@ -517,16 +564,16 @@ multiversion! {
         n: BlockNorm<'_>,
         batch: usize,
         len: usize,
-        film_scale: Option<&[f32]>,
+        film: Option<Film<'_>>,
         xhat: &[f32],
         inv_std: &[f32],
     ) {
         match act {
             Activation::Silu => {
-                norm_act_backward_impl::<SiluAct>(d, n, batch, len, film_scale, xhat, inv_std)
+                norm_act_backward_impl::<SiluAct>(d, n, batch, len, film, xhat, inv_std)
             }
             Activation::Mish => {
-                norm_act_backward_impl::<MishAct>(d, n, batch, len, film_scale, xhat, inv_std)
+                norm_act_backward_impl::<MishAct>(d, n, batch, len, film, xhat, inv_std)
             }
         }
     }
@@ -684,6 +731,9 @@ mod tests {
         let beta = [0.1f32, -0.2, 0.3, 0.0];
         let conv_bias = [0.3f32, -0.1, 0.0, 0.7];
         let (scale, shift) = ([0.8f32, 1.3, -0.4, 1.0], [0.2f32, 0.0, -0.3, 0.1]);
+        // Two FiLM vectors: the first shared by both rows, or one per row.
+        let films: Vec<f32> = [scale, shift, shift, scale].concat();
+        let rows = [0, 2 * ch];
         let n = BlockNorm {
             groups,
             gamma: &gamma,
@@ -695,7 +745,8 @@ mod tests {
             .collect();
         let w: Vec<f32> = (0..y.len()).map(|i| (i as f32 * 0.43).cos()).collect();
         for act in [Activation::Silu, Activation::Mish] {
-            for film in [None, Some((&scale[..], &shift[..]))] {
+            let per_row = Film::per_row(&films, &rows);
+            for film in [None, Some(Film::shared(&films)), Some(per_row)] {
                 let f = |y: &[f32]| -> f64 {
                     let (mut h, mut s, mut o) = (Vec::new(), Vec::new(), Vec::new());
                     norm_act(act, y, n, batch, len, film, &mut h, &mut s, &mut o);
@@ -704,7 +755,7 @@ mod tests {
                 let (mut h, mut s, mut o) = (Vec::new(), Vec::new(), Vec::new());
                 norm_act(act, &y, n, batch, len, film, &mut h, &mut s, &mut o);
                 let mut d = w.clone();
-                norm_act_backward(act, &mut d, n, batch, len, film.map(|f| f.0), &h, &s);
+                norm_act_backward(act, &mut d, n, batch, len, film, &h, &s);
                 for i in 0..y.len() {
                     let e = 1e-2f32;
                     let (mut p, mut m) = (y.clone(), y.clone());
@@ -713,8 +764,8 @@ mod tests {
                     let fd = (f(&p) - f(&m)) / (2.0 * f64::from(e));
                     assert!(
                         (fd - f64::from(d[i])).abs() < 3e-3,
-                        "{act:?} film {}: {i}: {fd} vs {}",
-                        film.is_some(),
+                        "{act:?} film {:?}: {i}: {fd} vs {}",
+                        film.map(|f| f.rows.is_some()),
                         d[i]
                     );
                 }

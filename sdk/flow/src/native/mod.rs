@@ -24,8 +24,9 @@ use crate::io_map::{self, batch_of, check_len};
 use crate::model::CfmModel;
 use crate::model::{CARD_FILE, crowd_points, normalise_condition};
 use crowd::{CrowdScratch, CrowdTape};
-use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
+use human2nav_core::flow::{FlowCondition, FlowError, FlowModel, FlowQuery};
 use human2nav_core::input::read_user_bytes;
+use kernels::Film;
 use net::{Net, Pool, Tape, WeightError, Weights};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -53,15 +54,94 @@ struct Forward {
     stamp: u64,
 }
 
-/// Per-condition caches and the reusable buffers of one model.
+/// One condition's encoding: the condition embedding, the crowd points and the FiLM vectors of
+/// recent flow times.
 #[derive(Debug, Default)]
-struct State {
+struct Encoded {
     cond: Option<FlowCondition>,
     embedding: Vec<f32>,
     /// The condition's crowd points ([`crowd_points`]; empty without the crowd pathway).
     points: Vec<f32>,
     /// FiLM vectors per flow time (keyed by the bits of `t`).
     films: Vec<(u64, Vec<f32>)>,
+}
+
+impl Encoded {
+    /// Encodes `cond` unless it is the one encoded already; returns whether it changed.
+    fn update(&mut self, model: &NativeCfm, cond: &FlowCondition) -> Result<bool, FlowError> {
+        if self.cond.as_ref() == Some(cond) {
+            return Ok(false);
+        }
+        let card = &model.card;
+        let len = card.net.bev_len();
+        if cond.bev.len() != len {
+            let cells = card.net.bev_cells;
+            return Err(FlowError::Shape(format!(
+                "BEV raster has {} values, the model expects 3×{cells}×{cells} = {len}",
+                cond.bev.len()
+            )));
+        }
+        let mut bev = vec![0f32; len];
+        let mut gv = [0f32; 4];
+        normalise_condition(
+            &card.normalisation,
+            &cond.bev,
+            cond.goal,
+            cond.velocity,
+            &mut bev,
+            &mut gv,
+        );
+        self.embedding = model.net.encode_condition(&bev, &gv);
+        let net = &card.net;
+        self.points.clear();
+        self.points.resize(net.crowd_len(), 0.0);
+        if let Some(c) = &net.crowd {
+            crowd_points(
+                c,
+                &card.normalisation,
+                net.bev_cells,
+                &cond.bev,
+                &mut self.points,
+            );
+        }
+        self.films.clear();
+        self.cond = Some(cond.clone());
+        Ok(true)
+    }
+
+    /// The index in `films` of flow time `t`'s FiLM vector (computed on first use).
+    fn film(&mut self, net: &Net, t: f64) -> usize {
+        let key = t.to_bits();
+        if let Some(i) = self.films.iter().position(|(k, _)| *k == key) {
+            return i;
+        }
+        if self.films.len() >= FILM_CACHE {
+            self.films.remove(0);
+        }
+        let film = net.film(t, &self.embedding);
+        self.films.push((key, film));
+        self.films.len() - 1
+    }
+}
+
+/// The buffers of a batched call ([`FlowModel::velocity_batch`]): one encoding per query index
+/// (kept while the query at that index keeps its condition), every row's FiLM vector and the
+/// pass over all rows.
+#[derive(Debug, Default)]
+struct Batched {
+    members: Vec<Encoded>,
+    films: Vec<f32>,
+    film_rows: Vec<usize>,
+    feat: Vec<f32>,
+    tape: Tape,
+    crowd: CrowdTape,
+    raw: Vec<f32>,
+}
+
+/// Per-condition caches and the reusable buffers of one model.
+#[derive(Debug, Default)]
+struct State {
+    encoded: Encoded,
     /// Recent forward passes under this condition.
     forwards: Vec<Forward>,
     clock: u64,
@@ -70,6 +150,7 @@ struct State {
     feat: Vec<f32>,
     dfeat: Vec<f32>,
     cot: Vec<f32>,
+    batched: Batched,
 }
 
 /// The flow model on Rust kernels; see the [module documentation](self).
@@ -163,50 +244,13 @@ impl NativeCfm {
             .map_err(|_| FlowError::Backend("native model state poisoned".into()))
     }
 
-    /// Fills the condition embedding and the FiLM vector of `(cond, t)` in `st` (cached) and
-    /// returns the index of the FiLM vector in `st.films`.
+    /// Encodes `cond` (cached) and returns the index of the FiLM vector of `(cond, t)` in
+    /// `st.encoded.films`; a new condition drops the kept forward passes.
     fn prepare(&self, st: &mut State, cond: &FlowCondition, t: f64) -> Result<usize, FlowError> {
-        if st.cond.as_ref() != Some(cond) {
-            let len = self.card.net.bev_len();
-            if cond.bev.len() != len {
-                let cells = self.card.net.bev_cells;
-                return Err(FlowError::Shape(format!(
-                    "BEV raster has {} values, the model expects 3×{cells}×{cells} = {len}",
-                    cond.bev.len()
-                )));
-            }
-            let mut bev = vec![0f32; len];
-            let mut gv = [0f32; 4];
-            normalise_condition(
-                &self.card.normalisation,
-                &cond.bev,
-                cond.goal,
-                cond.velocity,
-                &mut bev,
-                &mut gv,
-            );
-            st.embedding = self.net.encode_condition(&bev, &gv);
-            let net = &self.card.net;
-            st.points.clear();
-            st.points.resize(net.crowd_len(), 0.0);
-            if let Some(c) = &net.crowd {
-                let norm = &self.card.normalisation;
-                crowd_points(c, norm, net.bev_cells, &cond.bev, &mut st.points);
-            }
-            st.films.clear();
+        if st.encoded.update(self, cond)? {
             st.forwards.iter_mut().for_each(|f| f.x.clear());
-            st.cond = Some(cond.clone());
         }
-        let key = t.to_bits();
-        if let Some(i) = st.films.iter().position(|(k, _)| *k == key) {
-            return Ok(i);
-        }
-        if st.films.len() >= FILM_CACHE {
-            st.films.remove(0);
-        }
-        let film = self.net.film(t, &st.embedding);
-        st.films.push((key, film));
-        Ok(st.films.len() - 1)
+        Ok(st.encoded.film(&self.net, t))
     }
 
     /// The forward pass of poses `x` at flow time `t`: a kept one with exactly this input, or a
@@ -238,18 +282,13 @@ impl NativeCfm {
         write_features(x, h, self.card.normalisation.position_scale, &mut st.feat);
         let f = &mut st.forwards[slot];
         if let Some(c) = &self.net.crowd {
-            c.forward(
-                &mut st.feat,
-                (k, h),
-                &st.points,
-                &mut f.crowd,
-                &mut st.crowd,
-            );
+            let points = &st.encoded.points;
+            c.forward(&mut st.feat, (k, h), points, &mut f.crowd, &mut st.crowd);
         }
         self.net.forward(
             &st.feat,
             k,
-            &st.films[fi].1,
+            Film::shared(&st.encoded.films[fi].1),
             &mut f.tape,
             &mut st.pool,
             &mut f.raw,
@@ -293,15 +332,18 @@ fn write_features(x: &[f64], h: usize, position_scale: f64, out: &mut Vec<f32>) 
     });
 }
 
-/// Metric velocities from the raw output `[3, K, T]`.
+/// Metric velocities of rows `first..` (as many as `out` holds) of the raw output
+/// `[3, rows, T]`.
 fn velocity_of(
     raw: &[f32],
-    k: usize,
+    (rows, first): (usize, usize),
     h: usize,
     scale: [f64; 3],
     out: &mut [f64],
 ) -> Result<(), FlowError> {
-    io_map::write_velocity(out, h, scale, |b, c, j| f64::from(raw[(c * k + b) * h + j]))
+    io_map::write_velocity(out, h, scale, |b, c, j| {
+        f64::from(raw[(c * rows + first + b) * h + j])
+    })
 }
 
 impl FlowModel for NativeCfm {
@@ -324,7 +366,77 @@ impl FlowModel for NativeCfm {
         let mut st = self.lock()?;
         let (slot, _) = self.run_forward(&mut st, x, t, cond)?;
         let f = &st.forwards[slot];
-        velocity_of(&f.raw, f.batch, self.card.net.horizon, self.out_scale, out)
+        velocity_of(
+            &f.raw,
+            (f.batch, 0),
+            self.card.net.horizon,
+            self.out_scale,
+            out,
+        )
+    }
+
+    /// The groups run as one batch: each row gets its group's FiLM vector and crowd
+    /// features, every layer one matrix product over all rows. The values equal one
+    /// [`FlowModel::velocity`] per group bit for bit (each row's arithmetic is the same). Kept
+    /// forward passes are neither used nor made: guidance pulls back through single calls.
+    fn velocity_batch(&self, queries: &[FlowQuery<'_>], out: &mut [f64]) -> Result<(), FlowError> {
+        let total: usize = queries.iter().map(|q| q.x.len()).sum();
+        check_len("out", out.len(), total)?;
+        if let [q] = queries {
+            return self.velocity(q.x, q.t, q.cond, out);
+        }
+        let h = self.card.net.horizon;
+        let scale = self.card.normalisation.position_scale;
+        let mut guard = self.lock()?;
+        let st = &mut *guard;
+        let b = &mut st.batched;
+        b.members.resize_with(queries.len(), Encoded::default);
+        b.films.clear();
+        b.film_rows.clear();
+        let mut rows = 0;
+        for (q, m) in queries.iter().zip(&mut b.members) {
+            let k = batch_of(q.x.len(), h)?;
+            m.update(self, q.cond)?;
+            let fi = m.film(&self.net, q.t);
+            b.film_rows.extend(std::iter::repeat_n(b.films.len(), k));
+            b.films.extend_from_slice(&m.films[fi].1);
+            rows += k;
+        }
+        // Each group's features `[C, k, T]` (the crowd pathway's under its own points) go to
+        // its rows of `[C, rows, T]`.
+        let mut first = 0;
+        for (q, m) in queries.iter().zip(&b.members) {
+            let k = q.x.len() / (3 * h);
+            write_features(q.x, h, scale, &mut st.feat);
+            if let Some(c) = &self.net.crowd {
+                c.forward(&mut st.feat, (k, h), &m.points, &mut b.crowd, &mut st.crowd);
+            }
+            let channels = st.feat.len() / (k * h);
+            b.feat.resize(channels * rows * h, 0.0);
+            for (c, group) in st.feat.chunks_exact(k * h).enumerate() {
+                let at = (c * rows + first) * h;
+                b.feat[at..at + k * h].copy_from_slice(group);
+            }
+            first += k;
+        }
+        let film = Film::per_row(&b.films, &b.film_rows);
+        let (tape, pool) = (&mut b.tape, &mut st.pool);
+        self.net
+            .forward(&b.feat, rows, film, tape, pool, &mut b.raw);
+        let mut first = 0;
+        let mut rest = out;
+        for q in queries {
+            let (o, r) = rest.split_at_mut(q.x.len());
+            velocity_of(&b.raw, (rows, first), h, self.out_scale, o)?;
+            first += q.x.len() / (3 * h);
+            rest = r;
+        }
+        Ok(())
+    }
+
+    /// Clones share their weights ([`Clone`]), and so their network.
+    fn network_id(&self) -> Option<usize> {
+        Some(Arc::as_ptr(&self.net) as usize)
     }
 
     /// The backward pass of the network input runs on the activations of the forward pass at
@@ -346,12 +458,11 @@ impl FlowModel for NativeCfm {
         let mut st = self.lock()?;
         let (slot, fi) = self.run_forward(&mut st, x, t, cond)?;
         let State {
-            films,
+            encoded,
             forwards,
             dfeat,
             cot,
             pool,
-            points,
             crowd: scratch,
             ..
         } = &mut *st;
@@ -363,15 +474,16 @@ impl FlowModel for NativeCfm {
             ..
         } = &mut forwards[slot];
         let k = *k;
-        velocity_of(raw, k, h, self.out_scale, out)?;
+        velocity_of(raw, (k, 0), h, self.out_scale, out)?;
         cot.clear();
         cot.resize(3 * k * h, 0.0);
         io_map::for_each_output_cotangent(cotangent, h, self.out_scale, |b, c, j, v| {
             cot[(c * k + b) * h + j] = v as f32;
         });
-        self.net.backward(cot, &films[fi].1, tape, pool, dfeat);
+        let film = Film::shared(&encoded.films[fi].1);
+        self.net.backward(cot, film, tape, pool, dfeat);
         if let Some(c) = &self.net.crowd {
-            c.backward(dfeat, (k, h), points, crowd, scratch);
+            c.backward(dfeat, (k, h), &encoded.points, crowd, scratch);
         }
         let s = self.card.normalisation.position_scale;
         io_map::pull_back_features(

@@ -1,7 +1,7 @@
 //! Latency: percentiles of planning-call wall times ([`measure_latency`]) and [`TimedModel`],
 //! which splits them into time inside the flow network and everything else.
 
-use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
+use human2nav_core::flow::{FlowCondition, FlowError, FlowModel, FlowQuery};
 use human2nav_core::{Observation, PlanError, Planner};
 use serde::Serialize;
 use std::sync::{Arc, Mutex};
@@ -198,5 +198,19 @@ impl<M: FlowModel> FlowModel for TimedModel<M> {
         let rows = (x.len() / (3 * self.inner.horizon()).max(1)) as u64;
         self.record(true, rows, start.elapsed().as_secs_f64());
         r
+    }
+
+    /// Counted as one call of all the groups' rows.
+    fn velocity_batch(&self, queries: &[FlowQuery<'_>], out: &mut [f64]) -> Result<(), FlowError> {
+        let start = Instant::now();
+        let r = self.inner.velocity_batch(queries, out);
+        let values: usize = queries.iter().map(|q| q.x.len()).sum();
+        let rows = (values / (3 * self.inner.horizon()).max(1)) as u64;
+        self.record(false, rows, start.elapsed().as_secs_f64());
+        r
+    }
+
+    fn network_id(&self) -> Option<usize> {
+        self.inner.network_id()
     }
 }

@@ -8,7 +8,7 @@ use crate::card::ModelCard;
 use crate::model::CfmModel;
 use crate::native::NativeCfm;
 use human2nav_core::bev::BevSpec;
-use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
+use human2nav_core::flow::{FlowCondition, FlowError, FlowModel, FlowQuery};
 use human2nav_core::forecast::{CrowdPredictor, FlowPredictor, FlowPredictorSettings};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -165,6 +165,17 @@ impl PlannerModel {
         }
     }
 
+    /// The backend that runs it.
+    pub fn backend(&self) -> Backend {
+        match self {
+            Self::Native(_) => Backend::Native,
+            #[cfg(feature = "torch")]
+            Self::Torch(m) if m.device() == tch::Device::Cpu => Backend::Torch,
+            #[cfg(feature = "torch")]
+            Self::Torch(_) => Backend::Cuda,
+        }
+    }
+
     /// The model card.
     pub fn card(&self) -> &ModelCard {
         match self {
@@ -226,6 +237,14 @@ impl FlowModel for PlannerModel {
         vjp: &mut [f64],
     ) -> Result<(), FlowError> {
         self.flow().velocity_vjp(x, t, cond, cotangent, out, vjp)
+    }
+
+    fn velocity_batch(&self, queries: &[FlowQuery<'_>], out: &mut [f64]) -> Result<(), FlowError> {
+        self.flow().velocity_batch(queries, out)
+    }
+
+    fn network_id(&self) -> Option<usize> {
+        self.flow().network_id()
     }
 }
 

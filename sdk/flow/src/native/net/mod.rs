@@ -6,7 +6,7 @@
 
 use super::crowd::Crowd;
 use super::kernels::{
-    BlockNorm, Taps, add_bias, add_to, gather, linear, norm_act, norm_act_backward,
+    BlockNorm, Film, Taps, add_bias, add_to, gather, linear, norm_act, norm_act_backward,
     resize_for_overwrite, scatter_add, sgemm,
 };
 use crate::config::{Activation, NetConfig};
@@ -255,14 +255,14 @@ impl ConvBlock {
         }
     }
 
-    /// `out = act(GN(conv(x)))`, then `shift + out·scale` with `film = (scale, shift)`; the
+    /// `out = act(GN(conv(x)))`, then `shift + out·scale` with each row's FiLM; the
     /// length is unchanged.
     fn forward(
         &self,
         act: Activation,
         x: &[f32],
         (batch, len): (usize, usize),
-        film: Option<(&[f32], &[f32])>,
+        film: Option<Film<'_>>,
         s: &mut Scratch,
         cache: &mut BlockCache,
         out: &mut Vec<f32>,
@@ -291,7 +291,7 @@ impl ConvBlock {
         act: Activation,
         dout: &mut [f32],
         (batch, len): (usize, usize),
-        film_scale: Option<&[f32]>,
+        film: Option<Film<'_>>,
         s: &mut Scratch,
         cache: &BlockCache,
         dx: &mut [f32],
@@ -302,7 +302,7 @@ impl ConvBlock {
             self.block_norm(),
             batch,
             len,
-            film_scale,
+            film,
             &cache.xhat,
             &cache.inv_std,
         );
@@ -372,13 +372,12 @@ impl ResBlock {
         net: &Net,
         x: &[f32],
         (batch, len): (usize, usize),
-        film: &[f32],
+        film: Film<'_>,
         s: &mut Scratch,
         cache: &mut ResCache,
         out: &mut Vec<f32>,
     ) {
-        let c = self.cout();
-        let film = film[self.film_offset..self.film_offset + 2 * c].split_at(c);
+        let film = film.at(self.film_offset);
         let mut h = std::mem::take(&mut s.h);
         let bl = (batch, len);
         self.block0
@@ -403,7 +402,7 @@ impl ResBlock {
         net: &Net,
         dout: &[f32],
         (batch, len): (usize, usize),
-        film: &[f32],
+        film: Film<'_>,
         s: &mut Scratch,
         cache: &ResCache,
         dx: &mut Vec<f32>,
@@ -425,9 +424,15 @@ impl ResBlock {
         let bl = (batch, len);
         self.block1
             .backward(net.act, &mut d1, bl, None, s, &cache.b1, &mut dh);
-        let scale = &film[self.film_offset..self.film_offset + c];
-        self.block0
-            .backward(net.act, &mut dh, bl, Some(scale), s, &cache.b0, dx);
+        self.block0.backward(
+            net.act,
+            &mut dh,
+            bl,
+            Some(film.at(self.film_offset)),
+            s,
+            &cache.b0,
+            dx,
+        );
         s.d1 = d1;
         s.h = dh;
     }

@@ -2,7 +2,7 @@
 //! pass with its [`Tape`] and the backward pass of its input.
 
 use super::{Net, Pool, ResCache, Tape};
-use crate::native::kernels::{BlockNorm, activate_in_place, add_to, norm_act};
+use crate::native::kernels::{BlockNorm, Film, activate_in_place, add_to, norm_act};
 
 /// Sinusoidal time frequency multiplier of [`crate::net`].
 const TIME_SCALE: f32 = crate::net::TIME_SCALE as f32;
@@ -63,7 +63,7 @@ impl Net {
         &self,
         x: &[f32],
         batch: usize,
-        film: &[f32],
+        film: Film<'_>,
         tape: &mut Tape,
         pool: &mut Pool,
         out: &mut Vec<f32>,
@@ -136,7 +136,7 @@ impl Net {
     pub(crate) fn backward(
         &self,
         dout: &[f32],
-        film: &[f32],
+        film: Film<'_>,
         tape: &Tape,
         pool: &mut Pool,
         dx: &mut Vec<f32>,

@@ -13,12 +13,16 @@
 //! ones; the robot is `robots/diablo/robot.toml` (or `$H2N_ROBOT`); the planner settings are
 //! those of `sdk/configs/planner.toml`.
 //!
-//! Run: `cargo bench -p human2nav-flow --bench planning` (threads: `H2N_THREADS`, default 1).
+//! `plan_batch/*` times [`BATCH`] planners per iteration planned one by one and as one
+//! `Human2Nav::plan_batch` (native backend, the configured planner and the raw arm): plans per
+//! second on one thread.
+//!
+//! Run: `cargo bench -p human2nav-flow --features torch --bench planning` (threads: `H2N_THREADS`, default 1).
 //! `human2nav plan --bench <calls>` reports p50/p95 and the time split on the same setup.
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use human2nav_core::ablation::Arm;
-use human2nav_core::human2nav::Human2NavSettings;
+use human2nav_core::human2nav::{Human2Nav, Human2NavSettings};
 use human2nav_core::{AgentState, Observation, Planner, Pose2, Twist2};
 use human2nav_data::{Episode, EpisodeSuite, ScenarioClass};
 use human2nav_flow::net::Complexity;
@@ -144,13 +148,8 @@ fn bench_planning(c: &mut Criterion) {
         let timed = TimedModel::new(model);
         let stats = timed.stats();
         let phi = robot_phi(&profile).expect("robot terms");
-        let mut p = human2nav_core::human2nav::Human2Nav::new(
-            timed,
-            robot_model(&profile, phi),
-            bev,
-            settings,
-        )
-        .expect("planner");
+        let mut p =
+            Human2Nav::new(timed, robot_model(&profile, phi), bev, settings).expect("planner");
         for o in &obs {
             p.reset();
             p.plan(o).expect("plan");
@@ -184,5 +183,63 @@ fn bench_planning(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_planning);
+/// Planners planned per batch in `plan_batch/*`.
+const BATCH: usize = 16;
+
+/// Throughput of [`Human2Nav::plan_batch`] against the same planners planned one by one:
+/// `plan_batch/{configured,raw}/{one_by_one,batched}`, [`BATCH`] planners (clones of one native
+/// model) per iteration, planner `i` of iteration `r` on scene `r·BATCH + i` (a planner that
+/// saw the same scene again would find its forward passes kept); criterion reports plans per
+/// second.
+fn bench_batch(c: &mut Criterion) {
+    let robot = env_path("H2N_ROBOT", "robots/diablo/robot.toml");
+    let profile = load_profile(&robot).expect("robot profile");
+    let model = human2nav_flow::NativeCfm::load(&model_dir()).expect("model");
+    let scenes = scenes();
+    let round = |r: usize| -> Vec<Observation> {
+        (0..BATCH)
+            .map(|i| scenes[(r * BATCH + i) % scenes.len()].clone())
+            .collect()
+    };
+    let base: Human2NavSettings =
+        PlannerConfig::load(&workspace().join("sdk/configs/planner.toml"))
+            .map(|c| c.human2nav)
+            .unwrap_or_default();
+    let mut group = c.benchmark_group("plan_batch");
+    group
+        .sample_size(10)
+        .measurement_time(std::time::Duration::from_secs(10))
+        .throughput(Throughput::Elements(BATCH as u64));
+    for (mode, settings) in modes(&base).into_iter().take(2) {
+        let mut planners: Vec<RobotPlanner> = (0..BATCH)
+            .map(|_| RobotPlanner::new(profile.clone(), model.clone(), settings).expect("planner"))
+            .collect();
+        let mut r = 0;
+        group.bench_function(format!("{mode}/one_by_one"), |b| {
+            b.iter(|| {
+                r += 1;
+                for (p, o) in planners.iter_mut().zip(&round(r)) {
+                    p.planner.reset();
+                    black_box(p.planner.plan(o).expect("plan"));
+                }
+            })
+        });
+        group.bench_function(format!("{mode}/batched"), |b| {
+            b.iter(|| {
+                r += 1;
+                let mut refs: Vec<_> = planners
+                    .iter_mut()
+                    .map(|p| {
+                        p.planner.reset();
+                        &mut p.planner
+                    })
+                    .collect();
+                black_box(Human2Nav::plan_batch(&mut refs, &round(r)).expect("batch"))
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_planning, bench_batch);
 criterion_main!(benches);

@@ -140,6 +140,10 @@ pub(super) fn bench(
          MFLOP/call at the SGEMM rate above, so p50 / limit is how far a call is from the machine's arithmetic \
          bound (a lower bound on that distance with a crowd pathway)."
     );
+    if let Some(batch) = args.batch {
+        let shape = (calls, batch);
+        super::batch::batch_table(robot, model_dir, &backends, &cfg.human2nav, &wins, shape)?;
+    }
     if cfg.human2nav.budget_ms > 0.0 {
         let mut settings = cfg.human2nav;
         settings.guidance.enabled = true;

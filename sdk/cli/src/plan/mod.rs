@@ -23,6 +23,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+mod batch;
 mod bench;
 mod eval;
 
@@ -95,6 +96,11 @@ pub struct PlanArgs {
     /// (p50/p95 and where the time goes).
     #[arg(long, value_name = "CALLS")]
     pub bench: Option<usize>,
+    /// With `--bench`: also measure the throughput of this many planners planned at once
+    /// (`Human2Nav::plan_batch`, the network batched across them) against the same planners
+    /// one by one, on one and on two threads (native backend; about CALLS plans per row).
+    #[arg(long, value_name = "PLANNERS", requires = "bench")]
+    pub batch: Option<usize>,
     /// Planning budget of a call in milliseconds (overrides the configuration's `budget_ms`):
     /// the call returns the best plan found by then. With `--bench`, also reports how late the
     /// calls return and how far each stage got.
@@ -127,6 +133,9 @@ pub fn run(args: PlanArgs) -> anyhow::Result<ExitCode> {
     }
     if args.bench == Some(0) {
         bail!("--bench 0: `plan --bench` needs at least one timed call");
+    }
+    if args.batch == Some(0) {
+        bail!("--batch 0: a batch needs at least one planner");
     }
     if args.human == Some(0) {
         bail!("--human 0: give at least one recorded window, or leave --human out");

@@ -364,11 +364,12 @@ fn the_torch_backend_without_libtorch_says_how_to_get_it() {
 /// The GPU path: the shipped model on the first CUDA device computes what the native backend
 /// computes (velocity and VJP of 16 samples; CUDA convolutions may run in TF32, hence the
 /// tolerance), and a guided planner on it returns a plan from the robot. Without a CUDA
-/// device, asking for one is an error on `backend`, and the comparison is skipped.
+/// device, asking for one is an error on `backend`, and the comparison is skipped. The batch
+/// API is checked there too: one pass for two conditions, and two GPU planners planned at once.
 #[test]
 #[cfg(feature = "torch")]
 fn the_cuda_backend_agrees_with_the_native_one_where_a_gpu_is_present() {
-    use human2nav_core::flow::FlowModel;
+    use human2nav_core::flow::{FlowModel, FlowQuery};
     let dir = workspace().join("models/human2nav-cfm");
     if !tch::Cuda::is_available() {
         let err = load_model(&dir, Backend::Cuda).unwrap_err();
@@ -403,9 +404,28 @@ fn the_cuda_backend_agrees_with_the_native_one_where_a_gpu_is_present() {
             );
         }
     }
+    // The batch API on the GPU: one pass for two conditions agrees with the native calls.
+    let empty = human2nav_core::flow::FlowCondition {
+        bev: vec![0.0; cond.bev.len()],
+        ..cond.clone()
+    };
+    let queries = [(&cond, 0.2), (&empty, 0.8)].map(|(cond, t)| FlowQuery { x: &x, t, cond });
+    let mut batched = vec![0.0; 2 * n];
+    gpu.velocity_batch(&queries, &mut batched)
+        .expect("GPU batch");
+    for (q, b) in queries.iter().zip(batched.chunks_exact(n)) {
+        cpu.velocity(q.x, q.t, q.cond, &mut vb)
+            .expect("native velocity");
+        let scale = vb.iter().fold(0f64, |m, v| m.max(v.abs()));
+        let diff = b
+            .iter()
+            .zip(&vb)
+            .fold(0f64, |m, (p, q)| m.max((p - q).abs()));
+        assert!(diff <= 1e-2 * scale, "batched at t = {}: {diff}", q.t);
+    }
     let profile = load_profile(&workspace().join("robots/diablo/robot.toml")).expect("profile");
     let settings = Arm::Both.settings(&Human2NavSettings::default());
-    let mut rp = RobotPlanner::new(profile, gpu, settings).expect("planner on the GPU");
+    let mut rp = RobotPlanner::new(profile.clone(), gpu, settings).expect("planner on the GPU");
     let obs = observation();
     let plan = rp.planner.plan(&obs).expect("plan");
     assert!(!plan.poses.is_empty());
@@ -414,4 +434,12 @@ fn the_cuda_backend_agrees_with_the_native_one_where_a_gpu_is_present() {
             .iter()
             .all(|p| p.x.is_finite() && p.y.is_finite())
     );
+    // Two GPU planners loaded from one folder plan as a batch.
+    let second = load_model(&dir, Backend::Cuda).expect("second GPU model");
+    let mut other = RobotPlanner::new(profile, second, settings).expect("second planner");
+    let mut both = [&mut rp.planner, &mut other.planner];
+    for plan in Human2Nav::plan_batch(&mut both, &[obs.clone(), obs]).expect("batch") {
+        let plan = plan.expect("plan");
+        assert!(!plan.info.fallback && plan.is_finite());
+    }
 }

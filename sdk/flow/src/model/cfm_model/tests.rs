@@ -314,3 +314,66 @@ fn save_load_round_trip_and_validation() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The one-pass batch (`velocity_batch` on a GPU) runs all groups together, each row under its
+/// group's condition, time and crowd points: the same values as one call per group, to float
+/// rounding; on the CPU `velocity_batch` is one call per group.
+#[test]
+fn a_batch_of_conditions_agrees_with_calls_one_by_one() {
+    tch::manual_seed(4);
+    let cfg = NetConfig {
+        crowd: Some(CrowdConfig::default()),
+        ..small()
+    };
+    let model = CfmModel::new(&cfg, &norm(), Device::Cpu).unwrap();
+    let conds: Vec<FlowCondition> = (0..3).map(|s| condition(&cfg, 10 + s)).collect();
+    let xs: Vec<Vec<f64>> = [2, 1, 3].iter().map(|&k| poses(k, cfg.horizon)).collect();
+    let queries: Vec<FlowQuery<'_>> = [(0, 0.0), (1, 0.4), (2, 0.8)]
+        .iter()
+        .zip(&xs)
+        .map(|(&(c, t), x)| FlowQuery {
+            x,
+            t,
+            cond: &conds[c],
+        })
+        .collect();
+    let mut batched = vec![0.0; xs.iter().map(Vec::len).sum()];
+    let mut each = batched.clone();
+    model.velocity_batch(&queries, &mut each).unwrap();
+    // Twice: the second pass reuses the encodings.
+    for _ in 0..2 {
+        model.batched_velocity(&queries, &mut batched).unwrap();
+    }
+    let mut at = 0;
+    for q in &queries {
+        let mut alone = vec![0.0; q.x.len()];
+        model.velocity(q.x, q.t, q.cond, &mut alone).unwrap();
+        assert_eq!(alone, each[at..at + q.x.len()]);
+        for (a, b) in alone.iter().zip(&batched[at..]) {
+            assert_relative_eq!(*a, *b, epsilon = 1e-5, max_relative = 1e-5);
+        }
+        at += q.x.len();
+    }
+}
+
+/// Models loaded from one weights file report one network; a fresh model, or one whose
+/// variables were handed out, reports none.
+#[test]
+fn loaded_models_of_one_file_share_a_network_id() {
+    tch::manual_seed(5);
+    let dir = std::env::temp_dir().join(format!("h2n-flow-netid-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let model = CfmModel::new(&small(), &norm(), Device::Cpu).unwrap();
+    assert_eq!(model.network_id(), None);
+    model.save(&dir).unwrap();
+    let (a, b) = (
+        CfmModel::load(&dir, Device::Cpu).unwrap(),
+        CfmModel::load(&dir, Device::Cpu).unwrap(),
+    );
+    assert!(a.network_id().is_some());
+    assert_eq!(a.network_id(), b.network_id());
+    let _ = a.var_store();
+    assert_eq!(a.network_id(), None);
+    assert!(b.network_id().is_some());
+    let _ = std::fs::remove_dir_all(&dir);
+}

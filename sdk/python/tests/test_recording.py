@@ -18,8 +18,20 @@ SCHEMAS = {
     "/tf": "foxglove.FrameTransform",
     "/robot/pose": "foxglove.PoseInFrame",
     "/plan": "foxglove.PosesInFrame",
-    "/scene": "foxglove.SceneUpdate",
+    "/scene/static": "foxglove.SceneUpdate",
+    "/scene/people": "foxglove.SceneUpdate",
+    "/scene/plan": "foxglove.SceneUpdate",
     "/outcome": "foxglove.Log",
+}
+# Which scene topic carries each entity: the static scene, the people and the plan on topics of
+# their own, so that a viewer jumping to a time (the latest message of each topic) shows all.
+ENTITY_TOPIC = {
+    "footprint": "/scene/static",
+    "goal": "/scene/static",
+    "obstacles": "/scene/static",
+    "pedestrians": "/scene/people",
+    "plan": "/scene/plan",
+    "candidates": "/scene/plan",
 }
 
 
@@ -111,8 +123,9 @@ def test_a_recorded_run_shows_the_robot_people_obstacles_goal_and_plans(bench_ru
     _, messages, _ = read(out / "record" / "corridor" / row["robot"] / "straight" / f"{safe}.mcap")
     entities = {}
     for topic, t, m in messages:
-        if topic == "/scene":
+        if topic.startswith("/scene"):
             for e in m["entities"]:
+                assert ENTITY_TOPIC[e["id"]] == topic, (e["id"], topic)
                 entities.setdefault(e["id"], []).append((t, e))
     # Once at the start: the footprint in the robot's frame, the goal and the walls.
     (t0, footprint), = entities["footprint"]
@@ -150,7 +163,12 @@ def test_a_planning_call_is_recorded_with_its_candidates(tmp_path):
     )
     channels, messages, metadata = read(tmp_path / "plan.mcap")
     assert channels == SCHEMAS
-    scene = {e["id"]: e for topic, _, m in messages if topic == "/scene" for e in m["entities"]}
+    scene = {}
+    for topic, _, m in messages:
+        if topic.startswith("/scene"):
+            for e in m["entities"]:
+                assert ENTITY_TOPIC[e["id"]] == topic, (e["id"], topic)
+                scene[e["id"]] = e
     candidates = int(metadata["plan"]["candidates"])
     assert candidates > 0 and len(scene["candidates"]["lines"]) == candidates
     assert len(scene["plan"]["lines"]) == 1

@@ -256,7 +256,7 @@ def test_a_bag_is_replayed_into_plans_and_commands_rosbags_reads(tmp_path, kind)
     with open(tmp_path / "replayed.scene.mcap", "rb") as f:
         people = [
             json.loads(m.data)
-            for _, c, m in make_reader(f).iter_messages(topics=["/scene"])
+            for _, c, m in make_reader(f).iter_messages(topics=["/scene/people"])
         ]
     xs = [c["pose"]["position"]["x"] for u in people for e in u["entities"] if e["id"] == "pedestrians" for c in e["cylinders"]]
     assert xs and all(x == pytest.approx(3.0) for x in xs)
@@ -349,7 +349,7 @@ def test_people_goal_and_map_in_other_frames_are_brought_into_the_odometry_frame
             assert v.pose.position.y == pytest.approx(u.pose.position.y, abs=1e-6)
     # The scene shows the person where the plain bag has them, at x = 3 in odom.
     with open(tmp_path / "framed.scene.mcap", "rb") as f:
-        updates = [json.loads(m.data) for _, c, m in make_reader(f).iter_messages(topics=["/scene"])]
+        updates = [json.loads(m.data) for _, c, m in make_reader(f).iter_messages(topics=["/scene/people"])]
     xs = [c["pose"]["position"]["x"] for u in updates for e in u["entities"] if e["id"] == "pedestrians" for c in e["cylinders"]]
     assert xs and all(x == pytest.approx(3.0) for x in xs)
 

@@ -10,8 +10,13 @@
 //! | `/tf` | `foxglove.FrameTransform` | `world` → `base_link`: the robot's pose, every step |
 //! | `/robot/pose` | `foxglove.PoseInFrame` | the same pose, for plots |
 //! | `/plan` | `foxglove.PosesInFrame` | each plan the robot followed, when it was made |
-//! | `/scene` | `foxglove.SceneUpdate` | entities `footprint` (frame `base_link`: the collision footprint), `goal`, `obstacles` (once, at the start), `pedestrians` (discs as 1.7 m cylinders, every step), `plan` and `candidates` (line strips, with each plan) |
+//! | `/scene/static` | `foxglove.SceneUpdate` | entities `footprint` (frame `base_link`: the collision footprint), `goal` and `obstacles`, once at the start |
+//! | `/scene/people` | `foxglove.SceneUpdate` | entity `pedestrians` (discs as 1.7 m cylinders), every step |
+//! | `/scene/plan` | `foxglove.SceneUpdate` | entities `plan` and `candidates` (line strips), with each plan |
 //! | `/outcome` | `foxglove.Log` | how the run ended (info: success, warning: timeout, error: collision), at its end; a planning call's summary |
+//!
+//! The scene is three topics, not one, so that a viewer that jumps to a time (which shows the
+//! latest message of each topic) shows all of it: the static scene, the people and the plan.
 //!
 //! A run's MCAP also holds a `run` metadata record: suite, episode, scene, robot, method, seed
 //! and the run's metrics as text. Times are simulation time from 0 (nanoseconds).
@@ -40,21 +45,30 @@ const PERSON_HEIGHT: f64 = 1.7;
 /// Height of the robot's footprint prisms and of obstacle pillars (m).
 const BODY_HEIGHT: f64 = 0.4;
 
-/// The topics, their schema names and the schemas (see the module docs).
-const TOPICS: [(&str, &str); 5] = [
+/// The topics and their schema names (see the module docs), indexed by the constants below.
+const TOPICS: [(&str, &str); 7] = [
     ("/tf", "foxglove.FrameTransform"),
     ("/robot/pose", "foxglove.PoseInFrame"),
     ("/plan", "foxglove.PosesInFrame"),
-    ("/scene", "foxglove.SceneUpdate"),
+    ("/scene/static", "foxglove.SceneUpdate"),
+    ("/scene/people", "foxglove.SceneUpdate"),
+    ("/scene/plan", "foxglove.SceneUpdate"),
     ("/outcome", "foxglove.Log"),
 ];
+const TF: usize = 0;
+const ROBOT_POSE: usize = 1;
+const PLAN: usize = 2;
+const SCENE_STATIC: usize = 3;
+const SCENE_PEOPLE: usize = 4;
+const SCENE_PLAN: usize = 5;
+const OUTCOME: usize = 6;
 
 /// An MCAP file being written, one channel per topic of the module docs.
 pub struct Recorder {
     writer: mcap::Writer<BufWriter<File>>,
     path: PathBuf,
     frame: String,
-    channels: [u16; 5],
+    channels: [u16; TOPICS.len()],
     sequence: u32,
 }
 
@@ -166,7 +180,7 @@ impl Recorder {
             .library(concat!("human2nav ", env!("CARGO_PKG_VERSION")))
             .create(BufWriter::new(file))
             .map_err(failed)?;
-        let mut channels = [0u16; 5];
+        let mut channels = [0u16; TOPICS.len()];
         for (slot, (topic, schema)) in channels.iter_mut().zip(TOPICS) {
             let text = schema_of(schema).to_string();
             let id = writer
@@ -192,7 +206,7 @@ impl Recorder {
         }
     }
 
-    /// Writes `message` on the channel of topic `k` (index into the module's table) at `t`.
+    /// Writes `message` on the channel of topic `k` (index into [`TOPICS`]) at `t`.
     fn write(&mut self, k: usize, t: f64, message: &Value) -> Result<(), SimError> {
         let data = message.to_string();
         self.sequence += 1;
@@ -213,15 +227,15 @@ impl Recorder {
             "timestamp": stamp(t), "parent_frame_id": self.frame, "child_frame_id": ROBOT_FRAME,
             "translation": vec3(at.x, at.y, 0.0), "rotation": yaw_quat(at.theta)
         });
-        self.write(0, t, &tf)?;
+        self.write(TF, t, &tf)?;
         let p = json!({
             "timestamp": stamp(t), "frame_id": self.frame, "pose": pose(at.x, at.y, 0.0, at.theta)
         });
-        self.write(1, t, &p)
+        self.write(ROBOT_POSE, t, &p)
     }
 
     /// What does not move, at `t`: the robot's footprint (frame `base_link`), the goal and the
-    /// obstacles, on `/scene`.
+    /// obstacles, on `/scene/static`.
     pub fn static_scene(
         &mut self,
         t: f64,
@@ -277,7 +291,7 @@ impl Recorder {
             parts([("cylinders", pillars), ("lines", lines)]),
         );
         let update = json!({"deletions": [], "entities": [robot, goal, obstacles]});
-        self.write(3, t, &update)
+        self.write(SCENE_STATIC, t, &update)
     }
 
     /// The people of an observation at `t` ([`Self::pedestrians`]), each with its recent
@@ -300,7 +314,7 @@ impl Recorder {
     }
 
     /// The people at `t` as cylinders, with their recent positions as faint lines when given
-    /// (`histories[i]` for `people[i]`), on `/scene`.
+    /// (`histories[i]` for `people[i]`), on `/scene/people`.
     pub fn pedestrians(
         &mut self,
         t: f64,
@@ -329,11 +343,11 @@ impl Recorder {
             "pedestrians",
             parts([("cylinders", cylinders), ("lines", lines)]),
         );
-        self.write(3, t, &json!({"deletions": [], "entities": [e]}))
+        self.write(SCENE_PEOPLE, t, &json!({"deletions": [], "entities": [e]}))
     }
 
     /// A plan made at `t`: `/plan` (its poses) and the `plan` and `candidates` line strips on
-    /// `/scene`.
+    /// `/scene/plan`.
     pub fn plan(
         &mut self,
         t: f64,
@@ -344,7 +358,7 @@ impl Recorder {
             "timestamp": stamp(t), "frame_id": self.frame,
             "poses": poses.iter().map(|q| pose(q.x, q.y, 0.0, q.theta)).collect::<Vec<_>>()
         });
-        self.write(2, t, &p)?;
+        self.write(PLAN, t, &p)?;
         let chosen = entity(
             t,
             &self.frame,
@@ -366,7 +380,7 @@ impl Recorder {
             .collect();
         let candidates = entity(t, &self.frame, "candidates", parts([("lines", others)]));
         self.write(
-            3,
+            SCENE_PLAN,
             t,
             &json!({"deletions": [], "entities": [chosen, candidates]}),
         )
@@ -378,7 +392,7 @@ impl Recorder {
             "timestamp": stamp(t), "level": level, "message": message, "name": "human2nav",
             "file": "", "line": 0
         });
-        self.write(4, t, &log)
+        self.write(OUTCOME, t, &log)
     }
 
     /// Writes `metadata` as a metadata record named `name`.
@@ -620,7 +634,9 @@ mod tests {
         expect("/tf", "foxglove.FrameTransform", 2);
         expect("/robot/pose", "foxglove.PoseInFrame", 2);
         expect("/plan", "foxglove.PosesInFrame", 1);
-        expect("/scene", "foxglove.SceneUpdate", 3);
+        expect("/scene/static", "foxglove.SceneUpdate", 1);
+        expect("/scene/people", "foxglove.SceneUpdate", 1);
+        expect("/scene/plan", "foxglove.SceneUpdate", 1);
         expect("/outcome", "foxglove.Log", 1);
         let _ = std::fs::remove_file(&path);
     }

@@ -8,7 +8,6 @@ mod common;
 use approx::assert_relative_eq;
 use human2nav_core::ablation::Arm;
 use human2nav_core::bev::BevSpec;
-use human2nav_core::constraint::Phi;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel};
 use human2nav_core::forecast::{CrowdPredictor, Forecast, ForecastError, constant_velocity_path};
 use human2nav_core::guidance::analytic::FixedWalk;
@@ -17,41 +16,13 @@ use human2nav_core::human2nav::{
     GuidanceTerms, Human2Nav, Human2NavSettings, RobotModel, SelectionWeights, pose_at,
 };
 use human2nav_core::obstacle::{Obstacle, OccupancyGrid, footprint_clearance};
-use human2nav_core::robot::footprint::FootprintShape;
 use human2nav_core::tfs::tfs_plan;
-use human2nav_core::{
-    AgentState, Deadline, GuidanceWeights, Limits, Observation, Plan, Planner, Pose2, Stage, Twist2,
-};
+use human2nav_core::{AgentState, Deadline, Observation, Plan, Planner, Pose2, Stage, Twist2};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-fn limits() -> Limits {
-    Limits {
-        v_max: 1.0,
-        v_reverse_max: 0.3,
-        a_max: 1.0,
-        omega_max: 1.0,
-        kappa_max: None,
-        lateral_speed_max: 0.05,
-        coupled: None,
-    }
-}
-
-/// The test robot's footprint: a disc about its reference point (m).
-const ROBOT_RADIUS: f64 = 0.3;
-
-fn robot() -> RobotModel {
-    let limits = limits();
-    RobotModel {
-        limits,
-        footprint: vec![FootprintShape::Disc {
-            center: [0.0, 0.0],
-            radius: ROBOT_RADIUS,
-        }],
-        phi: Phi::from_weights(&GuidanceWeights::default(), &limits),
-    }
-}
+use common::{ROBOT_RADIUS, limits, robot};
 
 /// A "human" future the robot cannot follow: straight ahead at 1.6 m/s, 32 poses at 0.1 s.
 ///

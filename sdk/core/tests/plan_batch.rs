@@ -3,16 +3,15 @@
 
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] functions unwrap too
 
+mod common;
+
+use common::robot;
 use human2nav_core::ablation::Arm;
 use human2nav_core::bev::BevSpec;
-use human2nav_core::constraint::Phi;
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel, FlowQuery};
 use human2nav_core::guidance::analytic::FixedWalk;
-use human2nav_core::human2nav::{Human2Nav, Human2NavSettings, RobotModel};
-use human2nav_core::robot::footprint::FootprintShape;
-use human2nav_core::{
-    AgentState, GuidanceWeights, Limits, Observation, PlanError, Planner, Pose2, Twist2,
-};
+use human2nav_core::human2nav::{Human2Nav, Human2NavSettings};
+use human2nav_core::{AgentState, Observation, PlanError, Planner, Pose2, Twist2};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -101,26 +100,6 @@ impl FlowModel for SceneWalk {
 
     fn network_id(&self) -> Option<usize> {
         Some(1)
-    }
-}
-
-fn robot() -> RobotModel {
-    let limits = Limits {
-        v_max: 1.0,
-        v_reverse_max: 0.3,
-        a_max: 1.0,
-        omega_max: 1.0,
-        kappa_max: None,
-        lateral_speed_max: 0.05,
-        coupled: None,
-    };
-    RobotModel {
-        limits,
-        footprint: vec![FootprintShape::Disc {
-            center: [0.0, 0.0],
-            radius: 0.3,
-        }],
-        phi: Phi::from_weights(&GuidanceWeights::default(), &limits),
     }
 }
 

@@ -41,11 +41,22 @@ fn small() -> NetConfig {
 /// these tests start in parallel, so seeding and drawing happen under one lock: without it
 /// their draws interleave, a test's weights change from run to run, and an agreement close to
 /// the tolerance passes or fails by chance.
+///
+/// Every bias is drawn too (libtorch starts convolution biases at zero): a trained model's are
+/// not zero, and a bias applied twice or not at all showed only with the trained weights.
 fn seeded_model(cfg: &NetConfig, seed: i64) -> CfmModel {
     static TORCH_RNG: std::sync::Mutex<()> = std::sync::Mutex::new(());
     let _guard = TORCH_RNG.lock().unwrap_or_else(|e| e.into_inner());
     tch::manual_seed(seed);
-    CfmModel::new(cfg, &norm(), Device::Cpu).expect("valid config")
+    let model = CfmModel::new(cfg, &norm(), Device::Cpu).expect("valid config");
+    tch::no_grad(|| {
+        for (name, mut v) in model.var_store().variables() {
+            if name.ends_with(".bias") {
+                v.copy_(&(tch::Tensor::randn_like(&v) * 0.3));
+            }
+        }
+    });
+    model
 }
 
 fn noise(seed: u64, n: usize) -> Vec<f64> {
@@ -274,4 +285,38 @@ fn shape_errors_are_reported() {
         native.velocity(&x, 0.1, &bad, &mut out),
         Err(FlowError::Shape(_))
     ));
+}
+
+/// The shipped weights (trained: biases and scales far from their initial values) on both
+/// backends, at planning conditions with people in the raster and without.
+#[test]
+fn agrees_with_torch_on_the_shipped_weights() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/human2nav-cfm");
+    let torch = CfmModel::load(&dir, Device::Cpu).expect("shipped model");
+    let native = NativeCfm::load(&dir).expect("shipped model, native");
+    let cfg = &torch.card().net;
+    let crowded = crate::perf::bench_condition(cfg.bev_cells);
+    let empty = FlowCondition {
+        bev: vec![0.0; crowded.bev.len()],
+        ..crowded.clone()
+    };
+    for (case, cond) in [(1u64, &crowded), (2, &empty)] {
+        let x = poses(16, cfg.horizon, case);
+        let cot = noise(case + 20, x.len());
+        for t in [0.0, 0.6] {
+            let (mut a, mut b) = (vec![0.0; x.len()], vec![0.0; x.len()]);
+            let (mut va, mut vb) = (vec![0.0; x.len()], vec![0.0; x.len()]);
+            torch
+                .velocity_vjp(&x, t, cond, &cot, &mut a, &mut va)
+                .expect("torch");
+            native
+                .velocity_vjp(&x, t, cond, &cot, &mut b, &mut vb)
+                .expect("native");
+            let (e, ev) = (rel_err(&b, &a), rel_err(&vb, &va));
+            assert!(
+                e < 1e-5 && ev < 1e-5,
+                "case {case} t={t}: forward {e}, VJP {ev}"
+            );
+        }
+    }
 }

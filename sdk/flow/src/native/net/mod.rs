@@ -497,7 +497,6 @@ impl Conv2d {
             &mut y,
             false,
         );
-        add_bias(&mut y, &self.b);
         (y, out_side)
     }
 }

@@ -23,9 +23,10 @@
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use human2nav_core::ablation::Arm;
 use human2nav_core::human2nav::{Human2Nav, Human2NavSettings};
-use human2nav_core::{AgentState, Observation, Planner, Pose2, Twist2};
-use human2nav_data::{Episode, EpisodeSuite, ScenarioClass};
+use human2nav_core::{Observation, Planner};
+use human2nav_data::{EpisodeSuite, ScenarioClass};
 use human2nav_flow::net::Complexity;
+use human2nav_flow::perf::{episode_start, start_scenes};
 use human2nav_flow::planner::{
     Backend, DEFAULT_MODEL_DIR, PlannerConfig, RobotPlanner, TimedModel, load_model, load_profile,
     robot_model, robot_phi,
@@ -51,54 +52,18 @@ fn env_path(var: &str, default: &str) -> PathBuf {
     std::env::var_os(var).map_or_else(|| workspace().join(default), PathBuf::from)
 }
 
-/// The robot at the episode start facing the goal, at rest; the pedestrians present at t = 0.
-fn observation(ep: &Episode) -> Observation {
-    let s = ep.start;
-    let theta = (ep.goal[1] - s.y).atan2(ep.goal[0] - s.x);
-    let agents = ep
-        .agents
-        .iter()
-        .filter(|a| a.start_step == 0 && a.positions.len() >= 2)
-        .map(|a| {
-            let (p, q) = (a.positions[0], a.positions[1]);
-            AgentState {
-                id: a.id,
-                position: p,
-                velocity: [(q[0] - p[0]) / ep.dt, (q[1] - p[1]) / ep.dt],
-                radius: a.radius,
-                history: Vec::new(),
-            }
-        })
-        .filter(|a| (a.position[0] - s.x).hypot(a.position[1] - s.y) <= 10.0)
-        .collect();
-    Observation {
-        time: 0.0,
-        ego: Pose2::new(s.x, s.y, theta),
-        ego_velocity: Twist2::ZERO,
-        goal: ep.goal,
-        agents,
-        ..Default::default()
-    }
-}
-
 fn scenes() -> Vec<Observation> {
     let path = workspace().join("out/data/episodes.json");
-    let episodes: Vec<Episode> = match EpisodeSuite::load(&path) {
-        Ok(suite) => {
-            let n = suite.episodes.len();
-            suite
-                .episodes
-                .into_iter()
-                .step_by((n / 20).max(1))
-                .take(20)
-                .collect()
+    match EpisodeSuite::load(&path) {
+        Ok(suite) => start_scenes(&suite.episodes, 20),
+        Err(_) => {
+            let episodes: Vec<_> = ScenarioClass::ALL
+                .iter()
+                .flat_map(|c| human2nav_data::synthetic::episodes(*c, 5, 1))
+                .collect();
+            episodes.iter().map(episode_start).collect()
         }
-        Err(_) => ScenarioClass::ALL
-            .iter()
-            .flat_map(|c| human2nav_data::synthetic::episodes(*c, 5, 1))
-            .collect(),
-    };
-    episodes.iter().map(observation).collect()
+    }
 }
 
 fn model_dir() -> PathBuf {

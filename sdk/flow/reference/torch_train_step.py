@@ -294,7 +294,16 @@ class CondUnet1d(nn.Module):
         self.goal.fc0 = nn.Linear(4, gdim)
         self.goal.fc1 = nn.Linear(gdim, gdim)
 
-        dims = [5] + list(net["down_dims"])
+        # The crowd pathway ([net.crowd]): per waypoint, a two-layer MLP over every (crowd
+        # point, waypoint) pair and a max over the points, appended to the 5 input channels.
+        crowd = net.get("crowd")
+        self.crowd_step = None
+        if crowd:
+            self.crowd = nn.Module()
+            self.crowd.fc0 = nn.Linear(5, crowd["width"])
+            self.crowd.fc1 = nn.Linear(crowd["width"], crowd["width"])
+            self.crowd_step = crowd["step"]
+        dims = [5 + (crowd["width"] if crowd else 0)] + list(net["down_dims"])
         levels, nb = len(net["down_dims"]), net["blocks_per_level"]
         self.film_channels = []
 
@@ -340,7 +349,31 @@ class CondUnet1d(nn.Module):
         emb = torch.cat([args.sin(), args.cos()], 1)
         return self.time.fc1(self.act(self.time.fc0(emb)))
 
-    def forward(self, x, t, cond):
+    def crowd_features(self, x, points):
+        """`[B, width, T]` of trajectory features `x` (`[B, 5, T]`) and crowd points `points`
+        (`[B or 1, N, 5]`: x, y, v_x, v_y in network units, present), as
+        `CondUnet1d::crowd_features` computes them."""
+        t_len = x.shape[2]
+        tau = ((torch.arange(t_len, dtype=x.dtype) + 1.0) * self.crowd_step).view(1, 1, -1)
+        px, py, cs, sn = (x[:, c].unsqueeze(1) for c in range(4))
+        qx, qy, vx, vy, present = (points[:, :, c].unsqueeze(2) for c in range(5))
+        dx, dy = qx + vx * tau - px, qy + vy * tau - py
+        bx, by = cs * dx + sn * dy, cs * dy - sn * dx
+        dist = (bx.square() + by.square() + 1e-6).sqrt()
+        b, n = bx.shape[0], bx.shape[1]
+        ux = (cs * vx + sn * vy).expand(b, n, t_len)
+        uy = (cs * vy - sn * vx).expand(b, n, t_len)
+        pair = torch.stack([bx, by, dist, ux, uy], 3)
+        h = self.act(self.crowd.fc1(self.act(self.crowd.fc0(pair))))
+        present = present.unsqueeze(3)
+        pooled = (h + (present - 1.0) * 1e4).amax(1) * present.amax(1)
+        return pooled.permute(0, 2, 1)
+
+    def forward(self, x, t, cond, points=None):
+        if self.crowd_step is not None:
+            if points is None:
+                raise ValueError("this network has a crowd pathway: pass the crowd points")
+            x = torch.cat([x, self.crowd_features(x, points)], 1)
         c = torch.cat([self.encode_time(t), cond], 1)
         film = self.unet.film(self.act(c)).split([2 * ch for ch in self.film_channels], 1)
         film = iter([f.view(-1, 2, ch, 1).unbind(1) for f, ch in zip(film, self.film_channels)])
@@ -478,6 +511,11 @@ class Trainer:
         opts = cfg["train"]
         if opts.get("mirror", False) or opts.get("path_sigma", 0.0) != 0.0:
             raise SystemExit("train.mirror and train.path_sigma are not implemented (both off)")
+        if cfg["net"].get("crowd") or opts.get("clearance"):
+            raise SystemExit(
+                "training with [net.crowd] or [train.clearance] is not implemented here; "
+                "torch_planning_call.py runs such a network"
+            )
         torch.manual_seed(opts["seed"])
         self.opts = opts
         self.gen = torch.Generator().manual_seed(opts["seed"])

@@ -1,6 +1,8 @@
 //! Latency of a model's trait calls on this machine (what the planner pays per step).
 
 use human2nav_core::flow::{FlowCondition, FlowError};
+use human2nav_core::{AgentState, Observation, Pose2, Twist2};
+use human2nav_data::Episode;
 use std::time::Instant;
 #[cfg(feature = "torch")]
 use {
@@ -27,6 +29,48 @@ pub fn median_ms(
     }
     t.sort_by(f64::total_cmp);
     Ok(t[t.len() / 2])
+}
+
+/// A planning scene for benchmarks: the robot at an episode's start facing its goal, at rest,
+/// with the pedestrians present at t = 0 within 10 m (velocities from their first step).
+pub fn episode_start(ep: &Episode) -> Observation {
+    let s = ep.start;
+    let theta = (ep.goal[1] - s.y).atan2(ep.goal[0] - s.x);
+    let agents = ep
+        .agents
+        .iter()
+        .filter(|a| a.start_step == 0 && a.positions.len() >= 2)
+        .map(|a| {
+            let (p, q) = (a.positions[0], a.positions[1]);
+            AgentState {
+                id: a.id,
+                position: p,
+                velocity: [(q[0] - p[0]) / ep.dt, (q[1] - p[1]) / ep.dt],
+                radius: a.radius,
+                history: Vec::new(),
+            }
+        })
+        .filter(|a| (a.position[0] - s.x).hypot(a.position[1] - s.y) <= 10.0)
+        .collect();
+    Observation {
+        time: 0.0,
+        ego: Pose2::new(s.x, s.y, theta),
+        ego_velocity: Twist2::ZERO,
+        goal: ep.goal,
+        agents,
+        ..Default::default()
+    }
+}
+
+/// [`episode_start`] of at most `n` episodes spread evenly over `episodes`.
+pub fn start_scenes(episodes: &[Episode], n: usize) -> Vec<Observation> {
+    let step = (episodes.len() / n.max(1)).max(1);
+    episodes
+        .iter()
+        .step_by(step)
+        .take(n)
+        .map(episode_start)
+        .collect()
 }
 
 /// A deterministic planning condition for benchmarks: a raster with a few occupied cells.

@@ -13,35 +13,18 @@ use human2nav_core::constraint::{
 };
 use human2nav_core::guidance::analytic::FixedWalk;
 use human2nav_core::human2nav::{Human2Nav, Human2NavSettings, RobotModel};
-use human2nav_core::robot::footprint::FootprintShape;
-use human2nav_core::{GuidanceWeights, Limits, Observation, Plan, Planner, Twist2};
+use human2nav_core::{GuidanceWeights, Observation, Plan, Planner, Twist2};
 
-fn limits() -> Limits {
-    Limits {
-        v_max: 1.0,
-        v_reverse_max: 0.3,
-        a_max: 1.0,
-        omega_max: 1.0,
-        kappa_max: None,
-        lateral_speed_max: 0.05,
-        coupled: None,
-    }
-}
-
-/// The robot: a disc of 0.3 m, Φ with `weights` plus `extra` terms.
+/// The test robot (`common::robot`), Φ with `weights` plus `extra` terms.
 fn robot(weights: &GuidanceWeights, extra: Vec<(f64, Box<dyn ConstraintTerm>)>) -> RobotModel {
-    let limits = limits();
+    let limits = common::limits();
     let mut phi = Phi::from_weights(weights, &limits);
     for (w, term) in extra {
         phi.push(w, term).unwrap();
     }
     RobotModel {
-        limits,
-        footprint: vec![FootprintShape::Disc {
-            center: [0.0, 0.0],
-            radius: 0.3,
-        }],
         phi,
+        ..common::robot()
     }
 }
 

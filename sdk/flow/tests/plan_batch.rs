@@ -94,7 +94,8 @@ fn a_batch_of_conditions_equals_their_calls_one_by_one() {
         model.velocity_batch(&queries, &mut batched).unwrap();
         assert_eq!(batched, alone);
     }
-    // An output of the wrong size is refused.
+    // No query is no work; an output of the wrong size is refused.
+    model.velocity_batch(&[], &mut []).unwrap();
     let err = model
         .velocity_batch(&queries, &mut batched[1..])
         .unwrap_err();

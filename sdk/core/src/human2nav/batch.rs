@@ -125,8 +125,10 @@ impl<M: FlowModel> Human2Nav<M> {
     /// sampling of all of them runs as one batch (one network call per integration step for
     /// every planner's `K` samples), then each plans on from its samples as [`Planner::plan`]
     /// does. Each plan is the one `planners[i].plan(&observations[i])` returns, bit for bit,
-    /// with the same state carried to the next call (warm start, generator); what batching
-    /// saves is network time, which the native backend spends better on many rows at once.
+    /// with the same state carried to the next call (warm start, generator). Batching saves
+    /// network calls, not arithmetic: on a CPU the native backend plans no faster this way
+    /// (docs/experiments/2026-12-07-batch-planning.md); an accelerator, where a call costs
+    /// more than its rows, is what it is for.
     ///
     /// Planners share a batch when their models run the same network
     /// ([`FlowModel::network_id`]: clones of one native model, e.g. one robot planner per

@@ -382,8 +382,10 @@ impl FlowModel for NativeCfm {
     fn velocity_batch(&self, queries: &[FlowQuery<'_>], out: &mut [f64]) -> Result<(), FlowError> {
         let total: usize = queries.iter().map(|q| q.x.len()).sum();
         check_len("out", out.len(), total)?;
-        if let [q] = queries {
-            return self.velocity(q.x, q.t, q.cond, out);
+        match queries {
+            [] => return Ok(()),
+            [q] => return self.velocity(q.x, q.t, q.cond, out),
+            _ => {}
         }
         let h = self.card.net.horizon;
         let scale = self.card.normalisation.position_scale;

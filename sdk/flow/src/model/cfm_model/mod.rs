@@ -380,10 +380,24 @@ impl CfmModel {
             .ok_or_else(|| FlowError::Backend("condition cache empty".into()))
     }
 
-    /// [`FlowModel::velocity_batch`] as one forward pass over every group's rows: each row with its group's condition
-    /// encoding, flow time and crowd points (each query index keeps its condition's encoding
-    /// while its condition is unchanged). Agrees with one [`FlowModel::velocity`] per group to
-    /// float rounding (libtorch's kernels differ with the batch size).
+    /// The encodings of a batched call's `n` queries, one slot per query index (kept while the
+    /// query at that index keeps its condition).
+    fn batch_slots(
+        &self,
+        n: usize,
+    ) -> Result<std::sync::MutexGuard<'_, Vec<Option<CachedCondition>>>, FlowError> {
+        let mut cache = self
+            .batch_cache
+            .lock()
+            .map_err(|_| FlowError::Backend("batch condition cache poisoned".into()))?;
+        cache.resize_with(n, || None);
+        Ok(cache)
+    }
+
+    /// [`FlowModel::velocity_batch`] as one forward pass over every group's rows: each row with
+    /// its group's condition encoding ([`Self::batch_slots`]), flow time and crowd points.
+    /// Agrees with one [`FlowModel::velocity`] per group to float rounding (libtorch's kernels
+    /// differ with the batch size).
     pub fn batched_velocity(
         &self,
         queries: &[FlowQuery<'_>],
@@ -398,11 +412,7 @@ impl CfmModel {
             return Ok(());
         }
         let (kind, device) = (self.kind(), self.device());
-        let mut cache = self
-            .batch_cache
-            .lock()
-            .map_err(|_| FlowError::Backend("batch condition cache poisoned".into()))?;
-        cache.resize_with(queries.len(), || None);
+        let mut cache = self.batch_slots(queries.len())?;
         let mut feats = Vec::with_capacity(queries.len());
         let (mut embeddings, mut points) = (Vec::new(), Vec::new());
         let (mut rows, mut times) = (Vec::new(), Vec::new());
@@ -517,20 +527,15 @@ impl FlowModel for CfmModel {
 
     /// On a CUDA device, [`CfmModel::batched_velocity`]: one pass for all groups. On the CPU
     /// one pass per group (each query index keeping its condition's encoding, as
-    /// [`FlowModel::velocity`] keeps the last one), which measured faster: with 16 planners' rows in one pass libtorch's
-    /// crowd pathway works on tensors that leave the cache, and the batch planned at 0.73 to
-    /// 0.89 times the rate of its groups one by one (`human2nav plan --bench --batch`).
+    /// [`FlowModel::velocity`] keeps the last one), which measured faster there
+    /// (docs/experiments/2026-12-07-batch-planning.md).
     fn velocity_batch(&self, queries: &[FlowQuery<'_>], out: &mut [f64]) -> Result<(), FlowError> {
         if self.device() != Device::Cpu {
             return self.batched_velocity(queries, out);
         }
         let total: usize = queries.iter().map(|q| q.x.len()).sum();
         check_len("out", out.len(), total)?;
-        let mut cache = self
-            .batch_cache
-            .lock()
-            .map_err(|_| FlowError::Backend("batch condition cache poisoned".into()))?;
-        cache.resize_with(queries.len(), || None);
+        let mut cache = self.batch_slots(queries.len())?;
         let mut rest = out;
         for (q, slot) in queries.iter().zip(cache.iter_mut()) {
             let (o, r) = rest.split_at_mut(q.x.len());

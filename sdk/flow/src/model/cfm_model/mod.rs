@@ -395,7 +395,8 @@ impl CfmModel {
     }
 
     /// [`FlowModel::velocity_batch`] as one forward pass over every group's rows: each row with
-    /// its group's condition encoding ([`Self::batch_slots`]), flow time and crowd points.
+    /// its group's condition encoding (kept per query index while its condition is
+    /// unchanged), flow time and crowd points.
     /// Agrees with one [`FlowModel::velocity`] per group to float rounding (libtorch's kernels
     /// differ with the batch size).
     pub fn batched_velocity(

@@ -204,7 +204,7 @@ use adjoint::{Direction, backward};
 use iterations::{Iterations, iteration_step, optimise};
 use paper::{iterate_paper, shift_by_controls, to_body};
 use precondition::{TwistMetric, solve3};
-pub(crate) use rollout::euler_advance;
+pub(crate) use rollout::{euler_advance, flow_time};
 use rollout::{extrapolate, forward, start, terminal_cost};
 pub use sampling::{
     control_gradient, guide_subset, guide_subset_until, sample, sample_guided, sample_guided_until,

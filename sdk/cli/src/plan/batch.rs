@@ -4,6 +4,7 @@
 use super::bar;
 use human2nav_core::ablation::Arm;
 use human2nav_core::human2nav::{Human2Nav, Human2NavSettings};
+use human2nav_core::robot::RobotProfile;
 use human2nav_core::{Observation, Planner};
 use human2nav_flow::planner::{
     Backend, FlowCallStats, PlannerModel, TimedModel, bev_spec, check_dt, load_model, load_profile,
@@ -35,6 +36,7 @@ pub(super) fn batch_table(
     (calls, batch): (usize, usize),
 ) -> anyhow::Result<()> {
     let rounds = calls.div_ceil(batch).max(1);
+    let profile = load_profile(robot)?;
     println!();
     println!(
         "batched planning: {batch} planners a round on one network, {rounds} rounds of {} windows; \
@@ -60,7 +62,7 @@ pub(super) fn batch_table(
                 );
                 let shape = (rounds, batch, threads);
                 let r = measure(
-                    robot,
+                    &profile,
                     (&model, model_dir),
                     settings,
                     wins,
@@ -94,11 +96,10 @@ pub(super) fn batch_table(
 /// A planner on `model`'s network: a native model shared, a libtorch one loaded again from
 /// `dir`.
 fn planner(
-    robot: &Path,
+    profile: &RobotProfile,
     (model, dir): (&PlannerModel, &Path),
     settings: Human2NavSettings,
 ) -> anyhow::Result<(TimedPlanner, Arc<Mutex<FlowCallStats>>)> {
-    let profile = load_profile(robot)?;
     check_dt(model.card(), &settings)?;
     let (bev, _) = bev_spec(model.card());
     let handle = match model.try_share() {
@@ -107,9 +108,9 @@ fn planner(
     };
     let timed = TimedModel::new(handle);
     let stats = timed.stats();
-    let phi = robot_phi(&profile)?;
+    let phi = robot_phi(profile)?;
     Ok((
-        Human2Nav::new(timed, robot_model(&profile, phi), bev, settings)?,
+        Human2Nav::new(timed, robot_model(profile, phi), bev, settings)?,
         stats,
     ))
 }
@@ -117,7 +118,7 @@ fn planner(
 /// `rounds` rounds of `batch` plans split over `threads` threads (each planning its share of
 /// the planners), batched or one by one.
 fn measure(
-    robot: &Path,
+    profile: &RobotProfile,
     model: (&PlannerModel, &Path),
     settings: Human2NavSettings,
     wins: &[Observation],
@@ -128,7 +129,7 @@ fn measure(
     let mut planners = Vec::with_capacity(batch);
     let mut stats = Vec::with_capacity(batch);
     for _ in 0..batch {
-        let (p, s) = planner(robot, model, settings)?;
+        let (p, s) = planner(profile, model, settings)?;
         planners.push(p);
         stats.push(s);
     }

@@ -2,6 +2,7 @@
 //! (and its completion when a deadline cut it short) and Φ with its gradient at the end.
 
 use super::*;
+use crate::se2::euler_step_batch;
 
 /// Number of samples in `x0`, after checking its shape against the model.
 fn sample_count(
@@ -35,7 +36,7 @@ pub(super) fn forward(
         if deadline.passed() {
             return Ok(i);
         }
-        let t = i as f64 * dt;
+        let t = flow_time(i, n);
         let (done, rest) = ws.xs.split_at_mut((i + 1) * m);
         let x = &done[i * m..];
         model.velocity(x, t, cond, &mut ws.fout)?;
@@ -72,14 +73,14 @@ pub(crate) fn euler_advance(
     for (w, (f, u)) in w.iter_mut().zip(f.iter().zip(u)) {
         *w = f + u;
     }
-    for ((p, v), o) in x
-        .chunks_exact(3)
-        .zip(w.chunks_exact(3))
-        .zip(next.chunks_exact_mut(3))
-    {
-        let q = Pose2::from_slice(p).euler_step(Twist2::from_slice(v), dt);
-        o.copy_from_slice(&q.to_array());
-    }
+    next.copy_from_slice(x);
+    euler_step_batch(next, w, dt);
+}
+
+/// The flow time of integration step `i` of `n`: `i·Δt` with `Δt = 1/n`, as every rollout
+/// computes it (a velocity looked up by time must use the same bits).
+pub(crate) fn flow_time(i: usize, n: usize) -> f64 {
+    i as f64 * (1.0 / n as f64)
 }
 
 /// Completes a rollout cut short after `from ≥ 1` steps: the steps `from … N − 1` continue at
@@ -92,15 +93,9 @@ pub(super) fn extrapolate(ws: &mut GuidanceWorkspace, from: usize) {
         ws.ws.copy_within((from - 1) * m..from * m, i * m);
         let (done, rest) = ws.xs.split_at_mut((i + 1) * m);
         let x = &done[i * m..];
-        let w = &ws.ws[i * m..(i + 1) * m];
-        for ((p, v), o) in x
-            .chunks_exact(3)
-            .zip(w.chunks_exact(3))
-            .zip(rest[..m].chunks_exact_mut(3))
-        {
-            let q = Pose2::from_slice(p).euler_step(Twist2::from_slice(v), dt);
-            o.copy_from_slice(&q.to_array());
-        }
+        let next = &mut rest[..m];
+        next.copy_from_slice(x);
+        euler_step_batch(next, &ws.ws[i * m..(i + 1) * m], dt);
     }
 }
 

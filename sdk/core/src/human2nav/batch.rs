@@ -11,7 +11,7 @@
 use super::settings::budget_deadline;
 use super::{Human2Nav, Prepared};
 use crate::flow::{CrowdGuidance, FlowCondition, FlowError, FlowModel, FlowQuery};
-use crate::guidance::euler_advance;
+use crate::guidance::{euler_advance, flow_time};
 use crate::planner::{Deadline, Observation, Plan, PlanError};
 
 /// Flow velocities computed for a planner by a batched call, answered in place of its model.
@@ -111,6 +111,8 @@ struct Member {
     /// Index among the planners.
     planner: usize,
     x: Vec<f64>,
+    /// The velocity of the current step (crowd guidance combined).
+    v: Vec<f64>,
     next: Vec<f64>,
     w: Vec<f64>,
     zero: Vec<f64>,
@@ -230,6 +232,7 @@ fn sample_group<M: FlowModel>(
         rollouts.push(Member {
             planner: i,
             x: p.x0.clone(),
+            v: vec![0.0; p.x0.len()],
             next: vec![0.0; p.x0.len()],
             w: vec![0.0; p.x0.len()],
             zero: vec![0.0; p.x0.len()],
@@ -254,8 +257,7 @@ fn sample_group<M: FlowModel>(
         let mut queries = Vec::new();
         let mut owners = Vec::new();
         for (m, r) in rollouts.iter().enumerate().filter(|(_, r)| r.active) {
-            // The flow time as the rollout computes it (`i·Δt`, not `i/N`).
-            let t = step as f64 * (1.0 / r.steps as f64);
+            let t = flow_time(step, r.steps);
             for (c, cond) in planners[r.planner].replay.conds.iter().enumerate() {
                 queries.push(FlowQuery { x: &r.x, t, cond });
                 owners.push((m, c));
@@ -271,34 +273,38 @@ fn sample_group<M: FlowModel>(
             // Each planner's own call reports the failure.
             return;
         }
-        let times: Vec<f64> = queries.iter().map(|q| q.t).collect();
         drop(queries);
         let mut at = 0;
-        let mut velocity: Vec<Option<Vec<f64>>> = vec![None; rollouts.len()];
-        for (&(m, c), &t) in owners.iter().zip(&times) {
-            let r = &rollouts[m];
+        for &(m, c) in &owners {
+            let r = &mut rollouts[m];
             let v = &out[at..at + r.x.len()];
             at += r.x.len();
             planners[r.planner].replay.answers.push(Answer {
                 cond: c,
-                t: t.to_bits(),
+                t: flow_time(step, r.steps).to_bits(),
                 x: r.x.clone(),
                 v: v.to_vec(),
             });
-            match &mut velocity[m] {
-                None => velocity[m] = Some(v.to_vec()),
-                // The crowd-free velocity follows the conditional one.
-                Some(conditional) => r.guidance.combine(conditional, v),
+            // The crowd-free velocity (condition 1) follows the conditional one.
+            if c == 0 {
+                r.v.copy_from_slice(v);
+            } else {
+                r.guidance.combine(&mut r.v, v);
             }
         }
-        for (r, v) in rollouts.iter_mut().zip(velocity) {
-            let Some(v) = v else { continue };
-            if !v.iter().all(|a| a.is_finite()) {
+        for r in rollouts.iter_mut().filter(|r| r.active) {
+            if !r.v.iter().all(|a| a.is_finite()) {
                 r.active = false;
                 continue;
             }
-            let dt = 1.0 / r.steps as f64;
-            euler_advance(&r.x, &v, &r.zero, dt, &mut r.w, &mut r.next);
+            euler_advance(
+                &r.x,
+                &r.v,
+                &r.zero,
+                1.0 / r.steps as f64,
+                &mut r.w,
+                &mut r.next,
+            );
             std::mem::swap(&mut r.x, &mut r.next);
             r.active &= r.x.iter().all(|a| a.is_finite());
         }

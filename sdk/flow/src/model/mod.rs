@@ -9,8 +9,10 @@
 //! one training updates), is here with the `torch` feature; [`crate::NativeCfm`] runs the
 //! same weights without libtorch.
 
+use crate::card::ModelCard;
 use crate::config::{CrowdConfig, Normalisation};
 use human2nav_core::bev::BevSpec;
+use human2nav_core::flow::{FlowCondition, FlowError};
 
 #[cfg(feature = "torch")]
 mod cfm_model;
@@ -61,6 +63,33 @@ pub fn normalise_condition(
     };
     goal_out[2] = (velocity[0] / norm.speed_scale) as f32;
     goal_out[3] = (velocity[1] / norm.speed_scale) as f32;
+}
+
+/// The normalised raster (`3·H·W`) and goal/velocity features of a planning condition
+/// ([`normalise_condition`]), or a shape error when its raster is not the network's.
+pub(crate) fn planning_condition(
+    card: &ModelCard,
+    cond: &FlowCondition,
+) -> Result<(Vec<f32>, [f32; 4]), FlowError> {
+    let len = card.net.bev_len();
+    if cond.bev.len() != len {
+        let cells = card.net.bev_cells;
+        return Err(FlowError::Shape(format!(
+            "BEV raster has {} values, the model expects 3×{cells}×{cells} = {len}",
+            cond.bev.len()
+        )));
+    }
+    let mut bev = vec![0f32; len];
+    let mut gv = [0f32; 4];
+    normalise_condition(
+        &card.normalisation,
+        &cond.bev,
+        cond.goal,
+        cond.velocity,
+        &mut bev,
+        &mut gv,
+    );
+    Ok((bev, gv))
 }
 
 /// Writes the crowd points of one raster (`[3, H, W]`, velocities in m/s as rasterized) into

@@ -22,7 +22,7 @@ use crate::error::CfmError;
 use crate::io_map::{self, batch_of, check_len};
 #[cfg(feature = "torch")]
 use crate::model::CfmModel;
-use crate::model::{CARD_FILE, crowd_points, normalise_condition};
+use crate::model::{CARD_FILE, crowd_points, planning_condition};
 use crowd::{CrowdScratch, CrowdTape};
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel, FlowQuery};
 use human2nav_core::input::read_user_bytes;
@@ -73,24 +73,7 @@ impl Encoded {
             return Ok(false);
         }
         let card = &model.card;
-        let len = card.net.bev_len();
-        if cond.bev.len() != len {
-            let cells = card.net.bev_cells;
-            return Err(FlowError::Shape(format!(
-                "BEV raster has {} values, the model expects 3×{cells}×{cells} = {len}",
-                cond.bev.len()
-            )));
-        }
-        let mut bev = vec![0f32; len];
-        let mut gv = [0f32; 4];
-        normalise_condition(
-            &card.normalisation,
-            &cond.bev,
-            cond.goal,
-            cond.velocity,
-            &mut bev,
-            &mut gv,
-        );
+        let (bev, gv) = planning_condition(card, cond)?;
         self.embedding = model.net.encode_condition(&bev, &gv);
         let net = &card.net;
         self.points.clear();

@@ -7,7 +7,7 @@
 //! once. The cache compares the whole condition for equality (a 3·32·32 raster compares in a
 //! few microseconds), so there are no false hits.
 
-use super::{CARD_FILE, MAX_WEIGHTS_BYTES, WEIGHTS_FILE, crowd_points, normalise_condition};
+use super::{CARD_FILE, MAX_WEIGHTS_BYTES, WEIGHTS_FILE, crowd_points, planning_condition};
 use crate::card::{FORMAT_VERSION, ModelCard, SourceInfo};
 use crate::config::{NetConfig, Normalisation};
 use crate::error::CfmError;
@@ -288,23 +288,7 @@ impl CfmModel {
     /// Normalised condition tensors `([1, 3, H, W], [1, 4])` of one planning condition.
     pub fn condition_tensors(&self, cond: &FlowCondition) -> Result<(Tensor, Tensor), FlowError> {
         let cells = self.card.net.bev_cells;
-        let len = self.card.net.bev_len();
-        if cond.bev.len() != len {
-            return Err(FlowError::Shape(format!(
-                "BEV raster has {} values, the model expects 3×{cells}×{cells} = {len}",
-                cond.bev.len()
-            )));
-        }
-        let mut bev = vec![0f32; len];
-        let mut gv = [0f32; 4];
-        normalise_condition(
-            &self.card.normalisation,
-            &cond.bev,
-            cond.goal,
-            cond.velocity,
-            &mut bev,
-            &mut gv,
-        );
+        let (bev, gv) = planning_condition(&self.card, cond)?;
         let (kind, device) = (self.kind(), self.device());
         let c = cells as i64;
         let bev = Tensor::from_slice(&bev)

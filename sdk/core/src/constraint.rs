@@ -194,6 +194,7 @@ pub(crate) mod near;
 mod phi;
 
 pub use builtin::{BuiltinKind, BuiltinTerm, SMOOTH_ABS_EPS, SoftMargin, sigmoid, softplus};
+pub(crate) use clearance::closest_distance;
 pub use clearance::{CLEARANCE, Clearance, arrival};
 pub use phi::{Phi, PhiScratch};
 

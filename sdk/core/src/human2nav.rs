@@ -89,7 +89,7 @@ use std::borrow::Cow;
 use crate::bev::{self, BevSpec};
 use crate::constraint::{
     Clearance, ConstraintContext, ConstraintError, Phi, PhiScratch, SceneContext, TrajBatch,
-    arrival,
+    arrival, closest_distance,
 };
 use crate::feasibility;
 use crate::flow::{CrowdGuidance, FlowCondition, FlowModel};

@@ -7,7 +7,7 @@
 //! layout of `nav_msgs/OccupancyGrid` is turned into obstacles near the robot, one covering
 //! circle per occupied cell ([`OccupancyGrid::obstacles_near`]).
 
-use crate::robot::footprint::FootprintShape;
+use crate::robot::footprint::{self, FootprintShape};
 use crate::se2::Pose2;
 use serde::{Deserialize, Serialize};
 
@@ -47,6 +47,12 @@ pub enum Obstacle {
 
 /// Distance from `p` to the segment `a`–`b`.
 pub fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let [x, y] = from_segment(p, a, b);
+    x.hypot(y)
+}
+
+/// The vector from the point of the segment `a`–`b` closest to `p` to `p`.
+fn from_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
     let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
     let len2 = dx * dx + dy * dy;
     let s = if len2 > 0.0 {
@@ -54,7 +60,7 @@ pub fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     } else {
         0.0
     };
-    (p[0] - a[0] - s * dx).hypot(p[1] - a[1] - s * dy)
+    [p[0] - a[0] - s * dx, p[1] - a[1] - s * dy]
 }
 
 fn cross(o: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
@@ -219,6 +225,31 @@ impl Obstacle {
         }
     }
 
+    /// Whether every point of the obstacle is farther than `r` (≥ 0) from `p`, decided without
+    /// a square root: `false` when it is not, and where the test is too coarse to tell (a
+    /// polygon is judged by its bounding box) or a coordinate is not finite. A broad phase:
+    /// an obstacle this rejects is farther than `r` from `p` up to rounding.
+    pub fn farther_than(&self, p: [f64; 2], r: f64) -> bool {
+        let beyond = |[x, y]: [f64; 2], r: f64| x * x + y * y > r * r;
+        match self {
+            Obstacle::Circle { center, radius } => {
+                beyond([p[0] - center[0], p[1] - center[1]], r + radius)
+            }
+            Obstacle::Segment { a, b } => beyond(from_segment(p, *a, *b), r),
+            Obstacle::Polygon { vertices } => {
+                let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+                for v in vertices {
+                    for k in 0..2 {
+                        lo[k] = lo[k].min(v[k]);
+                        hi[k] = hi[k].max(v[k]);
+                    }
+                }
+                let gap = |k: usize| (lo[k] - p[k]).max(p[k] - hi[k]).max(0.0);
+                beyond([gap(0), gap(1)], r)
+            }
+        }
+    }
+
     /// The obstacle with every point mapped by `f` (a rigid motion: radii are kept).
     pub fn map_points(&self, f: impl Fn([f64; 2]) -> [f64; 2]) -> Obstacle {
         match self {
@@ -244,8 +275,8 @@ impl Obstacle {
     fn shape_clearance(&self, shape: &FootprintShape) -> f64 {
         match *shape {
             FootprintShape::Disc { center, radius } => self.distance(center) - radius,
-            FootprintShape::Rect { .. } => {
-                let corners = shape.corners();
+            FootprintShape::Rect { center, half, yaw } => {
+                let corners = footprint::rect_corners(center, half, yaw);
                 match self {
                     Obstacle::Circle { center, radius } => shape.signed_distance(*center) - radius,
                     Obstacle::Segment { a, b } => rect_segment_clearance(shape, &corners, *a, *b),
@@ -267,7 +298,7 @@ impl Obstacle {
 /// touch or overlap, else the exact distance (reached at a corner or a segment end).
 fn rect_segment_clearance(
     rect: &FootprintShape,
-    corners: &[[f64; 2]],
+    corners: &[[f64; 2]; 4],
     a: [f64; 2],
     b: [f64; 2],
 ) -> f64 {
@@ -277,9 +308,17 @@ fn rect_segment_clearance(
     if da <= 0.0 || db <= 0.0 || crosses {
         return da.min(db).min(-f64::EPSILON);
     }
-    corners
+    // The smallest of the corners' distances, to the bit, with the square root taken only of
+    // those whose squared distance comes within a thin shell of the smallest (the others
+    // cannot be it).
+    let offsets = corners.map(|c| from_segment(c, a, b));
+    let squared = offsets.map(|[x, y]| x * x + y * y);
+    let bound = squared.iter().copied().fold(f64::INFINITY, f64::min) * (1.0 + 1e-9);
+    offsets
         .iter()
-        .map(|c| point_segment_distance(*c, a, b))
+        .zip(squared)
+        .filter(|&(_, d2)| d2 <= bound)
+        .map(|([x, y], _)| x.hypot(*y))
         .fold(da.min(db), f64::min)
 }
 
@@ -287,7 +326,12 @@ fn rect_segment_clearance(
 /// frame): the smallest over the footprint's shapes, negative on overlap, `+∞` for an empty
 /// footprint.
 pub fn footprint_clearance(shapes: &[FootprintShape], pose: Pose2, obstacle: &Obstacle) -> f64 {
-    let local = obstacle.in_frame(pose);
+    // `pose.inverse_act` on every point, with the heading's sine and cosine taken once.
+    let (s, c) = pose.theta.sin_cos();
+    let local = obstacle.map_points(|p| {
+        let (dx, dy) = (p[0] - pose.x, p[1] - pose.y);
+        [c * dx + s * dy, -s * dx + c * dy]
+    });
     shapes
         .iter()
         .map(|s| local.shape_clearance(s))
@@ -470,6 +514,51 @@ mod tests {
         let sq = square([0.0, 0.0], 1.0);
         assert!((sq.distance([3.0, 0.0]) - 2.0).abs() < 1e-12);
         assert!((sq.distance([0.5, 0.0]) + 0.5).abs() < 1e-12);
+    }
+
+    /// `farther_than` never rejects an obstacle within `r` of the point (it is the broad
+    /// phase of the clearance term, which must not lose a pair that matters), and does
+    /// reject those well beyond it, by the obstacle's own distance.
+    #[test]
+    fn farther_than_rejects_only_what_is_beyond() {
+        let obstacles = [
+            Obstacle::Circle {
+                center: [1.0, -0.5],
+                radius: 0.4,
+            },
+            Obstacle::Segment {
+                a: [-2.0, 1.0],
+                b: [3.0, 2.5],
+            },
+            Obstacle::Segment {
+                a: [0.5, 0.5],
+                b: [0.5, 0.5],
+            },
+            square([-1.0, -1.5], 0.7),
+            Obstacle::Polygon {
+                vertices: vec![[0.0, 0.0], [4.0, 0.0], [0.0, 3.0]],
+            },
+        ];
+        let r = 0.8;
+        let mut rejected = [0usize; 5];
+        for i in 0..=80 {
+            for j in 0..=80 {
+                let p = [-4.0 + 0.1 * i as f64, -4.0 + 0.1 * j as f64];
+                for (k, o) in obstacles.iter().enumerate() {
+                    let d = o.distance(p);
+                    if o.farther_than(p, r) {
+                        assert!(d > r - 1e-12, "{o:?} at {p:?}: distance {d}");
+                        rejected[k] += 1;
+                    } else if !matches!(o, Obstacle::Polygon { .. }) {
+                        // Exact for discs and segments.
+                        assert!(d <= r + 1e-12, "{o:?} at {p:?}: distance {d}");
+                    }
+                }
+            }
+        }
+        assert!(rejected.iter().all(|&n| n > 1000), "{rejected:?}");
+        let nan = [f64::NAN, 0.0];
+        assert!(obstacles.iter().all(|o| !o.farther_than(nan, r)));
     }
 
     #[test]

@@ -75,14 +75,27 @@ impl SoftMargin {
     /// The value of [`Self::upper`] alone.
     #[inline]
     pub fn upper_value(&self, r: f64) -> f64 {
-        softplus(self.gamma * (r - 1.0 + self.delta)) / self.gamma
+        softplus(self.upper_argument(r)) / self.gamma
     }
 
     /// The value of [`Self::abs`] alone.
     #[inline]
     pub fn abs_value(&self, r: f64) -> f64 {
+        softplus(self.abs_argument(r)) / self.gamma
+    }
+
+    /// The argument `γ(r − 1 + δ)` of the softplus of [`Self::upper_value`].
+    #[inline]
+    fn upper_argument(&self, r: f64) -> f64 {
+        self.gamma * (r - 1.0 + self.delta)
+    }
+
+    /// The argument of the softplus of [`Self::abs_value`]: [`Self::upper_argument`] of
+    /// `|r|_ε`.
+    #[inline]
+    fn abs_argument(&self, r: f64) -> f64 {
         let s = (r * r + SMOOTH_ABS_EPS * SMOOTH_ABS_EPS).sqrt();
-        self.upper_value(s - SMOOTH_ABS_EPS)
+        self.upper_argument(s - SMOOTH_ABS_EPS)
     }
 
     /// The two-sided margin of Eq. 8, `softplus(γ(|r|_ε − 1 + δ))/γ`, and its derivative with
@@ -214,14 +227,15 @@ impl BuiltinTerm {
         (p, dp * inv)
     }
 
-    /// [`Self::penalty`] without its derivative (the same arithmetic for the value).
+    /// The argument of the softplus of [`Self::penalty`]'s value: the value is
+    /// `softplus(argument)/γ`, the same arithmetic as [`Self::penalty`].
     #[inline]
-    fn penalty_value(&self, q: f64, limit: f64) -> f64 {
+    fn penalty_argument(&self, q: f64, limit: f64) -> f64 {
         let inv = 1.0 / limit;
         match self.kind {
-            BuiltinKind::Speed | BuiltinKind::Coupled => self.margin.upper_value(q * inv),
-            BuiltinKind::Reverse => self.margin.upper_value(-q * inv),
-            _ => self.margin.abs_value(q * inv),
+            BuiltinKind::Speed | BuiltinKind::Coupled => self.margin.upper_argument(q * inv),
+            BuiltinKind::Reverse => self.margin.upper_argument(-q * inv),
+            _ => self.margin.abs_argument(q * inv),
         }
     }
 
@@ -243,11 +257,14 @@ impl BuiltinTerm {
 
     /// Adds this term's cost of every trajectory into `cost` from the segment values of the
     /// batch ([`Segments`]), without the gradient: the cost [`ConstraintTerm::evaluate`]
-    /// gives, to the bit, for a fraction of the work (the segment values are shared by every
-    /// built-in term of Φ).
+    /// gives, to the bit, for a fraction of the work. The segment values are shared by every
+    /// built-in term of Φ; the leading segments a trajectory shares with the one before it
+    /// ([`Segments::fill`]) are summed once, and a softplus whose argument repeats the last
+    /// one to the bit (a robot's lateral speed that is zero up to rounding, a straight path's
+    /// yaw rate) is not computed again.
     pub(crate) fn add_costs(
         &self,
-        segments: &Segments,
+        segments: &mut Segments,
         ctx: &ConstraintContext<'_>,
         cost: &mut [f64],
     ) -> Result<(), ConstraintError> {
@@ -258,20 +275,49 @@ impl BuiltinTerm {
         if n_seg == 0 {
             return Ok(());
         }
-        let (dt, inv_n) = (ctx.dt, 1.0 / n_seg as f64);
-        for (c, segs) in cost.iter_mut().zip(segments.values.chunks_exact(n_seg)) {
-            let mut sum = 0.0;
-            if self.kind == BuiltinKind::Acceleration {
-                let mut prev = segs[0][0];
-                sum += self.penalty_value((prev - ctx.initial_velocity.vx) / dt, limit);
-                for s in &segs[1..] {
-                    sum += self.penalty_value((s[0] - prev) / dt, limit);
-                    prev = s[0];
-                }
-            } else {
-                for &s in segs {
-                    sum += self.penalty_value(self.quantity_value(s, ctx), limit);
-                }
+        let (dt, inv_n, gamma) = (ctx.dt, 1.0 / n_seg as f64, self.margin.gamma);
+        let Segments {
+            values,
+            shared,
+            running,
+            ..
+        } = segments;
+        // `running[i]`: the sum over segments 0..=i of the trajectory before, which a
+        // trajectory sharing those segments continues from (the same additions in the same
+        // order, so the same bits).
+        running.clear();
+        running.resize(n_seg, 0.0);
+        let mut last: Option<(u64, f64)> = None;
+        let mut value = |z: f64| match last {
+            Some((bits, v)) if bits == z.to_bits() => v,
+            _ => {
+                let v = softplus(z) / gamma;
+                last = Some((z.to_bits(), v));
+                v
+            }
+        };
+        for ((c, segs), &start) in cost
+            .iter_mut()
+            .zip(values.chunks_exact(n_seg))
+            .zip(shared.iter())
+        {
+            let mut sum = match start {
+                0 => 0.0,
+                k => running[k - 1],
+            };
+            for i in start..n_seg {
+                let q = if self.kind == BuiltinKind::Acceleration {
+                    let prev = if i == 0 {
+                        ctx.initial_velocity.vx
+                    } else {
+                        segs[i - 1][0]
+                    };
+                    (segs[i][0] - prev) / dt
+                } else {
+                    self.quantity_value(segs[i], ctx)
+                };
+                sum += value(self.penalty_argument(q, limit));
+                running[i] = sum;
             }
             *c += sum * inv_n;
         }
@@ -396,16 +442,46 @@ fn coupled_value(x: [f64; 3], c: &crate::limits::CoupledLimit) -> f64 {
 pub(crate) struct Segments {
     values: Vec<[f64; 3]>,
     per_trajectory: usize,
+    /// Per trajectory: how many of its leading segments are those of the trajectory before it,
+    /// to the bit (0 for the first). Candidates rolled out from one start often share their
+    /// first poses (the robot's motions share their first segment per first target).
+    shared: Vec<usize>,
+    /// [`BuiltinTerm::add_costs`]' running sums of the trajectory before.
+    running: Vec<f64>,
 }
 
 impl Segments {
-    /// Fills the values of `batch` at time step `dt`, exactly as [`segment_jet`] computes them.
+    /// Fills the values of `batch` at time step `dt`, exactly as [`segment_jet`] computes them
+    /// (a segment between the same two poses as the one before it is copied).
     pub(crate) fn fill(&mut self, batch: &TrajBatch<'_>, dt: f64) {
         self.values.clear();
-        self.per_trajectory = batch.horizon.saturating_sub(1);
+        self.shared.clear();
+        let n_seg = batch.horizon.saturating_sub(1);
+        self.per_trajectory = n_seg;
         for b in 0..batch.batch {
             let traj = batch.trajectory(b);
-            self.values.extend((0..self.per_trajectory).map(|i| {
+            // Segment i joins poses i and i + 1: shared while both are.
+            let shared = match b {
+                0 => 0,
+                _ => {
+                    let before = batch.trajectory(b - 1);
+                    let poses = traj
+                        .chunks_exact(3)
+                        .zip(before.chunks_exact(3))
+                        .take_while(|(p, q)| {
+                            p.iter().zip(*q).all(|(x, y)| x.to_bits() == y.to_bits())
+                        })
+                        .count();
+                    poses.saturating_sub(1).min(n_seg)
+                }
+            };
+            self.shared.push(shared);
+            let start = self.values.len();
+            if shared > 0 {
+                self.values
+                    .extend_from_within(start - n_seg..start - n_seg + shared);
+            }
+            self.values.extend((shared..n_seg).map(|i| {
                 let jet = segment_jet(&traj[3 * i..3 * i + 3], &traj[3 * i + 3..3 * i + 6], dt);
                 [jet.v, jet.vy, jet.omega]
             }));
@@ -501,6 +577,6 @@ impl ConstraintTerm for BuiltinTerm {
         check_dt(self.name(), ctx)?;
         let mut segments = Segments::default();
         segments.fill(&batch, ctx.dt);
-        self.add_costs(&segments, ctx, cost)
+        self.add_costs(&mut segments, ctx, cost)
     }
 }

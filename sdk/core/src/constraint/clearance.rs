@@ -214,9 +214,10 @@ impl Clearance {
                     (gap, Gap::Agent(a.q, a.radius))
                 })
             });
-            let obstacles = near.obstacles(j).iter().map(|&k| {
+            let obstacles = near.obstacles(j).iter().filter_map(|&k| {
                 let o = &scene.obstacles[k];
-                (obstacle::footprint_clearance(fp, *p, o), Gap::Obstacle(k))
+                near.obstacle_may_matter(o, p)
+                    .then(|| (obstacle::footprint_clearance(fp, *p, o), Gap::Obstacle(k)))
             });
             for (gap, what) in agents.chain(obstacles) {
                 if gap < margin
@@ -252,7 +253,43 @@ fn distance(p: &Pose2, q: [f64; 2]) -> f64 {
 /// The index of the first waypoint of `traj` within `radius` of `goal`, where a run following
 /// it ends: the rule the selection's goal term and this term's scored waypoints share.
 pub fn arrival(traj: &[Pose2], goal: [f64; 2], radius: f64) -> Option<usize> {
-    traj.iter().position(|p| distance(p, goal) <= radius)
+    traj.iter().position(|p| within(p, goal, radius))
+}
+
+/// Relative width of the shell around a distance in which squared distances do not decide a
+/// comparison of [`distance`]s (far wider than the rounding of either).
+const SHELL: f64 = 1e-9;
+
+/// `distance(p, q) <= radius`, to the bit, with the square root left out wherever the squared
+/// distance decides it (all but a thin shell around `radius`).
+fn within(p: &Pose2, q: [f64; 2], radius: f64) -> bool {
+    let (dx, dy) = (p.x - q[0], p.y - q[1]);
+    let d2 = dx * dx + dy * dy;
+    let (inner, outer) = (radius * (1.0 - SHELL), radius * (1.0 + SHELL));
+    if d2 < inner * inner {
+        true
+    } else if d2 > outer * outer {
+        false
+    } else {
+        dx.hypot(dy) <= radius
+    }
+}
+
+/// The smallest of `start` and the [`distance`]s from the poses of `traj` to `q`, to the bit,
+/// with the square root taken only of the poses whose squared distance comes within a thin
+/// shell of the smallest (the others cannot be it). Non-finite distances are passed over,
+/// as `f64::min` does.
+pub(crate) fn closest_distance(traj: &[Pose2], q: [f64; 2], start: f64) -> f64 {
+    let squared = |p: &Pose2| {
+        let (dx, dy) = (p.x - q[0], p.y - q[1]);
+        dx * dx + dy * dy
+    };
+    let least = traj.iter().map(squared).fold(f64::INFINITY, f64::min);
+    let bound = least * (1.0 + SHELL);
+    traj.iter()
+        .filter(|p| squared(p) <= bound)
+        .map(|p| distance(p, q))
+        .fold(start, f64::min)
 }
 
 /// One trajectory as the term scores it: its scored waypoints, the hold after them and the
@@ -542,5 +579,37 @@ mod tests {
             err.contains("clearance") && err.contains("footprint"),
             "{err}"
         );
+    }
+
+    proptest::proptest! {
+        /// `arrival` and `closest_distance` leave out square roots: they answer what the
+        /// distances themselves answer, to the bit, on and around the radius, with poses on
+        /// the goal, far off, equally far, tiny and not finite.
+        #[test]
+        fn squared_shortcuts_answer_as_the_distances(
+            xs in proptest::collection::vec((-3.0..3.0f64, -3.0..3.0f64, 0usize..6), 1..12),
+            radius in 0.0..2.0f64,
+            start in 0.0..5.0f64,
+        ) {
+            let goal = [0.4, -0.7];
+            let traj: Vec<Pose2> = xs
+                .iter()
+                .map(|&(x, y, kind)| match kind {
+                    // Exactly on the radius along an axis, on the goal, tiny, not finite.
+                    0 => Pose2::new(goal[0] + radius, goal[1], 0.0),
+                    1 => Pose2::new(goal[0], goal[1], 0.0),
+                    2 => Pose2::new(goal[0] + x * 1e-170, goal[1] + y * 1e-170, 0.0),
+                    3 => Pose2::new(f64::NAN, y, 0.0),
+                    _ => Pose2::new(x, y, 0.0),
+                })
+                .collect();
+            let naive_arrival = traj.iter().position(|p| distance(p, goal) <= radius);
+            proptest::prop_assert_eq!(arrival(&traj, goal, radius), naive_arrival);
+            let naive = traj.iter().map(|p| distance(p, goal)).fold(start, f64::min);
+            proptest::prop_assert_eq!(
+                closest_distance(&traj, goal, start).to_bits(),
+                naive.to_bits()
+            );
+        }
     }
 }

@@ -48,6 +48,9 @@ pub(crate) struct Near {
     obstacles: Vec<usize>,
     /// Where those of waypoint `j` are in `obstacles`.
     obstacle_spans: Vec<Range<usize>>,
+    /// The distance from a candidate's pose beyond which an obstacle cannot matter to it:
+    /// `reach + margin`, with [`SLACK`].
+    obstacle_far: f64,
 }
 
 /// The poses of `candidate`, then its last pose `hold` more times (none when it is empty): the
@@ -95,6 +98,7 @@ impl Near {
             scenes: forecast.scenes(),
             weights: forecast.weights().map(<[f64]>::to_vec),
             steps,
+            obstacle_far: reach + margin + SLACK,
             ..Near::default()
         };
         for scene in 0..forecast.scenes() {
@@ -162,6 +166,13 @@ impl Near {
         self.obstacle_spans
             .get(step)
             .map_or(&[], |span| &self.obstacles[span.clone()])
+    }
+
+    /// Whether `obstacle` may matter to a candidate at `pose`: the narrow phase before the
+    /// footprint's exact clearance, with the pose's position alone ([`Obstacle::farther_than`]
+    /// the footprint's reach and the margin).
+    pub(crate) fn obstacle_may_matter(&self, obstacle: &Obstacle, pose: &Pose2) -> bool {
+        !obstacle.farther_than([pose.x, pose.y], self.obstacle_far)
     }
 }
 

@@ -208,7 +208,7 @@ impl Phi {
             }
             scratch.cost.fill(0.0);
             match builtin {
-                Some(b) => b.add_costs(&scratch.segments, ctx, &mut scratch.cost)?,
+                Some(b) => b.add_costs(&mut scratch.segments, ctx, &mut scratch.cost)?,
                 None => term.cost(batch, ctx, &mut scratch.cost)?,
             }
             check_finite(term.as_ref(), &scratch.cost, batch.batch, "cost")?;

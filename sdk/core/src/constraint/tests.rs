@@ -542,10 +542,11 @@ fn a_term_that_answers_nan_is_an_error_naming_it() {
 /// The cost-only path (each term's `cost`, and Φ's `costs`, whose built-in terms share one
 /// set of segment values) gives the costs `evaluate` gives, to the bit, on every limit set
 /// (curvature and coupled limits present and absent), including trajectories at rest and
-/// reversing.
+/// reversing, and trajectories that share their first poses with the one before (whose
+/// shared segments `costs` sums once).
 #[test]
 fn cost_only_paths_equal_evaluate_bit_for_bit() {
-    let (b, t) = (7, 12);
+    let (b, t) = (10, 12);
     let mut data = demo_batch(b, t, 0.1);
     // One trajectory at rest, one driven backwards.
     let rest: Vec<f64> = (0..t).flat_map(|_| [0.3, -0.2, 0.5]).collect();
@@ -553,6 +554,15 @@ fn cost_only_paths_equal_evaluate_bit_for_bit() {
     for i in 0..t {
         data[3 * t + 3 * i] = -0.05 * i as f64;
     }
+    // Trajectory 3 shares 5 poses with 2, 4 is 3 again, 5 shares 1 pose (no segment) with 4,
+    // 6 shares all but its last pose with 5.
+    let copy = |data: &mut Vec<f64>, from: usize, to: usize, poses: usize| {
+        data.copy_within(3 * t * from..3 * t * from + 3 * poses, 3 * t * to);
+    };
+    copy(&mut data, 2, 3, 5);
+    copy(&mut data, 3, 4, t);
+    copy(&mut data, 4, 5, 1);
+    copy(&mut data, 5, 6, t - 1);
     for l in [
         limits(Some(0.8)),
         limits(None),

@@ -190,7 +190,7 @@ pub(super) fn goal_term(
         Progress::Time => {
             (traj.len() as f64 * reach_per_step + traj.last().map_or(d0, distance)) / d0
         }
-        _ => traj.iter().map(distance).fold(d0, f64::min) / d0,
+        _ => closest_distance(traj, goal, d0) / d0,
     }
 }
 

@@ -67,16 +67,7 @@ impl FootprintShape {
     pub fn corners(&self) -> Vec<[f64; 2]> {
         match *self {
             FootprintShape::Disc { .. } => Vec::new(),
-            FootprintShape::Rect { center, half, yaw } => {
-                let (s, c) = yaw.sin_cos();
-                [(1.0, 1.0), (-1.0, 1.0), (-1.0, -1.0), (1.0, -1.0)]
-                    .iter()
-                    .map(|&(a, b)| {
-                        let (x, y) = (a * half[0], b * half[1]);
-                        [center[0] + c * x - s * y, center[1] + s * x + c * y]
-                    })
-                    .collect()
-            }
+            FootprintShape::Rect { center, half, yaw } => rect_corners(center, half, yaw).into(),
         }
     }
 }
@@ -108,6 +99,16 @@ impl std::fmt::Display for FootprintShape {
             }
         }
     }
+}
+
+/// The corners of the rectangle [`FootprintShape::Rect`] `{ center, half, yaw }`,
+/// counter-clockwise.
+pub(crate) fn rect_corners(center: [f64; 2], half: [f64; 2], yaw: f64) -> [[f64; 2]; 4] {
+    let (s, c) = yaw.sin_cos();
+    [(1.0, 1.0), (-1.0, 1.0), (-1.0, -1.0), (1.0, -1.0)].map(|(a, b)| {
+        let (x, y) = (a * half[0], b * half[1]);
+        [center[0] + c * x - s * y, center[1] + s * x + c * y]
+    })
 }
 
 /// The farthest any of `shapes` reaches from the base-link origin (0 for an empty footprint):

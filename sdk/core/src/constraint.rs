@@ -186,6 +186,15 @@ pub trait ConstraintTerm: Send + Sync {
         let mut grad = vec![0.0; batch.data.len()];
         self.evaluate(batch, ctx, cost, &mut grad)
     }
+
+    /// Whether this term's cost of a trajectory is never negative, is finite for finite
+    /// poses, and is the same to the bit whatever other trajectories share its batch: what
+    /// lets a planner's selection leave the term out for candidates whose score already loses
+    /// without it. The default, `false`, is always safe; a term that answers `true` must hold
+    /// to all three.
+    fn separable_nonnegative(&self) -> bool {
+        false
+    }
 }
 
 pub mod builtin;

@@ -21,6 +21,8 @@
 //!    ([`guidance::GuidanceVariant::Paper`]) guides all of them whatever `guided_samples` says;
 //! 4. scores every candidate (and the previous plan, shifted to the current time: the warm
 //!    start of receding-horizon use) and keeps the lowest score (see [`SelectionWeights`]);
+//!    Φ is left out where the score without it already loses, which changes no choice
+//!    (branch and bound, `selection.rs`);
 //! 5. returns the plan in the world frame: the current pose followed by the `T` future poses at
 //!    `dt` = [`Human2NavSettings::dt`].
 //!
@@ -122,7 +124,7 @@ mod tests;
 use batch::{Replay, Replayed};
 use candidates::Source;
 pub use candidates::{continued, goal_approach, time_scaled};
-use selection::{phi_context, select_best, selection_clearance};
+use selection::{phi_context, selection_clearance};
 pub use settings::{
     COLLISION_PENALTY, GuidanceTerms, Human2NavSettings, MAX_BUDGET_MS, MAX_CROWD_WEIGHT,
     MAX_HOLD_S, MAX_MOTIONS, MAX_SAMPLES, MOTION_SWITCH_S, Progress, SelectionWeights,
@@ -442,20 +444,17 @@ impl<M: FlowModel> Human2Nav<M> {
             corrected.resize(candidates.len(), true);
         }
 
-        // Stage 3: selection, every candidate scored with Φ.
+        // Stage 3: selection by the score with Φ (Φ only where it can change the choice).
         let scored = self.scored(&candidates);
         let ctx = self.phi_context(obs, &agents, &forecast, goal);
-        let phi_cost = self.phi_costs(&scored, &ctx)?;
-        let best = select_best(&scored, &corrected, |i| {
-            self.score(
-                &scored[i],
-                goal,
-                phi_cost[i],
-                obs.ego_velocity,
-                previous_ego,
-                true,
-            )
-        });
+        let best = self.select(
+            &scored,
+            &corrected,
+            &ctx,
+            goal,
+            obs.ego_velocity,
+            previous_ego,
+        )?;
         let Some(chosen) = best else {
             return Err(StageError::NoCandidate {
                 deadline: candidates.is_empty(),

@@ -540,6 +540,12 @@ impl ConstraintTerm for BuiltinTerm {
         self.kind.name()
     }
 
+    /// A mean of softplus values, per trajectory (its cost-only path sums the segments
+    /// a trajectory shares with the one before once, with the same additions).
+    fn separable_nonnegative(&self) -> bool {
+        true
+    }
+
     fn evaluate(
         &self,
         batch: TrajBatch<'_>,

@@ -344,6 +344,12 @@ impl ConstraintTerm for Clearance {
         CLEARANCE
     }
 
+    /// Squares and contact penalties, per trajectory (the broad phase over the batch leaves
+    /// out only what adds nothing).
+    fn separable_nonnegative(&self) -> bool {
+        true
+    }
+
     fn evaluate(
         &self,
         batch: TrajBatch<'_>,

@@ -122,6 +122,15 @@ impl Phi {
         }
     }
 
+    /// Whether every term of Φ is [`ConstraintTerm::separable_nonnegative`] (the weights are
+    /// never negative): then so is Φ, and Φ of a subset of a batch is Φ of those trajectories
+    /// in the whole batch, to the bit.
+    pub fn separable_nonnegative(&self) -> bool {
+        self.terms
+            .iter()
+            .all(|t| t.weight == 0.0 || t.term.separable_nonnegative())
+    }
+
     /// Number of terms.
     pub fn len(&self) -> usize {
         self.terms.len()

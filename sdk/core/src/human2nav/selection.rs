@@ -133,6 +133,19 @@ impl<M: FlowModel> Human2Nav<M> {
         previous: Option<&[Pose2]>,
         with_feasibility: bool,
     ) -> f64 {
+        self.score_without_phi(traj, goal, v0, previous, with_feasibility)
+            .with_phi(phi)
+    }
+
+    /// [`Self::score`] but for its Φ term, which [`Unweighed::with_phi`] adds.
+    fn score_without_phi(
+        &self,
+        traj: &[Pose2],
+        goal: [f64; 2],
+        v0: Twist2,
+        previous: Option<&[Pose2]>,
+        with_feasibility: bool,
+    ) -> Unweighed {
         let w = &self.settings.selection;
         // TFS costs a pass over the plan; with a zero weight (the shipped selection) it is
         // not computed.
@@ -155,7 +168,107 @@ impl<M: FlowModel> Human2Nav<M> {
                 / n as f64
         });
 
-        w.feasibility * (1.0 - feas) + w.goal * progress + w.phi * phi + w.consistency * consistency
+        Unweighed {
+            before: w.feasibility * (1.0 - feas) + w.goal * progress,
+            phi_weight: w.phi,
+            after: w.consistency * consistency,
+        }
+    }
+
+    /// The candidate [`select_best`] chooses by [`Self::score`] with Φ of every candidate
+    /// ([`Self::phi_costs`]), found without Φ of most of them. The score without its Φ term
+    /// is a lower bound of the score when Φ is never negative (a sum of non-negative terms,
+    /// and rounding is monotone), so the candidates are taken in the order of that bound, Φ
+    /// of a few at a time, until the next bound cannot beat the best score found (ties going
+    /// to the lower index, as in `select_best`): branch and bound. Φ of a candidate does not
+    /// depend on the others of its batch (the terms' [`ConstraintTerm::separable_nonnegative`]),
+    /// so the choice is the same to the bit. With a term that does not declare it, with a
+    /// candidate of non-finite or far-off poses, or of another length, every candidate is
+    /// scored, so that the same errors arise.
+    pub(super) fn select(
+        &self,
+        scored: &[Vec<Pose2>],
+        corrected: &[bool],
+        ctx: &ConstraintContext<'_>,
+        goal: [f64; 2],
+        v0: Twist2,
+        previous: Option<&[Pose2]>,
+    ) -> Result<Option<usize>, StageError> {
+        let parts: Vec<Unweighed> = scored
+            .iter()
+            .map(|c| self.score_without_phi(c, goal, v0, previous, true))
+            .collect();
+        let sane = |c: &Vec<Pose2>| {
+            c.len() == scored[0].len()
+                && c.iter()
+                    .all(|p| p.is_finite() && p.x.abs() <= FAR && p.y.abs() <= FAR)
+        };
+        let eligible = eligible(corrected);
+        let mut order: Vec<(f64, usize)> = (0..scored.len())
+            .filter(|&i| eligible(i))
+            .map(|i| (parts[i].with_phi(0.0), i))
+            .filter(|(bound, _)| bound.is_finite())
+            .collect();
+        if order.is_empty() || !self.robot.phi.separable_nonnegative() || !scored.iter().all(sane) {
+            let phi = self.phi_costs(scored, ctx)?;
+            return Ok(select_best(scored, corrected, |i| {
+                parts[i].with_phi(phi[i])
+            }));
+        }
+        order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let beats = |(s, i): (f64, usize), best: Option<(f64, usize)>| {
+            best.is_none_or(|(bs, bi)| s < bs || (s == bs && i < bi))
+        };
+        let mut best: Option<(f64, usize)> = None;
+        let mut rest = &order[..];
+        while let Some(&first) = rest.first() {
+            if !beats(first, best) {
+                break;
+            }
+            let (next, after) = rest.split_at(rest.len().min(PRUNE_CHUNK));
+            rest = after;
+            // In candidate order: neighbours often share their first poses, which Φ's
+            // built-in terms score once.
+            let mut chunk: Vec<usize> = next
+                .iter()
+                .filter(|&&bound| beats(bound, best))
+                .map(|&(_, i)| i)
+                .collect();
+            chunk.sort_unstable();
+            let candidates: Vec<Vec<Pose2>> = chunk.iter().map(|&i| scored[i].clone()).collect();
+            let phi = self.phi_costs(&candidates, ctx)?;
+            for (&i, phi) in chunk.iter().zip(phi) {
+                let s = parts[i].with_phi(phi);
+                if s.is_finite() && beats((s, i), best) {
+                    best = Some((s, i));
+                }
+            }
+        }
+        Ok(best.map(|(_, i)| i))
+    }
+}
+
+/// Candidates with a coordinate beyond this (m) from the robot are scored the plain way
+/// by [`Human2Nav::select`]: far beyond any plan, and far inside the range where Φ's terms
+/// stay finite.
+const FAR: f64 = 1e6;
+
+/// How many candidates [`Human2Nav::select`] scores with Φ at a time.
+const PRUNE_CHUNK: usize = 32;
+
+/// A selection score but for its Φ term: `before + phi_weight·Φ + after`, added in the order
+/// [`Human2Nav::score`] adds them.
+#[derive(Clone, Copy, Debug)]
+struct Unweighed {
+    before: f64,
+    phi_weight: f64,
+    after: f64,
+}
+
+impl Unweighed {
+    /// The score with Φ `phi`.
+    fn with_phi(self, phi: f64) -> f64 {
+        self.before + self.phi_weight * phi + self.after
     }
 }
 
@@ -203,11 +316,10 @@ pub(super) fn select_best(
     corrected: &[bool],
     mut score: impl FnMut(usize) -> f64,
 ) -> Option<usize> {
-    let any_corrected = corrected.contains(&true);
+    let eligible = eligible(corrected);
     let mut best: Option<(usize, f64)> = None;
     for (i, c) in candidates.iter().enumerate() {
-        let eligible = !any_corrected || corrected.get(i).copied().unwrap_or(false);
-        if !eligible || !c.iter().all(|p| p.is_finite()) {
+        if !eligible(i) || !c.iter().all(|p| p.is_finite()) {
             continue;
         }
         let s = score(i);
@@ -216,6 +328,12 @@ pub(super) fn select_best(
         }
     }
     best.map(|(i, _)| i)
+}
+
+/// Whether candidate `i` may be chosen given the correction's flags ([`select_best`]).
+fn eligible(corrected: &[bool]) -> impl Fn(usize) -> bool + '_ {
+    let any_corrected = corrected.contains(&true);
+    move |i| !any_corrected || corrected.get(i).copied().unwrap_or(false)
 }
 
 /// Ego-frame candidates as one flat batch of poses, each with the robot's pose (the identity)

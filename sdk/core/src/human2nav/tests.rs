@@ -1,5 +1,5 @@
 use super::candidates::motion_count;
-use super::selection::goal_term;
+use super::selection::{goal_term, select_best};
 use super::*;
 
 /// A candidate's goal term, and how many of its waypoints the clearance term scores.

@@ -209,11 +209,30 @@ pub fn walkers_near(
 /// (centre distance minus both radii; negative on overlap); `+∞` without pedestrians.
 #[inline]
 pub fn walker_clearance(walkers: &[Walker], p: [f64; 2], t: f64, radius: f64) -> f64 {
+    walker_clearance_below(walkers, p, t, radius, f64::INFINITY)
+}
+
+/// [`walker_clearance`] where it is below `limit`, to the bit; where it is not, some value
+/// that is not below `limit` either. The pedestrians whose squared centre distance puts them
+/// beyond `limit` (with a relative shell of 10⁻⁹ against rounding) are passed over without a
+/// square root: a critic that only acts below a distance needs no more.
+#[inline]
+pub fn walker_clearance_below(
+    walkers: &[Walker],
+    p: [f64; 2],
+    t: f64,
+    radius: f64,
+    limit: f64,
+) -> f64 {
     walkers
         .iter()
-        .map(|w| {
+        .filter_map(|w| {
             let q = w.at(t);
-            (p[0] - q[0]).hypot(p[1] - q[1]) - radius - w.radius
+            let (dx, dy) = (p[0] - q[0], p[1] - q[1]);
+            let reach = (limit + radius + w.radius) * (1.0 + 1e-9);
+            // NaN and an infinite `limit` fail the test: those take the square root.
+            (dx * dx + dy * dy <= reach * reach || reach.is_nan() || reach.is_infinite())
+                .then(|| dx.hypot(dy) - radius - w.radius)
         })
         .fold(f64::INFINITY, f64::min)
 }
@@ -277,5 +296,53 @@ mod tests {
         let d = world.distance([1.1, 1.5]);
         assert!((d - (0.4 - 0.2 / 2f64.sqrt())).abs() < 1e-9, "{d}");
         assert!(world.distance([-1.0, -1.0]).is_infinite());
+    }
+
+    /// Below the limit the thresholded clearance is the clearance to the bit; above it, it is
+    /// not below the limit either; with no limit it is the clearance.
+    #[test]
+    fn the_thresholded_walker_clearance_agrees_below_its_limit() {
+        let walkers: Vec<Walker> = (0..7)
+            .map(|k| {
+                let k = k as f64;
+                Walker {
+                    position: [1.3 * k - 4.0, 0.7 * (k * 1.7).sin()],
+                    velocity: [0.4 * (k * 0.9).cos(), -0.3],
+                    radius: 0.2 + 0.05 * k,
+                }
+            })
+            .collect();
+        let (mut below, mut above) = (0, 0);
+        for i in 0..=60 {
+            for j in 0..=30 {
+                let p = [-6.0 + 0.2 * i as f64, -3.0 + 0.2 * j as f64];
+                let t = 0.1 * (i % 7) as f64;
+                let exact = walker_clearance(&walkers, p, t, 0.3);
+                for limit in [0.0, 0.25, 0.6, 1.5] {
+                    let d = walker_clearance_below(&walkers, p, t, 0.3, limit);
+                    if exact < limit {
+                        assert_eq!(d.to_bits(), exact.to_bits(), "{p:?} {limit}");
+                        below += 1;
+                    } else {
+                        assert!(d >= limit, "{p:?} {limit}: {d} for {exact}");
+                        above += 1;
+                    }
+                }
+            }
+        }
+        assert!(below > 500 && above > 500, "{below} {above}");
+        let p = [0.5, 0.2];
+        let exact = walkers
+            .iter()
+            .map(|w| {
+                let q = w.at(0.3);
+                (p[0] - q[0]).hypot(p[1] - q[1]) - 0.3 - w.radius
+            })
+            .fold(f64::INFINITY, f64::min);
+        assert_eq!(
+            walker_clearance(&walkers, p, 0.3, 0.3).to_bits(),
+            exact.to_bits()
+        );
+        assert!(walker_clearance(&[], p, 0.0, 0.3).is_infinite());
     }
 }

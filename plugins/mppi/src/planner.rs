@@ -17,7 +17,7 @@
 
 use crate::config::MppiConfig;
 use crate::kinematics::Bounds;
-use crate::world::{StaticWorld, Walker, walker_clearance, walkers_near};
+use crate::world::{StaticWorld, Walker, walker_clearance_below, walkers_near};
 use human2nav_core::{Observation, Plan, PlanError, PlanInfo, Planner, Pose2, Twist2};
 use human2nav_plugin::{InitError, PluginInit};
 use rand::SeedableRng;
@@ -230,7 +230,12 @@ impl MppiPlanner {
                 }
             }
             if !scene.walkers.is_empty() {
-                let d = walker_clearance(&scene.walkers, p, (t + 1) as f64 * dt, self.radius);
+                // The critics act below the larger of their two distances.
+                let acts = c
+                    .collision_margin_distance
+                    .max(c.pedestrian_inflation_radius);
+                let t = (t + 1) as f64 * dt;
+                let d = walker_clearance_below(&scene.walkers, p, t, self.radius, acts);
                 if d < 0.0 {
                     collided = true;
                 } else if d < c.collision_margin_distance {

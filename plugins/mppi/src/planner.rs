@@ -215,6 +215,10 @@ impl MppiPlanner {
         let (mut ped_critical, mut ped_repulsive) = (0.0, 0.0);
         let mut collided = false;
         let check_walls = !scene.walls.is_empty();
+        // The pedestrian critics act below the larger of their two distances.
+        let acts = c
+            .collision_margin_distance
+            .max(c.pedestrian_inflation_radius);
         self.rollout(scene, controls, |t, pose, v| {
             let p = [pose.x, pose.y];
             goal += (p[0] - scene.goal[0]).hypot(p[1] - scene.goal[1]);
@@ -230,10 +234,6 @@ impl MppiPlanner {
                 }
             }
             if !scene.walkers.is_empty() {
-                // The critics act below the larger of their two distances.
-                let acts = c
-                    .collision_margin_distance
-                    .max(c.pedestrian_inflation_radius);
                 let t = (t + 1) as f64 * dt;
                 let d = walker_clearance_below(&scene.walkers, p, t, self.radius, acts);
                 if d < 0.0 {

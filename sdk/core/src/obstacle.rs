@@ -308,30 +308,33 @@ fn rect_segment_clearance(
     if da <= 0.0 || db <= 0.0 || crosses {
         return da.min(db).min(-f64::EPSILON);
     }
-    // The smallest of the corners' distances, to the bit, with the square root taken only of
-    // those whose squared distance comes within a thin shell of the smallest (the others
-    // cannot be it).
-    let offsets = corners.map(|c| from_segment(c, a, b));
-    let squared = offsets.map(|[x, y]| x * x + y * y);
-    let bound = squared.iter().copied().fold(f64::INFINITY, f64::min) * (1.0 + 1e-9);
-    offsets
-        .iter()
-        .zip(squared)
-        .filter(|&(_, d2)| d2 <= bound)
-        .map(|([x, y], _)| x.hypot(*y))
-        .fold(da.min(db), f64::min)
+    smallest_norm(corners.iter().map(|c| from_segment(*c, a, b)), da.min(db))
+}
+
+/// Relative width of the shell around a distance within which comparing squared distances
+/// does not decide a comparison of the distances themselves (far wider than the rounding of
+/// either).
+pub(crate) const SHELL: f64 = 1e-9;
+
+/// The smallest of `start` and the lengths (`hypot`) of `vectors`, to the bit, with the square
+/// root taken only of the vectors whose squared length comes within [`SHELL`] of the smallest
+/// (the others cannot be it). Non-finite lengths are passed over, as `f64::min` does.
+pub(crate) fn smallest_norm(vectors: impl Iterator<Item = [f64; 2]> + Clone, start: f64) -> f64 {
+    let squared = |[x, y]: [f64; 2]| x * x + y * y;
+    let bound = vectors.clone().map(squared).fold(f64::INFINITY, f64::min) * (1.0 + SHELL);
+    vectors
+        .filter(|&v| squared(v) <= bound)
+        .map(|[x, y]| x.hypot(y))
+        .fold(start, f64::min)
 }
 
 /// The clearance between a footprint placed at `pose` and `obstacle` (both in the same
 /// frame): the smallest over the footprint's shapes, negative on overlap, `+∞` for an empty
 /// footprint.
 pub fn footprint_clearance(shapes: &[FootprintShape], pose: Pose2, obstacle: &Obstacle) -> f64 {
-    // `pose.inverse_act` on every point, with the heading's sine and cosine taken once.
-    let (s, c) = pose.theta.sin_cos();
-    let local = obstacle.map_points(|p| {
-        let (dx, dy) = (p[0] - pose.x, p[1] - pose.y);
-        [c * dx + s * dy, -s * dx + c * dy]
-    });
+    // The heading's sine and cosine once, not per point.
+    let turn = pose.theta.sin_cos();
+    let local = obstacle.map_points(|p| pose.inverse_act_turned(turn, p));
     shapes
         .iter()
         .map(|s| local.shape_clearance(s))

@@ -170,7 +170,12 @@ impl Pose2 {
 
     /// Maps a world point into this frame: `R(θ)ᵀ·(p − t)`.
     pub fn inverse_act(self, p: [f64; 2]) -> [f64; 2] {
-        let (s, c) = self.theta.sin_cos();
+        self.inverse_act_turned(self.theta.sin_cos(), p)
+    }
+
+    /// [`Self::inverse_act`] with the heading's sine and cosine `(s, c)` given, for mapping
+    /// many points into one frame.
+    pub fn inverse_act_turned(self, (s, c): (f64, f64), p: [f64; 2]) -> [f64; 2] {
         let (dx, dy) = (p[0] - self.x, p[1] - self.y);
         [c * dx + s * dy, -s * dx + c * dy]
     }

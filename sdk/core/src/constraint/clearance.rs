@@ -256,16 +256,15 @@ pub fn arrival(traj: &[Pose2], goal: [f64; 2], radius: f64) -> Option<usize> {
     traj.iter().position(|p| within(p, goal, radius))
 }
 
-/// Relative width of the shell around a distance in which squared distances do not decide a
-/// comparison of [`distance`]s (far wider than the rounding of either).
-const SHELL: f64 = 1e-9;
-
 /// `distance(p, q) <= radius`, to the bit, with the square root left out wherever the squared
 /// distance decides it (all but a thin shell around `radius`).
 fn within(p: &Pose2, q: [f64; 2], radius: f64) -> bool {
     let (dx, dy) = (p.x - q[0], p.y - q[1]);
     let d2 = dx * dx + dy * dy;
-    let (inner, outer) = (radius * (1.0 - SHELL), radius * (1.0 + SHELL));
+    let (inner, outer) = (
+        radius * (1.0 - obstacle::SHELL),
+        radius * (1.0 + obstacle::SHELL),
+    );
     if d2 < inner * inner {
         true
     } else if d2 > outer * outer {
@@ -275,21 +274,10 @@ fn within(p: &Pose2, q: [f64; 2], radius: f64) -> bool {
     }
 }
 
-/// The smallest of `start` and the [`distance`]s from the poses of `traj` to `q`, to the bit,
-/// with the square root taken only of the poses whose squared distance comes within a thin
-/// shell of the smallest (the others cannot be it). Non-finite distances are passed over,
-/// as `f64::min` does.
+/// The smallest of `start` and the [`distance`]s from the poses of `traj` to `q`, to the bit
+/// ([`obstacle::smallest_norm`]: few square roots).
 pub(crate) fn closest_distance(traj: &[Pose2], q: [f64; 2], start: f64) -> f64 {
-    let squared = |p: &Pose2| {
-        let (dx, dy) = (p.x - q[0], p.y - q[1]);
-        dx * dx + dy * dy
-    };
-    let least = traj.iter().map(squared).fold(f64::INFINITY, f64::min);
-    let bound = least * (1.0 + SHELL);
-    traj.iter()
-        .filter(|p| squared(p) <= bound)
-        .map(|p| distance(p, q))
-        .fold(start, f64::min)
+    obstacle::smallest_norm(traj.iter().map(|p| [p.x - q[0], p.y - q[1]]), start)
 }
 
 /// One trajectory as the term scores it: its scored waypoints, the hold after them and the

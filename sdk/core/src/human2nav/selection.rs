@@ -2,6 +2,7 @@
 //! of candidates, the goal term and the score, and the best candidate.
 
 use super::*;
+use crate::planner::MAX_COORDINATE;
 
 impl<M: FlowModel> Human2Nav<M> {
     /// The samples that go on past sampling (to Algorithm 1, the slowed copies and the
@@ -42,9 +43,6 @@ impl<M: FlowModel> Human2Nav<M> {
     /// Φ's context for this call: the plan step, the limits, the robot's velocity, the
     /// ego-frame agents, and the scene the clearance term reads (the forecast, the nearby
     /// obstacles, the footprint and the clipped goal).
-    /// Φ's context at a planning instant: the plan step, the robot's limits, its velocity, the
-    /// nearby pedestrians and the scene (a free function so that it borrows fields, not the whole
-    /// planner).
     pub(super) fn phi_context<'a>(
         &'a self,
         obs: &Observation,
@@ -85,9 +83,9 @@ impl<M: FlowModel> Human2Nav<M> {
     /// Φ of every ego-frame candidate (each with the robot's pose, the identity, prepended as
     /// pose 0), without gradients. A term that fails or answers a non-finite cost is an error
     /// naming it: the selection never scores without a term.
-    pub(super) fn phi_costs(
+    pub(super) fn phi_costs<C: AsRef<[Pose2]>>(
         &self,
-        candidates: &[Vec<Pose2>],
+        candidates: &[C],
         ctx: &ConstraintContext<'_>,
     ) -> Result<Vec<f64>, StageError> {
         let Some((data, poses)) = pose_batch(candidates)? else {
@@ -200,8 +198,9 @@ impl<M: FlowModel> Human2Nav<M> {
             .collect();
         let sane = |c: &Vec<Pose2>| {
             c.len() == scored[0].len()
-                && c.iter()
-                    .all(|p| p.is_finite() && p.x.abs() <= FAR && p.y.abs() <= FAR)
+                && c.iter().all(|p| {
+                    p.is_finite() && p.x.abs() <= MAX_COORDINATE && p.y.abs() <= MAX_COORDINATE
+                })
         };
         let eligible = eligible(corrected);
         let mut order: Vec<(f64, usize)> = (0..scored.len())
@@ -235,7 +234,7 @@ impl<M: FlowModel> Human2Nav<M> {
                 .map(|&(_, i)| i)
                 .collect();
             chunk.sort_unstable();
-            let candidates: Vec<Vec<Pose2>> = chunk.iter().map(|&i| scored[i].clone()).collect();
+            let candidates: Vec<&[Pose2]> = chunk.iter().map(|&i| scored[i].as_slice()).collect();
             let phi = self.phi_costs(&candidates, ctx)?;
             for (&i, phi) in chunk.iter().zip(phi) {
                 let s = parts[i].with_phi(phi);
@@ -247,11 +246,6 @@ impl<M: FlowModel> Human2Nav<M> {
         Ok(best.map(|(_, i)| i))
     }
 }
-
-/// Candidates with a coordinate beyond this (m) from the robot are scored the plain way
-/// by [`Human2Nav::select`]: far beyond any plan, and far inside the range where Φ's terms
-/// stay finite.
-const FAR: f64 = 1e6;
 
 /// How many candidates [`Human2Nav::select`] scores with Φ at a time.
 const PRUNE_CHUNK: usize = 32;
@@ -339,15 +333,15 @@ fn eligible(corrected: &[bool]) -> impl Fn(usize) -> bool + '_ {
 /// Ego-frame candidates as one flat batch of poses, each with the robot's pose (the identity)
 /// prepended as pose 0, and the poses per trajectory; `None` without candidates. Candidates
 /// of different lengths cannot be scored together (an error).
-pub(super) fn pose_batch(
-    candidates: &[Vec<Pose2>],
+pub(super) fn pose_batch<C: AsRef<[Pose2]>>(
+    candidates: &[C],
 ) -> Result<Option<(Vec<f64>, usize)>, StageError> {
-    let Some(first) = candidates.first() else {
+    let Some(first) = candidates.first().map(C::as_ref) else {
         return Ok(None);
     };
     let poses = first.len() + 1;
     let mut data = Vec::with_capacity(candidates.len() * poses * 3);
-    for c in candidates {
+    for c in candidates.iter().map(C::as_ref) {
         if c.len() + 1 != poses {
             return Err(StageError::Lengths {
                 first: first.len(),

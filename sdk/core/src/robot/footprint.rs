@@ -139,12 +139,11 @@ pub fn clearance_at(shapes: &[FootprintShape], pose: Pose2, p: [f64; 2], radius:
 pub fn clearance_at_turned(
     shapes: &[FootprintShape],
     pose: Pose2,
-    (s, c): (f64, f64),
+    turn: (f64, f64),
     p: [f64; 2],
     radius: f64,
 ) -> f64 {
-    let (dx, dy) = (p[0] - pose.x, p[1] - pose.y);
-    clearance(shapes, [c * dx + s * dy, -s * dx + c * dy], radius)
+    clearance(shapes, pose.inverse_act_turned(turn, p), radius)
 }
 
 #[cfg(test)]

@@ -334,6 +334,7 @@ pub struct GuidanceWorkspace {
     saved_ws: Vec<f64>,
     saved_u: Vec<f64>,
     saved_phi: Vec<f64>,
+    saved_ext: Vec<f64>,
     saved_ext_grad: Vec<f64>,
     /// Adam's first and second moments of the last-step iterations, `K·T·3`.
     adam_m: Vec<f64>,
@@ -378,12 +379,14 @@ impl GuidanceWorkspace {
         self.tri.resize(horizon, 0.0);
     }
 
-    /// Remembers the current iterate (states, velocities, controls, Φ and ∇Φ).
+    /// Remembers the current iterate (states, velocities, controls, Φ, the final poses and ∇Φ
+    /// there).
     fn save(&mut self) {
         self.saved_xs.clone_from(&self.xs);
         self.saved_ws.clone_from(&self.ws);
         self.saved_u.clone_from(&self.u);
         self.saved_phi.clone_from(&self.phi);
+        self.saved_ext.clone_from(&self.ext);
         self.saved_ext_grad.clone_from(&self.ext_grad);
     }
 
@@ -418,6 +421,7 @@ impl GuidanceWorkspace {
         let per_ext = (self.horizon + 1) * 3;
         self.saved_phi[b] = self.phi[b];
         let e = b * per_ext..(b + 1) * per_ext;
+        self.saved_ext[e.clone()].copy_from_slice(&self.ext[e.clone()]);
         self.saved_ext_grad[e.clone()].copy_from_slice(&self.ext_grad[e]);
         let n = self.steps;
         let last = (n - 1) * m + b * per..(n - 1) * m + (b + 1) * per;
@@ -427,13 +431,15 @@ impl GuidanceWorkspace {
         self.saved_u[last.clone()].copy_from_slice(&self.u[last]);
     }
 
-    /// Sample `b`'s states, velocities, controls, Φ and ∇Φ back to the saved iterate.
+    /// Sample `b`'s states, velocities, controls, Φ, final poses and ∇Φ back to the saved
+    /// iterate.
     fn restore(&mut self, b: usize) {
         let m = self.size();
         let per = self.horizon * 3;
         let per_ext = (self.horizon + 1) * 3;
         self.phi[b] = self.saved_phi[b];
         let e = b * per_ext..(b + 1) * per_ext;
+        self.ext[e.clone()].copy_from_slice(&self.saved_ext[e.clone()]);
         self.ext_grad[e.clone()].copy_from_slice(&self.saved_ext_grad[e]);
         for i in 0..=self.steps {
             let r = i * m + b * per..i * m + (b + 1) * per;

@@ -130,7 +130,11 @@
 //! step (`adaptive_step = true`, the default): an update that raises the sample's Φ is undone
 //! (states, controls and gradient restored, no extra network call) and its step multiplied by
 //! [`STEP_SHRINK`]; an accepted one multiplies it by [`STEP_GROW`]. Hence `phi_after ≤
-//! phi_before` for every sample.
+//! phi_before` for every sample. A restored sample is back where the last backward pass
+//! computed its direction, so the next backward pass does not compute it again: it asks the
+//! network only for the other samples, at the states the rollout just evaluated (where the
+//! model may still hold the forward pass), and is skipped when every sample was restored.
+//! The direction is the same to the bit, as the network's rows do not depend on each other.
 //!
 //! Known limit: the update moves waypoint *coordinates*; rotating a long remainder of the plan
 //! is only linearised, so large yaw-rate and curvature violations are reduced but not always
@@ -142,7 +146,7 @@
 //! is frozen (its controls are not updated, so a feasible sample is left exactly as it is); the
 //! loop stops once every sample is frozen (so in particular once their mean `Φ` is below the
 //! tolerance), or after `M` iterations. Network calls: `N` for the first rollout, then `2N − 1`
-//! per iteration (`μ_0` is never needed).
+//! per iteration (`μ_0` is never needed), `N` when every sample was restored.
 //!
 //! # Last-step iterations
 //!
@@ -307,6 +311,15 @@ pub struct GuidanceWorkspace {
     xs: Vec<f64>,
     /// Velocities `w_i = f(x_i) + u_i`, `N·K·T·3`.
     ws: Vec<f64>,
+    /// The states `x_0 … x_{N−1}` at which the last rollout called the model, `N·K·T·3`: the
+    /// backward pass asks for its VJPs there, where the model may keep the forward passes.
+    /// They differ from `xs` only in samples restored since.
+    evaluated: Vec<f64>,
+    /// Per sample: `dir` holds the direction at its current iterate (it was restored to the
+    /// iterate where the last backward pass computed it), so the next backward pass skips it.
+    dir_current: Vec<bool>,
+    /// Never mark a direction current (tests: the reference that recomputes every one).
+    recompute_directions: bool,
     /// Controls `u_i`, `N·K·T·3`.
     u: Vec<f64>,
     /// Direction `d_i` of the control update, `N·K·T·3`: `∂J/∂u_i` or its preconditioned form
@@ -358,6 +371,7 @@ impl GuidanceWorkspace {
         let m = samples * horizon * 3;
         self.xs.resize((steps + 1) * m, 0.0);
         self.ws.resize(steps * m, 0.0);
+        self.evaluated.resize(steps * m, 0.0);
         self.u.resize(steps * m, 0.0);
         self.dir.resize(steps * m, 0.0);
         for b in [
@@ -375,6 +389,8 @@ impl GuidanceWorkspace {
         self.ext_grad.resize(e, 0.0);
         self.phi.resize(samples, 0.0);
         self.active.resize(samples, true);
+        self.dir_current.clear();
+        self.dir_current.resize(samples, false);
         self.gxi.resize(horizon * 3, 0.0);
         self.tri.resize(horizon, 0.0);
     }
@@ -402,6 +418,7 @@ impl GuidanceWorkspace {
             } else {
                 self.step[b] *= STEP_SHRINK;
                 self.restore(b);
+                self.dir_current[b] = !self.recompute_directions;
             }
         }
     }

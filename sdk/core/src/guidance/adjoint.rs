@@ -34,6 +34,11 @@ pub(super) fn backward(
     let m = ws.size();
     let n = ws.steps;
     let dt = 1.0 / n as f64;
+    if ws.dir_current.iter().all(|&c| c) {
+        // Every sample is where its direction was computed (module docs, "The adaptive
+        // variant").
+        return Ok(true);
+    }
     // μ_N: ∇Φ at the T generated poses (pose 0 of the extended batch is fixed), clipped per
     // waypoint (line 6).
     for b in 0..k {
@@ -62,10 +67,22 @@ pub(super) fn backward(
         if paper {
             shift_by_controls(ws, i, dt);
         }
+        // A sample restored since the rollout keeps its direction: the VJP takes it at the
+        // state the rollout evaluated, with no cotangent, so that the batch is the one whose
+        // forward pass the model may keep; the other samples are at their states (the same
+        // ones, unless every direction is recomputed).
         let x = if paper {
             &ws.shifted[..]
         } else {
-            &ws.xs[i * m..(i + 1) * m]
+            let per = 3 * t;
+            let at = &mut ws.evaluated[i * m..(i + 1) * m];
+            for (b, current) in ws.dir_current.iter().enumerate() {
+                if !current {
+                    let r = b * per..(b + 1) * per;
+                    at[r.clone()].copy_from_slice(&ws.xs[i * m + r.start..i * m + r.end]);
+                }
+            }
+            &ws.evaluated[i * m..(i + 1) * m]
         };
         model.velocity_vjp(x, i as f64 * dt, cond, &ws.cot, &mut ws.fout, &mut ws.vjp)?;
         if !all_finite(&ws.vjp) {
@@ -101,14 +118,20 @@ pub(super) fn backward(
 /// One step of the backward pass before the model's VJP: with `(S_x, S_w)` the Jacobians of the
 /// step `x_{i+1} = x_i·exp(Δt·w_i)` at the forward pass's `(x_i, w_i)`, writes `S_xᵀ·μ_{i+1}`
 /// into `back` and the cotangent `S_wᵀ·μ_{i+1}` into `cot`, and, for the adaptive directions,
-/// `d_i` into `dir`.
+/// `d_i` into `dir`; zeros for a sample whose direction is current (`dir` kept).
 fn pull_back_step(ws: &mut GuidanceWorkspace, i: usize, dt: f64, direction: Direction<'_>) {
     let m = ws.size();
+    let per = ws.horizon;
     let x = &ws.xs[i * m..(i + 1) * m];
     let w = &ws.ws[i * m..(i + 1) * m];
     let d = &mut ws.dir[i * m..(i + 1) * m];
     for j in 0..m / 3 {
         let r = 3 * j..3 * j + 3;
+        if ws.dir_current[j / per] {
+            ws.cot[r.clone()].fill(0.0);
+            ws.back[r].fill(0.0);
+            continue;
+        }
         let (sx, sw) = euler_step_jacobians(
             Pose2::from_slice(&x[r.clone()]),
             Twist2::from_slice(&w[r.clone()]),

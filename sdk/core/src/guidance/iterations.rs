@@ -14,6 +14,9 @@ pub(super) fn optimise(
     deadline: &Deadline,
 ) -> Result<GuidanceResult, GuidanceError> {
     terminal_cost(phi, ctx, ws, 0)?;
+    // A subset of a rollout was not evaluated as such: its VJPs start from its own states.
+    let evaluated = ws.steps * ws.size();
+    ws.evaluated[..evaluated].copy_from_slice(&ws.xs[..evaluated]);
 
     let unguided = ws.final_state().to_vec();
     let phi_before = ws.phi.clone();
@@ -72,6 +75,7 @@ pub(super) fn iteration_step(
         return Ok(false);
     }
     update_controls(ws, momentum, clip_dir);
+    ws.dir_current.fill(false);
     if forward(model, cond, ws, iteration, deadline)? < ws.steps {
         ws.restore_all();
         return Ok(false);
@@ -87,18 +91,17 @@ fn update_controls(ws: &mut GuidanceWorkspace, momentum: f64, clip_dir: f64) {
     let per_sample = ws.horizon * 3;
     for i in 0..ws.steps {
         let u = &mut ws.u[i * m..(i + 1) * m];
-        let g = &mut ws.dir[i * m..(i + 1) * m];
+        let g = &ws.dir[i * m..(i + 1) * m];
         for (b, active) in ws.active.iter().enumerate() {
             if !active {
                 continue;
             }
             let lr = ws.step[b];
             let r = b * per_sample..(b + 1) * per_sample;
-            for (uc, gc) in u[r.clone()]
-                .chunks_exact_mut(3)
-                .zip(g[r].chunks_exact_mut(3))
-            {
-                clip3(gc, clip_dir);
+            for (uc, gc) in u[r.clone()].chunks_exact_mut(3).zip(g[r].chunks_exact(3)) {
+                // Clipped in a copy: a restored sample takes the same direction again.
+                let mut gc = [gc[0], gc[1], gc[2]];
+                clip3(&mut gc, clip_dir);
                 for d in 0..3 {
                     uc[d] = momentum * uc[d] - lr * gc[d];
                 }

@@ -46,6 +46,7 @@ pub(super) fn forward(
                 iteration,
             });
         }
+        ws.evaluated[i * m..(i + 1) * m].copy_from_slice(x);
         let w = &mut ws.ws[i * m..(i + 1) * m];
         let u = &ws.u[i * m..(i + 1) * m];
         let next = &mut rest[..m];

@@ -347,6 +347,112 @@ fn feasible_samples_are_left_exactly_as_they_are() {
     }
 }
 
+/// A model that counts its VJP calls.
+struct CountingVjps<M> {
+    model: M,
+    vjps: std::sync::atomic::AtomicUsize,
+}
+
+impl<M: FlowModel + ?Sized> FlowModel for CountingVjps<Box<M>> {
+    fn horizon(&self) -> usize {
+        self.model.horizon()
+    }
+
+    fn velocity(
+        &self,
+        x: &[f64],
+        t: f64,
+        c: &FlowCondition,
+        out: &mut [f64],
+    ) -> Result<(), FlowError> {
+        self.model.velocity(x, t, c, out)
+    }
+
+    fn velocity_vjp(
+        &self,
+        x: &[f64],
+        t: f64,
+        c: &FlowCondition,
+        cot: &[f64],
+        out: &mut [f64],
+        vjp: &mut [f64],
+    ) -> Result<(), FlowError> {
+        self.vjps.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.model.velocity_vjp(x, t, c, cot, out, vjp)
+    }
+}
+
+#[test]
+fn restored_samples_reuse_their_direction_to_the_bit() {
+    // Steps large enough that many updates raise Φ and are undone. The backward pass then
+    // skips the restored samples (and runs no VJP when all were restored); the result must be
+    // the one of recomputing every direction, on whole rollouts and on subsets of one.
+    let l = limits(Some(1.0));
+    let c = ctx(&l, Twist2::new(0.5, 0.0, 0.0));
+    let phi = Phi::from_weights(&weights(), &l);
+    let t = 16;
+    let demo = demo_batch(3, t + 1, DT);
+    let (mut vjps_reused, mut vjps_all) = (0, 0);
+    for (j, traj) in demo.chunks_exact((t + 1) * 3).enumerate() {
+        let target = traj[3..].to_vec();
+        let models: [Box<dyn FlowModel>; 2] = [
+            Box::new(GeodesicTarget { target }),
+            Box::new(LinearField {
+                horizon: t,
+                a: [[-0.5, 0.1, 0.0], [0.0, -0.5, 0.2], [0.1, 0.0, -0.5]],
+                b: [1.5, 0.0, 0.4],
+            }),
+        ];
+        for model in models {
+            let model = CountingVjps {
+                model,
+                vjps: Default::default(),
+            };
+            for (precondition, learning_rate) in [(false, 3.0), (true, 0.5)] {
+                let s = GuidanceSettings {
+                    precondition,
+                    learning_rate,
+                    tolerance: 0.0,
+                    iterations_m: 6,
+                    ..Default::default()
+                };
+                let x0 = source(4, t, 0.3, j as u64);
+                let mut results = Vec::new();
+                for recompute in [false, true] {
+                    let before = model.vjps.load(std::sync::atomic::Ordering::Relaxed);
+                    let mut ws = GuidanceWorkspace::new();
+                    ws.recompute_directions = recompute;
+                    let whole = sample_guided(&model, &cond(), &x0, &phi, &c, &s, &mut ws).unwrap();
+                    sample(&model, &cond(), &x0, s.steps_n, &mut ws).unwrap();
+                    let subset =
+                        guide_subset(&model, &cond(), &[1, 3], &phi, &c, &s, &mut ws).unwrap();
+                    let used = model.vjps.load(std::sync::atomic::Ordering::Relaxed) - before;
+                    if recompute {
+                        vjps_all += used;
+                    } else {
+                        vjps_reused += used;
+                    }
+                    results.push((whole, subset));
+                }
+                for (a, b) in [
+                    (&results[0].0, &results[1].0),
+                    (&results[0].1, &results[1].1),
+                ] {
+                    let case = (j, precondition);
+                    assert_eq!(a.guided, b.guided, "{case:?}");
+                    assert_eq!(a.phi_after, b.phi_after, "{case:?}");
+                    assert_eq!(a.iterations_run, b.iterations_run, "{case:?}");
+                }
+            }
+        }
+    }
+    // Not vacuous: restores happened, and their directions were not computed again.
+    assert!(
+        vjps_reused * 10 < vjps_all * 9,
+        "{vjps_reused} VJPs with reuse, {vjps_all} without"
+    );
+}
+
 #[test]
 fn guidance_never_raises_phi() {
     // Random targets from the demo batch (violating in every way), three kinds of field, with

@@ -773,10 +773,17 @@ fn a_deadline_anywhere_in_the_call_gives_a_feasible_plan_and_no_late_network_cal
         if paper {
             assert_eq!(backward, m * n);
         } else {
-            assert!(backward % (n - 1) == 0 && backward <= m * (n - 1), "{total} calls");
+            assert!(
+                backward % (n - 1) == 0 && backward <= m * (n - 1),
+                "{total} calls"
+            );
         }
         // An iteration costs 2N calls (paper), or N to 2N − 1 (adaptive).
-        let (fewest, most) = if paper { (2 * n, 2 * n) } else { (n, 2 * n - 1) };
+        let (fewest, most) = if paper {
+            (2 * n, 2 * n)
+        } else {
+            (n, 2 * n - 1)
+        };
         let mut done_before = 0;
         for at in 0..=total + 1 {
             let (mut p, deadline) = ticking(settings, at);
@@ -1418,4 +1425,79 @@ fn pruned_selection_plans_what_full_scoring_plans() {
     }
     // The scenes are not all alike: the plans differ.
     assert!(chosen.len() > 12, "{} different plans", chosen.len());
+}
+
+/// A term whose cost is negative: the farther a trajectory ends from the robot, the lower.
+/// `declares` says whether it (falsely) declares itself separable and non-negative.
+struct Negative {
+    declares: bool,
+}
+
+impl human2nav_core::constraint::ConstraintTerm for Negative {
+    fn name(&self) -> &str {
+        "negative"
+    }
+
+    fn evaluate(
+        &self,
+        batch: human2nav_core::constraint::TrajBatch<'_>,
+        _ctx: &human2nav_core::constraint::ConstraintContext<'_>,
+        cost: &mut [f64],
+        _grad: &mut [f64],
+    ) -> Result<(), human2nav_core::constraint::ConstraintError> {
+        let per = batch.horizon * 3;
+        for (c, t) in cost.iter_mut().zip(batch.data.chunks_exact(per)) {
+            *c -= 2.0 * t[per - 3].hypot(t[per - 2]);
+        }
+        Ok(())
+    }
+
+    fn separable_nonnegative(&self) -> bool {
+        self.declares
+    }
+}
+
+/// A term that breaks its declaration (a negative cost) turns the selection's pruning off
+/// for the call: the plan is the one scoring every candidate gives.
+#[test]
+fn a_term_that_breaks_its_declaration_plans_as_full_scoring_does() {
+    let planner = |term: Option<Negative>| {
+        let mut r = robot();
+        if let Some(term) = term {
+            r.phi.push(1.0, Box::new(term)).unwrap();
+        }
+        Human2Nav::new(
+            fast_straight(),
+            r,
+            BevSpec::default(),
+            Human2NavSettings::default(),
+        )
+        .unwrap()
+    };
+    let mut liar = planner(Some(Negative { declares: true }));
+    let mut honest = planner(Some(Negative { declares: false }));
+    let mut plain = planner(None);
+    let mut changed = 0;
+    for scene in 0..8 {
+        let k = scene as f64;
+        let obs = Observation {
+            time: 0.1 * k,
+            ego: Pose2::new(0.0, 0.0, 0.4 * k),
+            ego_velocity: Twist2::new(0.1 * k, 0.0, 0.0),
+            goal: [3.0 * (0.4 * k).cos(), 3.0 * (0.4 * k).sin()],
+            agents: vec![AgentState {
+                id: 1,
+                position: [1.5 * (0.4 * k + 0.2).cos(), 1.5 * (0.4 * k + 0.2).sin()],
+                velocity: [0.0, 0.0],
+                radius: 0.25,
+                history: vec![],
+            }],
+            ..Default::default()
+        };
+        let a = liar.plan(&obs).unwrap();
+        assert_eq!(a.poses, honest.plan(&obs).unwrap().poses, "scene {scene}");
+        changed += usize::from(a.poses != plain.plan(&obs).unwrap().poses);
+    }
+    // The term matters: it changes plans.
+    assert!(changed > 0);
 }

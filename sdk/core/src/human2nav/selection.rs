@@ -182,7 +182,8 @@ impl<M: FlowModel> Human2Nav<M> {
     /// depend on the others of its batch (the terms' [`ConstraintTerm::separable_nonnegative`]),
     /// so the choice is the same to the bit. With a term that does not declare it, with a
     /// candidate of non-finite or far-off poses, or of another length, every candidate is
-    /// scored, so that the same errors arise.
+    /// scored, so that the same errors arise; so they are when a Φ comes out negative (a term
+    /// that broke its declaration).
     pub(super) fn select(
         &self,
         scored: &[Vec<Pose2>],
@@ -208,11 +209,14 @@ impl<M: FlowModel> Human2Nav<M> {
             .map(|i| (parts[i].with_phi(0.0), i))
             .filter(|(bound, _)| bound.is_finite())
             .collect();
-        if order.is_empty() || !self.robot.phi.separable_nonnegative() || !scored.iter().all(sane) {
+        let score_all = || -> Result<Option<usize>, StageError> {
             let phi = self.phi_costs(scored, ctx)?;
-            return Ok(select_best(scored, corrected, |i| {
+            Ok(select_best(scored, corrected, |i| {
                 parts[i].with_phi(phi[i])
-            }));
+            }))
+        };
+        if order.is_empty() || !self.robot.phi.separable_nonnegative() || !scored.iter().all(sane) {
+            return score_all();
         }
         order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let beats = |(s, i): (f64, usize), best: Option<(f64, usize)>| {
@@ -236,6 +240,10 @@ impl<M: FlowModel> Human2Nav<M> {
             chunk.sort_unstable();
             let candidates: Vec<&[Pose2]> = chunk.iter().map(|&i| scored[i].as_slice()).collect();
             let phi = self.phi_costs(&candidates, ctx)?;
+            if phi.iter().any(|&v| v < 0.0) {
+                // A term broke its declaration (a plugin's, say): the bound does not hold.
+                return score_all();
+            }
             for (&i, phi) in chunk.iter().zip(phi) {
                 let s = parts[i].with_phi(phi);
                 if s.is_finite() && beats((s, i), best) {

@@ -317,6 +317,7 @@ fn constraint_plugin_in_c_compiles_loads_and_costs_what_it_says() {
     let term = host
         .constraint(&lib, "speed_cap", "v_cap = 0.6", None)
         .unwrap();
+    assert!(term.separable_nonnegative(), "the `properties` slot");
 
     // Two trajectories of three poses 0.1 s apart: 1.0 m/s then 0.5 m/s, and 0.5 m/s only.
     let data = [

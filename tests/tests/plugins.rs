@@ -243,6 +243,8 @@ fn c_plugin_computes_what_its_rust_twin_computes() {
             Some(&robot()),
         );
         let (c, r) = (c.unwrap(), r.unwrap());
+        // Both declare what lets the shipped planner's selection prune (`properties`).
+        assert!(c.separable_nonnegative() && r.separable_nonnegative());
         let data = batch(6, 32);
         let (cc, gc) = evaluate(&c, &data, 6, 32);
         let (cr, gr) = evaluate(&r, &data, 6, 32);

@@ -193,6 +193,20 @@ fn a_null_required_slot_is_an_error_naming_file_table_and_slot() {
         human2nav_core::embodiment::Embodiment::coupled_limit(&e),
         None
     );
+    // A constraint whose `properties` fails is refused, naming the slot.
+    let err = host
+        .constraint(&library, "bad_properties", "", None)
+        .expect_err("failing properties");
+    assert!(
+        err.to_string()
+            .contains("constraint `bad_properties`: properties returned"),
+        "{err}"
+    );
+    // Likewise a constraint table that ends before `properties`: no properties.
+    let term = host
+        .constraint(&library, "first_version_term", "", None)
+        .expect("a first-version constraint table is accepted");
+    assert!(!term.separable_nonnegative());
 }
 
 /// An embodiment that answers well, then NaN: every answer is checked, not the first only, and
@@ -333,11 +347,13 @@ fn inspect_reports_what_it_checked() {
             "embodiment `null_step` instance",
             "constraint `huge_name` instance",
             "embodiment `bad_coupled` instance",
+            "constraint `bad_properties` instance",
         ],
         "{text}"
     );
     assert!(text.contains("has a null `plan`"), "{text}");
     assert!(text.contains("declares 8 bytes"), "{text}");
+    assert!(text.contains("properties returned error"), "{text}");
     assert!(
         text.contains("ok    planner `huge_plan` instance: created with an empty config"),
         "{text}"

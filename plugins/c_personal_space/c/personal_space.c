@@ -257,8 +257,17 @@ static H2nStatus term_evaluate(void *instance, const H2nTrajBatch *batch,
     return H2N_OK;
 }
 
+/* A sum of softplus terms per trajectory: never negative, finite for finite poses, and each
+ * trajectory's cost is computed from it alone. */
+static H2nStatus term_properties(void *instance, uint32_t *out) {
+    if (instance == NULL || out == NULL) return H2N_INVALID_ARGUMENT;
+    *out = H2N_CONSTRAINT_SEPARABLE_NONNEGATIVE;
+    return H2N_OK;
+}
+
 static const H2nConstraintVTable TERM_VTABLE = {
     sizeof(H2nConstraintVTable), 0, term_destroy, term_last_error, term_name, term_evaluate,
+    term_properties,
 };
 
 static H2nStatus create_term(const H2nCreateArgs *args, H2nObject *out, H2nBuffer *error) {
@@ -379,7 +388,7 @@ size_t h2n_c_layout(size_t *out, size_t capacity) {
         SZ(H2nConstraintVTable), OF(H2nConstraintVTable, struct_size),
         OF(H2nConstraintVTable, reserved), OF(H2nConstraintVTable, destroy),
         OF(H2nConstraintVTable, last_error), OF(H2nConstraintVTable, name),
-        OF(H2nConstraintVTable, evaluate),
+        OF(H2nConstraintVTable, evaluate), OF(H2nConstraintVTable, properties),
         SZ(H2nRobotState), OF(H2nRobotState, pose), OF(H2nRobotState, velocity),
         SZ(H2nPlanView), OF(H2nPlanView, t0), OF(H2nPlanView, dt), OF(H2nPlanView, poses),
         OF(H2nPlanView, pose_count),

@@ -148,6 +148,12 @@ impl ConstraintTerm for PersonalSpace {
         "personal_space"
     }
 
+    /// A sum of softplus terms per trajectory (γ > 0): never negative, finite for finite
+    /// poses, and each trajectory's cost is computed from it alone.
+    fn separable_nonnegative(&self) -> bool {
+        true
+    }
+
     fn evaluate(
         &self,
         batch: TrajBatch<'_>,

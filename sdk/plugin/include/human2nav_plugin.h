@@ -11,11 +11,12 @@
  *    which a version-1 planner never reads);
  *  - tables are append-only and carry their own size (the host refuses one smaller than the
  *    table's first version or larger than 4096 bytes; slots appended later, such as the
- *    embodiment's coupled_limit, are absent from a table that ends before them; the factories
- *    of the array are struct_size apart);
+ *    embodiment's coupled_limit and the constraint's properties, are absent from a table that
+ *    ends before them; the factories of the array are struct_size apart);
  *  - function pointers may be NULL only in the optional slots: find_factory (not called by
- *    the Rust host), last_error, name, reset and coupled_limit; a NULL required slot makes the host refuse
- *    the library or instance, naming the file, the table and the slot;
+ *    the Rust host), last_error, name, reset, coupled_limit and properties; a NULL required
+ *    slot makes the host refuse the library or instance, naming the file, the table and the
+ *    slot;
  *  - counts and lengths are capped by the host: 256 factories, 256-byte names and versions,
  *    4096-byte descriptions, 10000-pose plans;
  *  - strings are UTF-8 pointer + length; arrays pointer + length (+ shape); the host owns every
@@ -177,7 +178,15 @@ typedef struct H2nConstraintVTable {
     /* Adds cost[b] (cost.len == batch) and the gradient (grad.len == batch->len). */
     H2nStatus (*evaluate)(void *instance, const H2nTrajBatch *batch,
                           const H2nConstraintContext *ctx, H2nF64Out cost, H2nF64Out grad);
+    /* Optional (appended after the table's first version): writes the H2N_CONSTRAINT_* bits
+     * into *out; asked once, when the instance is created. */
+    H2nStatus (*properties)(void *instance, uint32_t *out);
 } H2nConstraintVTable;
+
+/* The cost of a trajectory is never negative, is finite for finite poses, and does not depend
+ * on the other trajectories of its batch (to the bit): a planner may then skip the term for
+ * candidates whose score already loses without it. */
+#define H2N_CONSTRAINT_SEPARABLE_NONNEGATIVE 1u
 
 typedef struct H2nRobotState {
     H2nPose pose;

@@ -18,14 +18,16 @@
 //! * Every table starts with a `struct_size` (or is versioned by the entry's): tables are
 //!   append-only, so a newer plugin may add fields at the end and an older host ignores them.
 //!   The host refuses a `struct_size` below the table's first version (its own size, except
-//!   for a table that has grown since: [`H2nEmbodimentVTable::coupled_limit`] was appended,
-//!   and a table that ends before it has no such slot) or above
+//!   for a table that has grown since: [`H2nEmbodimentVTable::coupled_limit`] and
+//!   [`H2nConstraintVTable::properties`] were appended, and a table that ends before its slot
+//!   has none) or above
 //!   [`crate::validate::MAX_TABLE_BYTES`]. The factories of the entry's array are
 //!   `struct_size` bytes apart, and all have the same `struct_size`.
 //! * Function slots are nullable (`Option<extern "C" fn>`, the layout of a C function pointer).
 //!   Each table says which slots are **required** (the host refuses an instance or library
 //!   with a null one, naming the file, the table and the slot, and calls nothing of it) and
-//!   which are **optional** (`find_factory`, `last_error`, `name`, `reset`, `coupled_limit`).
+//!   which are **optional** (`find_factory`, `last_error`, `name`, `reset`, `coupled_limit`,
+//!   `properties`).
 //! * Counts and lengths a plugin hands over are capped ([`crate::validate`]): factories,
 //!   names, descriptions, plan lengths, messages.
 //! * Strings are [`H2nStr`] (UTF-8, pointer and length, no terminator required); arrays are
@@ -97,6 +99,8 @@ pub type EvaluateFn = unsafe extern "C" fn(
     cost: H2nF64Out,
     grad: H2nF64Out,
 ) -> H2nStatus;
+/// `H2nConstraintVTable::properties`.
+pub type PropertiesFn = unsafe extern "C" fn(instance: *mut c_void, out: *mut u32) -> H2nStatus;
 /// `H2nEmbodimentVTable::holonomic`.
 pub type HolonomicFn = unsafe extern "C" fn(instance: *mut c_void, out: *mut u32) -> H2nStatus;
 /// `H2nEmbodimentVTable::saturate`.
@@ -463,7 +467,19 @@ pub struct H2nConstraintVTable {
     /// Adds the cost of trajectory `b` into `cost.data[b]` (`cost.len == batch`) and its
     /// gradient into `grad` (`grad.len == batch.len`). **Required.**
     pub evaluate: Option<EvaluateFn>,
+    /// Writes the term's property bits (`H2N_CONSTRAINT_*`) into `out`; asked once, when the
+    /// instance is created. Bits this host does not know are ignored. **Optional** (no
+    /// properties), and appended after the first version of this table: a table whose
+    /// `struct_size` ends before it has none.
+    pub properties: Option<PropertiesFn>,
 }
+
+/// [`H2nConstraintVTable::properties`] bit: the term's cost of a trajectory is never negative,
+/// is finite for finite poses, and is the same to the bit whatever other trajectories share its
+/// batch (core's `ConstraintTerm::separable_nonnegative`). A planner may then leave the term
+/// out for candidates whose score already loses without it. A term that sets this bit must
+/// hold to all three; a negative cost turns that pruning off for the planning call.
+pub const H2N_CONSTRAINT_SEPARABLE_NONNEGATIVE: u32 = 1;
 
 /// A robot state: pose and the body-frame velocity executed during the last step.
 #[repr(C)]

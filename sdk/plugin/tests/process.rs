@@ -146,6 +146,28 @@ fn a_well_behaved_constraint_answers_bit_for_bit_as_in_process() {
 }
 
 #[test]
+fn a_constraint_declares_what_it_is_in_process_and_out_of_it() {
+    let host = host();
+    let lib = fixture();
+    for (config, declared) in [("", false), ("separable_nonnegative = true", true)] {
+        for (deadline, isolation) in [
+            (None, PluginIsolation::InProcess),
+            (Some(Duration::from_secs(1)), PluginIsolation::InProcess),
+            (Some(Duration::from_secs(1)), PluginIsolation::Process),
+        ] {
+            let term = host
+                .constraint_with_options(&lib, "quadratic", config, None, deadline, isolation)
+                .expect("created");
+            assert_eq!(
+                term.separable_nonnegative(),
+                declared,
+                "{config:?} {isolation:?}"
+            );
+        }
+    }
+}
+
+#[test]
 fn mismatched_buffers_are_refused_before_the_plugin_is_called() {
     let host = host();
     let lib = fixture();

@@ -1,8 +1,9 @@
-//! Constraint terms across the ABI: the `evaluate` shim and [`create_constraint`], the
-//! factory that `export_plugin!` expands to for a constraint.
+//! Constraint terms across the ABI: the `evaluate` and `properties` shims and
+//! [`create_constraint`], the factory that `export_plugin!` expands to for a constraint.
 
 use super::{
-    Fail, agents_from_abi, call, create, destroy, last_error, name, reference, slice, slice_mut,
+    Fail, agents_from_abi, call, create, destroy, last_error, name, output, reference, slice,
+    slice_mut,
 };
 use crate::abi::*;
 use crate::init::{InitError, PluginInit};
@@ -60,6 +61,24 @@ unsafe extern "C" fn constraint_evaluate<T: ConstraintTerm + 'static>(
     }
 }
 
+unsafe extern "C" fn constraint_properties<T: ConstraintTerm + 'static>(
+    instance: *mut c_void,
+    out: *mut u32,
+) -> H2nStatus {
+    // SAFETY: the host upholds the ABI contract for every pointer; `call` checks `instance`.
+    unsafe {
+        call::<T>(instance, |term| {
+            let out = output(out, "output")?;
+            out.write(if term.separable_nonnegative() {
+                H2N_CONSTRAINT_SEPARABLE_NONNEGATIVE
+            } else {
+                0
+            });
+            Ok(())
+        })
+    }
+}
+
 /// Creates a constraint term through `ctor` (used by `export_plugin!`).
 ///
 /// # Safety
@@ -82,6 +101,7 @@ where
             last_error: Some(last_error::<T>),
             name: Some(name::<T>),
             evaluate: Some(constraint_evaluate::<T>),
+            properties: Some(constraint_properties::<T>),
         }
     };
     // SAFETY: forwarded contract.

@@ -61,10 +61,19 @@ impl PluginHost {
                 robot,
                 deadline,
             )?;
+            let mut client = client;
+            let separable_nonnegative =
+                client
+                    .separable_nonnegative()
+                    .map_err(|message| PluginError::Process {
+                        instance: format!("constraint `{plugin}` from {}", library.display()),
+                        message,
+                    })?;
             return Ok(PluginConstraint {
                 name,
                 health,
                 deadline,
+                separable_nonnegative,
                 exec: ConstraintExec::Process(Mutex::new(client)),
             });
         }
@@ -74,6 +83,26 @@ impl PluginHost {
             table: format!("constraint vtable of `{plugin}`"),
             slot: "evaluate",
         })?;
+        // Asked once, on this thread, as the factory was.
+        let separable_nonnegative = match c.vtable.properties {
+            None => false,
+            Some(f) => {
+                let mut bits = 0u32;
+                // SAFETY: a live instance of the table `f` came from; a valid output.
+                let status = unsafe { f(c.handle.ptr(), &mut bits) };
+                if status != H2N_OK {
+                    return Err(PluginError::Malformed {
+                        path: library.to_path_buf(),
+                        message: format!(
+                            "constraint `{plugin}`: properties returned {}: {}",
+                            status_name(status),
+                            c.handle.failure(status)
+                        ),
+                    });
+                }
+                bits & H2N_CONSTRAINT_SEPARABLE_NONNEGATIVE != 0
+            }
+        };
         let health = Arc::clone(&c.handle.health);
         let core = ConstraintCore {
             handle: c.handle,
@@ -91,6 +120,7 @@ impl PluginHost {
             name: c.name,
             health,
             deadline,
+            separable_nonnegative,
             exec,
         })
     }
@@ -210,6 +240,8 @@ pub struct PluginConstraint {
     name: String,
     health: Arc<Health>,
     deadline: Option<Duration>,
+    /// What the instance declared through its `properties` slot.
+    separable_nonnegative: bool,
     exec: ConstraintExec,
 }
 
@@ -313,6 +345,12 @@ impl PluginConstraint {
 impl ConstraintTerm for PluginConstraint {
     fn name(&self) -> &str {
         &self.name
+    }
+
+    /// What the plugin declared ([`H2N_CONSTRAINT_SEPARABLE_NONNEGATIVE`]); false without a
+    /// `properties` slot.
+    fn separable_nonnegative(&self) -> bool {
+        self.separable_nonnegative
     }
 
     fn evaluate(

@@ -54,8 +54,28 @@ macro_rules! common_slots {
 
 impl VTable for H2nConstraintVTable {
     const KIND: PluginKind = PluginKind::Constraint;
+    const MIN_SIZE: usize = std::mem::offset_of!(H2nConstraintVTable, properties);
     fn own_slots(&self) -> Vec<(&'static str, bool, bool)> {
-        vec![("evaluate", self.evaluate.is_some(), true)]
+        vec![
+            ("evaluate", self.evaluate.is_some(), true),
+            ("properties", self.properties.is_some(), false),
+        ]
+    }
+    unsafe fn probe_instance(&self, instance: *mut c_void) -> Result<String, String> {
+        let Some(f) = self.properties else {
+            return Ok(String::new());
+        };
+        let mut bits = 0u32;
+        // SAFETY: a live instance of this table (the caller's contract), a valid output.
+        let status = unsafe { f(instance, &mut bits) };
+        if status != H2N_OK {
+            return Err(format!("properties returned {}", status_name(status)));
+        }
+        Ok(if bits & H2N_CONSTRAINT_SEPARABLE_NONNEGATIVE != 0 {
+            "; separable and non-negative".to_owned()
+        } else {
+            "; no properties".to_owned()
+        })
     }
     common_slots!();
 }

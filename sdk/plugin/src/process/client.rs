@@ -355,6 +355,23 @@ impl ProcessClient {
         self.decoded(decode_evaluate_answer(&mut d, cost, grad))
     }
 
+    /// A constraint term's declaration `separable_nonnegative` (asked once, after the start).
+    pub(crate) fn separable_nonnegative(&mut self) -> Result<bool, String> {
+        self.enc.start(OP_PROPERTIES);
+        self.enc.finish();
+        let answer = self.round_trip("properties")?;
+        let mut d = Dec::new(&answer);
+        let r = match d.u8() {
+            Ok(ANSWER_OK) => d.u8().and_then(|v| match v {
+                0 | 1 => Ok(v == 1),
+                v => Err(format!("a flag of {v}")),
+            }),
+            Ok(other) => Err(format!("answer code {other}")),
+            Err(e) => Err(e),
+        };
+        self.decoded(r)
+    }
+
     /// An embodiment call: `Err` for a failed call (a dead or hung process, which marks the
     /// instance dead), else the value and the failure the helper's proxy recorded, if any.
     pub(crate) fn embodiment(

@@ -78,6 +78,7 @@ pub(crate) const OP_SATURATE: u8 = 6;
 pub(crate) const OP_STEP: u8 = 7;
 pub(crate) const OP_TRACK: u8 = 8;
 pub(crate) const OP_COUPLED_LIMIT: u8 = 9;
+pub(crate) const OP_PROPERTIES: u8 = 10;
 pub(crate) const ANSWER_OK: u8 = 0;
 pub(crate) const ANSWER_ERR: u8 = 1;
 

@@ -176,6 +176,11 @@ fn serve(input: &mut dyn Read, out: &mut dyn Write) -> std::io::Result<()> {
                 let r = human2nav_core::Planner::plan(p, &obs);
                 encode_plan_answer(&mut e, &r);
             }
+            (OP_PROPERTIES, Served::Constraint(c)) => {
+                e.start(ANSWER_OK);
+                let flag = human2nav_core::constraint::ConstraintTerm::separable_nonnegative(c);
+                e.u8(u8::from(flag));
+            }
             (OP_EVALUATE, Served::Constraint(c)) => {
                 eval.decode(&mut d).map_err(invalid)?;
                 let limits = eval.limits.unwrap_or(Limits {

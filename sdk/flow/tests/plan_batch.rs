@@ -1,6 +1,7 @@
 //! Batched planning with the shipped model on the native backend: one network pass for
-//! several conditions gives each the values of its own pass, and robot planners planned as a
-//! batch plan what they plan one by one.
+//! several conditions gives each the values of its own pass, some rows of a kept pass serve a
+//! later call at those rows, and robot planners planned as a batch plan what they plan one by
+//! one.
 
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] functions unwrap too
 
@@ -48,6 +49,41 @@ fn poses(model: &NativeCfm, k: usize, seed: u64) -> Vec<f64> {
     (0..k * model.horizon() * 3)
         .map(|_| rng.random_range(-2.0..2.0))
         .collect()
+}
+
+#[test]
+fn a_call_at_some_rows_of_a_kept_pass_gives_what_a_pass_of_its_own_gives() {
+    // Algorithm 1 on a shortlist: the rollout evaluated 6 samples, the VJPs and the next
+    // rollout's first step ask for rows 1, 4 and 5 (a crowd, so the crowd pathway's tape too).
+    let cond = condition(&shipped(), 6, 7);
+    let x = poses(&shipped(), 6, 8);
+    let per = x.len() / 6;
+    let rows = [1, 4, 5];
+    let sub: Vec<f64> = rows
+        .iter()
+        .flat_map(|&r| x[r * per..(r + 1) * per].to_vec())
+        .collect();
+    let cot: Vec<f64> = (0..sub.len()).map(|i| (i as f64 * 0.61).sin()).collect();
+    for t in [0.0, 0.6] {
+        let kept = shipped();
+        let mut all = vec![0.0; x.len()];
+        kept.velocity(&x, t, &cond, &mut all).unwrap();
+        let (mut out, mut vjp) = (vec![0.0; sub.len()], vec![0.0; sub.len()]);
+        kept.velocity_vjp(&sub, t, &cond, &cot, &mut out, &mut vjp)
+            .unwrap();
+        let mut v = vec![0.0; sub.len()];
+        kept.velocity(&sub, t, &cond, &mut v).unwrap();
+        // A model of its own: nothing kept.
+        let (mut out1, mut vjp1) = (vec![0.0; sub.len()], vec![0.0; sub.len()]);
+        shipped()
+            .velocity_vjp(&sub, t, &cond, &cot, &mut out1, &mut vjp1)
+            .unwrap();
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&out), bits(&out1), "t = {t}");
+        assert_eq!(bits(&v), bits(&out1), "t = {t}");
+        assert_eq!(bits(&vjp), bits(&vjp1), "t = {t}");
+        assert!(vjp.iter().any(|g| *g != 0.0));
+    }
 }
 
 #[test]

@@ -13,7 +13,7 @@ use super::kernels::{
     activate_in_place, activation_derivative, derivative_in_place, multiversion,
     resize_for_overwrite, sgemm,
 };
-use super::net::{WeightError, Weights, take};
+use super::net::{WeightError, Weights, gather_rows, take};
 use crate::config::{Activation, CrowdConfig};
 use crate::net::{CROWD_FEATURES, CROWD_PAIR_FEATURES, TRAJ_CHANNELS};
 
@@ -45,6 +45,15 @@ pub(crate) struct CrowdTape {
     arg: Vec<u32>,
     /// The trajectory features `[5, K, T]` the pass read.
     feat: Vec<f32>,
+}
+
+impl CrowdTape {
+    /// What a pass over rows `rows` of this pass's `batch` rows of `t_len` waypoints records.
+    pub(crate) fn gather(&self, (batch, t_len): (usize, usize), rows: &[usize], into: &mut Self) {
+        into.present = self.present;
+        gather_rows(&self.arg, batch, t_len, rows, &mut into.arg);
+        gather_rows(&self.feat, batch, t_len, rows, &mut into.feat);
+    }
 }
 
 /// Buffers of the passes, reused from call to call (no state between calls).

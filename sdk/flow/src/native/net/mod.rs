@@ -213,10 +213,40 @@ impl Norm {
 /// What the backward pass of one Conv → GroupNorm → activation block needs.
 #[derive(Debug, Default)]
 struct BlockCache {
-    /// Normalised conv output `x̂` (the pre-activation is `γ·x̂ + β`).
+    /// Normalised conv output `x̂` (the pre-activation is `γ·x̂ + β`), `[C, B, len]`.
     xhat: Vec<f32>,
     /// `1/σ` per `(b, group)`.
     inv_std: Vec<f32>,
+    len: usize,
+}
+
+impl BlockCache {
+    /// The cache of rows `rows` of a pass over `batch` rows.
+    fn gather(&self, batch: usize, rows: &[usize], into: &mut Self) {
+        gather_rows(&self.xhat, batch, self.len, rows, &mut into.xhat);
+        let groups = self.inv_std.len() / batch.max(1);
+        gather_rows(&self.inv_std, batch, groups, rows, &mut into.inv_std);
+        into.len = self.len;
+    }
+}
+
+/// Rows `rows` of a `[C, batch, len]` buffer, as `[C, rows.len(), len]`.
+pub(crate) fn gather_rows<T: Copy>(
+    src: &[T],
+    batch: usize,
+    len: usize,
+    rows: &[usize],
+    out: &mut Vec<T>,
+) {
+    out.clear();
+    if batch == 0 || len == 0 {
+        return;
+    }
+    for plane in src.chunks_exact(batch * len) {
+        for &r in rows {
+            out.extend_from_slice(&plane[r * len..(r + 1) * len]);
+        }
+    }
 }
 
 /// Conv1d → GroupNorm → activation (`Conv1dBlock`).
@@ -270,6 +300,7 @@ impl ConvBlock {
         let mut y = std::mem::take(&mut s.y);
         self.conv
             .forward_unbiased(x, batch, len, &mut s.col, &mut y);
+        cache.len = len;
         norm_act(
             act,
             &y,
@@ -540,8 +571,29 @@ pub(crate) struct Tape {
     /// weights, so no layer inputs are kept).
     res: Vec<ResCache>,
     final_block: BlockCache,
-    /// Output of each level's blocks (the skip connections), per down level.
+    /// Output of each level's blocks (the skip connections), per down level, and its length.
     skips: Vec<Vec<f32>>,
+    skip_lens: Vec<usize>,
+}
+
+impl Tape {
+    /// What a forward pass over rows `rows` of this pass's input records: each row of a pass
+    /// is computed on its own (the values equal to the bit).
+    pub(crate) fn gather(&self, rows: &[usize], into: &mut Tape) {
+        let batch = self.batch;
+        into.batch = rows.len();
+        into.res.resize_with(self.res.len(), ResCache::default);
+        for (from, to) in self.res.iter().zip(&mut into.res) {
+            from.b0.gather(batch, rows, &mut to.b0);
+            from.b1.gather(batch, rows, &mut to.b1);
+        }
+        self.final_block.gather(batch, rows, &mut into.final_block);
+        into.skips.resize_with(self.skips.len(), Vec::new);
+        for ((from, to), &len) in self.skips.iter().zip(&mut into.skips).zip(&self.skip_lens) {
+            gather_rows(from, batch, len, rows, to);
+        }
+        into.skip_lens.clone_from(&self.skip_lens);
+    }
 }
 
 /// Buffers the passes use between layers and then hand back: shared by every [`Tape`] of a

@@ -74,6 +74,7 @@ impl Net {
         tape.batch = batch;
         tape.res.resize_with(n_res, ResCache::default);
         tape.skips.resize_with(self.down.len(), Vec::new);
+        tape.skip_lens.resize(self.down.len(), 0);
         let mut acts = std::mem::take(&mut pool.acts);
         let mut next = || -> Vec<f32> { acts.pop().unwrap_or_default() };
         let mut h = next();
@@ -92,6 +93,7 @@ impl Net {
             }
             tape.skips[i].clear();
             tape.skips[i].extend_from_slice(&h);
+            tape.skip_lens[i] = len;
             if let Some(d) = &lvl.down {
                 let mut o = next();
                 d.forward(&h, batch, len, &mut s.col, &mut o);

@@ -8,6 +8,8 @@
 //! convolution over the whole batch, group normalisation and the activation), with every buffer
 //! reused from call to call. It computes the forward pass and the gradient of its input (the
 //! vector-Jacobian product guidance needs); weight gradients, and so training, stay with tch.
+//! It keeps its recent forward passes: a VJP at the input of one, or at some of its rows (the
+//! shortlist of a rollout), pulls back through it instead of running it again.
 //!
 //! [`NativeCfm`] implements core's [`FlowModel`] exactly as `CfmModel` does (same features,
 //! normalisation and output scaling), so a planner can use either; the agreement tests compare

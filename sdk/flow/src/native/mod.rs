@@ -38,8 +38,9 @@ const FILM_CACHE: usize = 64;
 
 /// Forward passes kept for a later VJP at the same input (Algorithm 1's adjoint pass pulls
 /// back through the very points its rollout just evaluated) or at some of its rows (Algorithm
-/// 1 on a shortlist of the samples): the integration steps of two rollouts.
-const KEPT_FORWARDS: usize = 12;
+/// 1 on a shortlist of the samples): the integration steps of two rollouts of `N = 5`, the
+/// sampling's and the shortlist's. Each keeps about 50 KiB of activations per trajectory.
+const KEPT_FORWARDS: usize = 10;
 
 /// One forward pass with its input, output and tape.
 #[derive(Debug, Default)]

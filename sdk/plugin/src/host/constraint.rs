@@ -53,7 +53,7 @@ impl PluginHost {
         isolation: PluginIsolation,
     ) -> Result<PluginConstraint, PluginError> {
         if isolation == PluginIsolation::Process {
-            let (client, name, health) = self.process_instance(
+            let (mut client, name, health) = self.process_instance(
                 PluginKind::Constraint,
                 library,
                 plugin,
@@ -61,7 +61,6 @@ impl PluginHost {
                 robot,
                 deadline,
             )?;
-            let mut client = client;
             let separable_nonnegative =
                 client
                     .separable_nonnegative()
@@ -84,25 +83,16 @@ impl PluginHost {
             slot: "evaluate",
         })?;
         // Asked once, on this thread, as the factory was.
-        let separable_nonnegative = match c.vtable.properties {
-            None => false,
-            Some(f) => {
-                let mut bits = 0u32;
-                // SAFETY: a live instance of the table `f` came from; a valid output.
-                let status = unsafe { f(c.handle.ptr(), &mut bits) };
-                if status != H2N_OK {
-                    return Err(PluginError::Malformed {
-                        path: library.to_path_buf(),
-                        message: format!(
-                            "constraint `{plugin}`: properties returned {}: {}",
-                            status_name(status),
-                            c.handle.failure(status)
-                        ),
-                    });
-                }
-                bits & H2N_CONSTRAINT_SEPARABLE_NONNEGATIVE != 0
-            }
-        };
+        // SAFETY: a live instance of the table the slot came from.
+        let separable_nonnegative = unsafe { call_properties(c.vtable.properties, c.handle.ptr()) }
+            .map_err(|status| PluginError::Malformed {
+                path: library.to_path_buf(),
+                message: format!(
+                    "constraint `{plugin}`: properties returned {}: {}",
+                    status_name(status),
+                    c.handle.failure(status)
+                ),
+            })?;
         let health = Arc::clone(&c.handle.health);
         let core = ConstraintCore {
             handle: c.handle,
@@ -124,6 +114,27 @@ impl PluginHost {
             exec,
         })
     }
+}
+
+/// Calls a constraint's `properties` slot: whether it declares
+/// [`H2N_CONSTRAINT_SEPARABLE_NONNEGATIVE`] (false without the slot), or the failed status.
+///
+/// # Safety
+/// `instance` is a live instance of the vtable `f` came from.
+pub(super) unsafe fn call_properties(
+    f: Option<PropertiesFn>,
+    instance: *mut c_void,
+) -> Result<bool, H2nStatus> {
+    let Some(f) = f else {
+        return Ok(false);
+    };
+    let mut bits = 0u32;
+    // SAFETY: live instance (the caller's contract), a valid output.
+    let status = unsafe { f(instance, &mut bits) };
+    if status != H2N_OK {
+        return Err(status);
+    }
+    Ok(bits & H2N_CONSTRAINT_SEPARABLE_NONNEGATIVE != 0)
 }
 
 /// The functions of a constraint instance, with the instance.

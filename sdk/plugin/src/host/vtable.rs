@@ -62,20 +62,15 @@ impl VTable for H2nConstraintVTable {
         ]
     }
     unsafe fn probe_instance(&self, instance: *mut c_void) -> Result<String, String> {
-        let Some(f) = self.properties else {
+        if self.properties.is_none() {
             return Ok(String::new());
-        };
-        let mut bits = 0u32;
-        // SAFETY: a live instance of this table (the caller's contract), a valid output.
-        let status = unsafe { f(instance, &mut bits) };
-        if status != H2N_OK {
-            return Err(format!("properties returned {}", status_name(status)));
         }
-        Ok(if bits & H2N_CONSTRAINT_SEPARABLE_NONNEGATIVE != 0 {
-            "; separable and non-negative".to_owned()
-        } else {
-            "; no properties".to_owned()
-        })
+        // SAFETY: a live instance of this table (the caller's contract).
+        match unsafe { super::constraint::call_properties(self.properties, instance) } {
+            Ok(true) => Ok("; separable and non-negative".to_owned()),
+            Ok(false) => Ok("; no properties".to_owned()),
+            Err(status) => Err(format!("properties returned {}", status_name(status))),
+        }
     }
     common_slots!();
 }

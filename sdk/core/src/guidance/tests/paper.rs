@@ -308,41 +308,6 @@ fn paper_clipping_bounds_every_costate() {
     }
 }
 
-/// Records the points and flow times at which the model's VJP is called.
-struct Recorder<M> {
-    model: M,
-    vjp_at: RefCell<Vec<(f64, Vec<f64>)>>,
-}
-
-impl<M: FlowModel> FlowModel for Recorder<M> {
-    fn horizon(&self) -> usize {
-        self.model.horizon()
-    }
-
-    fn velocity(
-        &self,
-        x: &[f64],
-        t: f64,
-        c: &FlowCondition,
-        out: &mut [f64],
-    ) -> Result<(), FlowError> {
-        self.model.velocity(x, t, c, out)
-    }
-
-    fn velocity_vjp(
-        &self,
-        x: &[f64],
-        t: f64,
-        c: &FlowCondition,
-        cotangent: &[f64],
-        out: &mut [f64],
-        vjp: &mut [f64],
-    ) -> Result<(), FlowError> {
-        self.vjp_at.borrow_mut().push((t, x.to_vec()));
-        self.model.velocity_vjp(x, t, c, cotangent, out, vjp)
-    }
-}
-
 #[test]
 fn paper_evaluates_the_model_jacobian_at_x_plus_u() {
     // The field's Jacobian depends on x. After one iteration the controls are not zero; the
@@ -388,7 +353,7 @@ fn paper_evaluates_the_model_jacobian_at_x_plus_u() {
     assert!(largest_shift > 1e-3, "u too small to tell x from x ⊕ u");
 
     let recorder = Recorder {
-        model: field,
+        model: &field,
         vjp_at: RefCell::new(Vec::new()),
     };
     let mut ws = GuidanceWorkspace::new();

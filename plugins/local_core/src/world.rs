@@ -3,7 +3,7 @@
 //! on at constant velocity. Shared by the MPPI and the DWA plugins (the DWA crate compiles this
 //! file as a module of its own).
 
-use human2nav_core::obstacle::{Obstacle, OccupancyGrid};
+use human2nav_core::obstacle::{Obstacle, OccupancyGrid, SHELL};
 use human2nav_core::{AgentState, Observation};
 
 /// Edge of a bucket of [`StaticWorld`]'s lookup grid is at least this (m).
@@ -214,7 +214,7 @@ pub fn walker_clearance(walkers: &[Walker], p: [f64; 2], t: f64, radius: f64) ->
 
 /// [`walker_clearance`] where it is below `limit`, to the bit; where it is not, some value
 /// that is not below `limit` either. The pedestrians whose squared centre distance puts them
-/// beyond `limit` (with a relative shell of 10⁻⁹ against rounding) are passed over without a
+/// beyond `limit` (with core's relative [`SHELL`] against rounding) are passed over without a
 /// square root: a critic that only acts below a distance needs no more.
 #[inline]
 pub fn walker_clearance_below(
@@ -229,7 +229,7 @@ pub fn walker_clearance_below(
         .filter_map(|w| {
             let q = w.at(t);
             let (dx, dy) = (p[0] - q[0], p[1] - q[1]);
-            let reach = (limit + radius + w.radius) * (1.0 + 1e-9);
+            let reach = (limit + radius + w.radius) * (1.0 + SHELL);
             // NaN and an infinite `limit` fail the test: those take the square root.
             (dx * dx + dy * dy <= reach * reach || reach.is_nan() || reach.is_infinite())
                 .then(|| dx.hypot(dy) - radius - w.radius)

@@ -267,7 +267,9 @@ impl Obstacle {
     /// The obstacle seen from `frame`: points given in the frame `frame` sits in, returned in
     /// `frame`'s own coordinates (e.g. world → ego with the ego pose).
     pub fn in_frame(&self, frame: Pose2) -> Obstacle {
-        self.map_points(|p| frame.inverse_act(p))
+        // The heading's sine and cosine once, not per point.
+        let turn = frame.theta.sin_cos();
+        self.map_points(|p| frame.inverse_act_turned(turn, p))
     }
 
     /// Signed clearance between one footprint shape (base-link frame) and this obstacle given
@@ -314,7 +316,7 @@ fn rect_segment_clearance(
 /// Relative width of the shell around a distance within which comparing squared distances
 /// does not decide a comparison of the distances themselves (far wider than the rounding of
 /// either).
-pub(crate) const SHELL: f64 = 1e-9;
+pub const SHELL: f64 = 1e-9;
 
 /// The smallest of `start` and the lengths (`hypot`) of `vectors`, to the bit, with the square
 /// root taken only of the vectors whose squared length comes within [`SHELL`] of the smallest
@@ -332,9 +334,7 @@ pub(crate) fn smallest_norm(vectors: impl Iterator<Item = [f64; 2]> + Clone, sta
 /// frame): the smallest over the footprint's shapes, negative on overlap, `+∞` for an empty
 /// footprint.
 pub fn footprint_clearance(shapes: &[FootprintShape], pose: Pose2, obstacle: &Obstacle) -> f64 {
-    // The heading's sine and cosine once, not per point.
-    let turn = pose.theta.sin_cos();
-    let local = obstacle.map_points(|p| pose.inverse_act_turned(turn, p));
+    let local = obstacle.in_frame(pose);
     shapes
         .iter()
         .map(|s| local.shape_clearance(s))

@@ -1303,24 +1303,46 @@ fn guidance_terms_parse_from_the_planner_table() {
     assert!(err.to_string().contains("guidance_terms"), "{err}");
 }
 
-/// A term that adds nothing and does not declare itself separable and non-negative: with it
-/// in Φ the selection scores every candidate with Φ instead of pruning by the score without
-/// it (`ConstraintTerm::separable_nonnegative`).
-struct Opaque;
+/// A test term: `per_metre` times the distance of a trajectory's last pose from the robot (0:
+/// it adds nothing; negative: a negative cost), and whether it declares itself separable and
+/// non-negative (`ConstraintTerm::separable_nonnegative`). A term that adds nothing and does
+/// not declare it makes the selection score every candidate with Φ instead of pruning by the
+/// score without it.
+struct EndDistance {
+    per_metre: f64,
+    declares: bool,
+}
 
-impl human2nav_core::constraint::ConstraintTerm for Opaque {
+/// The term that turns the pruning off and changes nothing else.
+const OPAQUE: EndDistance = EndDistance {
+    per_metre: 0.0,
+    declares: false,
+};
+
+impl human2nav_core::constraint::ConstraintTerm for EndDistance {
     fn name(&self) -> &str {
-        "opaque"
+        "end_distance"
     }
 
     fn evaluate(
         &self,
-        _batch: human2nav_core::constraint::TrajBatch<'_>,
+        batch: human2nav_core::constraint::TrajBatch<'_>,
         _ctx: &human2nav_core::constraint::ConstraintContext<'_>,
-        _cost: &mut [f64],
+        cost: &mut [f64],
         _grad: &mut [f64],
     ) -> Result<(), human2nav_core::constraint::ConstraintError> {
+        if self.per_metre == 0.0 {
+            return Ok(());
+        }
+        let per = batch.horizon * 3;
+        for (c, t) in cost.iter_mut().zip(batch.data.chunks_exact(per)) {
+            *c += self.per_metre * t[per - 3].hypot(t[per - 2]);
+        }
         Ok(())
+    }
+
+    fn separable_nonnegative(&self) -> bool {
+        self.declares
     }
 }
 
@@ -1338,7 +1360,7 @@ fn pruned_selection_plans_what_full_scoring_plans() {
         lo + (hi - lo) * (seed >> 11) as f64 / (1u64 << 53) as f64
     };
     let mut opaque = robot();
-    opaque.phi.push(1.0, Box::new(Opaque)).unwrap();
+    opaque.phi.push(1.0, Box::new(OPAQUE)).unwrap();
     let mut pruned = Human2Nav::new(
         fast_straight(),
         robot(),
@@ -1427,41 +1449,11 @@ fn pruned_selection_plans_what_full_scoring_plans() {
     assert!(chosen.len() > 12, "{} different plans", chosen.len());
 }
 
-/// A term whose cost is negative: the farther a trajectory ends from the robot, the lower.
-/// `declares` says whether it (falsely) declares itself separable and non-negative.
-struct Negative {
-    declares: bool,
-}
-
-impl human2nav_core::constraint::ConstraintTerm for Negative {
-    fn name(&self) -> &str {
-        "negative"
-    }
-
-    fn evaluate(
-        &self,
-        batch: human2nav_core::constraint::TrajBatch<'_>,
-        _ctx: &human2nav_core::constraint::ConstraintContext<'_>,
-        cost: &mut [f64],
-        _grad: &mut [f64],
-    ) -> Result<(), human2nav_core::constraint::ConstraintError> {
-        let per = batch.horizon * 3;
-        for (c, t) in cost.iter_mut().zip(batch.data.chunks_exact(per)) {
-            *c -= 2.0 * t[per - 3].hypot(t[per - 2]);
-        }
-        Ok(())
-    }
-
-    fn separable_nonnegative(&self) -> bool {
-        self.declares
-    }
-}
-
 /// A term that breaks its declaration (a negative cost) turns the selection's pruning off
 /// for the call: the plan is the one scoring every candidate gives.
 #[test]
 fn a_term_that_breaks_its_declaration_plans_as_full_scoring_does() {
-    let planner = |term: Option<Negative>| {
+    let planner = |term: Option<EndDistance>| {
         let mut r = robot();
         if let Some(term) = term {
             r.phi.push(1.0, Box::new(term)).unwrap();
@@ -1474,8 +1466,12 @@ fn a_term_that_breaks_its_declaration_plans_as_full_scoring_does() {
         )
         .unwrap()
     };
-    let mut liar = planner(Some(Negative { declares: true }));
-    let mut honest = planner(Some(Negative { declares: false }));
+    let negative = |declares| EndDistance {
+        per_metre: -2.0,
+        declares,
+    };
+    let mut liar = planner(Some(negative(true)));
+    let mut honest = planner(Some(negative(false)));
     let mut plain = planner(None);
     let mut changed = 0;
     for scene in 0..8 {

@@ -347,6 +347,15 @@ fn feasible_samples_are_left_exactly_as_they_are() {
     }
 }
 
+/// The `t` future poses of each trajectory of the demo batch (violating every limit), its
+/// first pose, the robot's, left out.
+fn demo_targets(t: usize) -> Vec<Vec<f64>> {
+    demo_batch(3, t + 1, DT)
+        .chunks_exact((t + 1) * 3)
+        .map(|traj| traj[3..].to_vec())
+        .collect()
+}
+
 /// Records the points and flow times at which the model's VJP is called.
 struct Recorder<M> {
     model: M,
@@ -391,10 +400,8 @@ fn restored_samples_reuse_their_direction_to_the_bit() {
     let c = ctx(&l, Twist2::new(0.5, 0.0, 0.0));
     let phi = Phi::from_weights(&weights(), &l);
     let t = 16;
-    let demo = demo_batch(3, t + 1, DT);
     let (mut vjps_reused, mut vjps_all) = (0, 0);
-    for (j, traj) in demo.chunks_exact((t + 1) * 3).enumerate() {
-        let target = traj[3..].to_vec();
+    for (j, target) in demo_targets(t).into_iter().enumerate() {
         let models: [Box<dyn FlowModel>; 2] = [
             Box::new(GeodesicTarget { target }),
             Box::new(LinearField {
@@ -461,9 +468,7 @@ fn guidance_never_raises_phi() {
     let c = ctx(&l, Twist2::new(0.5, 0.0, 0.0));
     let phi = Phi::from_weights(&weights(), &l);
     let t = 16;
-    let demo = demo_batch(3, t + 1, DT);
-    for (j, traj) in demo.chunks_exact((t + 1) * 3).enumerate() {
-        let target = traj[3..].to_vec();
+    for (j, target) in demo_targets(t).into_iter().enumerate() {
         let twists: Vec<f64> = target
             .chunks_exact(3)
             .flat_map(|p| Pose2::from_slice(p).log().to_array())

@@ -361,15 +361,7 @@ impl ProcessClient {
         self.enc.finish();
         let answer = self.round_trip("properties")?;
         let mut d = Dec::new(&answer);
-        let r = match d.u8() {
-            Ok(ANSWER_OK) => d.u8().and_then(|v| match v {
-                0 | 1 => Ok(v == 1),
-                v => Err(format!("a flag of {v}")),
-            }),
-            Ok(other) => Err(format!("answer code {other}")),
-            Err(e) => Err(e),
-        };
-        self.decoded(r)
+        self.decoded(decode_properties_answer(&mut d))
     }
 
     /// An embodiment call: `Err` for a failed call (a dead or hung process, which marks the

@@ -285,6 +285,24 @@ pub(crate) fn decode_unit_answer(d: &mut Dec<'_>) -> Result<Result<(), String>, 
     }
 }
 
+/// A constraint term's `properties` answer: whether it declares itself separable and
+/// non-negative.
+pub(crate) fn encode_properties_answer(e: &mut Enc, separable_nonnegative: bool) {
+    e.start(ANSWER_OK);
+    e.u8(u8::from(separable_nonnegative));
+}
+
+/// The flag of [`encode_properties_answer`].
+pub(crate) fn decode_properties_answer(d: &mut Dec<'_>) -> Result<bool, String> {
+    match d.u8()? {
+        ANSWER_OK => match d.u8()? {
+            v @ (0 | 1) => Ok(v == 1),
+            v => Err(format!("a flag of {v}")),
+        },
+        other => Err(format!("answer code {other}")),
+    }
+}
+
 /// An embodiment call: what the host sends and the helper decodes.
 #[derive(Clone, Debug, PartialEq)]
 #[expect(

@@ -177,9 +177,8 @@ fn serve(input: &mut dyn Read, out: &mut dyn Write) -> std::io::Result<()> {
                 encode_plan_answer(&mut e, &r);
             }
             (OP_PROPERTIES, Served::Constraint(c)) => {
-                e.start(ANSWER_OK);
                 let flag = human2nav_core::constraint::ConstraintTerm::separable_nonnegative(c);
-                e.u8(u8::from(flag));
+                encode_properties_answer(&mut e, flag);
             }
             (OP_EVALUATE, Served::Constraint(c)) => {
                 eval.decode(&mut d).map_err(invalid)?;

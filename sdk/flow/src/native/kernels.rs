@@ -169,6 +169,23 @@ pub(crate) fn gather(
     for c in 0..channels {
         for kk in 0..k {
             let row = &mut col[(c * k + kk) * batch * ln..(c * k + kk + 1) * batch * ln];
+            if taps.stride == 1 && ln == ls {
+                // The whole plane shifted by `kk − pad` in one copy (each row's run lands where
+                // a copy of its own puts it), then each row's ends zeroed.
+                let plane = &src[c * batch * ls..(c + 1) * batch * ls];
+                let lo = taps.pad.saturating_sub(kk).min(ln);
+                let hi = (ls + taps.pad).saturating_sub(kk).clamp(lo, ln);
+                if lo < hi {
+                    let s0 = lo + kk - taps.pad;
+                    let n = batch * ln - lo - (ln - hi);
+                    row[lo..lo + n].copy_from_slice(&plane[s0..s0 + n]);
+                }
+                for r in row.chunks_exact_mut(ln) {
+                    r[..lo].fill(0.0);
+                    r[hi..].fill(0.0);
+                }
+                continue;
+            }
             for b in 0..batch {
                 let s = &src[(c * batch + b) * ls..(c * batch + b + 1) * ls];
                 let r = &mut row[b * ln..(b + 1) * ln];
@@ -330,6 +347,26 @@ pub(crate) fn resize_for_overwrite(v: &mut Vec<f32>, n: usize) {
     }
 }
 
+/// Per-row lanes and statistics of one group of [`norm_act`] and [`norm_act_backward`], reused
+/// from call to call.
+#[derive(Debug, Default)]
+pub(crate) struct GroupSums {
+    a1: Vec<[f64; 16]>,
+    a2: Vec<[f64; 16]>,
+    means: Vec<(f64, f64)>,
+}
+
+impl GroupSums {
+    /// Zeroes the lanes of `batch` rows.
+    fn clear(&mut self, batch: usize) {
+        for a in [&mut self.a1, &mut self.a2] {
+            a.clear();
+            a.resize(batch, [0f64; 16]);
+        }
+        self.means.resize(batch, (0.0, 0.0));
+    }
+}
+
 /// A convolution block's normalisation: GroupNorm's groups and affine parameters, and the
 /// bias of the convolution before it (folded into the statistics instead of a pass of its own).
 #[derive(Clone, Copy, Debug)]
@@ -444,39 +481,54 @@ fn norm_act_impl<A: Act>(
     xhat: &mut [f32],
     inv_std: &mut [f32],
     out: &mut [f32],
+    sums: &mut GroupSums,
 ) {
+    if len == 0 {
+        return;
+    }
     let per = n.gamma.len() / n.groups;
     let count = (per * len) as f64;
-    for b in 0..batch {
-        let film = film.map(|f| f.row(b, n.gamma.len()));
-        for g in 0..n.groups {
-            let channels = g * per..(g + 1) * per;
-            let row = |c: usize| (c * batch + b) * len..(c * batch + b + 1) * len;
-            let mut acc = [0f64; 16];
-            for c in channels.clone() {
-                add_offset_lanes(&mut acc, &y[row(c)], n.conv_bias[c]);
+    // Each channel's rows of all the batch are one contiguous plane; a group's statistics are
+    // summed plane by plane, every row into lanes of its own, so the rows' reductions are
+    // independent of each other (and each row's additions keep their order).
+    let plane = |c: usize| c * batch * len..(c + 1) * batch * len;
+    for g in 0..n.groups {
+        let channels = g * per..(g + 1) * per;
+        sums.clear(batch);
+        for c in channels.clone() {
+            let bias = n.conv_bias[c];
+            for (a, row) in sums.a1.iter_mut().zip(y[plane(c)].chunks_exact(len)) {
+                add_offset_lanes(a, row, bias);
             }
-            let mean = lanes(acc) / count;
-            let mut acc = [0f64; 16];
-            for c in channels.clone() {
-                add_sq_dev_lanes(
-                    &mut acc,
-                    &y[row(c)],
-                    (mean - f64::from(n.conv_bias[c])) as f32,
-                );
+        }
+        for (m, a) in sums.means.iter_mut().zip(&sums.a1) {
+            m.0 = lanes(*a) / count;
+        }
+        for c in channels.clone() {
+            let bias = f64::from(n.conv_bias[c]);
+            let rows = sums.a2.iter_mut().zip(y[plane(c)].chunks_exact(len));
+            for ((a, row), m) in rows.zip(&sums.means) {
+                add_sq_dev_lanes(a, row, (m.0 - bias) as f32);
             }
-            let inv = (1.0 / (lanes(acc) / count + f64::from(GN_EPS)).sqrt()) as f32;
-            inv_std[b * n.groups + g] = inv;
-            for c in channels {
-                let m = (mean - f64::from(n.conv_bias[c])) as f32;
-                let (ga, be) = (n.gamma[c], n.beta[c]);
-                let (sc, sh) = film.map_or((1.0, 0.0), |(s, h)| (s[c], h[c]));
-                let r = row(c);
-                for ((&v, h), o) in y[r.clone()]
-                    .iter()
-                    .zip(&mut xhat[r.clone()])
-                    .zip(&mut out[r])
-                {
+        }
+        for (b, a) in sums.a2.iter().enumerate() {
+            inv_std[b * n.groups + g] =
+                (1.0 / (lanes(*a) / count + f64::from(GN_EPS)).sqrt()) as f32;
+        }
+        for c in channels {
+            let (bias, ga, be) = (f64::from(n.conv_bias[c]), n.gamma[c], n.beta[c]);
+            let rows = y[plane(c)]
+                .chunks_exact(len)
+                .zip(xhat[plane(c)].chunks_exact_mut(len))
+                .zip(out[plane(c)].chunks_exact_mut(len));
+            for (b, ((y, xhat), out)) in rows.enumerate() {
+                let m = (sums.means[b].0 - bias) as f32;
+                let inv = inv_std[b * n.groups + g];
+                let (sc, sh) = film.map_or((1.0, 0.0), |f| {
+                    let (s, h) = f.row(b, n.gamma.len());
+                    (s[c], h[c])
+                });
+                for ((&v, h), o) in y.iter().zip(xhat.iter_mut()).zip(out.iter_mut()) {
                     let xh = (v - m) * inv;
                     *h = xh;
                     *o = sh + A::f(xh * ga + be) * sc;
@@ -501,13 +553,14 @@ multiversion! {
         xhat: &mut Vec<f32>,
         inv_std: &mut Vec<f32>,
         out: &mut Vec<f32>,
+        sums: &mut GroupSums,
     ) {
         resize_for_overwrite(xhat, y.len());
         resize_for_overwrite(inv_std, batch * n.groups);
         resize_for_overwrite(out, y.len());
         match act {
-            Activation::Silu => norm_act_impl::<SiluAct>(y, n, batch, len, film, xhat, inv_std, out),
-            Activation::Mish => norm_act_impl::<MishAct>(y, n, batch, len, film, xhat, inv_std, out),
+            Activation::Silu => norm_act_impl::<SiluAct>(y, n, batch, len, film, xhat, inv_std, out, sums),
+            Activation::Mish => norm_act_impl::<MishAct>(y, n, batch, len, film, xhat, inv_std, out, sums),
         }
     }
 }
@@ -522,31 +575,46 @@ fn norm_act_backward_impl<A: Act>(
     film: Option<Film<'_>>,
     xhat: &[f32],
     inv_std: &[f32],
+    sums: &mut GroupSums,
 ) {
+    if len == 0 {
+        return;
+    }
     let per = n.gamma.len() / n.groups;
     let count = (per * len) as f64;
-    for b in 0..batch {
-        let film_scale = film.map(|f| f.row(b, n.gamma.len()).0);
-        for g in 0..n.groups {
-            let channels = g * per..(g + 1) * per;
-            let row = |c: usize| (c * batch + b) * len..(c * batch + b + 1) * len;
-            let (mut a1, mut a2) = ([0f64; 16], [0f64; 16]);
-            for c in channels.clone() {
-                let (ga, be) = (n.gamma[c], n.beta[c]);
-                let sc = film_scale.map_or(1.0, |s| s[c]);
-                let r = row(c);
-                for (v, &h) in d[r.clone()].iter_mut().zip(&xhat[r.clone()]) {
+    // Plane by plane, every row into lanes of its own, as in `norm_act_impl`.
+    let plane = |c: usize| c * batch * len..(c + 1) * batch * len;
+    for g in 0..n.groups {
+        let channels = g * per..(g + 1) * per;
+        sums.clear(batch);
+        let GroupSums { a1, a2, means } = &mut *sums;
+        for c in channels.clone() {
+            let (ga, be) = (n.gamma[c], n.beta[c]);
+            let rows = d[plane(c)]
+                .chunks_exact_mut(len)
+                .zip(xhat[plane(c)].chunks_exact(len));
+            for (b, ((d, xhat), (a1, a2))) in rows.zip(a1.iter_mut().zip(a2.iter_mut())).enumerate()
+            {
+                let sc = film.map_or(1.0, |f| f.row(b, n.gamma.len()).0[c]);
+                for (v, &h) in d.iter_mut().zip(xhat) {
                     *v *= sc * A::df(h * ga + be);
                 }
-                add_scaled_lanes(&mut a1, &d[r.clone()], ga);
-                add_dot_lanes(&mut a2, &d[r.clone()], &xhat[r], ga);
+                add_scaled_lanes(a1, d, ga);
+                add_dot_lanes(a2, d, xhat, ga);
             }
-            let (m1, m2) = ((lanes(a1) / count) as f32, (lanes(a2) / count) as f32);
-            let inv = inv_std[b * n.groups + g];
-            for c in channels {
-                let ga = n.gamma[c];
-                let r = row(c);
-                for (v, &h) in d[r.clone()].iter_mut().zip(&xhat[r]) {
+        }
+        for ((m, a1), a2) in means.iter_mut().zip(a1.iter()).zip(a2.iter()) {
+            *m = (lanes(*a1) / count, lanes(*a2) / count);
+        }
+        for c in channels {
+            let ga = n.gamma[c];
+            let rows = d[plane(c)]
+                .chunks_exact_mut(len)
+                .zip(xhat[plane(c)].chunks_exact(len));
+            for (b, (d, xhat)) in rows.enumerate() {
+                let (m1, m2) = (means[b].0 as f32, means[b].1 as f32);
+                let inv = inv_std[b * n.groups + g];
+                for (v, &h) in d.iter_mut().zip(xhat) {
                     *v = inv * (*v * ga - m1 - h * m2);
                 }
             }
@@ -567,13 +635,14 @@ multiversion! {
         film: Option<Film<'_>>,
         xhat: &[f32],
         inv_std: &[f32],
+        sums: &mut GroupSums,
     ) {
         match act {
             Activation::Silu => {
-                norm_act_backward_impl::<SiluAct>(d, n, batch, len, film, xhat, inv_std)
+                norm_act_backward_impl::<SiluAct>(d, n, batch, len, film, xhat, inv_std, sums)
             }
             Activation::Mish => {
-                norm_act_backward_impl::<MishAct>(d, n, batch, len, film, xhat, inv_std)
+                norm_act_backward_impl::<MishAct>(d, n, batch, len, film, xhat, inv_std, sums)
             }
         }
     }
@@ -664,6 +733,43 @@ mod tests {
         }
     }
 
+    /// Every column of [`gather`] is the source element its definition names, or zero: the
+    /// whole-plane copy of same-length convolutions (any kernel width and padding, rows of
+    /// one or several positions) and the strided path.
+    #[test]
+    fn gather_puts_every_source_element_where_its_definition_says() {
+        let taps = |k, stride, pad| Taps { k, stride, pad };
+        for (t, ls, ln) in [
+            (taps(3, 1, 1), 8, 8),
+            (taps(5, 1, 2), 6, 6),
+            (taps(3, 1, 0), 5, 5),
+            (taps(7, 1, 3), 2, 2),
+            (taps(3, 1, 1), 1, 1),
+            (taps(3, 1, 4), 3, 3),
+            (taps(3, 2, 1), 8, 4),
+            (taps(4, 2, 1), 8, 4),
+        ] {
+            let (ch, batch) = (2, 3);
+            let x: Vec<f32> = (0..ch * batch * ls).map(|i| i as f32 + 1.0).collect();
+            let mut col = vec![f32::NAN; 7];
+            gather(&x, ch, batch, ls, ln, t, &mut col);
+            assert_eq!(col.len(), ch * t.k * batch * ln);
+            for c in 0..ch {
+                for kk in 0..t.k {
+                    for b in 0..batch {
+                        for n in 0..ln {
+                            let want = t
+                                .source(n, kk, ls)
+                                .map_or(0.0, |p| x[(c * batch + b) * ls + p]);
+                            let got = col[(c * t.k + kk) * batch * ln + b * ln + n];
+                            assert_eq!(got, want, "{t:?} c {c} tap {kk} row {b} column {n}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
     #[test]
     fn scatter_add_is_the_adjoint_of_gather() {
         // <gather(x), y> = <x, scatter_add(y)> for every stride and padding used.
@@ -722,6 +828,92 @@ mod tests {
         }
     }
 
+    /// A batch's rows are normalised apart: [`norm_act`] and [`norm_act_backward`] give every
+    /// row of a batch what a batch of that row alone gives, to the bit (the batch API's
+    /// promise), at the lengths the network runs (whole lanes and a remainder).
+    #[test]
+    fn norm_act_gives_each_row_of_a_batch_what_it_gives_the_row_alone() {
+        let (ch, groups, batch) = (8, 4, 5);
+        let gamma: Vec<f32> = (0..ch).map(|c| 0.5 + 0.1 * c as f32).collect();
+        let beta: Vec<f32> = (0..ch).map(|c| 0.05 * c as f32 - 0.2).collect();
+        let conv_bias: Vec<f32> = (0..ch).map(|c| (c as f32 * 1.3).sin()).collect();
+        let n = BlockNorm {
+            groups,
+            gamma: &gamma,
+            beta: &beta,
+            conv_bias: &conv_bias,
+        };
+        let films: Vec<f32> = (0..2 * ch * batch)
+            .map(|i| (i as f32 * 0.37).cos())
+            .collect();
+        let starts: Vec<usize> = (0..batch).map(|b| 2 * ch * b).collect();
+        let sums = &mut GroupSums::default();
+        for len in [16, 32, 21] {
+            let y: Vec<f32> = (0..ch * batch * len)
+                .map(|i| (i as f32 * 0.77).sin() * 3.0 + 1.0)
+                .collect();
+            let dout: Vec<f32> = (0..y.len()).map(|i| (i as f32 * 0.29).cos()).collect();
+            // Rows `rows` of a `[ch, batch, len]` buffer, as a `[ch, rows, len]` buffer.
+            let pick = |v: &[f32], rows: std::ops::Range<usize>| -> Vec<f32> {
+                (0..ch)
+                    .flat_map(|c| &v[(c * batch + rows.start) * len..(c * batch + rows.end) * len])
+                    .copied()
+                    .collect()
+            };
+            for act in [Activation::Silu, Activation::Mish] {
+                let (mut h, mut inv, mut out) = (Vec::new(), Vec::new(), Vec::new());
+                let film = Film::per_row(&films, &starts);
+                norm_act(
+                    act,
+                    &y,
+                    n,
+                    batch,
+                    len,
+                    Some(film),
+                    &mut h,
+                    &mut inv,
+                    &mut out,
+                    sums,
+                );
+                let mut d = dout.clone();
+                norm_act_backward(act, &mut d, n, batch, len, Some(film), &h, &inv, sums);
+                for b in 0..batch {
+                    let (mut h1, mut inv1, mut out1) = (Vec::new(), Vec::new(), Vec::new());
+                    let film1 = Film::per_row(&films, &starts[b..=b]);
+                    let y1 = pick(&y, b..b + 1);
+                    norm_act(
+                        act,
+                        &y1,
+                        n,
+                        1,
+                        len,
+                        Some(film1),
+                        &mut h1,
+                        &mut inv1,
+                        &mut out1,
+                        sums,
+                    );
+                    let mut d1 = pick(&dout, b..b + 1);
+                    norm_act_backward(act, &mut d1, n, 1, len, Some(film1), &h1, &inv1, sums);
+                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    let row = b..b + 1;
+                    assert_eq!(
+                        bits(&pick(&out, row.clone())),
+                        bits(&out1),
+                        "{act:?} {len} row {b}"
+                    );
+                    assert_eq!(
+                        bits(&pick(&h, row.clone())),
+                        bits(&h1),
+                        "{act:?} {len} row {b}"
+                    );
+                    assert_eq!(bits(&inv[b * groups..(b + 1) * groups]), bits(&inv1));
+                    assert_eq!(bits(&pick(&d, row)), bits(&d1), "{act:?} {len} row {b}");
+                }
+            }
+        }
+    }
+
     /// `Σ w·norm_act(y)` and its gradient through [`norm_act_backward`], against central
     /// differences, for both activations, with and without FiLM.
     #[test]
@@ -744,18 +936,32 @@ mod tests {
             .map(|i| (i as f32 * 0.91).sin() * 2.0)
             .collect();
         let w: Vec<f32> = (0..y.len()).map(|i| (i as f32 * 0.43).cos()).collect();
+        let mut sums = GroupSums::default();
         for act in [Activation::Silu, Activation::Mish] {
             let per_row = Film::per_row(&films, &rows);
             for film in [None, Some(Film::shared(&films)), Some(per_row)] {
                 let f = |y: &[f32]| -> f64 {
                     let (mut h, mut s, mut o) = (Vec::new(), Vec::new(), Vec::new());
-                    norm_act(act, y, n, batch, len, film, &mut h, &mut s, &mut o);
+                    norm_act(
+                        act,
+                        y,
+                        n,
+                        batch,
+                        len,
+                        film,
+                        &mut h,
+                        &mut s,
+                        &mut o,
+                        &mut GroupSums::default(),
+                    );
                     o.iter().zip(&w).map(|(a, b)| f64::from(a * b)).sum()
                 };
                 let (mut h, mut s, mut o) = (Vec::new(), Vec::new(), Vec::new());
-                norm_act(act, &y, n, batch, len, film, &mut h, &mut s, &mut o);
+                norm_act(
+                    act, &y, n, batch, len, film, &mut h, &mut s, &mut o, &mut sums,
+                );
                 let mut d = w.clone();
-                norm_act_backward(act, &mut d, n, batch, len, film, &h, &s);
+                norm_act_backward(act, &mut d, n, batch, len, film, &h, &s, &mut sums);
                 for i in 0..y.len() {
                     let e = 1e-2f32;
                     let (mut p, mut m) = (y.clone(), y.clone());

@@ -6,8 +6,8 @@
 
 use super::crowd::Crowd;
 use super::kernels::{
-    BlockNorm, Film, Taps, add_bias, add_to, gather, linear, norm_act, norm_act_backward,
-    resize_for_overwrite, scatter_add, sgemm,
+    BlockNorm, Film, GroupSums, Taps, add_bias, add_to, gather, linear, norm_act,
+    norm_act_backward, resize_for_overwrite, scatter_add, sgemm,
 };
 use crate::config::{Activation, NetConfig};
 use std::collections::BTreeMap;
@@ -311,6 +311,7 @@ impl ConvBlock {
             &mut cache.xhat,
             &mut cache.inv_std,
             out,
+            &mut s.sums,
         );
         s.y = y;
     }
@@ -336,6 +337,7 @@ impl ConvBlock {
             film,
             &cache.xhat,
             &cache.inv_std,
+            &mut s.sums,
         );
         self.conv.backward(dout, batch, len, &mut s.col, dx);
     }
@@ -561,6 +563,7 @@ pub(crate) struct Scratch {
     h: Vec<f32>,
     res: Vec<f32>,
     d1: Vec<f32>,
+    sums: GroupSums,
 }
 
 /// Everything one forward pass keeps for its backward pass (reused across calls).

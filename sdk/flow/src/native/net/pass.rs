@@ -2,7 +2,7 @@
 //! pass with its [`Tape`] and the backward pass of its input.
 
 use super::{Net, Pool, ResCache, Tape};
-use crate::native::kernels::{BlockNorm, Film, activate_in_place, add_to, norm_act};
+use crate::native::kernels::{BlockNorm, Film, GroupSums, activate_in_place, add_to, norm_act};
 
 /// Sinusoidal time frequency multiplier of [`crate::net`].
 const TIME_SCALE: f32 = crate::net::TIME_SCALE as f32;
@@ -22,7 +22,19 @@ impl Net {
                 conv_bias: &conv.b,
             };
             let (mut xh, mut inv) = (Vec::new(), Vec::new());
-            norm_act(self.act, &y, n, 1, s * s, None, &mut xh, &mut inv, &mut h);
+            let sums = &mut GroupSums::default();
+            norm_act(
+                self.act,
+                &y,
+                n,
+                1,
+                s * s,
+                None,
+                &mut xh,
+                &mut inv,
+                &mut h,
+                sums,
+            );
             side = s;
         }
         let pooled = adaptive_avg_pool_4x4(&h, side);

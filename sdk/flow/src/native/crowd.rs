@@ -10,8 +10,7 @@
 //! through both layers.
 
 use super::kernels::{
-    activate_in_place, activation_derivative, derivative_in_place, multiversion,
-    resize_for_overwrite, sgemm,
+    activate_in_place, derivative_in_place, multiversion, resize_for_overwrite, sgemm,
 };
 use super::net::{WeightError, Weights, gather_rows, take};
 use crate::config::{Activation, CrowdConfig};
@@ -68,12 +67,14 @@ pub(crate) struct CrowdScratch {
     ends_at: Vec<u32>,
     tau: Vec<f32>,
     /// Backward: the first layer's activations, the second layer's gradient, the picked
-    /// `(waypoint, point)` pairs, each output's column among them, one waypoint's picks.
+    /// `(waypoint, point)` pairs, each output's column among them, one waypoint's picks, the
+    /// second activation's slope at each output's pick.
     a0: Vec<f32>,
     dz: Vec<f32>,
     cols: Vec<(u32, u32)>,
     col_of: Vec<u32>,
     picks: Vec<u32>,
+    slopes: Vec<f32>,
 }
 
 const PAIR: usize = CROWD_PAIR_FEATURES as usize;
@@ -230,11 +231,13 @@ impl Crowd {
         // dZ1: each output's gradient at its pick, through the second activation.
         s.dz.clear();
         s.dz.resize(width * m, 0.0);
-        for c in 0..width {
-            for bj in 0..plane {
-                let at = c * m + s.col_of[c * plane + bj] as usize;
-                s.dz[at] = dcrowd[c * plane + bj] * activation_derivative(self.act, s.z1[at]);
-            }
+        // The slopes at the picks are taken in one vectorised pass.
+        let at = |o: usize| (o / plane) * m + s.col_of[o] as usize;
+        s.slopes.clear();
+        s.slopes.extend((0..width * plane).map(|o| s.z1[at(o)]));
+        derivative_in_place(self.act, &mut s.slopes);
+        for (o, (&slope, &g)) in s.slopes.iter().zip(&dcrowd[..width * plane]).enumerate() {
+            s.dz[at(o)] = g * slope;
         }
         // dZ0 = act'(z0) ⊙ W1ᵀ·dZ1 (into a0), then dF = W0ᵀ·dZ0 (into pairs).
         sgemm(

@@ -682,14 +682,6 @@ multiversion! {
     }
 }
 
-/// The derivative of `act` at `x`.
-pub(crate) fn activation_derivative(act: Activation, x: f32) -> f32 {
-    match act {
-        Activation::Silu => SiluAct::df(x),
-        Activation::Mish => MishAct::df(x),
-    }
-}
-
 multiversion! {
     /// `y = W·x + b` for one vector (`W` row-major `[out, in]`).
     pub(crate) fn linear(w: &[f32], b: &[f32], x: &[f32], y: &mut [f32]) {

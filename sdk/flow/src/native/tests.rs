@@ -36,29 +36,43 @@ fn small() -> NetConfig {
     }
 }
 
-/// A deterministic pseudo-random stream in [-1, 1).
-/// A model with weights drawn from torch's generator at `seed`. The generator is global and
-/// these tests start in parallel, so seeding and drawing happen under one lock: without it
-/// their draws interleave, a test's weights change from run to run, and an agreement close to
-/// the tolerance passes or fails by chance.
+/// A model whose every parameter is drawn from [`noise`] at `seed` and the parameter's name,
+/// not from torch's generator: that generator is global, and other tests of this crate seed
+/// and draw from it in parallel, so weights drawn from it changed from run to run and an
+/// agreement close to the tolerance passed or failed by chance.
 ///
-/// Every bias is drawn too (libtorch starts convolution biases at zero): a trained model's are
-/// not zero, and a bias applied twice or not at all showed only with the trained weights.
-fn seeded_model(cfg: &NetConfig, seed: i64) -> CfmModel {
-    static TORCH_RNG: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    let _guard = TORCH_RNG.lock().unwrap_or_else(|e| e.into_inner());
-    tch::manual_seed(seed);
+/// Matrices and kernels are uniform in `±1/√fan_in` (torch's default bound), normalisation
+/// scales `1 ± 0.2`, and every bias is drawn too, in `±0.3` (libtorch starts convolution biases
+/// at zero; a trained model's are not zero, and a bias applied twice or not at all showed only
+/// with the trained weights).
+fn seeded_model(cfg: &NetConfig, seed: u64) -> CfmModel {
     let model = CfmModel::new(cfg, &norm(), Device::Cpu).expect("valid config");
+    let mut vars: Vec<_> = model.var_store().variables().into_iter().collect();
+    vars.sort_by(|a, b| a.0.cmp(&b.0));
     tch::no_grad(|| {
-        for (name, mut v) in model.var_store().variables() {
-            if name.ends_with(".bias") {
-                v.copy_(&(tch::Tensor::randn_like(&v) * 0.3));
-            }
+        for (name, mut v) in vars {
+            let shape = v.size();
+            let numel: i64 = shape.iter().product();
+            let key = human2nav_core::input::fnv1a64(name.as_bytes()) ^ seed;
+            let u = noise(key, usize::try_from(numel).expect("tensor size"));
+            let values: Vec<f64> = if name.ends_with(".bias") {
+                u.iter().map(|x| 0.3 * x).collect()
+            } else if shape.len() >= 2 {
+                let bound = 1.0 / ((numel / shape[0]) as f64).sqrt();
+                u.iter().map(|x| bound * x).collect()
+            } else {
+                u.iter().map(|x| 1.0 + 0.2 * x).collect()
+            };
+            let t = tch::Tensor::from_slice(&values)
+                .to_kind(v.kind())
+                .reshape(&shape);
+            v.copy_(&t);
         }
     });
     model
 }
 
+/// A deterministic pseudo-random stream in [-1, 1).
 fn noise(seed: u64, n: usize) -> Vec<f64> {
     let mut s = seed
         .wrapping_mul(6364136223846793005)
@@ -111,7 +125,7 @@ fn rel_err(a: &[f64], b: &[f64]) -> f64 {
     diff / scale.max(1e-12)
 }
 
-fn check_agreement(cfg: &NetConfig, seed: i64) {
+fn check_agreement(cfg: &NetConfig, seed: u64) {
     let torch = seeded_model(cfg, seed);
     let native = NativeCfm::from_model(&torch).expect("same architecture");
     let h = cfg.horizon;

@@ -47,10 +47,8 @@ fn small() -> NetConfig {
 /// with the trained weights).
 fn seeded_model(cfg: &NetConfig, seed: u64) -> CfmModel {
     let model = CfmModel::new(cfg, &norm(), Device::Cpu).expect("valid config");
-    let mut vars: Vec<_> = model.var_store().variables().into_iter().collect();
-    vars.sort_by(|a, b| a.0.cmp(&b.0));
     tch::no_grad(|| {
-        for (name, mut v) in vars {
+        for (name, mut v) in model.var_store().variables() {
             let shape = v.size();
             let numel: i64 = shape.iter().product();
             let key = human2nav_core::input::fnv1a64(name.as_bytes()) ^ seed;

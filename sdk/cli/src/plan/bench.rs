@@ -113,7 +113,7 @@ pub(super) fn bench(
             // MFLOP / (GFLOP/s) = ms.
             let limit_ms = mflop / peak;
             println!(
-                "| {mode} | {} | {} | {:.2} | {:.2} | {:.2} | {:.1} + {:.1} | {:.2} | {:.2} | {:.0} | {:.2} | {:.1} |",
+                "| {mode} | {} | {} | {:.2} | {:.2} | {:.2} | {:.1} + {:.1} | {:.2} | {:.2} | {:.0} | {:.2} | {:.2} |",
                 backend,
                 lat.calls,
                 lat.p50_ms,

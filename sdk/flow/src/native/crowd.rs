@@ -67,8 +67,8 @@ pub(crate) struct CrowdScratch {
     ends_at: Vec<u32>,
     tau: Vec<f32>,
     /// Backward: the first layer's activations, the second layer's gradient, the picked
-    /// `(waypoint, point)` pairs, each output's column among them, one waypoint's picks, the
-    /// second activation's slope at each output's pick.
+    /// `(waypoint, point)` pairs, each output's column among them, the column of each point
+    /// one waypoint picked, the second activation's slope at each output's pick.
     a0: Vec<f32>,
     dz: Vec<f32>,
     cols: Vec<(u32, u32)>,
@@ -197,17 +197,26 @@ impl Crowd {
         s.cols.clear();
         s.col_of.clear();
         s.col_of.resize(width * plane, 0);
+        // `picks[n]`: the column of point `n` at the current waypoint, or `NONE`.
+        const NONE: u32 = u32::MAX;
+        s.picks.clear();
+        s.picks.resize(tape.present, NONE);
         for bj in 0..plane {
-            s.picks.clear();
-            s.picks.extend((0..width).map(|c| tape.arg[c * plane + bj]));
-            s.picks.sort_unstable();
-            s.picks.dedup();
-            let start = s.cols.len();
-            s.cols.extend(s.picks.iter().map(|&n| (bj as u32, n)));
             for c in 0..width {
-                let n = tape.arg[c * plane + bj];
-                let at = s.picks.partition_point(|&p| p < n);
-                s.col_of[c * plane + bj] = (start + at) as u32;
+                s.picks[tape.arg[c * plane + bj] as usize] = 0;
+            }
+            for (n, col) in s.picks.iter_mut().enumerate() {
+                if *col != NONE {
+                    *col = s.cols.len() as u32;
+                    s.cols.push((bj as u32, n as u32));
+                }
+            }
+            for c in 0..width {
+                let out = c * plane + bj;
+                s.col_of[out] = s.picks[tape.arg[out] as usize];
+            }
+            for c in 0..width {
+                s.picks[tape.arg[c * plane + bj] as usize] = NONE;
             }
         }
         let m = s.cols.len();

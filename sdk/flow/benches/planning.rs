@@ -17,7 +17,8 @@
 //! `Human2Nav::plan_batch` (native backend, the configured planner and the raw arm): plans per
 //! second on one thread.
 //!
-//! Run: `cargo bench -p human2nav-flow --features torch --bench planning` (threads: `H2N_THREADS`, default 1).
+//! Run: `cargo bench -p human2nav-flow --features torch --bench planning` (threads: `H2N_THREADS`,
+//! default 1; `H2N_SAMPLES=16` times the calls at K = 16 instead of the configured K).
 //! `human2nav plan --bench <calls>` reports p50/p95 and the time split on the same setup.
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
@@ -101,10 +102,17 @@ fn bench_planning(c: &mut Criterion) {
     let dir = model_dir();
     let obs = scenes();
     // The shipped planner settings (sdk/configs/planner.toml), else the built-in defaults.
-    let base: Human2NavSettings =
+    let mut base: Human2NavSettings =
         PlannerConfig::load(&workspace().join("sdk/configs/planner.toml"))
             .map(|c| c.human2nav)
             .unwrap_or_default();
+    // `H2N_SAMPLES`: another K, as `plan --bench --samples K` (the guided call is timed at 16).
+    if let Some(k) = std::env::var("H2N_SAMPLES")
+        .ok()
+        .and_then(|s| s.parse().ok())
+    {
+        base.samples = k;
+    }
     let peak = human2nav_flow::native::sgemm_gflops(512, 21);
     for (mode, settings) in modes(&base) {
         let model = load_model(&dir, Backend::Native).expect("model");

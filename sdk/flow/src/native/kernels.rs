@@ -151,6 +151,15 @@ impl Taps {
         let p = (n * self.stride + kk).checked_sub(self.pad)?;
         (p < len).then_some(p)
     }
+
+    /// For stride 1: the columns `lo..hi` of `0..ln` whose tap `kk` lies in `0..len`, a run of
+    /// consecutive source positions from `lo + kk − pad`.
+    #[inline]
+    fn run(self, kk: usize, len: usize, ln: usize) -> (usize, usize) {
+        let lo = self.pad.saturating_sub(kk).min(ln);
+        let hi = (len + self.pad).saturating_sub(kk).clamp(lo, ln);
+        (lo, hi)
+    }
 }
 
 /// `col[(c·k + kk), b·ln + n] = src[c, b, n·stride − pad + kk]` (zero outside `0..ls`):
@@ -173,8 +182,7 @@ pub(crate) fn gather(
                 // The whole plane shifted by `kk − pad` in one copy (each row's run lands where
                 // a copy of its own puts it), then each row's ends zeroed.
                 let plane = &src[c * batch * ls..(c + 1) * batch * ls];
-                let lo = taps.pad.saturating_sub(kk).min(ln);
-                let hi = (ls + taps.pad).saturating_sub(kk).clamp(lo, ln);
+                let (lo, hi) = taps.run(kk, ls, ln);
                 if lo < hi {
                     let s0 = lo + kk - taps.pad;
                     let n = batch * ln - lo - (ln - hi);
@@ -191,8 +199,7 @@ pub(crate) fn gather(
                 let r = &mut row[b * ln..(b + 1) * ln];
                 if taps.stride == 1 {
                     // Contiguous run: positions n − pad + kk for n in 0..ln, zero outside.
-                    let lo = taps.pad.saturating_sub(kk).min(ln);
-                    let hi = (ls + taps.pad).saturating_sub(kk).clamp(lo, ln);
+                    let (lo, hi) = taps.run(kk, ls, ln);
                     r[..lo].fill(0.0);
                     let s0 = lo + kk - taps.pad;
                     r[lo..hi].copy_from_slice(&s[s0..s0 + (hi - lo)]);
@@ -226,8 +233,7 @@ pub(crate) fn scatter_add(
                 let r = &row[b * ln..(b + 1) * ln];
                 if taps.stride == 1 {
                     // Contiguous run, as in `gather`.
-                    let lo = taps.pad.saturating_sub(kk);
-                    let hi = (ld + taps.pad).saturating_sub(kk).min(ln);
+                    let (lo, hi) = taps.run(kk, ld, ln);
                     if lo < hi {
                         let d0 = lo + kk - taps.pad;
                         add_to(&mut d[d0..d0 + (hi - lo)], &r[lo..hi]);
@@ -695,6 +701,7 @@ multiversion! {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::native::net::gather_rows;
 
     fn naive(m: usize, n: usize, k: usize, a: impl Fn(usize, usize) -> f32, b: &[f32]) -> Vec<f32> {
         let mut c = vec![0f32; m * n];
@@ -845,12 +852,11 @@ mod tests {
                 .map(|i| (i as f32 * 0.77).sin() * 3.0 + 1.0)
                 .collect();
             let dout: Vec<f32> = (0..y.len()).map(|i| (i as f32 * 0.29).cos()).collect();
-            // Rows `rows` of a `[ch, batch, len]` buffer, as a `[ch, rows, len]` buffer.
-            let pick = |v: &[f32], rows: std::ops::Range<usize>| -> Vec<f32> {
-                (0..ch)
-                    .flat_map(|c| &v[(c * batch + rows.start) * len..(c * batch + rows.end) * len])
-                    .copied()
-                    .collect()
+            // Row `b` of a `[ch, batch, len]` buffer, as a `[ch, 1, len]` one.
+            let pick = |v: &[f32], b: usize| -> Vec<f32> {
+                let mut row = Vec::new();
+                gather_rows(v, batch, len, &[b], &mut row);
+                row
             };
             for act in [Activation::Silu, Activation::Mish] {
                 let (mut h, mut inv, mut out) = (Vec::new(), Vec::new(), Vec::new());
@@ -872,7 +878,7 @@ mod tests {
                 for b in 0..batch {
                     let (mut h1, mut inv1, mut out1) = (Vec::new(), Vec::new(), Vec::new());
                     let film1 = Film::per_row(&films, &starts[b..=b]);
-                    let y1 = pick(&y, b..b + 1);
+                    let y1 = pick(&y, b);
                     norm_act(
                         act,
                         &y1,
@@ -885,22 +891,13 @@ mod tests {
                         &mut out1,
                         sums,
                     );
-                    let mut d1 = pick(&dout, b..b + 1);
+                    let mut d1 = pick(&dout, b);
                     norm_act_backward(act, &mut d1, n, 1, len, Some(film1), &h1, &inv1, sums);
                     let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-                    let row = b..b + 1;
-                    assert_eq!(
-                        bits(&pick(&out, row.clone())),
-                        bits(&out1),
-                        "{act:?} {len} row {b}"
-                    );
-                    assert_eq!(
-                        bits(&pick(&h, row.clone())),
-                        bits(&h1),
-                        "{act:?} {len} row {b}"
-                    );
+                    assert_eq!(bits(&pick(&out, b)), bits(&out1), "{act:?} {len} row {b}");
+                    assert_eq!(bits(&pick(&h, b)), bits(&h1), "{act:?} {len} row {b}");
                     assert_eq!(bits(&inv[b * groups..(b + 1) * groups]), bits(&inv1));
-                    assert_eq!(bits(&pick(&d, row)), bits(&d1), "{act:?} {len} row {b}");
+                    assert_eq!(bits(&pick(&d, b)), bits(&d1), "{act:?} {len} row {b}");
                 }
             }
         }

@@ -2,9 +2,11 @@
 //! configured planner and the guidance ablation's arms that change its cost (`raw`: no guidance
 //! stage; `qp`: shortlist and last-step correction; `alg1+qp`: Algorithm 1's iterations before
 //! the correction; the arms without the robot's own motions), with the network run natively and
-//! by libtorch (one thread by default): `plan/{configured,raw,qp,alg1+qp}/{native,torch}`. Before the timings it prints each configuration's
-//! network operations per call, this machine's single-thread SGEMM rate and the resulting
-//! lower bound on a call's time, so the criterion medians can be read as ratios to it.
+//! by libtorch (one thread by default): `plan/{configured,raw,qp,alg1+qp}/{native,torch}`.
+//! Before the timings it prints each configuration's network operations per call (those the
+//! native network counts it did, `NativeCfm::macs`), this machine's single-thread SGEMM rate
+//! and the resulting lower bound on a call's time, so the criterion medians can be read as
+//! ratios to it.
 //!
 //! The model is the shipped one (`models/human2nav-cfm`, or `$H2N_MODEL`); without it, a
 //! freshly initialised model of the default architecture (same cost per network call, but
@@ -26,11 +28,10 @@ use human2nav_core::ablation::Arm;
 use human2nav_core::human2nav::{Human2Nav, Human2NavSettings};
 use human2nav_core::{Observation, Planner};
 use human2nav_data::{EpisodeSuite, ScenarioClass};
-use human2nav_flow::net::Complexity;
 use human2nav_flow::perf::{episode_start, start_scenes};
 use human2nav_flow::planner::{
-    Backend, DEFAULT_MODEL_DIR, PlannerConfig, RobotPlanner, TimedModel, load_model, load_profile,
-    robot_model, robot_phi,
+    Backend, DEFAULT_MODEL_DIR, PlannerConfig, PlannerModel, RobotPlanner, load_model,
+    load_profile, robot_model, robot_phi,
 };
 use human2nav_flow::{CfmModel, NetConfig, Normalisation};
 use std::hint::black_box;
@@ -116,18 +117,18 @@ fn bench_planning(c: &mut Criterion) {
     let peak = human2nav_flow::native::sgemm_gflops(512, 21);
     for (mode, settings) in modes(&base) {
         let model = load_model(&dir, Backend::Native).expect("model");
-        let macs = Complexity::of(&model.card().net).unet_macs;
         let bev = human2nav_flow::planner::bev_spec(model.card()).0;
-        let timed = TimedModel::new(model);
-        let stats = timed.stats();
         let phi = robot_phi(&profile).expect("robot terms");
         let mut p =
-            Human2Nav::new(timed, robot_model(&profile, phi), bev, settings).expect("planner");
+            Human2Nav::new(model, robot_model(&profile, phi), bev, settings).expect("planner");
+        // The products the native network counts it did (`NativeCfm::macs`).
+        let macs = |p: &Human2Nav<PlannerModel>| p.model().macs().unwrap_or(0);
+        let before = macs(&p);
         for o in &obs {
             p.reset();
             p.plan(o).expect("plan");
         }
-        let flops = stats.lock().expect("stats").network_flops(macs) / obs.len() as f64;
+        let flops = 2.0 * (macs(&p) - before) as f64 / obs.len() as f64;
         eprintln!(
             "plan/{mode}: {:.0} MFLOP of network per call; single-thread SGEMM {peak:.1} GFLOP/s; limit {:.2} ms",
             flops / 1e6,

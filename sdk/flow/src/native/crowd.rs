@@ -98,7 +98,8 @@ impl Crowd {
     }
 
     /// Appends the pathway's features `[width, K, T]` to `feat` (`[5, K, T]` on entry, so
-    /// `[5 + width, K, T]` after), reading `points` (`N × 5`, present rows first).
+    /// `[5 + width, K, T]` after), reading `points` (`N × 5`, present rows first). Returns the
+    /// (waypoint, point) pairs it ran the MLP on: `K · T` times the present points.
     pub(crate) fn forward(
         &self,
         feat: &mut Vec<f32>,
@@ -106,7 +107,7 @@ impl Crowd {
         points: &[f32],
         tape: &mut CrowdTape,
         s: &mut CrowdScratch,
-    ) {
+    ) -> usize {
         let plane = k * t_len;
         let traj = TRAJ_CHANNELS as usize * plane;
         tape.feat.clear();
@@ -121,7 +122,7 @@ impl Crowd {
         feat.resize(traj + width * plane, 0.0);
         if present == 0 {
             feat[traj..].fill(0.0);
-            return;
+            return 0;
         }
         tape.arg.clear();
         tape.arg.resize(width * plane, 0);
@@ -171,12 +172,14 @@ impl Crowd {
                 }
             }
         }
+        plane * present
     }
 
     /// Adds to `dfeat[..5·K·T]` the pull-back of `dfeat[5·K·T..]` (the gradient arriving at
     /// the pathway's features) through the pass recorded in `tape`: only the pairs some
     /// output's max picked carry a gradient, so both layers are recomputed and pulled back for
-    /// those columns alone, one matrix product per layer.
+    /// those columns alone, one matrix product per layer. Returns how many pairs that is
+    /// (each recomputed through both layers and pulled back through both).
     pub(crate) fn backward(
         &self,
         dfeat: &mut [f32],
@@ -184,9 +187,9 @@ impl Crowd {
         points: &[f32],
         tape: &CrowdTape,
         s: &mut CrowdScratch,
-    ) {
+    ) -> usize {
         if tape.present == 0 {
-            return;
+            return 0;
         }
         let (plane, width) = (k * t_len, self.width);
         let traj = TRAJ_CHANNELS as usize * plane;
@@ -283,6 +286,7 @@ impl Crowd {
                 g = [0.0; 4];
             }
         }
+        m
     }
 }
 

@@ -25,6 +25,7 @@ use crate::io_map::{self, batch_of, check_len};
 #[cfg(feature = "torch")]
 use crate::model::CfmModel;
 use crate::model::{CARD_FILE, crowd_points, planning_condition};
+use crate::net::Complexity;
 use crowd::{CrowdScratch, CrowdTape};
 use human2nav_core::flow::{FlowCondition, FlowError, FlowModel, FlowQuery};
 use human2nav_core::input::read_user_bytes;
@@ -137,6 +138,8 @@ struct State {
     dfeat: Vec<f32>,
     cot: Vec<f32>,
     batched: Batched,
+    /// Multiply-accumulates computed so far ([`NativeCfm::macs`]).
+    macs: u64,
 }
 
 /// The flow model on Rust kernels; see the [module documentation](self).
@@ -145,6 +148,10 @@ pub struct NativeCfm {
     card: ModelCard,
     net: Arc<Net>,
     out_scale: [f64; 3],
+    /// Multiply-accumulates of the convolutions per trajectory, and of the crowd pathway's
+    /// MLP per (waypoint, point) pair ([`Complexity`]).
+    conv_macs: u64,
+    pair_macs: u64,
     state: Mutex<State>,
 }
 
@@ -156,6 +163,8 @@ impl Clone for NativeCfm {
             card: self.card.clone(),
             net: Arc::clone(&self.net),
             out_scale: self.out_scale,
+            conv_macs: self.conv_macs,
+            pair_macs: self.pair_macs,
             state: Mutex::new(State::default()),
         }
     }
@@ -211,10 +220,13 @@ impl NativeCfm {
             s * n.velocity_std[1],
             n.velocity_std[2],
         ];
+        let work = Complexity::of(&card.net);
         Ok(Self {
             card,
             net: Arc::new(net),
             out_scale,
+            conv_macs: work.conv_macs,
+            pair_macs: work.crowd_pair_macs,
             state: Mutex::new(State::default()),
         })
     }
@@ -222,6 +234,16 @@ impl NativeCfm {
     /// The model card (architecture, normalisation, provenance).
     pub fn card(&self) -> &ModelCard {
         &self.card
+    }
+
+    /// The multiply-accumulates this model has computed since it was made: per trajectory of
+    /// a forward pass the convolutions and the crowd pathway's MLP at the points present; per
+    /// trajectory of a VJP the convolutions' transposed products and the crowd pathway's picked
+    /// pairs, through both layers and back. A kept pass reused counts nothing, nor do
+    /// normalisation, activations, FiLM and the condition encoding (see [`Complexity`]). With
+    /// the machine's SGEMM rate it gives the least time the arithmetic a call did can take.
+    pub fn macs(&self) -> u64 {
+        self.state.lock().map_or(0, |st| st.macs)
     }
 
     fn lock(&self) -> Result<std::sync::MutexGuard<'_, State>, FlowError> {
@@ -298,8 +320,10 @@ impl NativeCfm {
         let f = &mut st.forwards[slot];
         if let Some(c) = &self.net.crowd {
             let points = &st.encoded.points;
-            c.forward(&mut st.feat, (k, h), points, &mut f.crowd, &mut st.crowd);
+            let pairs = c.forward(&mut st.feat, (k, h), points, &mut f.crowd, &mut st.crowd);
+            st.macs += pairs as u64 * self.pair_macs;
         }
+        st.macs += k as u64 * self.conv_macs;
         self.net.forward(
             &st.feat,
             k,
@@ -426,7 +450,8 @@ impl FlowModel for NativeCfm {
             let k = q.x.len() / (3 * h);
             write_features(q.x, h, scale, &mut st.feat);
             if let Some(c) = &self.net.crowd {
-                c.forward(&mut st.feat, (k, h), &m.points, &mut b.crowd, &mut st.crowd);
+                let pairs = c.forward(&mut st.feat, (k, h), &m.points, &mut b.crowd, &mut st.crowd);
+                st.macs += pairs as u64 * self.pair_macs;
             }
             let channels = st.feat.len() / (k * h);
             b.feat.resize(channels * rows * h, 0.0);
@@ -436,6 +461,7 @@ impl FlowModel for NativeCfm {
             }
             first += k;
         }
+        st.macs += rows as u64 * self.conv_macs;
         let film = Film::per_row(&b.films, &b.film_rows);
         let (tape, pool) = (&mut b.tape, &mut st.pool);
         self.net
@@ -481,6 +507,7 @@ impl FlowModel for NativeCfm {
             cot,
             pool,
             crowd: scratch,
+            macs,
             ..
         } = &mut *st;
         let Forward {
@@ -499,8 +526,10 @@ impl FlowModel for NativeCfm {
         });
         let film = Film::shared(&encoded.films[fi].1);
         self.net.backward(cot, film, tape, pool, dfeat);
+        *macs += k as u64 * self.conv_macs;
         if let Some(c) = &self.net.crowd {
-            c.backward(dfeat, (k, h), &encoded.points, crowd, scratch);
+            let pairs = c.backward(dfeat, (k, h), &encoded.points, crowd, scratch);
+            *macs += 2 * pairs as u64 * self.pair_macs;
         }
         let s = self.card.normalisation.position_scale;
         io_map::pull_back_features(

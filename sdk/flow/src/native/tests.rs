@@ -5,6 +5,7 @@
 
 use super::*;
 use crate::config::{Activation, NetConfig, Normalisation};
+use crate::net::CROWD_FEATURES;
 use tch::Device;
 
 fn norm() -> Normalisation {
@@ -331,4 +332,56 @@ fn agrees_with_torch_on_the_shipped_weights() {
             );
         }
     }
+}
+
+/// [`NativeCfm::macs`] counts what each pass computed: a forward pass its convolutions and
+/// the crowd pathway at the present points alone, a kept pass reused (the same input, or rows
+/// of it) nothing, and a VJP on a kept pass the transposed products and the picked pairs.
+#[test]
+fn macs_count_the_products_each_pass_computed() {
+    let cfg = NetConfig {
+        crowd: Some(crate::config::CrowdConfig {
+            points: 40,
+            width: 32,
+            ..Default::default()
+        }),
+        ..NetConfig::default()
+    };
+    let native = NativeCfm::from_model(&seeded_model(&cfg, 11)).expect("same architecture");
+    let work = Complexity::of(&cfg);
+    let (h, k) = (cfg.horizon as u64, 4u64);
+    let (cond, x) = (condition(&cfg, 4), poses(4, cfg.horizon, 12));
+    let mut out = vec![0.0; x.len()];
+    assert_eq!(native.macs(), 0);
+    native.velocity(&x, 0.4, &cond, &mut out).expect("forward");
+    let present = native
+        .lock()
+        .expect("state")
+        .encoded
+        .points
+        .chunks_exact(CROWD_FEATURES as usize)
+        .filter(|p| p[4] > 0.5)
+        .count() as u64;
+    assert!(present > 0, "the condition places people");
+    let forward = k * work.conv_macs + k * h * present * work.crowd_pair_macs;
+    assert_eq!(native.macs(), forward);
+    assert!(forward < k * work.unet_macs || present == 40);
+    native.velocity(&x, 0.4, &cond, &mut out).expect("kept");
+    let rows = 3 * cfg.horizon;
+    native
+        .velocity(&x[rows..3 * rows], 0.4, &cond, &mut out[..2 * rows])
+        .expect("rows of a kept pass");
+    assert_eq!(native.macs(), forward, "a kept pass costs nothing");
+    let (cot, mut vjp) = (noise(13, x.len()), vec![0.0; x.len()]);
+    native
+        .velocity_vjp(&x, 0.4, &cond, &cot, &mut out, &mut vjp)
+        .expect("vjp");
+    let backward = native.macs() - forward;
+    // Every waypoint's outputs pick between one point and as many as there are outputs.
+    let picks = |per_waypoint: u64| 2 * k * h * per_waypoint * work.crowd_pair_macs;
+    let (least, most) = (picks(1), picks(present.min(32)));
+    assert!(
+        (k * work.conv_macs + least..=k * work.conv_macs + most).contains(&backward),
+        "{backward} outside the transposed products plus {least}..={most}"
+    );
 }

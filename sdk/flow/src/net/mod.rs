@@ -54,8 +54,13 @@ pub(crate) const TIME_SCALE: f64 = 100.0;
 /// (convolutions and linear layers; normalisations and activations are not counted).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Complexity {
-    /// U-Net convolutions and the crowd pathway's MLP, per trajectory.
+    /// U-Net convolutions and the crowd pathway's MLP at every one of its points, per
+    /// trajectory (`conv_macs + points · horizon · crowd_pair_macs`).
     pub unet_macs: u64,
+    /// The U-Net's convolutions alone, per trajectory.
+    pub conv_macs: u64,
+    /// The crowd pathway's MLP per (waypoint, point) pair (0 without the pathway).
+    pub crowd_pair_macs: u64,
     /// Time MLP and the fused FiLM layer, once per `(t, c)` (shared by the batch).
     pub film_macs: u64,
     /// BEV and goal encoders, once per condition.
@@ -107,9 +112,12 @@ impl Complexity {
         }
         let d0 = dims[1];
         unet += conv1d(d0, d0, k, len) + conv1d(d0, OUT_CHANNELS as u64, 1, len);
+        let conv_macs = unet;
+        let mut crowd_pair_macs = 0;
         if let Some(c) = &cfg.crowd {
             let (n, w) = (c.points as u64, c.width as u64);
-            unet += n * cfg.horizon as u64 * (CROWD_PAIR_FEATURES as u64 * w + w * w);
+            crowd_pair_macs = CROWD_PAIR_FEATURES as u64 * w + w * w;
+            unet += n * cfg.horizon as u64 * crowd_pair_macs;
         }
 
         let mut condition = 0u64;
@@ -134,6 +142,8 @@ impl Complexity {
         let film = tdim * 4 * tdim * 2 + cond * film_width;
         Self {
             unet_macs: unet,
+            conv_macs,
+            crowd_pair_macs,
             film_macs: film,
             condition_macs: condition,
         }

@@ -146,6 +146,11 @@ impl<M> TimedModel<M> {
         Arc::clone(&self.stats)
     }
 
+    /// The model it times.
+    pub fn inner(&self) -> &M {
+        &self.inner
+    }
+
     fn record(&self, vjp: bool, rows: u64, seconds: f64) {
         if let Ok(mut s) = self.stats.lock() {
             if vjp {

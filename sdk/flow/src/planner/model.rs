@@ -176,6 +176,16 @@ impl PlannerModel {
         }
     }
 
+    /// The multiply-accumulates the network has computed so far, where the backend counts
+    /// them ([`NativeCfm::macs`]; `None` for libtorch).
+    pub fn macs(&self) -> Option<u64> {
+        match self {
+            Self::Native(m) => Some(m.macs()),
+            #[cfg(feature = "torch")]
+            Self::Torch(_) => None,
+        }
+    }
+
     /// The model card.
     pub fn card(&self) -> &ModelCard {
         match self {

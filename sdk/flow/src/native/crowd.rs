@@ -10,7 +10,8 @@
 //! through both layers.
 
 use super::kernels::{
-    activate_in_place, derivative_in_place, multiversion, resize_for_overwrite, sgemm,
+    activate_in_place, bias_activate_in_place, derivative_in_place, multiversion,
+    resize_for_overwrite, sgemm,
 };
 use super::net::{WeightError, Weights, gather_rows, take};
 use crate::config::{Activation, CrowdConfig};
@@ -138,21 +139,22 @@ impl Crowd {
             let way = |c: usize| &tape.feat[c * plane + bj0..c * plane + bj0 + rows];
             let waypoints = [way(0), way(1), way(2), way(3), &s.tau[bj0..bj0 + rows]];
             tile_pairs(waypoints, &points[..present * stride], &mut s.pairs);
-            layer(&self.w0, &self.b0, PAIR, &s.pairs, m, &mut s.z0);
-            activate_in_place(self.act, &mut s.z0);
-            layer(&self.w1, &self.b1, width, &s.z0, m, &mut s.z1);
+            product(&self.w0, PAIR, &s.pairs, m, &mut s.z0);
+            bias_activate_in_place(self.act, &self.b0, &mut s.z0);
+            product(&self.w1, width, &s.z0, m, &mut s.z1);
             // Both activations fall from 0 to a single minimum and rise after it, so an
             // output's largest activation is that of its largest or of its smallest
             // pre-activation: only those two are activated. `ends` is `[width, 2, rows]`.
+            // The second layer's bias is added as the extremes are sought.
             resize_for_overwrite(&mut s.ends, 2 * width * rows);
-            s.ends_at.clear();
-            s.ends_at.resize(2 * width * rows, 0);
-            for ((z, ends), at) in
+            resize_for_overwrite(&mut s.ends_at, 2 * width * rows);
+            for (((z, ends), at), &b) in
                 s.z1.chunks_exact(m)
                     .zip(s.ends.chunks_exact_mut(2 * rows))
                     .zip(s.ends_at.chunks_exact_mut(2 * rows))
+                    .zip(&self.b1)
             {
-                tile_extremes(z, rows, ends, at);
+                tile_extremes(z, b, rows, ends, at);
             }
             activate_in_place(self.act, &mut s.ends);
             for c in 0..width {
@@ -323,22 +325,27 @@ multiversion! {
 }
 
 multiversion! {
-    /// Per waypoint `r` of one output channel's tile `z` (`[present, rows]`), the largest and
-    /// the smallest value over the points with the first point attaining each: `ends` and
-    /// `at` are `[largest; smallest]`, `rows` each.
-    fn tile_extremes(z: &[f32], rows: usize, ends: &mut [f32], at: &mut [u32]) {
+    /// Per waypoint `r` of one output channel's tile `z` (`[present, rows]`) plus the
+    /// channel's bias `b`, the largest and the smallest value over the points with the first
+    /// point attaining each: `ends` and `at` are `[largest; smallest]`, `rows` each.
+    fn tile_extremes(z: &[f32], b: f32, rows: usize, ends: &mut [f32], at: &mut [u32]) {
         let (hi, lo) = ends.split_at_mut(rows);
         let (hi_at, lo_at) = at.split_at_mut(rows);
-        hi.copy_from_slice(&z[..rows]);
-        lo.copy_from_slice(&z[..rows]);
-        hi_at.fill(0);
-        lo_at.fill(0);
+        for (((h, l), &v), (h_at, l_at)) in hi
+            .iter_mut()
+            .zip(lo.iter_mut())
+            .zip(&z[..rows])
+            .zip(hi_at.iter_mut().zip(lo_at.iter_mut()))
+        {
+            (*h, *l, *h_at, *l_at) = (v + b, v + b, 0, 0);
+        }
         // Selects and unconditional stores, so that the loop vectorises along the waypoints.
         for (n, row) in z.chunks_exact(rows).enumerate().skip(1) {
             let n = n as u32;
             let hi = hi.iter_mut().zip(hi_at.iter_mut());
             let lo = lo.iter_mut().zip(lo_at.iter_mut());
             for (&v, ((h, h_at), (l, l_at))) in row.iter().zip(hi.zip(lo)) {
+                let v = v + b;
                 let (up, down) = (v > *h, v < *l);
                 *h = if up { v } else { *h };
                 *h_at = if up { n } else { *h_at };
@@ -349,11 +356,16 @@ multiversion! {
     }
 }
 
-/// `z = W·x + b` for `m` columns: `W` `[out, inp]`, `x` `[inp, m]`, `z` `[out, m]`.
-fn layer(w: &[f32], b: &[f32], inp: usize, x: &[f32], m: usize, z: &mut Vec<f32>) {
-    let out = b.len();
+/// `z = W·x` for `m` columns: `W` `[out, inp]`, `x` `[inp, m]`, `z` `[out, m]`.
+fn product(w: &[f32], inp: usize, x: &[f32], m: usize, z: &mut Vec<f32>) {
+    let out = w.len() / inp;
     resize_for_overwrite(z, out * m);
     sgemm(out, m, inp, w, inp, 1, x, m, 1, z, false);
+}
+
+/// `z = W·x + b` for `m` columns ([`product`] plus the bias of each output row).
+fn layer(w: &[f32], b: &[f32], inp: usize, x: &[f32], m: usize, z: &mut Vec<f32>) {
+    product(w, inp, x, m, z);
     for (row, &bias) in z.chunks_exact_mut(m).zip(b) {
         row.iter_mut().for_each(|v| *v += bias);
     }

@@ -347,9 +347,9 @@ pub(crate) fn dot(x: &[f32], y: &[f32]) -> f32 {
 /// Resizes a buffer that the caller overwrites completely (no zeroing when it already has
 /// the length).
 #[inline]
-pub(crate) fn resize_for_overwrite(v: &mut Vec<f32>, n: usize) {
+pub(crate) fn resize_for_overwrite<T: Copy + Default>(v: &mut Vec<T>, n: usize) {
     if v.len() != n {
-        v.resize(n, 0.0);
+        v.resize(n, T::default());
     }
 }
 
@@ -674,6 +674,23 @@ multiversion! {
         match act {
             Activation::Silu => x.iter_mut().for_each(|v| *v *= sigmoid(*v)),
             Activation::Mish => x.iter_mut().for_each(|v| *v *= tanh_softplus(*v)),
+        }
+    }
+}
+
+multiversion! {
+    /// `act(x + b)` in place, one bias per row of `x` (`[bias.len(), x.len() / bias.len()]`):
+    /// the values of adding the bias and then [`activate_in_place`], in one pass.
+    pub(crate) fn bias_activate_in_place(act: Activation, bias: &[f32], x: &mut [f32]) {
+        let m = x.len() / bias.len().max(1);
+        if m == 0 {
+            return;
+        }
+        for (row, &b) in x.chunks_exact_mut(m).zip(bias) {
+            match act {
+                Activation::Silu => row.iter_mut().for_each(|v| *v = SiluAct::f(*v + b)),
+                Activation::Mish => row.iter_mut().for_each(|v| *v = MishAct::f(*v + b)),
+            }
         }
     }
 }

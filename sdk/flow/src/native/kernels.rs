@@ -189,8 +189,8 @@ pub(crate) fn gather(
                     row[lo..lo + n].copy_from_slice(&plane[s0..s0 + n]);
                 }
                 for r in row.chunks_exact_mut(ln) {
-                    r[..lo].fill(0.0);
-                    r[hi..].fill(0.0);
+                    zero_few(&mut r[..lo]);
+                    zero_few(&mut r[hi..]);
                 }
                 continue;
             }
@@ -211,6 +211,18 @@ pub(crate) fn gather(
                 }
             }
         }
+    }
+}
+
+/// Zeroes the few values (a convolution's padding, one or two) at a row's end: stores, where
+/// `fill` on a slice of unknown length is a library call per row.
+#[inline(always)]
+fn zero_few(r: &mut [f32]) {
+    match r {
+        [] => {}
+        [a] => *a = 0.0,
+        [a, b] => (*a, *b) = (0.0, 0.0),
+        _ => r.fill(0.0),
     }
 }
 

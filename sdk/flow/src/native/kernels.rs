@@ -232,8 +232,11 @@ fn zero_few(r: &mut [f32]) {
 }
 
 /// The adjoint of [`gather`]: `dst[c, b, n·stride − pad + kk] += col[(c·k + kk), b·ln + n]`.
+/// `col` is consumed: a same-length convolution's columns whose target lies outside their
+/// own row are zeroed, so that each tap adds its whole plane in one pass (every target still
+/// receives one addition per tap, in the same order).
 pub(crate) fn scatter_add(
-    col: &[f32],
+    col: &mut [f32],
     channels: usize,
     batch: usize,
     ld: usize,
@@ -244,7 +247,21 @@ pub(crate) fn scatter_add(
     let k = taps.k;
     for c in 0..channels {
         for kk in 0..k {
-            let row = &col[(c * k + kk) * batch * ln..(c * k + kk + 1) * batch * ln];
+            let row = &mut col[(c * k + kk) * batch * ln..(c * k + kk + 1) * batch * ln];
+            if taps.stride == 1 && ln == ld {
+                let (lo, hi) = taps.run(kk, ld, ln);
+                if lo < hi {
+                    for r in row.chunks_exact_mut(ln) {
+                        zero_few(&mut r[..lo]);
+                        zero_few(&mut r[hi..]);
+                    }
+                    let plane = &mut dst[c * batch * ld..(c + 1) * batch * ld];
+                    let d0 = lo + kk - taps.pad;
+                    let n = batch * ln - lo - (ln - hi);
+                    add_to(&mut plane[d0..d0 + n], &row[lo..lo + n]);
+                }
+                continue;
+            }
             for b in 0..batch {
                 let d = &mut dst[(c * batch + b) * ld..(c * batch + b + 1) * ld];
                 let r = &row[b * ln..(b + 1) * ln];
@@ -860,9 +877,48 @@ mod tests {
             gather(&x, ch, batch, ls, ln, taps, &mut col);
             let lhs: f32 = col.iter().zip(&y).map(|(a, b)| a * b).sum();
             let mut back = vec![0f32; x.len()];
-            scatter_add(&y, ch, batch, ls, ln, taps, &mut back);
+            scatter_add(&mut y.clone(), ch, batch, ls, ln, taps, &mut back);
             let rhs: f32 = x.iter().zip(&back).map(|(a, b)| a * b).sum();
             assert!((lhs - rhs).abs() < 1e-4, "{taps:?}: {lhs} vs {rhs}");
+        }
+    }
+
+    /// [`scatter_add`] adds every column to the target its definition names, in tap order, to
+    /// the bit: the whole-plane path of same-length convolutions (any kernel width and
+    /// padding, rows of one or several positions) and the row-by-row ones.
+    #[test]
+    fn scatter_add_adds_every_column_where_its_definition_says() {
+        let taps = |k, stride, pad| Taps { k, stride, pad };
+        for (t, ld, ln) in [
+            (taps(3, 1, 1), 8, 8),
+            (taps(5, 1, 2), 6, 6),
+            (taps(3, 1, 0), 5, 5),
+            (taps(3, 1, 1), 1, 1),
+            (taps(4, 1, 2), 7, 7),
+            (taps(3, 1, 1), 6, 8),
+            (taps(4, 2, 1), 8, 4),
+        ] {
+            let (ch, batch) = (3, 4);
+            let col: Vec<f32> = (0..ch * t.k * batch * ln)
+                .map(|i| (i as f32 * 0.61).sin())
+                .collect();
+            let start: Vec<f32> = (0..ch * batch * ld).map(|i| (i as f32 * 0.2).cos()).collect();
+            let mut want = start.clone();
+            for c in 0..ch {
+                for kk in 0..t.k {
+                    for b in 0..batch {
+                        for n in 0..ln {
+                            if let Some(p) = t.source(n, kk, ld) {
+                                want[(c * batch + b) * ld + p] +=
+                                    col[(c * t.k + kk) * batch * ln + b * ln + n];
+                            }
+                        }
+                    }
+                }
+            }
+            let mut got = start;
+            scatter_add(&mut col.clone(), ch, batch, ld, ln, t, &mut got);
+            assert_eq!(got, want, "{t:?}, {ld} ← {ln}");
         }
     }
 

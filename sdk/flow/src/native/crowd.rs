@@ -4,14 +4,15 @@
 //!
 //! The forward pass works through the pairs in tiles of whole waypoints (each tile's pair
 //! features and both layers' activations stay in cache, one matrix product per layer and tile)
-//! and keeps only which point each output's max picked. The max passes its gradient to that one
-//! point, so the backward pass recomputes the two layers for the picked pairs alone: at most
-//! `width` of the `points` pairs of a waypoint, where a dense pass would pull every pair back
-//! through both layers.
+//! and keeps only which point each output's max picked, with the second layer's
+//! pre-activation there. The max passes its gradient to that one point, so the backward pass
+//! recomputes the first layer for the picked pairs alone and pulls them back through both: at
+//! most `width` of the `points` pairs of a waypoint, where a dense pass would pull every pair
+//! back through both layers.
 
 use super::kernels::{
-    activate_in_place, bias_activate_in_place, derivative_in_place, multiversion,
-    resize_for_overwrite, sgemm,
+    activate_into, bias_activate_in_place, derivative_in_place, multiversion, resize_for_overwrite,
+    sgemm,
 };
 use super::net::{WeightError, Weights, gather_rows, take};
 use crate::config::{Activation, CrowdConfig};
@@ -41,8 +42,10 @@ pub(crate) struct Crowd {
 pub(crate) struct CrowdTape {
     /// Present points (the first `present` rows of the points).
     present: usize,
-    /// Per output `(w, b, j)`: the point the max picked.
+    /// Per output `(w, b, j)`: the point the max picked, and the second layer's
+    /// pre-activation there (the slope the gradient passes through).
     arg: Vec<u32>,
+    pre: Vec<f32>,
     /// The trajectory features `[5, K, T]` the pass read.
     feat: Vec<f32>,
 }
@@ -52,6 +55,7 @@ impl CrowdTape {
     pub(crate) fn gather(&self, (batch, t_len): (usize, usize), rows: &[usize], into: &mut Self) {
         into.present = self.present;
         gather_rows(&self.arg, batch, t_len, rows, &mut into.arg);
+        gather_rows(&self.pre, batch, t_len, rows, &mut into.pre);
         gather_rows(&self.feat, batch, t_len, rows, &mut into.feat);
     }
 }
@@ -62,14 +66,15 @@ pub(crate) struct CrowdScratch {
     pairs: Vec<f32>,
     z0: Vec<f32>,
     z1: Vec<f32>,
-    /// Forward: per output of a tile, the largest and smallest pre-activation (activated in
-    /// place) and the points they belong to; each waypoint's time ahead.
+    /// Forward: per output of a tile, the largest and smallest pre-activation, activated, and
+    /// the points they belong to; each waypoint's time ahead.
     ends: Vec<f32>,
+    ends_act: Vec<f32>,
     ends_at: Vec<u32>,
     tau: Vec<f32>,
-    /// Backward: the first layer's activations, the second layer's gradient, the picked
-    /// `(waypoint, point)` pairs, each output's column among them, the column of each point
-    /// one waypoint picked, the second activation's slope at each output's pick.
+    /// Backward: the gradient at the first layer's activations, the second layer's gradient,
+    /// the picked `(waypoint, point)` pairs, each output's column among them, the column of
+    /// each point one waypoint picked, the second activation's slope at each output's pick.
     a0: Vec<f32>,
     dz: Vec<f32>,
     cols: Vec<(u32, u32)>,
@@ -100,7 +105,8 @@ impl Crowd {
 
     /// Appends the pathway's features `[width, K, T]` to `feat` (`[5, K, T]` on entry, so
     /// `[5 + width, K, T]` after), reading `points` (`N × 5`, present rows first). Returns the
-    /// (waypoint, point) pairs it ran the MLP on: `K · T` times the present points.
+    /// multiply-accumulates of its matrix products: the MLP on `K · T` times the present
+    /// points.
     pub(crate) fn forward(
         &self,
         feat: &mut Vec<f32>,
@@ -108,7 +114,7 @@ impl Crowd {
         points: &[f32],
         tape: &mut CrowdTape,
         s: &mut CrowdScratch,
-    ) -> usize {
+    ) -> u64 {
         let plane = k * t_len;
         let traj = TRAJ_CHANNELS as usize * plane;
         tape.feat.clear();
@@ -127,6 +133,7 @@ impl Crowd {
         }
         tape.arg.clear();
         tape.arg.resize(width * plane, 0);
+        resize_for_overwrite(&mut tape.pre, width * plane);
         s.tau.clear();
         s.tau
             .extend((0..plane).map(|bj| (bj % t_len + 1) as f32 * self.step));
@@ -156,32 +163,33 @@ impl Crowd {
             {
                 tile_extremes(z, b, rows, ends, at);
             }
-            activate_in_place(self.act, &mut s.ends);
+            activate_into(self.act, &s.ends, &mut s.ends_act);
             for c in 0..width {
-                let (v, at) = (&s.ends[2 * c * rows..], &s.ends_at[2 * c * rows..]);
+                let span = |i: usize| (2 * c + i) * rows..(2 * c + i + 1) * rows;
+                let (hv, lv) = (&s.ends_act[span(0)], &s.ends_act[span(1)]);
+                let (ha, la) = (&s.ends_at[span(0)], &s.ends_at[span(1)]);
+                let (hp, lp) = (&s.ends[span(0)], &s.ends[span(1)]);
+                let out = c * plane + bj0..c * plane + bj0 + rows;
+                let best = &mut feat[traj + out.start..traj + out.end];
+                let (arg, pre) = (&mut tape.arg[out.clone()], &mut tape.pre[out]);
                 for r in 0..rows {
-                    let (hi, lo) = ((v[r], at[r]), (v[rows + r], at[rows + r]));
                     // The first point attaining the max, as a search of the activated
                     // outputs picks.
-                    let (best, arg) = if hi.0 > lo.0 || (hi.0 == lo.0 && hi.1 < lo.1) {
-                        hi
-                    } else {
-                        lo
-                    };
-                    let out = c * plane + bj0 + r;
-                    feat[traj + out] = best;
-                    tape.arg[out] = arg;
+                    let hi = hv[r] > lv[r] || (hv[r] == lv[r] && ha[r] < la[r]);
+                    best[r] = if hi { hv[r] } else { lv[r] };
+                    arg[r] = if hi { ha[r] } else { la[r] };
+                    pre[r] = if hi { hp[r] } else { lp[r] };
                 }
             }
         }
-        plane * present
+        (plane * present * (PAIR + width) * width) as u64
     }
 
     /// Adds to `dfeat[..5·K·T]` the pull-back of `dfeat[5·K·T..]` (the gradient arriving at
     /// the pathway's features) through the pass recorded in `tape`: only the pairs some
     /// output's max picked carry a gradient, so both layers are recomputed and pulled back for
-    /// those columns alone, one matrix product per layer. Returns how many pairs that is
-    /// (each recomputed through both layers and pulled back through both).
+    /// those columns alone, one matrix product per layer. Returns the multiply-accumulates of
+    /// those products: per picked pair, the first layer recomputed and both pulled back.
     pub(crate) fn backward(
         &self,
         dfeat: &mut [f32],
@@ -189,7 +197,7 @@ impl Crowd {
         points: &[f32],
         tape: &CrowdTape,
         s: &mut CrowdScratch,
-    ) -> usize {
+    ) -> u64 {
         if tape.present == 0 {
             return 0;
         }
@@ -235,25 +243,31 @@ impl Crowd {
                 s.pairs[c * m + col] = *v;
             }
         }
-        // Forward through both layers on the picked columns: z0 becomes act'(z0), a0 = act(z0).
+        // The first layer on the picked columns: z0 becomes act'(z0). (The second layer's
+        // pre-activation at each pick is the forward pass's, kept in the tape.)
         layer(&self.w0, &self.b0, PAIR, &s.pairs, m, &mut s.z0);
-        s.a0.clear();
-        s.a0.extend_from_slice(&s.z0);
-        activate_in_place(self.act, &mut s.a0);
         derivative_in_place(self.act, &mut s.z0);
-        layer(&self.w1, &self.b1, width, &s.a0, m, &mut s.z1);
-        // dZ1: each output's gradient at its pick, through the second activation.
+        // dZ1: each output's gradient at its pick, through the second activation, whose
+        // slopes are taken in one vectorised pass; output `(c, bj)` writes column
+        // `col_of[c·plane + bj]` of channel `c`'s row of `dz`.
         s.dz.clear();
         s.dz.resize(width * m, 0.0);
-        // The slopes at the picks are taken in one vectorised pass.
-        let at = |o: usize| (o / plane) * m + s.col_of[o] as usize;
         s.slopes.clear();
-        s.slopes.extend((0..width * plane).map(|o| s.z1[at(o)]));
+        s.slopes.extend_from_slice(&tape.pre);
         derivative_in_place(self.act, &mut s.slopes);
-        for (o, (&slope, &g)) in s.slopes.iter().zip(&dcrowd[..width * plane]).enumerate() {
-            s.dz[at(o)] = g * slope;
+        let per_channel = s
+            .col_of
+            .chunks_exact(plane)
+            .zip(s.slopes.chunks_exact(plane))
+            .zip(dcrowd[..width * plane].chunks_exact(plane))
+            .zip(s.dz.chunks_exact_mut(m));
+        for (((cols, slopes), g), dz) in per_channel {
+            for ((&col, &slope), &g) in cols.iter().zip(slopes).zip(g) {
+                dz[col as usize] = g * slope;
+            }
         }
         // dZ0 = act'(z0) ⊙ W1ᵀ·dZ1 (into a0), then dF = W0ᵀ·dZ0 (into pairs).
+        resize_for_overwrite(&mut s.a0, width * m);
         sgemm(
             width, m, width, &self.w1, 1, width, &s.dz, m, 1, &mut s.a0, false,
         );
@@ -288,7 +302,7 @@ impl Crowd {
                 g = [0.0; 4];
             }
         }
-        m
+        (m * (2 * PAIR + width) * width) as u64
     }
 }
 

@@ -718,6 +718,17 @@ multiversion! {
 }
 
 multiversion! {
+    /// `out = act(x)`.
+    pub(crate) fn activate_into(act: Activation, x: &[f32], out: &mut Vec<f32>) {
+        resize_for_overwrite(out, x.len());
+        match act {
+            Activation::Silu => out.iter_mut().zip(x).for_each(|(o, &v)| *o = SiluAct::f(v)),
+            Activation::Mish => out.iter_mut().zip(x).for_each(|(o, &v)| *o = MishAct::f(v)),
+        }
+    }
+}
+
+multiversion! {
     /// `act(x + b)` in place, one bias per row of `x` (`[bias.len(), x.len() / bias.len()]`):
     /// the values of adding the bias and then [`activate_in_place`], in one pass.
     pub(crate) fn bias_activate_in_place(act: Activation, bias: &[f32], x: &mut [f32]) {
@@ -902,7 +913,9 @@ mod tests {
             let col: Vec<f32> = (0..ch * t.k * batch * ln)
                 .map(|i| (i as f32 * 0.61).sin())
                 .collect();
-            let start: Vec<f32> = (0..ch * batch * ld).map(|i| (i as f32 * 0.2).cos()).collect();
+            let start: Vec<f32> = (0..ch * batch * ld)
+                .map(|i| (i as f32 * 0.2).cos())
+                .collect();
             let mut want = start.clone();
             for c in 0..ch {
                 for kk in 0..t.k {

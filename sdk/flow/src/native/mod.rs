@@ -148,10 +148,8 @@ pub struct NativeCfm {
     card: ModelCard,
     net: Arc<Net>,
     out_scale: [f64; 3],
-    /// Multiply-accumulates of the convolutions per trajectory, and of the crowd pathway's
-    /// MLP per (waypoint, point) pair ([`Complexity`]).
+    /// Multiply-accumulates of the convolutions per trajectory ([`Complexity`]).
     conv_macs: u64,
-    pair_macs: u64,
     state: Mutex<State>,
 }
 
@@ -164,7 +162,6 @@ impl Clone for NativeCfm {
             net: Arc::clone(&self.net),
             out_scale: self.out_scale,
             conv_macs: self.conv_macs,
-            pair_macs: self.pair_macs,
             state: Mutex::new(State::default()),
         }
     }
@@ -220,13 +217,11 @@ impl NativeCfm {
             s * n.velocity_std[1],
             n.velocity_std[2],
         ];
-        let work = Complexity::of(&card.net);
         Ok(Self {
+            conv_macs: Complexity::of(&card.net).conv_macs,
             card,
             net: Arc::new(net),
             out_scale,
-            conv_macs: work.conv_macs,
-            pair_macs: work.crowd_pair_macs,
             state: Mutex::new(State::default()),
         })
     }
@@ -238,8 +233,8 @@ impl NativeCfm {
 
     /// The multiply-accumulates this model has computed since it was made: per trajectory of
     /// a forward pass the convolutions and the crowd pathway's MLP at the points present; per
-    /// trajectory of a VJP the convolutions' transposed products and the crowd pathway's picked
-    /// pairs, through both layers and back. A kept pass reused counts nothing, nor do
+    /// trajectory of a VJP the convolutions' transposed products and, at the crowd pathway's
+    /// picked pairs, its first layer again and both layers' transposed products. A kept pass reused counts nothing, nor do
     /// normalisation, activations, FiLM and the condition encoding (see [`Complexity`]). With
     /// the machine's SGEMM rate it gives the least time the arithmetic a call did can take.
     pub fn macs(&self) -> u64 {
@@ -320,8 +315,7 @@ impl NativeCfm {
         let f = &mut st.forwards[slot];
         if let Some(c) = &self.net.crowd {
             let points = &st.encoded.points;
-            let pairs = c.forward(&mut st.feat, (k, h), points, &mut f.crowd, &mut st.crowd);
-            st.macs += pairs as u64 * self.pair_macs;
+            st.macs += c.forward(&mut st.feat, (k, h), points, &mut f.crowd, &mut st.crowd);
         }
         st.macs += k as u64 * self.conv_macs;
         self.net.forward(
@@ -450,8 +444,7 @@ impl FlowModel for NativeCfm {
             let k = q.x.len() / (3 * h);
             write_features(q.x, h, scale, &mut st.feat);
             if let Some(c) = &self.net.crowd {
-                let pairs = c.forward(&mut st.feat, (k, h), &m.points, &mut b.crowd, &mut st.crowd);
-                st.macs += pairs as u64 * self.pair_macs;
+                st.macs += c.forward(&mut st.feat, (k, h), &m.points, &mut b.crowd, &mut st.crowd);
             }
             let channels = st.feat.len() / (k * h);
             b.feat.resize(channels * rows * h, 0.0);
@@ -528,8 +521,7 @@ impl FlowModel for NativeCfm {
         self.net.backward(cot, film, tape, pool, dfeat);
         *macs += k as u64 * self.conv_macs;
         if let Some(c) = &self.net.crowd {
-            let pairs = c.backward(dfeat, (k, h), &encoded.points, crowd, scratch);
-            *macs += 2 * pairs as u64 * self.pair_macs;
+            *macs += c.backward(dfeat, (k, h), &encoded.points, crowd, scratch);
         }
         let s = self.card.normalisation.position_scale;
         io_map::pull_back_features(

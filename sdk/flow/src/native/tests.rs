@@ -377,8 +377,9 @@ fn macs_count_the_products_each_pass_computed() {
         .velocity_vjp(&x, 0.4, &cond, &cot, &mut out, &mut vjp)
         .expect("vjp");
     let backward = native.macs() - forward;
-    // Every waypoint's outputs pick between one point and as many as there are outputs.
-    let picks = |per_waypoint: u64| 2 * k * h * per_waypoint * work.crowd_pair_macs;
+    // Every waypoint's outputs pick between one point and as many as there are outputs; each
+    // pick is the first layer again (5 · 32) and both transposed (32 · 32 + 32 · 5).
+    let picks = |per_waypoint: u64| k * h * per_waypoint * (10 * 32 + 32 * 32);
     let (least, most) = (picks(1), picks(present.min(32)));
     assert!(
         (k * work.conv_macs + least..=k * work.conv_macs + most).contains(&backward),

@@ -187,9 +187,9 @@ impl Crowd {
 
     /// Adds to `dfeat[..5·K·T]` the pull-back of `dfeat[5·K·T..]` (the gradient arriving at
     /// the pathway's features) through the pass recorded in `tape`: only the pairs some
-    /// output's max picked carry a gradient, so both layers are recomputed and pulled back for
-    /// those columns alone, one matrix product per layer. Returns the multiply-accumulates of
-    /// those products: per picked pair, the first layer recomputed and both pulled back.
+    /// output's max picked carry a gradient, so the first layer is recomputed and both are
+    /// pulled back for those columns alone, one matrix product each. Returns the
+    /// multiply-accumulates of those products.
     pub(crate) fn backward(
         &self,
         dfeat: &mut [f32],

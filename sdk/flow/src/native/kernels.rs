@@ -799,22 +799,30 @@ mod tests {
         }
     }
 
-    /// Every column of [`gather`] is the source element its definition names, or zero: the
-    /// whole-plane copy of same-length convolutions (any kernel width and padding, rows of
-    /// one or several positions) and the strided path.
-    #[test]
-    fn gather_puts_every_source_element_where_its_definition_says() {
+    /// Index maps for [`gather`] and [`scatter_add`], with the length of a row of the source
+    /// (of the target) and of the columns: same-length convolutions of several kernel widths
+    /// and paddings with rows of one or several positions (the whole-plane paths), and the
+    /// row-by-row ones (lengths that differ, strides).
+    fn tap_cases() -> [(Taps, usize, usize); 10] {
         let taps = |k, stride, pad| Taps { k, stride, pad };
-        for (t, ls, ln) in [
+        [
             (taps(3, 1, 1), 8, 8),
             (taps(5, 1, 2), 6, 6),
             (taps(3, 1, 0), 5, 5),
             (taps(7, 1, 3), 2, 2),
             (taps(3, 1, 1), 1, 1),
             (taps(3, 1, 4), 3, 3),
+            (taps(4, 1, 2), 7, 7),
+            (taps(3, 1, 1), 6, 8),
             (taps(3, 2, 1), 8, 4),
             (taps(4, 2, 1), 8, 4),
-        ] {
+        ]
+    }
+
+    /// Every column of [`gather`] is the source element its definition names, or zero.
+    #[test]
+    fn gather_puts_every_source_element_where_its_definition_says() {
+        for (t, ls, ln) in tap_cases() {
             let (ch, batch) = (2, 3);
             let x: Vec<f32> = (0..ch * batch * ls).map(|i| i as f32 + 1.0).collect();
             let mut col = vec![f32::NAN; 7];
@@ -895,20 +903,10 @@ mod tests {
     }
 
     /// [`scatter_add`] adds every column to the target its definition names, in tap order, to
-    /// the bit: the whole-plane path of same-length convolutions (any kernel width and
-    /// padding, rows of one or several positions) and the row-by-row ones.
+    /// the bit.
     #[test]
     fn scatter_add_adds_every_column_where_its_definition_says() {
-        let taps = |k, stride, pad| Taps { k, stride, pad };
-        for (t, ld, ln) in [
-            (taps(3, 1, 1), 8, 8),
-            (taps(5, 1, 2), 6, 6),
-            (taps(3, 1, 0), 5, 5),
-            (taps(3, 1, 1), 1, 1),
-            (taps(4, 1, 2), 7, 7),
-            (taps(3, 1, 1), 6, 8),
-            (taps(4, 2, 1), 8, 4),
-        ] {
+        for (t, ld, ln) in tap_cases() {
             let (ch, batch) = (3, 4);
             let col: Vec<f32> = (0..ch * t.k * batch * ln)
                 .map(|i| (i as f32 * 0.61).sin())

@@ -378,8 +378,8 @@ fn macs_count_the_products_each_pass_computed() {
         .expect("vjp");
     let backward = native.macs() - forward;
     // Every waypoint's outputs pick between one point and as many as there are outputs; each
-    // pick is the first layer again (5 · 32) and both transposed (32 · 32 + 32 · 5).
-    let picks = |per_waypoint: u64| k * h * per_waypoint * (10 * 32 + 32 * 32);
+    // pick is the first layer again and both layers transposed (the pair's MLP and 32 · 5).
+    let picks = |per_waypoint: u64| k * h * per_waypoint * (work.crowd_pair_macs + 32 * 5);
     let (least, most) = (picks(1), picks(present.min(32)));
     assert!(
         (k * work.conv_macs + least..=k * work.conv_macs + most).contains(&backward),

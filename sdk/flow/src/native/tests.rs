@@ -167,15 +167,17 @@ fn agrees_with_torch_on_deeper_levels_more_blocks_and_mish() {
     check_agreement(&small(), 8);
 }
 
+/// A crowd pathway of `points` points and MLP width `width`.
+fn crowd(points: usize, width: usize) -> Option<crate::config::CrowdConfig> {
+    Some(crate::config::CrowdConfig {
+        points,
+        width,
+        ..Default::default()
+    })
+}
+
 #[test]
 fn agrees_with_torch_with_the_crowd_pathway() {
-    let crowd = |points, width| {
-        Some(crate::config::CrowdConfig {
-            points,
-            width,
-            ..Default::default()
-        })
-    };
     check_agreement(
         &NetConfig {
             crowd: crowd(40, 32),
@@ -340,11 +342,7 @@ fn agrees_with_torch_on_the_shipped_weights() {
 #[test]
 fn macs_count_the_products_each_pass_computed() {
     let cfg = NetConfig {
-        crowd: Some(crate::config::CrowdConfig {
-            points: 40,
-            width: 32,
-            ..Default::default()
-        }),
+        crowd: crowd(40, 32),
         ..NetConfig::default()
     };
     let native = NativeCfm::from_model(&seeded_model(&cfg, 11)).expect("same architecture");

@@ -131,8 +131,7 @@ impl Crowd {
             feat[traj..].fill(0.0);
             return 0;
         }
-        tape.arg.clear();
-        tape.arg.resize(width * plane, 0);
+        resize_for_overwrite(&mut tape.arg, width * plane);
         resize_for_overwrite(&mut tape.pre, width * plane);
         s.tau.clear();
         s.tau

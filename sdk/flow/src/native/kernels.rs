@@ -165,6 +165,39 @@ impl Taps {
         let hi = (len + self.pad).saturating_sub(kk).clamp(lo, ln);
         (lo, hi)
     }
+
+    /// For stride 1 and rows of `len` columns over `len` positions: tap `kk`'s columns
+    /// `lo..hi` of every row ([`Self::run`]), and the one run over a whole plane of `batch`
+    /// rows that covers them: `n` consecutive columns from column `lo`, at positions from
+    /// `start` on (each row's run where a run of its own puts it, and the few columns between
+    /// two rows' runs, which [`zero_row_ends`] zeroes).
+    #[inline]
+    fn plane_run(self, kk: usize, len: usize, batch: usize) -> PlaneRun {
+        let (lo, hi) = self.run(kk, len, len);
+        PlaneRun {
+            lo,
+            hi,
+            start: (lo + kk).saturating_sub(self.pad),
+            n: (batch * len).saturating_sub(lo + len - hi),
+        }
+    }
+}
+
+/// A tap's run over a whole plane ([`Taps::plane_run`]).
+struct PlaneRun {
+    lo: usize,
+    hi: usize,
+    start: usize,
+    n: usize,
+}
+
+/// Zeroes each row's columns outside `lo..hi` (rows of `len` columns).
+#[inline]
+fn zero_row_ends(row: &mut [f32], len: usize, (lo, hi): (usize, usize)) {
+    for r in row.chunks_exact_mut(len) {
+        zero_few(&mut r[..lo]);
+        zero_few(&mut r[hi..]);
+    }
 }
 
 /// `col[(c·k + kk), b·ln + n] = src[c, b, n·stride − pad + kk]` (zero outside `0..ls`):
@@ -184,19 +217,14 @@ pub(crate) fn gather(
         for kk in 0..k {
             let row = &mut col[(c * k + kk) * batch * ln..(c * k + kk + 1) * batch * ln];
             if taps.stride == 1 && ln == ls {
-                // The whole plane shifted by `kk − pad` in one copy (each row's run lands where
-                // a copy of its own puts it), then each row's ends zeroed.
+                // The whole plane shifted by `kk − pad` in one copy, then each row's ends
+                // zeroed.
                 let plane = &src[c * batch * ls..(c + 1) * batch * ls];
-                let (lo, hi) = taps.run(kk, ls, ln);
+                let PlaneRun { lo, hi, start, n } = taps.plane_run(kk, ls, batch);
                 if lo < hi {
-                    let s0 = lo + kk - taps.pad;
-                    let n = batch * ln - lo - (ln - hi);
-                    row[lo..lo + n].copy_from_slice(&plane[s0..s0 + n]);
+                    row[lo..lo + n].copy_from_slice(&plane[start..start + n]);
                 }
-                for r in row.chunks_exact_mut(ln) {
-                    zero_few(&mut r[..lo]);
-                    zero_few(&mut r[hi..]);
-                }
+                zero_row_ends(row, ln, (lo, hi));
                 continue;
             }
             for b in 0..batch {
@@ -249,16 +277,11 @@ pub(crate) fn scatter_add(
         for kk in 0..k {
             let row = &mut col[(c * k + kk) * batch * ln..(c * k + kk + 1) * batch * ln];
             if taps.stride == 1 && ln == ld {
-                let (lo, hi) = taps.run(kk, ld, ln);
+                let PlaneRun { lo, hi, start, n } = taps.plane_run(kk, ld, batch);
                 if lo < hi {
-                    for r in row.chunks_exact_mut(ln) {
-                        zero_few(&mut r[..lo]);
-                        zero_few(&mut r[hi..]);
-                    }
+                    zero_row_ends(row, ln, (lo, hi));
                     let plane = &mut dst[c * batch * ld..(c + 1) * batch * ld];
-                    let d0 = lo + kk - taps.pad;
-                    let n = batch * ln - lo - (ln - hi);
-                    add_to(&mut plane[d0..d0 + n], &row[lo..lo + n]);
+                    add_to(&mut plane[start..start + n], &row[lo..lo + n]);
                 }
                 continue;
             }

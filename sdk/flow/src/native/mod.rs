@@ -234,9 +234,10 @@ impl NativeCfm {
     /// The multiply-accumulates this model has computed since it was made: per trajectory of
     /// a forward pass the convolutions and the crowd pathway's MLP at the points present; per
     /// trajectory of a VJP the convolutions' transposed products and, at the crowd pathway's
-    /// picked pairs, its first layer again and both layers' transposed products. A kept pass reused counts nothing, nor do
-    /// normalisation, activations, FiLM and the condition encoding (see [`Complexity`]). With
-    /// the machine's SGEMM rate it gives the least time the arithmetic a call did can take.
+    /// picked pairs, its first layer again and both layers' transposed products. A kept pass
+    /// reused counts nothing, nor do normalisation, activations, FiLM and the condition
+    /// encoding (see [`Complexity`]). With the machine's SGEMM rate it gives the least time
+    /// the arithmetic a call did can take.
     pub fn macs(&self) -> u64 {
         self.state.lock().map_or(0, |st| st.macs)
     }

@@ -115,7 +115,9 @@ impl FlowCallStats {
     /// (2 per multiply-accumulate): `unet` per trajectory forward, twice that for a VJP (the
     /// forward pass and the gradient of its input, which is the transposed products, no weight
     /// gradients). The condition encoding and FiLM layers are not included (see
-    /// [`crate::net::Complexity`]: under 1 % of a planning call).
+    /// [`crate::net::Complexity`]: under 1 % of a planning call). This is the architecture's
+    /// count, what libtorch computes; the native backend counts what it did
+    /// ([`crate::NativeCfm::macs`]: it reuses kept forward passes and skips empty crowd cells).
     pub fn network_flops(&self, unet_macs_per_trajectory: u64) -> f64 {
         let f = 2.0 * unet_macs_per_trajectory as f64;
         self.velocity_rows as f64 * f + self.vjp_rows as f64 * 2.0 * f

@@ -13,6 +13,7 @@ impl Net {
     pub(crate) fn encode_condition(&self, bev: &[f32], goal_vel: &[f32]) -> Vec<f32> {
         let mut h = bev.to_vec();
         let mut side = self.cfg.bev_cells;
+        let sums = &mut GroupSums::default();
         for (conv, norm) in &self.bev {
             let (y, s) = conv.forward_unbiased(&h, side);
             let n = BlockNorm {
@@ -22,7 +23,6 @@ impl Net {
                 conv_bias: &conv.b,
             };
             let (mut xh, mut inv) = (Vec::new(), Vec::new());
-            let sums = &mut GroupSums::default();
             norm_act(
                 self.act,
                 &y,

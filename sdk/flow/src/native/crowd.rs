@@ -352,21 +352,48 @@ multiversion! {
         {
             (*h, *l, *h_at, *l_at) = (v + b, v + b, 0, 0);
         }
-        // Selects and unconditional stores, so that the loop vectorises along the waypoints.
-        for (n, row) in z.chunks_exact(rows).enumerate().skip(1) {
-            let n = n as u32;
+        // Selects and unconditional stores, so that the loops vectorise along the waypoints;
+        // four points a pass while four remain, so that each waypoint's extremes are loaded
+        // and stored once per four points instead of once per point. The points are taken in
+        // order either way: the first point attaining an extreme is the one kept.
+        let points = z.len() / rows;
+        let quads = (points - 1) / 4;
+        for q in 0..quads {
+            let n = 1 + 4 * q;
+            let point = |i: usize| &z[i * rows..(i + 1) * rows];
+            let zs = point(n).iter().zip(point(n + 1));
+            let zs = zs.zip(point(n + 2).iter().zip(point(n + 3)));
+            let hi = hi.iter_mut().zip(hi_at.iter_mut());
+            let lo = lo.iter_mut().zip(lo_at.iter_mut());
+            for (((&v0, &v1), (&v2, &v3)), ((h, h_at), (l, l_at))) in zs.zip(hi.zip(lo)) {
+                let mut e = (*h, *h_at, *l, *l_at);
+                for (i, v) in [v0, v1, v2, v3].into_iter().enumerate() {
+                    e = extend(e, v + b, (n + i) as u32);
+                }
+                (*h, *h_at, *l, *l_at) = e;
+            }
+        }
+        for (n, row) in z.chunks_exact(rows).enumerate().skip(1 + 4 * quads) {
             let hi = hi.iter_mut().zip(hi_at.iter_mut());
             let lo = lo.iter_mut().zip(lo_at.iter_mut());
             for (&v, ((h, h_at), (l, l_at))) in row.iter().zip(hi.zip(lo)) {
-                let v = v + b;
-                let (up, down) = (v > *h, v < *l);
-                *h = if up { v } else { *h };
-                *h_at = if up { n } else { *h_at };
-                *l = if down { v } else { *l };
-                *l_at = if down { n } else { *l_at };
+                (*h, *h_at, *l, *l_at) = extend((*h, *h_at, *l, *l_at), v + b, n as u32);
             }
         }
     }
+}
+
+/// The extremes `(largest, its point, smallest, its point)` with the value `v` of point `i`
+/// taken in: a later point replaces an extreme only by passing it.
+#[inline(always)]
+fn extend((h, h_at, l, l_at): (f32, u32, f32, u32), v: f32, i: u32) -> (f32, u32, f32, u32) {
+    let (up, down) = (v > h, v < l);
+    (
+        if up { v } else { h },
+        if up { i } else { h_at },
+        if down { v } else { l },
+        if down { i } else { l_at },
+    )
 }
 
 /// `z = W·x` for `m` columns: `W` `[out, inp]`, `x` `[inp, m]`, `z` `[out, m]`.
@@ -435,5 +462,40 @@ impl Waypoint {
         g[1] += -self.sn * gbx - self.cs * gby;
         g[2] += dx * gbx + dy * gby + p[2] * gux + p[3] * guy;
         g[3] += dy * gbx - dx * gby + p[3] * gux - p[2] * guy;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::tile_extremes;
+
+    /// Against a plain search, for every count of points around the four-point passes (one
+    /// point to three passes and a remainder), on values with many ties: the largest and the
+    /// smallest with the bias, and the first point attaining each.
+    #[test]
+    fn tile_extremes_pick_the_first_point_attaining_each_extreme() {
+        for points in 1..=14 {
+            for rows in [1, 3, 8, 17] {
+                // Coarse values: ties between points are common.
+                let z: Vec<f32> = (0..points * rows)
+                    .map(|i| ((i * 7 + i / rows * 3) % 5) as f32 - 2.0)
+                    .collect();
+                let (mut ends, mut at) = (vec![0.0; 2 * rows], vec![0; 2 * rows]);
+                tile_extremes(&z, 0.5, rows, &mut ends, &mut at);
+                for r in 0..rows {
+                    let column = (0..points).map(|n| (z[n * rows + r] + 0.5, n as u32));
+                    let first = |better: fn(f32, f32) -> bool| {
+                        column
+                            .clone()
+                            .reduce(|a, b| if better(b.0, a.0) { b } else { a })
+                            .expect("one point at least")
+                    };
+                    let (hi, lo) = (first(|a, b| a > b), first(|a, b| a < b));
+                    assert_eq!((ends[r], at[r]), hi, "largest: {points} points, row {r}");
+                    let got = (ends[rows + r], at[rows + r]);
+                    assert_eq!(got, lo, "smallest: {points} points, row {r}");
+                }
+            }
+        }
     }
 }

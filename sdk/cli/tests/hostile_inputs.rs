@@ -1473,6 +1473,17 @@ fn data_cases() -> Vec<Case> {
         ),
         err(
             a,
+            "episode agent that jumps 50 m in one step",
+            "`bench` failed the planner calls that observed it (a recorded SDD track did this)",
+            &["episodes.json", "agents[0].positions[1]", "m/s"],
+            episode_edit(|e| {
+                let p = e["agents"][0]["positions"][0].clone();
+                let (x, y) = (p[0].as_f64().unwrap_or(0.0), p[1].as_f64().unwrap_or(0.0));
+                e["agents"][0]["positions"] = serde_json::json!([[x, y], [x + 50.0, y]]);
+            }),
+        ),
+        err(
+            a,
             "episode polygon that crosses itself",
             "accepted though the format says \"simple polygon\"",
             &["obstacles[0]", "not a simple polygon", "edge 0"],

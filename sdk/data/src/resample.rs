@@ -10,6 +10,10 @@
 //!   step indices) with a cubic Hermite spline whose knot tangents are the non-uniform
 //!   Catmull-Rom slopes `(p[i+1] − p[i−1]) / (t[i+1] − t[i−1])`, one-sided at the ends. It
 //!   passes through every sample and handles the irregular UCY control points.
+//! * A track is cut where it jumps: where one step between its samples (before smoothing) is
+//!   faster than [`TRACK_SPEED_LIMIT`], and again where one grid step is (the interpolant can
+//!   overshoot). That is a tracking error, and no observation may carry such a speed; the
+//!   samples inside a run of such steps are dropped, the pieces follow the `min_duration` rule.
 //! * Velocity is the central difference of the resampled positions (one-sided at the ends).
 //! * Heading θ is the direction of the displacement over ±`heading_window` steps. When that
 //!   displacement corresponds to less than `heading_speed` (nearly stationary), the last
@@ -20,6 +24,12 @@ use crate::error::DataError;
 use crate::track::{AgentClass, RawScene, RawTrack, Sample};
 use human2nav_core::Pose2;
 use serde::{Deserialize, Serialize};
+use std::ops::Range;
+
+/// Fastest grid step (m/s) a track keeps: 1 % under the bound every observation is checked
+/// against ([`human2nav_core::planner::MAX_SPEED`]), so that the velocities a simulator
+/// interpolates between grid positions stay under it through rounding. A faster step is cut.
+pub const TRACK_SPEED_LIMIT: f64 = 0.99 * human2nav_core::planner::MAX_SPEED;
 
 /// Options of [`resample`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -150,6 +160,9 @@ pub struct ResampleStats {
     pub short_segments: usize,
     /// Tracks split where a gap exceeded the source's `max_gap`.
     pub gap_splits: usize,
+    /// Jumps (runs of grid steps faster than [`TRACK_SPEED_LIMIT`]) a track was cut at (a
+    /// track cut twice counts twice).
+    pub speed_splits: usize,
 }
 
 /// A scene on the regular grid.
@@ -291,7 +304,17 @@ fn resample_track(
         }
     }
     segments.push(&rt.samples[begin..]);
+    // Cut at jumps, before smoothing (which would spread a jump over its window).
+    let too_fast = |a: &Sample, b: &Sample| {
+        (b.p[0] - a.p[0]).hypot(b.p[1] - a.p[1]) > TRACK_SPEED_LIMIT * (b.t - a.t)
+    };
+    let mut pieces = Vec::new();
     for seg in segments {
+        let (ranges, jumps) = cut_at_jumps(seg, too_fast);
+        stats.speed_splits += jumps;
+        pieces.extend(ranges.into_iter().map(|r| &seg[r]));
+    }
+    for seg in pieces {
         let duration = seg[seg.len() - 1].t - seg[0].t;
         if seg.len() < 2 || duration < opts.min_duration {
             stats.short_segments += 1;
@@ -316,18 +339,56 @@ fn resample_track(
             stats.short_segments += 1;
             continue;
         }
-        let velocities = central_difference(&positions, opts.dt);
-        let (headings, _) = headings(&positions, opts.dt, opts);
-        out.push(Track {
-            id: out.len() as u64,
-            source_id: rt.id,
-            class: rt.class,
-            start: k0,
-            positions,
-            velocities,
-            headings,
+        // The interpolant can overshoot its samples' speeds (up to twice): cut again on the
+        // grid, so that no grid step is faster than the limit. A piece of a track cut here is
+        // kept when it spans `min_duration` on the grid.
+        let (ranges, jumps) = cut_at_jumps(&positions, |a, b| {
+            (b[0] - a[0]).hypot(b[1] - a[1]) > TRACK_SPEED_LIMIT * opts.dt
         });
+        stats.speed_splits += jumps;
+        for r in ranges {
+            let piece = &positions[r.clone()];
+            if jumps > 0
+                && (piece.len() < 2 || (piece.len() - 1) as f64 * opts.dt < opts.min_duration)
+            {
+                stats.short_segments += 1;
+                continue;
+            }
+            out.push(Track {
+                id: out.len() as u64,
+                source_id: rt.id,
+                class: rt.class,
+                start: k0 + r.start as i64,
+                positions: piece.to_vec(),
+                velocities: central_difference(piece, opts.dt),
+                headings: headings(piece, opts.dt, opts).0,
+            });
+        }
     }
+}
+
+/// The pieces of `items` left by cutting at jumps (`jump(a, b)`: the step from `a` to `b` is
+/// not a possible motion) and the number of jumps. A run of consecutive jump steps is one
+/// jump, and the items inside it are dropped; each piece of a non-empty list has an item.
+fn cut_at_jumps<T>(items: &[T], jump: impl Fn(&T, &T) -> bool) -> (Vec<Range<usize>>, usize) {
+    let mut pieces = Vec::new();
+    let mut jumps = 0;
+    let mut begin = 0;
+    let mut in_jump = false;
+    for i in 1..items.len() {
+        if !jump(&items[i - 1], &items[i]) {
+            in_jump = false;
+            continue;
+        }
+        if !in_jump {
+            pieces.push(begin..i);
+            jumps += 1;
+            in_jump = true;
+        }
+        begin = i;
+    }
+    pieces.push(begin..items.len());
+    (pieces, jumps)
 }
 
 /// Centred moving average over samples within ±`window/2` seconds.
@@ -551,6 +612,83 @@ mod tests {
         let sc = resample(&empty, &ResampleOptions::default());
         assert_eq!(sc.stats.empty_tracks, 1);
         assert!(sc.tracks.is_empty());
+    }
+
+    #[test]
+    fn a_jump_faster_than_any_walker_cuts_the_track() {
+        // 1 m/s along x for 3 s, a 20 m jump in one 0.4 s step (50 m/s), 3 s more; then a
+        // second jump and a piece too short to keep.
+        let walk = |t0: f64, x0: f64, n: usize| {
+            (0..n).map(move |i| Sample {
+                t: t0 + 0.4 * i as f64,
+                p: [x0 + 0.4 * i as f64, 0.0],
+            })
+        };
+        let s: Vec<Sample> = walk(0.0, 0.0, 8)
+            .chain(walk(3.2, 23.2, 8))
+            .chain(walk(6.4, 60.0, 2))
+            .collect();
+        let sc = resample(&scene(s, TIMING), &ResampleOptions::default());
+        assert_eq!(sc.stats.gap_splits, 0);
+        assert_eq!(sc.stats.speed_splits, 2);
+        assert_eq!(sc.stats.short_segments, 1, "the 0.4 s piece is skipped");
+        assert_eq!(sc.tracks.len(), 2);
+        for t in &sc.tracks {
+            for w in t.positions.windows(2) {
+                let step = (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]);
+                assert!(step <= TRACK_SPEED_LIMIT * 0.1, "{step} m in a step");
+            }
+            for v in &t.velocities {
+                assert!(v[0].hypot(v[1]) < 2.0, "{v:?}");
+            }
+            assert_eq!(t.positions.len(), t.velocities.len());
+            assert_eq!(t.positions.len(), t.headings.len());
+        }
+        // The pieces keep their place on the grid: the first ends before the jump, the
+        // second starts after it.
+        let (a, b) = (&sc.tracks[0], &sc.tracks[1]);
+        assert_eq!(a.start, 0);
+        assert!(
+            a.end() <= b.start && b.start <= 33,
+            "{} {}",
+            a.end(),
+            b.start
+        );
+        assert!((b.positions[0][0] - (23.2 + 0.1 * b.start as f64 - 3.2)).abs() < 0.5);
+        // Samples under the limit whose interpolant overshoots it (a 29 m/s out-and-back in
+        // 0.8 s, between two walks): cut on the grid.
+        let s: Vec<Sample> = walk(0.0, 0.0, 8)
+            .chain([(3.2, 14.4), (3.6, 3.6)].map(|(t, x)| Sample { t, p: [x, 0.0] }))
+            .chain(walk(4.0, 4.0, 8))
+            .collect();
+        let sc = resample(&scene(s, TIMING), &ResampleOptions::default());
+        assert!(sc.stats.speed_splits >= 1);
+        assert!(!sc.tracks.is_empty());
+        for t in &sc.tracks {
+            for w in t.positions.windows(2) {
+                let step = (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]);
+                assert!(step <= TRACK_SPEED_LIMIT * 0.1, "{step} m in a step");
+            }
+        }
+        // The cuts as such: a run of jump steps is one jump, the items inside it dropped.
+        let jump = |a: &f64, b: &f64| (b - a).abs() > 5.0;
+        let (pieces, jumps) = cut_at_jumps(&[0.0, 1.0, 10.0, 20.0, 21.0, 30.0], jump);
+        assert_eq!((pieces, jumps), (vec![0..2, 3..5, 5..6], 2));
+        let one_piece = |items: &[f64]| {
+            let (pieces, jumps) = cut_at_jumps(items, jump);
+            (pieces.len(), pieces[0].clone(), jumps)
+        };
+        assert_eq!(one_piece(&[0.0, 1.0]), (1, 0..2, 0));
+        assert_eq!(one_piece(&[]), (1, 0..0, 0));
+        // A walk at 2 m/s is not cut.
+        let s: Vec<Sample> = (0..20)
+            .map(|i| Sample {
+                t: 0.4 * i as f64,
+                p: [0.8 * i as f64, 0.0],
+            })
+            .collect();
+        let sc = resample(&scene(s, TIMING), &ResampleOptions::default());
+        assert_eq!((sc.stats.speed_splits, sc.tracks.len()), (0, 1));
     }
 
     #[test]

@@ -15,7 +15,8 @@
 //! ```
 //!
 //! * `p_rec`, `v_rec`: the recorded position and velocity at `t` ([`crate::replay`]);
-//!   `v_cap = 1.3 · max(|v_rec|, 0.5 m/s)`;
+//!   `v_cap = 1.3 · max(|v_rec|, 0.5 m/s)`, at most the speed a recorded track may have
+//!   ([`TRACK_SPEED_LIMIT`], under the bound every observation is checked against);
 //! * `d`: the clearance from the pedestrian's disc to the robot's footprint (the collision
 //!   body the simulator checks), `n` the unit direction from the centre of the nearest
 //!   footprint shape to the pedestrian (the circular specification's centre-to-centre
@@ -36,6 +37,7 @@ use crate::replay::{CrowdReplay, PedestrianSample};
 use human2nav_core::robot::footprint::{self, FootprintShape};
 pub use human2nav_core::social_force::SocialForce;
 use human2nav_core::{AgentState, Pose2};
+use human2nav_data::resample::TRACK_SPEED_LIMIT;
 
 /// How the pedestrians of a suite behave.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -289,7 +291,10 @@ fn step_walker(
     push: [f64; 2],
     dt: f64,
 ) {
-    let cap = force.speed_cap(rec.velocity[0].hypot(rec.velocity[1]));
+    // Never faster than a recorded track may move, so that every observation stays valid.
+    let cap = force
+        .speed_cap(rec.velocity[0].hypot(rec.velocity[1]))
+        .min(TRACK_SPEED_LIMIT);
     let desired = [
         rec.velocity[0] + (rec.position[0] - walker.position[0]) / force.return_time,
         rec.velocity[1] + (rec.position[1] - walker.position[1]) / force.return_time,

@@ -253,6 +253,7 @@ pub fn build_cache(
             ("empty_tracks", scene.stats.empty_tracks),
             ("short_segments", scene.stats.short_segments),
             ("gap_splits", scene.stats.gap_splits),
+            ("speed_splits", scene.stats.speed_splits),
             ("too_short_tracks", st.too_short_tracks),
             ("stationary_windows", st.stationary_windows),
         ] {

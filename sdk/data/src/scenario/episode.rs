@@ -74,10 +74,12 @@ impl Episode {
     /// (0, [`MAX_TIME_BUDGET`]], start, goal and agent positions finite and within
     /// [`MAX_COORDINATE`](crate::input_limits::MAX_COORDINATE) m of the origin, agent radii finite and
     /// ≥ 0, every agent track starting within [`MAX_TIME`](crate::input_limits::MAX_TIME) s, holding
-    /// at least one position and an id no other track has. The error names the field
+    /// at least one position and an id no other track has, and no step of a track faster than
+    /// [`TRACK_SPEED_LIMIT`](crate::resample::TRACK_SPEED_LIMIT). The error names the field
     /// (`agents[3].positions[7]`) and what is wrong with it.
     pub fn validate(&self) -> Result<(), (String, String)> {
         use crate::input_limits::{MAX_COORDINATE, MAX_TIME};
+        use crate::resample::TRACK_SPEED_LIMIT;
         let field = |f: &str, m: String| Err((f.to_string(), m));
         if !(self.dt.is_finite() && (MIN_EPISODE_DT..=MAX_EPISODE_DT).contains(&self.dt)) {
             return field(
@@ -162,6 +164,26 @@ impl Episode {
                 return field(
                     &format!("agents[{i}].positions[{k}]"),
                     format!("{range}, got {:?}", a.positions[k]),
+                );
+            }
+            // A step faster than anything that walks is a tracking error, and no observation
+            // of it would be valid: `data build` cuts its tracks there.
+            let step = |k: usize| {
+                let (p, q) = (a.positions[k - 1], a.positions[k]);
+                (q[0] - p[0]).hypot(q[1] - p[1])
+            };
+            if let Some(k) = (1..a.positions.len()).find(|&k| step(k) > TRACK_SPEED_LIMIT * self.dt)
+            {
+                return field(
+                    &format!("agents[{i}].positions[{k}]"),
+                    format!(
+                        "agent {} moves {:.2} m in one {} s step ({:.1} m/s; a track may move \
+                         at {TRACK_SPEED_LIMIT:.1} m/s at most: split it where it jumps)",
+                        a.id,
+                        step(k),
+                        self.dt,
+                        step(k) / self.dt
+                    ),
                 );
             }
         }

@@ -133,6 +133,16 @@ fn an_episode_with_one_id_twice_or_an_empty_track_is_refused() {
     let (field, why) = ep.validate().unwrap_err();
     assert_eq!(field, "agents[1].positions");
     assert!(why.contains("no positions"), "{why}");
+    // 2.9 m in a 0.1 s step is 29 m/s, under the limit; 3 m is 30 m/s, over it.
+    ep.agents[1] = track(4, vec![[2.0, 1.0], [4.9, 1.0], [7.9, 1.0]]);
+    let (field, why) = ep.validate().unwrap_err();
+    assert_eq!(field, "agents[1].positions[2]");
+    assert!(
+        why.contains("agent 4 moves 3.00 m in one 0.1 s step"),
+        "{why}"
+    );
+    ep.agents[1].positions.pop();
+    assert_eq!(ep.validate(), Ok(()));
 }
 
 #[test]

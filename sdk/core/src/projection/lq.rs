@@ -378,7 +378,10 @@ fn residuals(p: &LqProblem<'_>, ws: &mut LqWorkspace) {
     }
     for (i, r) in p.rows.iter().enumerate() {
         ws.rp[i] = row_value(r, &ws.u) + ws.s[i] - r.b;
-        ws.inv_s[i] = 1.0 / ws.s[i];
+    }
+    // Apart from the rows' gathers, so that the divisions run four at a time.
+    for (inv, &s) in ws.inv_s.iter_mut().zip(&ws.s) {
+        *inv = 1.0 / s;
     }
     // Co-state of e_k: c_k = W·e_k + q_k + A_{k+1}ᵀ·c_{k+1}; ∂f/∂u_k = ρ·u_k + B_kᵀ·c_k.
     let mut co = [0.0; 3];
@@ -546,9 +549,14 @@ fn newton(p: &LqProblem<'_>, ws: &mut LqWorkspace) {
         x = step(&p.a[k], &p.b[k], &x, &du);
     }
     for (i, r) in p.rows.iter().enumerate() {
-        let cdu = row_value(r, &ws.du);
-        ws.ds[i] = -ws.rp[i] - cdu;
-        ws.dl[i] = (ws.lam[i] * (cdu + ws.rp[i]) - ws.rc[i]) * ws.inv_s[i];
+        ws.ds[i] = -ws.rp[i] - row_value(r, &ws.du);
+    }
+    // `C·Δu + r_p` is `−Δs` (`(−a) − b` rounds as `−(a + b)`; only a zero's sign can
+    // differ, which no later step sees), so this loop needs no gathers and runs four rows at
+    // a time.
+    let rows = ws.dl.iter_mut().zip(&ws.ds).zip(&ws.lam);
+    for (((dl, &ds), &lam), (&rc, &inv_s)) in rows.zip(ws.rc.iter().zip(&ws.inv_s)) {
+        *dl = (lam * -ds - rc) * inv_s;
     }
 }
 

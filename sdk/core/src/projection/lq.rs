@@ -106,8 +106,6 @@ pub(super) struct LqWorkspace {
     du: Vec<[f64; 3]>,
     ds: Vec<f64>,
     dl: Vec<f64>,
-    ds_aff: Vec<f64>,
-    dl_aff: Vec<f64>,
     chol: Vec<M3>,
     gain: Vec<M34>,
     hux: Vec<M34>,
@@ -232,8 +230,6 @@ impl LqWorkspace {
             &mut self.rc,
             &mut self.ds,
             &mut self.dl,
-            &mut self.ds_aff,
-            &mut self.dl_aff,
         ] {
             v.clear();
             v.resize(m, 0.0);
@@ -298,9 +294,10 @@ pub(super) fn solve(p: &LqProblem<'_>, ws: &mut LqWorkspace) -> Result<Vec<f64>,
             return Ok(ws.u.iter().flatten().copied().collect());
         }
         factor(p, ws)?;
-        // Predictor (affine) step: r_c = s∘λ.
-        for i in 0..m {
-            ws.rc[i] = ws.s[i] * ws.lam[i];
+        // Predictor (affine) step: r_c = s∘λ. (The elementwise loops run over slices zipped
+        // together, so that they run four rows at a time.)
+        for ((rc, &s), &lam) in ws.rc.iter_mut().zip(&ws.s).zip(&ws.lam) {
+            *rc = s * lam;
         }
         newton(p, ws);
         let alpha = step_length(ws);
@@ -313,22 +310,22 @@ pub(super) fn solve(p: &LqProblem<'_>, ws: &mut LqWorkspace) -> Result<Vec<f64>,
         } else {
             0.0
         };
-        ws.ds_aff.copy_from_slice(&ws.ds);
-        ws.dl_aff.copy_from_slice(&ws.dl);
-        // Corrector: r_c = s∘λ + Δs_aff∘Δλ_aff − σμ.
-        for i in 0..m {
-            ws.rc[i] = ws.s[i] * ws.lam[i] + ws.ds_aff[i] * ws.dl_aff[i] - sigma * mu;
+        // Corrector: r_c = s∘λ + Δs_aff∘Δλ_aff − σμ (`Δs`, `Δλ` still hold the affine step).
+        let shift = sigma * mu;
+        let rows = ws.rc.iter_mut().zip(ws.s.iter().zip(&ws.lam));
+        for ((rc, (&s, &lam)), (&ds, &dl)) in rows.zip(ws.ds.iter().zip(&ws.dl)) {
+            *rc = s * lam + ds * dl - shift;
         }
         newton(p, ws);
         let alpha = (STEP_TO_BOUNDARY * step_length(ws)).min(1.0);
-        for k in 0..t {
-            for c in 0..3 {
-                ws.u[k][c] += alpha * ws.du[k][c];
-            }
+        for (u, du) in ws.u.iter_mut().flatten().zip(ws.du.iter().flatten()) {
+            *u += alpha * du;
         }
-        for i in 0..m {
-            ws.s[i] += alpha * ws.ds[i];
-            ws.lam[i] += alpha * ws.dl[i];
+        for (s, ds) in ws.s.iter_mut().zip(&ws.ds) {
+            *s += alpha * ds;
+        }
+        for (lam, dl) in ws.lam.iter_mut().zip(&ws.dl) {
+            *lam += alpha * dl;
         }
     }
     Err(LqError::NotConverged)

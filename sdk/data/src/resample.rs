@@ -31,6 +31,12 @@ use std::ops::Range;
 /// interpolates between grid positions stay under it through rounding. A faster step is cut.
 pub const TRACK_SPEED_LIMIT: f64 = 0.99 * human2nav_core::planner::MAX_SPEED;
 
+/// Whether moving from `a` to `b` in `dt` seconds is faster than [`TRACK_SPEED_LIMIT`] (a
+/// jump, not a motion): the one rule of the raw samples, the grid and episode files.
+pub fn is_jump(a: [f64; 2], b: [f64; 2], dt: f64) -> bool {
+    (b[0] - a[0]).hypot(b[1] - a[1]) > TRACK_SPEED_LIMIT * dt
+}
+
 /// Options of [`resample`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -305,9 +311,7 @@ fn resample_track(
     }
     segments.push(&rt.samples[begin..]);
     // Cut at jumps, before smoothing (which would spread a jump over its window).
-    let too_fast = |a: &Sample, b: &Sample| {
-        (b.p[0] - a.p[0]).hypot(b.p[1] - a.p[1]) > TRACK_SPEED_LIMIT * (b.t - a.t)
-    };
+    let too_fast = |a: &Sample, b: &Sample| is_jump(a.p, b.p, b.t - a.t);
     let mut pieces = Vec::new();
     for seg in segments {
         let (ranges, jumps) = cut_at_jumps(seg, too_fast);
@@ -342,9 +346,7 @@ fn resample_track(
         // The interpolant can overshoot its samples' speeds (up to twice): cut again on the
         // grid, so that no grid step is faster than the limit. A piece of a track cut here is
         // kept when it spans `min_duration` on the grid.
-        let (ranges, jumps) = cut_at_jumps(&positions, |a, b| {
-            (b[0] - a[0]).hypot(b[1] - a[1]) > TRACK_SPEED_LIMIT * opts.dt
-        });
+        let (ranges, jumps) = cut_at_jumps(&positions, |a, b| is_jump(*a, *b, opts.dt));
         stats.speed_splits += jumps;
         for r in ranges {
             let piece = &positions[r.clone()];

@@ -336,12 +336,14 @@ pub(super) fn solve(p: &LqProblem<'_>, ws: &mut LqWorkspace) -> Result<Vec<f64>,
 /// time: a minimum is exact, so the order it is taken in does not change it.
 fn step_length(ws: &LqWorkspace) -> f64 {
     #[inline(always)]
-    fn bound(v: f64, d: f64) -> f64 {
-        if d < 0.0 { -v / d } else { f64::INFINITY }
-    }
-    #[inline(always)]
     fn lesser(a: f64, b: f64) -> f64 {
         if b < a { b } else { a }
+    }
+    /// The step bound of one row's slack and multiplier, taken into `a`.
+    #[inline(always)]
+    fn take(a: f64, s: f64, ds: f64, lam: f64, dl: f64) -> f64 {
+        let bound = |v: f64, d: f64| if d < 0.0 { -v / d } else { f64::INFINITY };
+        lesser(lesser(a, bound(s, ds)), bound(lam, dl))
     }
     fn quads(v: &[f64]) -> std::slice::ChunksExact<'_, f64> {
         v.chunks_exact(4)
@@ -352,15 +354,15 @@ fn step_length(ws: &LqWorkspace) -> f64 {
         .zip(quads(&ws.lam).zip(quads(&ws.dl)));
     for ((s, ds), (lam, dl)) in rows {
         for j in 0..4 {
-            lanes[j] = lesser(lesser(lanes[j], bound(s[j], ds[j])), bound(lam[j], dl[j]));
+            lanes[j] = take(lanes[j], s[j], ds[j], lam[j], dl[j]);
         }
     }
+    let first = lanes
+        .into_iter()
+        .fold(1.0, |a, b| if b < a { b } else { a });
     let tail = ws.s.len() / 4 * 4;
-    (tail..ws.s.len()).fold(lanes.into_iter().fold(1.0, lesser), |a, i| {
-        lesser(
-            lesser(a, bound(ws.s[i], ws.ds[i])),
-            bound(ws.lam[i], ws.dl[i]),
-        )
+    (tail..ws.s.len()).fold(first, |a, i| {
+        take(a, ws.s[i], ws.ds[i], ws.lam[i], ws.dl[i])
     })
 }
 

@@ -79,7 +79,7 @@ impl Episode {
     /// (`agents[3].positions[7]`) and what is wrong with it.
     pub fn validate(&self) -> Result<(), (String, String)> {
         use crate::input_limits::{MAX_COORDINATE, MAX_TIME};
-        use crate::resample::TRACK_SPEED_LIMIT;
+        use crate::resample::{TRACK_SPEED_LIMIT, is_jump};
         let field = |f: &str, m: String| Err((f.to_string(), m));
         if !(self.dt.is_finite() && (MIN_EPISODE_DT..=MAX_EPISODE_DT).contains(&self.dt)) {
             return field(
@@ -172,8 +172,8 @@ impl Episode {
                 let (p, q) = (a.positions[k - 1], a.positions[k]);
                 (q[0] - p[0]).hypot(q[1] - p[1])
             };
-            if let Some(k) = (1..a.positions.len()).find(|&k| step(k) > TRACK_SPEED_LIMIT * self.dt)
-            {
+            let jump = |&k: &usize| is_jump(a.positions[k - 1], a.positions[k], self.dt);
+            if let Some(k) = (1..a.positions.len()).find(jump) {
                 return field(
                     &format!("agents[{i}].positions[{k}]"),
                     format!(

@@ -1,9 +1,10 @@
 //! The documents stay usable: README.md and ARCHITECTURE.md within their size budgets,
-//! ARCHITECTURE.md with a contents list, and every relative link in the project's markdown
-//! (README, ARCHITECTURE, CONTRIBUTING, CHANGELOG, `docs/**`, `plugins/*/README.md`) pointing at a
-//! file that exists and, for `#anchor` into a markdown file, at a heading it has. Anchors
-//! follow GitHub's rule: the heading's text lowercased, punctuation dropped (letters, digits,
-//! `-` and `_` kept), spaces turned into `-`, and `-1`, `-2`, ... appended to repeats.
+//! ARCHITECTURE.md with a contents list, README's count of hostile-input cases that of the
+//! generated table, and every relative link in the project's markdown (README, ARCHITECTURE,
+//! CONTRIBUTING, CHANGELOG, `docs/**`, `plugins/*/README.md`) pointing at a file that exists
+//! and, for `#anchor` into a markdown file, at a heading it has. Anchors follow GitHub's rule:
+//! the heading's text lowercased, punctuation dropped (letters, digits, `-` and `_` kept),
+//! spaces turned into `-`, and `-1`, `-2`, ... appended to repeats.
 
 use human2nav_integration_tests::workspace_root;
 use std::collections::HashSet;
@@ -39,6 +40,31 @@ fn architecture_stays_within_its_budget() {
         bytes <= ARCHITECTURE_MAX_BYTES,
         "ARCHITECTURE.md is {bytes} bytes, over its budget of {ARCHITECTURE_MAX_BYTES}: \
          measured results belong in docs/experiments, linked from here"
+    );
+}
+
+/// The number README.md gives for the hostile-input table: its `| total | N |` row.
+#[test]
+fn readme_gives_the_hostile_input_tables_count() {
+    let read = |name: &str| {
+        let path = workspace_root().join(name);
+        fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+    };
+    let table = read("docs/hostile-inputs.md");
+    let total = table
+        .lines()
+        .find_map(|l| l.strip_prefix("| total | "))
+        .and_then(|rest| rest.split(' ').next())
+        .expect("docs/hostile-inputs.md has a `| total | N |` row");
+    let readme = read("README.md");
+    let stated = readme
+        .split("(docs/hostile-inputs.md) lists ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .expect("README.md says how many cases docs/hostile-inputs.md lists");
+    assert_eq!(
+        stated, total,
+        "README.md says docs/hostile-inputs.md lists {stated} cases; its table's total is {total}"
     );
 }
 

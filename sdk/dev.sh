@@ -5,7 +5,8 @@
 #   sdk/dev.sh test             build everything and run the whole test suite
 #   sdk/dev.sh python           install the Python package `human2nav` (sdk/python) into the
 #                               torch virtualenv below (`import human2nav` with its python3)
-#   sdk/dev.sh env              print the exports this script uses (eval "$(sdk/dev.sh env)")
+#   sdk/dev.sh env              print the exports this script uses (eval "$(sdk/dev.sh env)"),
+#                               with torch and the Python tools installed
 #
 # libtorch comes from PyTorch 2.13.0 on PyPI (the version tch 0.26 is built against),
 # installed once into a virtualenv in a cache outside the repository:
@@ -148,11 +149,12 @@ case "${1:-}" in
         log "installed: $venv/bin/python3 -c 'import human2nav'"
         ;;
     env)
-        setup >&2
+        # The Python tools too: the PyTorch references (sdk/flow/reference) read with numpy.
+        { setup; ensure_python_tools; } >&2
         printf 'export LIBTORCH_USE_PYTORCH=1\nexport PATH=%q:"$PATH"\n' "$venv/bin"
         ;;
     *)
-        sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'
+        sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'
         exit 2
         ;;
 esac

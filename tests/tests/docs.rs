@@ -23,6 +23,11 @@ fn size_of(name: &str) -> u64 {
         .len()
 }
 
+fn text_of(name: &str) -> String {
+    let path = workspace_root().join(name);
+    fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
 #[test]
 fn readme_stays_within_its_budget() {
     let bytes = size_of("README.md");
@@ -46,17 +51,13 @@ fn architecture_stays_within_its_budget() {
 /// The number README.md gives for the hostile-input table: its `| total | N |` row.
 #[test]
 fn readme_gives_the_hostile_input_tables_count() {
-    let read = |name: &str| {
-        let path = workspace_root().join(name);
-        fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-    };
-    let table = read("docs/hostile-inputs.md");
+    let table = text_of("docs/hostile-inputs.md");
     let total = table
         .lines()
         .find_map(|l| l.strip_prefix("| total | "))
         .and_then(|rest| rest.split(' ').next())
         .expect("docs/hostile-inputs.md has a `| total | N |` row");
-    let readme = read("README.md");
+    let readme = text_of("README.md");
     let stated = readme
         .split("(docs/hostile-inputs.md) lists ")
         .nth(1)

@@ -357,9 +357,7 @@ fn step_length(ws: &LqWorkspace) -> f64 {
             lanes[j] = take(lanes[j], s[j], ds[j], lam[j], dl[j]);
         }
     }
-    let first = lanes
-        .into_iter()
-        .fold(1.0, |a, b| if b < a { b } else { a });
+    let first = lanes.into_iter().fold(1.0, lesser);
     let tail = ws.s.len() / 4 * 4;
     (tail..ws.s.len()).fold(first, |a, i| {
         take(a, ws.s[i], ws.ds[i], ws.lam[i], ws.dl[i])

@@ -168,21 +168,19 @@ impl Episode {
             }
             // A step faster than anything that walks is a tracking error, and no observation
             // of it would be valid: `data build` cuts its tracks there.
-            let step = |k: usize| {
-                let (p, q) = (a.positions[k - 1], a.positions[k]);
-                (q[0] - p[0]).hypot(q[1] - p[1])
-            };
             let jump = |&k: &usize| is_jump(a.positions[k - 1], a.positions[k], self.dt);
             if let Some(k) = (1..a.positions.len()).find(jump) {
+                let (p, q) = (a.positions[k - 1], a.positions[k]);
+                let step = (q[0] - p[0]).hypot(q[1] - p[1]);
                 return field(
                     &format!("agents[{i}].positions[{k}]"),
                     format!(
                         "agent {} moves {:.2} m in one {} s step ({:.1} m/s; a track may move \
                          at {TRACK_SPEED_LIMIT:.1} m/s at most: split it where it jumps)",
                         a.id,
-                        step(k),
+                        step,
                         self.dt,
-                        step(k) / self.dt
+                        step / self.dt
                     ),
                 );
             }
